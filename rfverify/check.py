@@ -1,0 +1,110 @@
+"""Independent check of a candidate solution (v, u, r) of a :class:`~rfverify.problem.Problem`.
+
+Nothing a file or a solver says about its own solution is trusted: the residuals are
+recomputed from the problem data.  This is the cheap, double-precision check used by
+``rfverify info`` on a file's ``/solution``; certification in high precision lives elsewhere.
+
+Measures (all relative, dimensionless; 0 is exact):
+
+``dynamics``        ‖M v − H r − f‖∞ / max(‖M v‖∞, ‖H r‖∞, ‖f‖∞)
+``velocity``        ‖u − Hᵀ v − w‖∞ / max(‖u‖∞, ‖Hᵀ v‖∞, ‖w‖∞)
+``primal_cone``     max_i max(‖r_T‖ − μ r_N, ‖r_R‖ − μr r_N, 0) / ‖r‖∞      (r ∈ K)
+``dual_cone``       max_i max(μ‖u_T‖ + μr‖u_R‖ − u_N, 0) / ‖u‖∞            (u ∈ K*)
+``complementarity`` |rᵀu| / (‖r‖₂ ‖u‖₂)
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .problem import SPACEDIM, Problem, StoredSolution
+
+_TINY = np.finfo(float).tiny
+
+
+@dataclass(frozen=True)
+class SolutionCheck:
+    """Result of :func:`check_solution`; ``missing`` lists absent vectors, ``zero`` the stored
+    vectors that are identically zero (placeholders some generators store: the Siconos Chute
+    file has v = 0 and r = 0)."""
+
+    missing: tuple
+    zero: tuple
+    dynamics: float
+    velocity: float
+    primal_cone: float
+    dual_cone: float
+    complementarity: float
+
+    @property
+    def max_error(self) -> float:
+        return max(self.dynamics, self.velocity, self.primal_cone, self.dual_cone,
+                   self.complementarity)
+
+    def ok(self, tol: float) -> bool:
+        return not self.missing and self.max_error <= tol
+
+    def verdict(self, tol: float) -> str:
+        if self.missing:
+            return f"incomplete: {', '.join(self.missing)} missing"
+        worst = max(("dynamics", "velocity", "primal_cone", "dual_cone", "complementarity"),
+                    key=lambda k: getattr(self, k))
+        zero = f"{', '.join(self.zero)} all zero; " if self.zero else ""
+        if self.max_error <= tol:
+            return f"{zero}consistent to {self.max_error:.2e} (≤ {tol:g})"
+        return f"{zero}NOT a solution to {tol:g}: {worst} residual {getattr(self, worst):.2e}"
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["missing"] = list(self.missing)
+        d["zero"] = list(self.zero)
+        d["max_error"] = self.max_error
+        return d
+
+
+def check_solution(problem: Problem, solution: StoredSolution) -> SolutionCheck:
+    """Recompute the residuals of ``solution`` for ``problem`` (see module docstring).
+
+    Missing u is recomputed as Hᵀv + w (its residual is then 0 by construction); a missing
+    v or r makes the check incomplete (the residual measures involving it are reported NaN).
+    """
+    v, u, r = solution.v, solution.u, solution.r
+    missing = tuple(k for k, a in (("v", v), ("r", r)) if a is None)
+    zero = tuple(k for k, a in (("v", v), ("u", u), ("r", r)) if a is not None and not np.any(a))
+    nan = float("nan")
+    if missing:
+        return SolutionCheck(missing, zero, nan, nan, nan, nan, nan)
+    Mv = problem.M_sym @ v
+    Hr = problem.H @ r
+    dyn = _rel(Mv - Hr - problem.f, Mv, Hr, problem.f)
+    HTv = problem.H.T @ v
+    if u is None:
+        u = HTv + problem.w
+    vel = _rel(u - HTv - problem.w, u, HTv, problem.w)
+    rc = r.reshape(-1, SPACEDIM)
+    uc = u.reshape(-1, SPACEDIM)
+    mu, mu_r = problem.mu, problem.mu_r
+    rT = np.hypot(rc[:, 1], rc[:, 2])
+    rR = np.hypot(rc[:, 3], rc[:, 4])
+    primal = np.maximum.reduce([rT - mu * rc[:, 0], rR - mu_r * rc[:, 0], np.zeros(len(mu))])
+    uT = np.hypot(uc[:, 1], uc[:, 2])
+    uR = np.hypot(uc[:, 3], uc[:, 4])
+    dual = np.maximum(mu * uT + mu_r * uR - uc[:, 0], 0.0)
+    # With μ = μr = 0 the norm conditions no longer force r_N ≥ 0 (nor u_N ≥ 0): check signs.
+    primal = np.maximum(primal, -rc[:, 0])
+    dual = np.maximum(dual, -uc[:, 0])
+    rmax = max(np.abs(r).max(initial=0.0), _TINY)
+    umax = max(np.abs(u).max(initial=0.0), _TINY)
+    comp = abs(float(r @ u)) / max(np.linalg.norm(r) * np.linalg.norm(u), _TINY)
+    return SolutionCheck(
+        missing=(), zero=zero, dynamics=dyn, velocity=vel,
+        primal_cone=float(max(primal.max(initial=0.0), 0.0) / rmax),
+        dual_cone=float(max(dual.max(initial=0.0), 0.0) / umax), complementarity=float(comp),
+    )
+
+
+def _rel(residual, *terms) -> float:
+    scale = max(max(np.abs(t).max(initial=0.0) for t in terms), _TINY)
+    return float(np.abs(residual).max(initial=0.0) / scale)

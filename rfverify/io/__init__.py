@@ -1,0 +1,81 @@
+"""Problem files: FCLIB HDF5 and Siconos ``.dat`` text; bundled example problems.
+
+:func:`load` picks the reader from the file's content (HDF5 signature) and suffix;
+:func:`save` writes FCLIB HDF5.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import ProblemFileError
+from ..problem import DEFAULT_MAX_ASYMMETRY, Problem
+from .fclib import read_fclib, write_fclib
+from .siconos_dat import LocalProblem, lift_local, parse_siconos_dat, read_siconos_dat
+
+BUNDLED_PREFIX = "bundled:"
+
+__all__ = ["load", "save", "read_fclib", "write_fclib", "read_siconos_dat", "parse_siconos_dat",
+           "lift_local", "LocalProblem", "bundled_problems", "resolve_path", "BUNDLED_PREFIX"]
+
+
+def bundled_problems() -> dict[str, Path]:
+    """Problems shipped inside the package: short name → path.
+
+    ``chute`` is the Siconos Chute FCLIB file (4 contacts, 768 dofs; Apache-2.0, from the
+    Siconos/FCLIB collections); the others are small Siconos ``.dat`` problems.
+    """
+    from .. import data
+
+    root = Path(data.__file__).parent
+    return {
+        "chute": root / "Chute-ndof-768-nc-4-3.hdf5",
+        "chute-dat": root / "GRFC3D_Chute-ndof-768-nc-4-3.dat",
+        "sphere": root / "RFC3D_sphere_1.dat",
+        "cube": root / "RFC3D_cube_1.dat",
+        "sphere-from-global": root / "rfc3d_sphere_from_grfc3d.dat",
+    }
+
+
+def resolve_path(spec) -> Path:
+    """``bundled:NAME`` → the bundled file's path; anything else → ``Path(spec)``."""
+    text = str(spec)
+    if text.startswith(BUNDLED_PREFIX):
+        name = text[len(BUNDLED_PREFIX):]
+        table = bundled_problems()
+        if name not in table:
+            raise ProblemFileError(text, f"no bundled problem named {name!r}; bundled problems: "
+                                         f"{', '.join(sorted(table))}")
+        return table[name]
+    return Path(spec)
+
+
+def load(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem:
+    """Read a problem file (FCLIB ``.hdf5``/``.h5`` or Siconos ``.dat``) into a validated
+    :class:`~rfverify.problem.Problem`.  ``path`` may be ``"bundled:NAME"`` (see
+    :func:`bundled_problems`).  A local ``.dat`` problem is lifted to global form.
+
+    Raises
+    ------
+    ProblemFileError
+        the file is missing, unreadable or malformed (path and location named).
+    InvalidProblemError
+        the data are not a valid problem (field and index named).
+    """
+    p = resolve_path(path)
+    if not p.exists():
+        raise ProblemFileError(p, "no such file")
+    if p.is_dir():
+        raise ProblemFileError(p, "is a directory, expected a problem file")
+    with open(p, "rb") as fh:
+        head = fh.read(8)
+    if head == b"\x89HDF\r\n\x1a\n" or p.suffix.lower() in {".hdf5", ".h5", ".hdf"}:
+        return read_fclib(p, max_asymmetry=max_asymmetry)
+    if p.suffix.lower() == ".dat" or head[:1].isdigit():
+        return read_siconos_dat(p, max_asymmetry=max_asymmetry)
+    raise ProblemFileError(p, "unrecognised format: expected an FCLIB HDF5 file or a Siconos .dat file")
+
+
+def save(problem: Problem, path, **kwargs) -> Path:
+    """Write ``problem`` as an FCLIB HDF5 file (see :func:`write_fclib`)."""
+    return write_fclib(problem, path, **kwargs)

@@ -1,0 +1,377 @@
+"""Siconos ``.dat`` text files of rolling-friction problems (DESIGN §7).
+
+Two layouts, as written by Siconos' ``*_printInFile`` functions::
+
+    local  (RFC3D):   d  nc  W  q  mu  mu_r                 W (5nc×5nc), q (5nc)
+    global (GRFC3D):  d  nc  M  H  f  w  mu  mu_r           M (m×m), H (m×5nc)
+
+Each matrix starts with three integer lines: storage type (0 dense, 2 sparse; 1 = sparse
+block is not supported), number of rows, number of columns.  A dense matrix follows with a
+line ``rows<TAB>cols`` and the entries in column-major order (``%32.24e``: full precision).
+A sparse matrix follows with an integer line (the Siconos sparse origin) and a CSparse
+``cs_print`` listing, either a triplet (``triplet: m-by-n, nzmax: .. nnz: ..`` then
+``row col : value``) or compressed columns (``m-by-n, nzmax: .. nnz: .., 1-norm: ..`` then
+``col j : locations a to b`` and ``row : value``).  CSparse prints values with ``%g``: **six
+significant digits**, so such a problem is only known to about 5e-6 relative per entry;
+the reader records this in ``problem.provenance["significant_digits"]``.
+
+The file kind is recognised from the content: after the first matrix, a global file has a
+second matrix header (a line holding one integer); a local file has the vector q (floats).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import InvalidProblemError, ProblemFileError
+from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem
+
+STORAGE_DENSE = 0
+STORAGE_SPARSE_BLOCK = 1
+STORAGE_SPARSE = 2
+
+CSPARSE_DIGITS = 6
+"""Significant digits kept by CSparse's ``%g`` print-out."""
+
+_INT_RE = re.compile(r"^[+-]?\d+$")
+_TRIPLET_HDR = re.compile(r"triplet:\s*(\d+)-by-(\d+),\s*nzmax:\s*(\d+)\s+nnz:\s*(\d+)")
+_CSC_HDR = re.compile(r"^(\d+)-by-(\d+),\s*nzmax:\s*(\d+)\s+nnz:\s*(\d+)")
+_TRIPLET_ENTRY = re.compile(r"^(\d+)\s+(\d+)\s*:\s*(\S+)$")
+_CSC_COL = re.compile(r"^col\s+(\d+)\s*:\s*locations\s+(\d+)\s+to\s+(-?\d+)$")
+_CSC_ENTRY = re.compile(r"^(\d+)\s*:\s*(\S+)$")
+
+
+@dataclass(frozen=True)
+class LocalProblem:
+    """A local (reduced) rolling-friction problem ``u = W r + q``, ``K* ∋ u ⊥ r ∈ K``.
+
+    W (5n×5n, symmetric positive semidefinite up to data precision), q (5n,), mu, mu_r (n,).
+    ``significant_digits`` is the precision of the printed data (None = full double).
+    """
+
+    W: np.ndarray
+    q: np.ndarray
+    mu: np.ndarray
+    mu_r: np.ndarray
+    significant_digits: int | None = None
+
+    @property
+    def n_contacts(self) -> int:
+        return int(self.mu.size)
+
+
+@dataclass(frozen=True)
+class LiftReport:
+    """What :func:`lift_local` did: W = HᵀH with H = Λ^{1/2}Vᵀ on the kept eigenpairs."""
+
+    rank: int
+    dropped: int
+    min_eigenvalue: float
+    max_eigenvalue: float
+    rank_tol: float
+    asymmetry: float
+
+
+class _Lines:
+    """Non-empty, stripped lines with their 1-based line numbers, consumed in order."""
+
+    def __init__(self, path: Path, text: str):
+        self.path = path
+        self.items = [(k + 1, s.strip()) for k, s in enumerate(text.splitlines()) if s.strip()]
+        self.pos = 0
+
+    def peek(self):
+        return self.items[self.pos] if self.pos < len(self.items) else (None, None)
+
+    def next(self, what: str):
+        if self.pos >= len(self.items):
+            raise ProblemFileError(self.path, f"file ends early: expected {what}",
+                                   location=f"line {self.items[-1][0] + 1 if self.items else 1}")
+        item = self.items[self.pos]
+        self.pos += 1
+        return item
+
+    def error(self, lineno, msg):
+        return ProblemFileError(self.path, msg, location=f"line {lineno}")
+
+    def integer(self, what: str) -> int:
+        lineno, s = self.next(what)
+        if not _INT_RE.match(s):
+            raise self.error(lineno, f"expected {what} (an integer), found {s[:40]!r}")
+        return int(s)
+
+
+def read_siconos_dat(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY,
+                     rank_tol: float | None = None) -> Problem:
+    """Read a Siconos rolling-friction ``.dat`` file as a global :class:`Problem`.
+
+    A local file is lifted to global form with :func:`lift_local` (M = I, H from W = HᵀH,
+    f = 0, w = q); ``problem.provenance`` records the kind, the print precision and the
+    lifting report.
+    """
+    kind, data, digits = parse_siconos_dat(path)
+    provenance = {"format": "siconos-dat", "kind": kind, "significant_digits": digits}
+    if kind == "local":
+        lifted, report = lift_local(data, rank_tol=rank_tol, max_asymmetry=max_asymmetry)
+        provenance["lift"] = report.__dict__
+        return _with_provenance(lifted, provenance, str(path))
+    M, H, f, w, mu, mu_r, storage = data
+    problem = Problem.from_arrays(M, H, f, w, mu, mu_r, storage=storage,
+                                  max_asymmetry=max_asymmetry, source=str(path),
+                                  title=Path(path).stem,
+                                  description="read from a Siconos global rolling .dat file")
+    return _with_provenance(problem, provenance, str(path))
+
+
+def _with_provenance(problem: Problem, provenance: dict, source: str) -> Problem:
+    return dataclasses.replace(problem, provenance=provenance, source=source)
+
+
+def parse_siconos_dat(path):
+    """Parse a ``.dat`` file.  Returns ``(kind, data, significant_digits)`` with
+    ``kind == "local"`` and ``data`` a :class:`LocalProblem`, or ``kind == "global"`` and
+    ``data = (M, H, f, w, mu, mu_r, storage)``."""
+    path = Path(path)
+    if not path.exists():
+        raise ProblemFileError(path, "no such file")
+    if path.is_dir():
+        raise ProblemFileError(path, "is a directory, expected a Siconos .dat file")
+    try:
+        text = path.read_text(encoding="ascii")
+    except UnicodeDecodeError:
+        raise ProblemFileError(path, "is not a text file (binary content); a Siconos .dat "
+                                     "problem is plain text") from None
+    lines = _Lines(path, text)
+    d = lines.integer("the dimension d")
+    if d != SPACEDIM:
+        raise ProblemFileError(path, f"dimension d = {d}: not a rolling-friction problem "
+                                     f"(expected {SPACEDIM})", location="line 1")
+    nc = lines.integer("the number of contacts nc")
+    if nc <= 0:
+        raise ProblemFileError(path, f"number of contacts nc = {nc} must be positive", location="line 2")
+    A, A_fmt, A_digits = _read_matrix(lines, "first matrix")
+    lineno, nxt = lines.peek()
+    is_global = nxt is not None and _INT_RE.match(nxt) is not None
+    digits = A_digits
+    if is_global:
+        M = A
+        H, H_fmt, H_digits = _read_matrix(lines, "H")
+        digits = _min_digits(A_digits, H_digits)
+        m = M.shape[0]
+        if H.shape != (m, SPACEDIM * nc):
+            raise ProblemFileError(path, f"H is {H.shape[0]}×{H.shape[1]}, expected "
+                                         f"{m}×{SPACEDIM * nc} (m × 5nc)", location="H header")
+        tokens = _remaining_floats(lines)
+        f, w, mu, mu_r = _split(path, tokens, [("f", m), ("w", SPACEDIM * nc), ("mu", nc), ("mu_r", nc)])
+        return "global", (M, H, f, w, mu, mu_r, {"M": A_fmt, "H": H_fmt}), digits
+    if A.shape != (SPACEDIM * nc, SPACEDIM * nc):
+        raise ProblemFileError(path, f"W is {A.shape[0]}×{A.shape[1]}, expected "
+                                     f"{SPACEDIM * nc}×{SPACEDIM * nc} (5nc × 5nc)", location="W header")
+    tokens = _remaining_floats(lines)
+    q, mu, mu_r = _split(path, tokens, [("q", SPACEDIM * nc), ("mu", nc), ("mu_r", nc)])
+    W = A.toarray()
+    return "local", LocalProblem(W=W, q=q, mu=mu, mu_r=mu_r, significant_digits=digits), digits
+
+
+def _min_digits(a, b):
+    vals = [x for x in (a, b) if x is not None]
+    return min(vals) if vals else None
+
+
+def _read_matrix(lines: _Lines, what: str):
+    lineno, _ = lines.peek()
+    storage = lines.integer(f"the storage type of {what}")
+    rows = lines.integer(f"the number of rows of {what}")
+    cols = lines.integer(f"the number of columns of {what}")
+    if rows < 0 or cols < 0:
+        raise lines.error(lineno, f"{what} has negative size {rows}×{cols}")
+    if storage == STORAGE_DENSE:
+        ln, s = lines.next(f"the dense header of {what}")
+        if [t for t in s.split()] != [str(rows), str(cols)]:
+            raise lines.error(ln, f"dense header of {what} is {s!r}, expected '{rows} {cols}'")
+        vals = []
+        while len(vals) < rows * cols:
+            ln, s = lines.next(f"{rows * cols} entries of {what}")
+            vals.extend(_floats(lines, ln, s))
+        if len(vals) != rows * cols:
+            raise lines.error(ln, f"{what} has {len(vals)} dense entries, expected {rows * cols}")
+        dense = np.array(vals, dtype=np.float64).reshape((rows, cols), order="F")
+        return sp.csc_matrix(dense), "dense", None
+    if storage == STORAGE_SPARSE:
+        lines.integer(f"the sparse origin of {what}")
+        ln, s = lines.next(f"the CSparse banner of {what}")
+        if not s.startswith("CSparse"):
+            raise lines.error(ln, f"expected a CSparse print-out of {what}, found {s[:40]!r}")
+        ln, hdr = lines.next(f"the CSparse header of {what}")
+        if (mt := _TRIPLET_HDR.match(hdr)):
+            return _read_cs_triplet(lines, ln, mt, rows, cols, what), "triplet", CSPARSE_DIGITS
+        if (mc := _CSC_HDR.match(hdr)):
+            return _read_cs_csc(lines, ln, mc, rows, cols, what), "csc", CSPARSE_DIGITS
+        raise lines.error(ln, f"unrecognised CSparse header for {what}: {hdr[:60]!r}")
+    if storage == STORAGE_SPARSE_BLOCK:
+        raise lines.error(lineno, f"{what} is stored as a Siconos sparse-block matrix (type 1), "
+                                  "which rfverify does not read; re-export it dense or sparse")
+    raise lines.error(lineno, f"unknown storage type {storage} for {what} (0 dense, 2 sparse)")
+
+
+def _read_cs_triplet(lines, hdr_line, match, rows, cols, what):
+    m, n, _nzmax, nnz = (int(g) for g in match.groups())
+    if (m, n) != (rows, cols):
+        raise lines.error(hdr_line, f"{what}: CSparse says {m}-by-{n}, header said {rows}×{cols}")
+    r = np.empty(nnz, dtype=np.int64)
+    c = np.empty(nnz, dtype=np.int64)
+    x = np.empty(nnz)
+    for k in range(nnz):
+        ln, s = lines.next(f"entry {k + 1} of {nnz} of {what}")
+        me = _TRIPLET_ENTRY.match(s)
+        if not me:
+            raise lines.error(ln, f"expected 'row col : value' for {what}, found {s[:40]!r}")
+        r[k], c[k] = int(me.group(1)), int(me.group(2))
+        x[k] = _float(lines, ln, me.group(3))
+        if r[k] >= m or c[k] >= n:
+            raise lines.error(ln, f"entry ({r[k]}, {c[k]}) outside {m}×{n} in {what}")
+    return sp.coo_matrix((x, (r, c)), shape=(m, n)).tocsc()
+
+
+def _read_cs_csc(lines, hdr_line, match, rows, cols, what):
+    m, n, _nzmax, nnz = (int(g) for g in match.groups())
+    if (m, n) != (rows, cols):
+        raise lines.error(hdr_line, f"{what}: CSparse says {m}-by-{n}, header said {rows}×{cols}")
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    idx, vals = [], []
+    for j in range(n):
+        ln, s = lines.next(f"column {j} of {what}")
+        mc = _CSC_COL.match(s)
+        if not mc or int(mc.group(1)) != j:
+            raise lines.error(ln, f"expected 'col {j} : locations a to b' in {what}, found {s[:40]!r}")
+        a, b = int(mc.group(2)), int(mc.group(3))
+        if a != len(idx) or b < a - 1:
+            raise lines.error(ln, f"column {j} of {what} has inconsistent locations {a} to {b}")
+        for _ in range(b - a + 1):
+            ln, s = lines.next(f"an entry of column {j} of {what}")
+            me = _CSC_ENTRY.match(s)
+            if not me:
+                raise lines.error(ln, f"expected 'row : value' in {what}, found {s[:40]!r}")
+            row = int(me.group(1))
+            if row >= m:
+                raise lines.error(ln, f"row {row} outside 0..{m - 1} in {what}")
+            idx.append(row)
+            vals.append(_float(lines, ln, me.group(2)))
+        indptr[j + 1] = len(idx)
+    if len(idx) != nnz:
+        raise lines.error(hdr_line, f"{what} lists {len(idx)} entries, header says nnz = {nnz}")
+    A = sp.csc_matrix((np.array(vals), np.array(idx, dtype=np.int64), indptr), shape=(m, n))
+    A.sum_duplicates()
+    return A
+
+
+def _float(lines, ln, s):
+    try:
+        return float(s)
+    except ValueError:
+        raise lines.error(ln, f"{s[:40]!r} is not a number") from None
+
+
+def _floats(lines, ln, s):
+    return [_float(lines, ln, t) for t in s.split()]
+
+
+def _remaining_floats(lines: _Lines):
+    out = []
+    while lines.peek()[0] is not None:
+        ln, s = lines.next("vector data")
+        out.extend((ln, v) for v in _floats(lines, ln, s))
+    return out
+
+
+def _split(path, tokens, spec):
+    """Cut the trailing float tokens into the named vectors, checking the counts."""
+    total = sum(size for _, size in spec)
+    pos = 0
+    result = []
+    for name, size in spec:
+        if pos + size > len(tokens):
+            raise ProblemFileError(path, f"vector {name} is short: the file has {len(tokens)} numbers "
+                                         f"after the matrices, {total} expected "
+                                         f"({', '.join(f'{n}:{s}' for n, s in spec)})",
+                                   location="end of file")
+        result.append(np.array([v for _, v in tokens[pos:pos + size]], dtype=np.float64))
+        pos += size
+    if pos != len(tokens):
+        ln = tokens[pos][0]
+        raise ProblemFileError(path, f"{len(tokens) - pos} unexpected numbers after mu_r "
+                                     f"({total} expected after the matrices)", location=f"line {ln}")
+    return result
+
+
+# ---------------------------------------------------------------------- lifting
+def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
+               max_asymmetry: float = DEFAULT_MAX_ASYMMETRY):
+    """Lift a local problem (W, q) to global form: M = I_m, H = Λ^{1/2}Vᵀ (m×5n), f = 0, w = q.
+
+    W is symmetrised and factored as W = V Λ Vᵀ (dense symmetric eigendecomposition, fine for
+    the few-thousand-row local problems Siconos prints).  Eigenvalues ≤ ``rank_tol``·‖W‖₂ are
+    dropped (W is often singular; m = the numerical rank), so HᵀH = W up to that tolerance,
+    and then u = HᵀH r + q = W r + q and M v = H r give back the local problem.
+
+    ``rank_tol`` defaults to the data precision: 10⁻ᵈ·n_dim for ``d`` printed digits (a
+    print-out rounded to d digits perturbs each entry by ≤ 5·10⁻ᵈ relative, hence W's
+    eigenvalues by ≤ 5·10⁻ᵈ‖|W|‖), or 100·eps·5n for full-precision data.
+
+    Raises
+    ------
+    InvalidProblemError
+        field ``"W"``: asymmetric beyond ``max_asymmetry``, non-finite, or with an eigenvalue
+        below −rank_tol·‖W‖ (not positive semidefinite).
+    """
+    W = np.asarray(local.W, dtype=np.float64)
+    dim = W.shape[0]
+    if not np.all(np.isfinite(W)):
+        i, j = np.argwhere(~np.isfinite(W))[0]
+        raise InvalidProblemError("W", "contains a non-finite value", index=(int(i), int(j)),
+                                  fix="remove NaN/Inf from the data")
+    d = np.sqrt(np.abs(np.diag(W)))
+    asym = np.abs(W - W.T)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scaled = np.where(asym > 0, asym / np.outer(d, d), 0.0)
+    scaled[np.isnan(scaled)] = np.inf
+    asymmetry = float(scaled.max()) if scaled.size else 0.0
+    if not asymmetry <= max_asymmetry:
+        i, j = np.unravel_index(np.argmax(scaled), scaled.shape)
+        raise InvalidProblemError("W", f"is not symmetric: scaled asymmetry {asymmetry:.3g} > "
+                                       f"max_asymmetry = {max_asymmetry:.3g}",
+                                  index=(int(i), int(j)),
+                                  fix="check the data or raise max_asymmetry")
+    Ws = 0.5 * (W + W.T)
+    lam, V = np.linalg.eigh(Ws)
+    norm = float(max(abs(lam[0]), abs(lam[-1]))) if lam.size else 0.0
+    if rank_tol is None:
+        rank_tol = (10.0 ** (-local.significant_digits) * dim if local.significant_digits
+                    else 100 * np.finfo(float).eps * dim)
+    if norm == 0.0:
+        raise InvalidProblemError("W", "is zero", fix="a local problem needs a non-zero Delassus matrix")
+    if lam[0] < -rank_tol * norm:
+        raise InvalidProblemError(
+            "W", f"is not positive semidefinite: eigenvalue {lam[0]:.3e} < -{rank_tol:.1e}·‖W‖ "
+                 f"(‖W‖ = {norm:.3e})",
+            fix="a Delassus matrix W = H M⁻¹ Hᵀ is PSD; check the data or pass a larger rank_tol")
+    keep = lam > rank_tol * norm
+    H = (V[:, keep] * np.sqrt(lam[keep])).T  # m × 5n
+    m = H.shape[0]
+    report = LiftReport(rank=int(m), dropped=int(dim - m), min_eigenvalue=float(lam[0]),
+                        max_eigenvalue=float(lam[-1]), rank_tol=float(rank_tol),
+                        asymmetry=asymmetry)
+    problem = Problem.from_arrays(
+        sp.identity(m, format="csc"), sp.csc_matrix(H), np.zeros(m), local.q, local.mu, local.mu_r,
+        title="lifted local rolling problem",
+        description=(f"local problem (W {dim}×{dim}, rank {m}) lifted to global form: M = I, "
+                     f"H = Λ^1/2 Vᵀ from W = V Λ Vᵀ, f = 0, w = q"),
+        storage={"M": "csc", "H": "csc"},
+    )
+    return problem, report

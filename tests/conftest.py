@@ -1,0 +1,60 @@
+"""Shared pytest configuration: hypothesis profiles and data locations.
+
+Profiles
+--------
+``dev``  quick local runs (default outside CI): few examples, no deadline.
+``ci``   selected automatically when ``CI=true``: more examples, derandomised so a
+         failure in CI is reproducible from the log, still well inside the CI budget.
+Select explicitly with ``HYPOTHESIS_PROFILE=ci pytest`` or ``pytest --hypothesis-profile=ci``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, settings
+
+settings.register_profile(
+    "dev",
+    max_examples=60,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.register_profile(
+    "ci",
+    max_examples=300,
+    deadline=None,
+    derandomize=True,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+_default = "ci" if os.environ.get("CI", "").lower() in {"1", "true", "yes"} else "dev"
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", _default))
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """Directory with the real problems shipped beside the repository (``../shared/data``)."""
+    if not SHARED_DATA.is_dir():
+        # CI always has shared/ beside the clone: there a missing directory is a failure,
+        # elsewhere (a user's clone) the tests that need the real files are skipped.
+        if _default == "ci":
+            pytest.fail(f"shared data directory {SHARED_DATA} not present in CI")
+        pytest.skip(f"shared data directory {SHARED_DATA} not present")
+    return SHARED_DATA
+
+
+@pytest.fixture(autouse=True)
+def _restore_numpy_errstate():
+    """Fail loudly if a test leaks a changed numpy floating-point error state."""
+    before = np.geterr()
+    yield
+    after = np.geterr()
+    np.seterr(**before)
+    assert after == before, f"test changed numpy error state: {before} -> {after}"
