@@ -36,6 +36,8 @@ STORAGE_DENSE = 0
 STORAGE_SPARSE_BLOCK = 1
 STORAGE_SPARSE = 2
 
+_TINY = np.finfo(float).tiny
+
 CSPARSE_DIGITS = 6
 """Significant digits kept by CSparse's ``%g`` print-out."""
 
@@ -320,9 +322,11 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
     dropped (W is often singular; m = the numerical rank), so HᵀH = W up to that tolerance,
     and then u = HᵀH r + q = W r + q and M v = H r give back the local problem.
 
-    ``rank_tol`` defaults to the data precision: 10⁻ᵈ·n_dim for ``d`` printed digits (a
-    print-out rounded to d digits perturbs each entry by ≤ 5·10⁻ᵈ relative, hence W's
-    eigenvalues by ≤ 5·10⁻ᵈ‖|W|‖), or 100·eps·5n for full-precision data.
+    ``rank_tol`` defaults to the data precision.  A print-out rounded to d significant digits
+    perturbs each entry by |E_ij| ≤ ½·10^(1−d)·|W_ij|; the spectral norm is monotone on
+    non-negative matrices, so every eigenvalue moves by at most ½·10^(1−d)·‖|W|‖₂, and
+    eigenvalues below that bound are indistinguishable from 0.  Full-precision data use
+    100·eps·5n (rounding of the eigensolver).
 
     Raises
     ------
@@ -352,8 +356,11 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
     lam, V = np.linalg.eigh(Ws)
     norm = float(max(abs(lam[0]), abs(lam[-1]))) if lam.size else 0.0
     if rank_tol is None:
-        rank_tol = (10.0 ** (-local.significant_digits) * dim if local.significant_digits
-                    else 100 * np.finfo(float).eps * dim)
+        if local.significant_digits:
+            abs_norm = float(np.linalg.norm(np.abs(Ws), 2))
+            rank_tol = 0.5 * 10.0 ** (1 - local.significant_digits) * abs_norm / max(norm, _TINY)
+        else:
+            rank_tol = 100 * np.finfo(float).eps * dim
     if norm == 0.0:
         raise InvalidProblemError("W", "is zero", fix="a local problem needs a non-zero Delassus matrix")
     if lam[0] < -rank_tol * norm:

@@ -1,0 +1,155 @@
+"""The product cone of the lifted problem, L3^{n3} × L1^{n1}, as flat vectors.
+
+A thin layer over :mod:`rfverify.jordan`: each operation splits a flat cone vector (length
+nz = 3·n3 + n1) into its two families and makes one vectorised Jordan call per family, so
+nothing loops over contacts.  Domain errors are re-raised with the *global* cone index, which
+:class:`~rfverify.lifting.LiftedProblem` maps to a contact.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import jordan
+from ..errors import ConeDomainError
+
+
+class ProductCone:
+    """Operations on flat vectors of L3^{n3} × L1^{n1} (L3 cones first)."""
+
+    def __init__(self, n3: int, n1: int):
+        self.n3 = n3
+        self.n1 = n1
+        self.nz = 3 * n3 + n1
+        self.n_cones = n3 + n1
+        # Block-diagonal pattern (z index pairs within one cone) in the order of
+        # concatenate(Q3.ravel(), Q1.ravel()) for stacks Q3 (n3,3,3), Q1 (n1,1,1).
+        c3 = np.arange(n3)
+        a, b = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+        self.bd_rows = np.concatenate(((3 * c3[:, None, None] + a).ravel(), 3 * n3 + np.arange(n1)))
+        self.bd_cols = np.concatenate(((3 * c3[:, None, None] + b).ravel(), 3 * n3 + np.arange(n1)))
+
+    # ------------------------------------------------------------------ layout
+    def split(self, x):
+        return x[: 3 * self.n3].reshape(self.n3, 3), x[3 * self.n3:].reshape(self.n1, 1)
+
+    def join(self, x3, x1):
+        return np.concatenate((np.asarray(x3).reshape(-1), np.asarray(x1).reshape(-1)))
+
+    def identity(self, dtype=np.float64):
+        e = np.zeros(self.nz, dtype=dtype)
+        e[0: 3 * self.n3: 3] = 1
+        e[3 * self.n3:] = 1
+        return e
+
+    def _map(self, fn, *args, op: str):
+        """Apply ``fn`` family by family; re-raise domain errors with the global cone index."""
+        out3 = out1 = None
+        parts = [self.split(a) for a in args]
+        if self.n3:
+            try:
+                out3 = fn(*(p[0] for p in parts))
+            except ConeDomainError as exc:
+                raise ConeDomainError(op, _strip(exc), cone=exc.cone, value=exc.value) from exc
+        if self.n1:
+            try:
+                out1 = fn(*(p[1] for p in parts))
+            except ConeDomainError as exc:
+                cone = None if exc.cone is None else self.n3 + exc.cone
+                raise ConeDomainError(op, _strip(exc), cone=cone, value=exc.value) from exc
+        return out3, out1
+
+    def _flat(self, fn, *args, op):
+        o3, o1 = self._map(fn, *args, op=op)
+        dtype = np.result_type(*args)
+        return self.join(o3 if o3 is not None else np.empty((0, 3), dtype),
+                         o1 if o1 is not None else np.empty((0, 1), dtype))
+
+    # ------------------------------------------------------------------ algebra
+    def product(self, x, y):
+        return self._flat(jordan.jordan_product, x, y, op="jordan_product")
+
+    def arrow_solve(self, x, y):
+        """Solve x ∘ d = y for d (Arw(x)⁻¹ y)."""
+        return self._flat(_arrow_solve_tmp, x, y, op="arrow_solve")
+
+    def quad_apply(self, p, y):
+        return self._flat(jordan.quad_apply, p, y, op="quad_apply")
+
+    def inverse(self, x):
+        return self._flat(jordan.inverse, x, op="inverse")
+
+    def power(self, x, t):
+        return self._flat(lambda a: jordan.power(a, t), x, op=f"power({t})")
+
+    def quad_blocks(self, p) -> np.ndarray:
+        """Values of the block-diagonal Q_p in the order of (bd_rows, bd_cols), float64."""
+        q3, q1 = self._map(jordan.quad_matrix, p, op="quad_matrix")
+        parts = [np.asarray(q, dtype=np.float64).ravel() for q in (q3, q1) if q is not None]
+        return np.concatenate(parts) if parts else np.empty(0)
+
+    def arrow_blocks(self, x) -> np.ndarray:
+        """Values of the block-diagonal Arw(x) in the order of (bd_rows, bd_cols), float64."""
+        a3, a1 = self._map(jordan.arrow, x, op="arrow")
+        parts = [np.asarray(a, dtype=np.float64).ravel() for a in (a3, a1) if a is not None]
+        return np.concatenate(parts) if parts else np.empty(0)
+
+    def nt_scaling(self, z, s):
+        """NT point p and scaled point λ = Q_p z = Q_{p⁻¹} s, flat."""
+        r3, r1 = self._map(jordan.nt_scaling, z, s, op="nt_scaling")
+        dtype = np.result_type(z, s)
+        p = self.join(r3.p if r3 is not None else np.empty((0, 3), dtype),
+                      r1.p if r1 is not None else np.empty((0, 1), dtype))
+        lam = self.join(r3.lam if r3 is not None else np.empty((0, 3), dtype),
+                        r1.lam if r1 is not None else np.empty((0, 1), dtype))
+        return p, lam
+
+    def max_step(self, x, dx) -> float:
+        """Largest α ≥ 0 (possibly ∞) with x + α dx in the cone, for x strictly interior."""
+        a3, a1 = self._map(lambda a, b: jordan.step_to_boundary(a, b), x, dx, op="step_to_boundary")
+        vals = [np.min(a) for a in (a3, a1) if a is not None and np.size(a)]
+        return float(min(vals)) if vals else float("inf")
+
+    def min_lambda2(self, x):
+        """(smallest λ2 over all cones, its global cone index)."""
+        lam = self.lambda2(x)
+        k = int(np.argmin(lam))
+        return float(lam[k]), k
+
+    def lambda2(self, x) -> np.ndarray:
+        x3, x1 = self.split(x)
+        parts = []
+        if self.n3:
+            parts.append(jordan.spectral_values(x3)[1])
+        if self.n1:
+            parts.append(x1[:, 0])
+        return np.concatenate(parts)
+
+    def max_cond_quad(self, p):
+        """(max cond(Q_p) = (λ1/λ2)² over cones, its cone index)."""
+        x3, x1 = self.split(p)
+        parts = []
+        if self.n3:
+            l1, l2 = jordan.spectral_values(x3)
+            with np.errstate(divide="ignore", over="ignore"):
+                parts.append(np.asarray((l1 / l2) ** 2, dtype=np.float64))
+        if self.n1:
+            parts.append(np.ones(self.n1))
+        c = np.concatenate(parts)
+        k = int(np.argmax(c))
+        return float(c[k]), k
+
+
+def _strip(exc: ConeDomainError) -> str:
+    text = str(exc)
+    head = f"{exc.operation} (cone {exc.cone}): " if exc.cone is not None else f"{exc.operation}: "
+    return text[len(head):] if text.startswith(head) else text
+
+
+def _arrow_solve_tmp(x, y):
+    x0, xb = x[:, 0], x[:, 1:]
+    y0, yb = y[:, 0], y[:, 1:]
+    d = jordan.det(x)
+    d0 = (x0 * y0 - np.sum(xb * yb, axis=1)) / d
+    db = (yb - d0[:, None] * xb) / x0[:, None]
+    return np.concatenate((d0[:, None], db), axis=1)

@@ -1,0 +1,329 @@
+"""Linear-system forms of Algorithm 1 (DESIGN §4) behind one interface.
+
+Every form solves the same linearised KKT system for (dv, dr̃, dz)::
+
+    M dv − H̃ᵀ dr̃           = a          (dual residual)
+   −H̃ dv          + J dz    = b          (primal residual)
+    Q_p dz + Q_{p⁻¹} Jᵀ dr̃  = c          (NT forms;  c = λ \\ ξ in the scaled space)
+    Arw(s) dz + Arw(z) Jᵀ dr̃ = c         (noscaling)
+
+but factors a different matrix:
+
+``jqinv``   (14)  [[M, −H̃ᵀ, 0], [−H̃, 0, J Q_{p⁻¹}], [0, Q_{p⁻¹} Jᵀ, I]],  unknowns (dv, dr̃, Q_p dz)
+``qp2``     (11)  [[M, −H̃ᵀ, 0], [−H̃, 0, J], [0, Jᵀ, Q_{p²}]],            unknowns (dv, dr̃, dz)
+``reduced`` (15)  [[M, −H̃ᵀ], [−H̃, −J Q_{p⁻²} Jᵀ]],                       unknowns (dv, dr̃)
+``noscaling`` (6) [[M, −H̃ᵀ, 0], [−H̃, 0, J], [0, Arw(z) Jᵀ, Arw(s)]],      unsymmetric
+
+The symmetric forms are quasi-definite once a small static regularisation −δI is put on the
+dr̃ block (positive blocks M, I or Q_{p²}; negative block dr̃): they are factored by QDLDL
+(LDLᵀ without pivoting, AMD ordering, symbolic analysis reused through ``update``).  The
+unsymmetric form is factored by SuperLU with partial pivoting.
+
+Iterative refinement runs on the *unreduced, unregularised* three-block system above, with
+its residual evaluated by the exact operator (Q applied by Q_x y = 2(xᵀy)x − det(x)Ry, never
+formed) in longdouble when asked.  So every form is refined against the same equations and
+the reported solve residual means the same thing for all of them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from .cones import ProductCone
+
+
+class SparseAssembler:
+    """A fixed sparsity pattern assembled from (row, col) contributions, duplicates summed.
+
+    The pattern and the CSC order are computed once; each assembly is one ``bincount``.
+    """
+
+    def __init__(self, rows, cols, shape):
+        rows = np.asarray(rows, dtype=np.int64)
+        cols = np.asarray(cols, dtype=np.int64)
+        self.shape = shape
+        key = cols * shape[0] + rows
+        uniq, self.slot = np.unique(key, return_inverse=True)
+        self.indices = (uniq % shape[0]).astype(np.int32)
+        col_of = uniq // shape[0]
+        self.indptr = np.searchsorted(col_of, np.arange(shape[1] + 1)).astype(np.int32)
+        self.nnz = uniq.size
+
+    def matrix(self, values) -> sp.csc_matrix:
+        data = np.bincount(self.slot, weights=np.asarray(values, dtype=np.float64), minlength=self.nnz)
+        return sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
+
+
+class KKTSystem:
+    """Common data and the exact three-block operator used for refinement."""
+
+    symmetric = True
+    name = "base"
+
+    def __init__(self, M, H_t, J, cones: ProductCone, *, dtype_ref=np.longdouble, static_reg=1e-12):
+        self.M = sp.csc_matrix(M)
+        self.H_t = sp.csr_matrix(H_t)
+        self.J = sp.csr_matrix(J)
+        self.cones = cones
+        self.m = M.shape[0]
+        self.nk = H_t.shape[0]
+        self.nz = cones.nz
+        self.rho = self.J.tocsc().indices.astype(np.int64)  # J row of each z component
+        if np.any(np.diff(self.J.tocsc().indptr) != 1):
+            raise ValueError("J must have exactly one entry per column")
+        self.static_reg = static_reg
+        # Exact operator in the refinement precision.
+        self.dtype_ref = dtype_ref
+        self.M_ref = self.M.astype(dtype_ref)
+        self.H_ref = self.H_t.astype(dtype_ref)
+        self.HT_ref = self.H_t.T.tocsr().astype(dtype_ref)
+        self.J_ref = self.J.astype(dtype_ref)
+        self.JT_ref = self.J.T.tocsr().astype(dtype_ref)
+        self._Mcoo = sp.triu(self.M, format="coo")
+        self._Hcoo = self.H_t.tocoo()
+        self.factor_count = 0
+
+    # ------------------------------------------------------------------ exact operator
+    def set_point(self, p, z=None, s=None):
+        """Store the scaling for this iteration (p for NT forms; z, s for noscaling)."""
+        self.p = p
+        self.p_inv = self.cones.inverse(p) if p is not None else None
+        self.z = z
+        self.s = s
+
+    def apply(self, dv, dr, dz):
+        """The three-block operator of the module docstring, in the dtype of its inputs."""
+        a = self.M_ref @ dv - self.HT_ref @ dr
+        b = -(self.H_ref @ dv) + self.J_ref @ dz
+        JTdr = self.JT_ref @ dr
+        if self.symmetric:
+            c = self.cones.quad_apply(self.p, dz) + self.cones.quad_apply(self.p_inv, JTdr)
+        else:
+            c = self.cones.product(self.s, dz) + self.cones.product(self.z, JTdr)
+        return a, b, c
+
+    def norm_estimate(self) -> float:
+        return float(abs(self._K).sum(axis=1).max()) if self._K is not None else 1.0
+
+    # ------------------------------------------------------------------ to be provided
+    def factor(self):
+        raise NotImplementedError
+
+    def solve_once(self, a, b, c):
+        """One solve with the factorisation (float64), returning (dv, dr, dz)."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ refinement
+    def solve(self, a, b, c, *, refine_max=10, refine_extended=True):
+        """Solve with iterative refinement; returns (dv, dr, dz, relative residual, steps).
+
+        The relative residual is the normwise backward error
+        ‖rhs − K x‖∞ / (‖K‖∞ ‖x‖∞ + ‖rhs‖∞) of the unreduced system.
+        """
+        work = self.dtype_ref if refine_extended else np.float64
+        a, b, c = (np.asarray(x, dtype=work) for x in (a, b, c))
+        x = [np.asarray(t, dtype=work) for t in self.solve_once(a, b, c)]
+        rhs_norm = max(np.abs(a).max(initial=0), np.abs(b).max(initial=0), np.abs(c).max(initial=0))
+        knorm = self.norm_estimate()
+        best = None
+        steps = 0
+        for steps in range(refine_max + 1):
+            ka, kb, kc = self.apply(*x)
+            ra, rb, rc = a - ka, b - kb, c - kc
+            res = max(np.abs(ra).max(initial=0), np.abs(rb).max(initial=0), np.abs(rc).max(initial=0))
+            xnorm = max(np.abs(t).max(initial=0) for t in x)
+            rel = float(res / max(knorm * xnorm + rhs_norm, np.finfo(float).tiny))
+            if not np.isfinite(rel):
+                return (*x, float("nan"), steps)
+            if best is None or rel < best[0]:
+                best = (rel, [t.copy() for t in x])
+            elif rel > 0.5 * best[0]:
+                break  # refinement stopped converging: keep the best iterate
+            if rel <= 4 * np.finfo(work).eps or steps == refine_max:
+                break
+            corr = self.solve_once(ra, rb, rc)
+            x = [t + np.asarray(d, dtype=work) for t, d in zip(x, corr)]
+        rel, x = best
+        return (*x, rel, steps)
+
+
+class JQinvSystem(KKTSystem):
+    """Form (14): unknowns (dv, dr̃, y = Q_p dz)."""
+
+    name = "jqinv"
+
+    def __init__(self, *args, **kw):
+        super().__init__(*args, **kw)
+        m, nk, nz = self.m, self.nk, self.nz
+        cones = self.cones
+        Mc, Hc = self._Mcoo, self._Hcoo
+        up = self.rho[cones.bd_rows]  # J row of the Q row
+        rows = [Mc.row, Hc.col, m + up, m + nk + np.arange(nz), m + np.arange(nk)]
+        cols = [Mc.col, m + Hc.row, m + nk + cones.bd_cols, m + nk + np.arange(nz), m + np.arange(nk)]
+        self.N = m + nk + nz
+        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (self.N, self.N))
+        self._fixed = (Mc.data, -Hc.data)
+        self._solver = None
+        self._K = None
+
+    def factor(self):
+        import qdldl
+
+        qinv = self.cones.quad_blocks(self.p_inv)
+        Mdata, Hdata = self._fixed
+        diag_scale = max(np.abs(Mdata).max(initial=1.0), np.abs(qinv).max(initial=1.0), 1.0)
+        vals = np.concatenate((Mdata, Hdata, qinv, np.ones(self.nz),
+                               np.full(self.nk, -self.static_reg * diag_scale)))
+        K = self.asm.matrix(vals)
+        self._K = K + sp.triu(K, 1).T
+        if self._solver is None:
+            self._solver = qdldl.Solver(K, upper=True)
+        else:
+            self._solver.update(K, upper=True)
+        self.factor_count += 1
+
+    def solve_once(self, a, b, c):
+        m, nk = self.m, self.nk
+        rhs = np.concatenate((a, b, c)).astype(np.float64)
+        x = self._solver.solve(rhs)
+        dv, dr, y = x[:m], x[m:m + nk], x[m + nk:]
+        dz = self.cones.quad_apply(np.asarray(self.p_inv, dtype=np.float64), y)
+        return dv, dr, dz
+
+
+class QP2System(KKTSystem):
+    """Form (11): unknowns (dv, dr̃, dz); third row multiplied by Q_p: Jᵀdr̃ + Q_{p²} dz = Q_p c."""
+
+    name = "qp2"
+
+    def __init__(self, *args, **kw):
+        super().__init__(*args, **kw)
+        m, nk, nz = self.m, self.nk, self.nz
+        cones = self.cones
+        Mc, Hc = self._Mcoo, self._Hcoo
+        upper = cones.bd_rows <= cones.bd_cols
+        self._upper = upper
+        rows = [Mc.row, Hc.col, m + self.rho, m + nk + cones.bd_rows[upper], m + np.arange(nk)]
+        cols = [Mc.col, m + Hc.row, m + nk + np.arange(nz), m + nk + cones.bd_cols[upper],
+                m + np.arange(nk)]
+        self.N = m + nk + nz
+        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (self.N, self.N))
+        self._fixed = (Mc.data, -Hc.data)
+        self._solver = None
+        self._K = None
+
+    def factor(self):
+        import qdldl
+
+        p2 = self.cones.power(self.p, 2)
+        q2 = self.cones.quad_blocks(p2)[self._upper]
+        Mdata, Hdata = self._fixed
+        diag_scale = max(np.abs(Mdata).max(initial=1.0), np.abs(q2).max(initial=1.0), 1.0)
+        vals = np.concatenate((Mdata, Hdata, np.ones(self.nz), q2,
+                               np.full(self.nk, -self.static_reg * diag_scale)))
+        K = self.asm.matrix(vals)
+        self._K = K + sp.triu(K, 1).T
+        if self._solver is None:
+            self._solver = qdldl.Solver(K, upper=True)
+        else:
+            self._solver.update(K, upper=True)
+        self.factor_count += 1
+
+    def solve_once(self, a, b, c):
+        m, nk = self.m, self.nk
+        qc = self.cones.quad_apply(np.asarray(self.p, dtype=np.float64), np.asarray(c, dtype=np.float64))
+        x = self._solver.solve(np.concatenate((np.asarray(a, np.float64), np.asarray(b, np.float64), qc)))
+        return x[:m], x[m:m + nk], x[m + nk:]
+
+
+class ReducedSystem(KKTSystem):
+    """Form (15): [[M, −H̃ᵀ], [−H̃, −G]], G = J Q_{p⁻²} Jᵀ; dz = Q_{p⁻¹}c − Q_{p⁻²}Jᵀdr̃."""
+
+    name = "reduced"
+
+    def __init__(self, *args, **kw):
+        super().__init__(*args, **kw)
+        m, nk = self.m, self.nk
+        cones = self.cones
+        Mc, Hc = self._Mcoo, self._Hcoo
+        gr, gc = self.rho[cones.bd_rows], self.rho[cones.bd_cols]
+        upper = gr <= gc
+        self._upper = upper
+        rows = [Mc.row, Hc.col, m + gr[upper], m + np.arange(nk)]
+        cols = [Mc.col, m + Hc.row, m + gc[upper], m + np.arange(nk)]
+        self.N = m + nk
+        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (self.N, self.N))
+        self._fixed = (Mc.data, -Hc.data)
+        self._solver = None
+        self._K = None
+
+    def factor(self):
+        import qdldl
+
+        self.p_inv2 = self.cones.power(self.p, -2)
+        g = self.cones.quad_blocks(self.p_inv2)[self._upper]
+        Mdata, Hdata = self._fixed
+        diag_scale = max(np.abs(Mdata).max(initial=1.0), np.abs(g).max(initial=1.0), 1.0)
+        vals = np.concatenate((Mdata, Hdata, -g, np.full(self.nk, -self.static_reg * diag_scale)))
+        K = self.asm.matrix(vals)
+        self._K = K + sp.triu(K, 1).T
+        if self._solver is None:
+            self._solver = qdldl.Solver(K, upper=True)
+        else:
+            self._solver.update(K, upper=True)
+        self.factor_count += 1
+
+    def solve_once(self, a, b, c):
+        m = self.m
+        c64 = np.asarray(c, dtype=np.float64)
+        pinv = np.asarray(self.p_inv, dtype=np.float64)
+        qc = self.cones.quad_apply(pinv, c64)
+        rhs = np.concatenate((np.asarray(a, np.float64), np.asarray(b, np.float64) - self.J @ qc))
+        x = self._solver.solve(rhs)
+        dv, dr = x[:m], x[m:]
+        dz = qc - self.cones.quad_apply(np.asarray(self.p_inv2, dtype=np.float64), self.J.T @ dr)
+        return dv, dr, dz
+
+
+class NoScalingSystem(KKTSystem):
+    """Form (6): unsymmetric, Arw blocks, SuperLU with partial pivoting each iteration."""
+
+    name = "noscaling"
+    symmetric = False
+
+    def __init__(self, *args, **kw):
+        super().__init__(*args, **kw)
+        m, nk, nz = self.m, self.nk, self.nz
+        cones = self.cones
+        Mf = self.M.tocoo()
+        Hc = self._Hcoo
+        rows = [Mf.row, Hc.col, m + Hc.row, m + self.rho, m + nk + cones.bd_rows,
+                m + nk + cones.bd_rows]
+        cols = [Mf.col, m + Hc.row, Hc.col, m + nk + np.arange(nz), m + self.rho[cones.bd_cols],
+                m + nk + cones.bd_cols]
+        self.N = m + nk + nz
+        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (self.N, self.N))
+        self._fixed = (Mf.data, -Hc.data, -Hc.data, np.ones(nz))
+        self._lu = None
+        self._K = None
+
+    def factor(self):
+        from scipy.sparse.linalg import splu
+
+        arw_z = self.cones.arrow_blocks(self.z)
+        arw_s = self.cones.arrow_blocks(self.s)
+        vals = np.concatenate((*self._fixed, arw_z, arw_s))
+        self._K = self.asm.matrix(vals)
+        self._lu = splu(self._K)
+        self.factor_count += 1
+
+    def solve_once(self, a, b, c):
+        m, nk = self.m, self.nk
+        rhs = np.concatenate([np.asarray(t, dtype=np.float64) for t in (a, b, c)])
+        x = self._lu.solve(rhs)
+        return x[:m], x[m:m + nk], x[m + nk:]
+
+
+FORMS = {"jqinv": JQinvSystem, "qp2": QP2System, "reduced": ReducedSystem,
+         "noscaling": NoScalingSystem}

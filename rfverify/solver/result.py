@@ -1,0 +1,156 @@
+"""Settings, status and result objects of the production solver."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import asdict, dataclass, field, fields
+
+import numpy as np
+
+METHODS = ("jqinv", "qp2", "reduced", "noscaling", "clarabel")
+"""Linear-system forms of Algorithm 1 (DESIGN §4), plus the Clarabel peer."""
+
+
+class Status(enum.Enum):
+    """Termination status (Clarabel-like)."""
+
+    SOLVED = "Solved"
+    ALMOST_SOLVED = "AlmostSolved"
+    MAX_ITERATIONS = "MaxIterations"
+    NUMERICAL_ERROR = "NumericalError"
+    INSUFFICIENT_PROGRESS = "InsufficientProgress"
+    INVALID_INPUT = "InvalidInput"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Settings of Algorithm 1.  Defaults are the paper's unless stated.
+
+    Attributes
+    ----------
+    tol : float
+        Stop when max(pinfeas, dinfeas, μ) ≤ tol (DESIGN §4; μ = zᵀJᵀr̃ / n).
+    almost_factor : float
+        A run that ends otherwise but whose best iterate reached ``almost_factor·tol`` is
+        ``AlmostSolved``.
+    max_iter : int
+    sigma_rule : {"paper", "siconos"}
+        ``paper``: σ = min(1, (μ_a/μ)^e), e = max(1, 3α_a) when μ < 1e-5, else e = 1.
+        ``siconos``: e = max(1, 3α_a²) when μ > 1e-5, else e = max(1, 3α_a), and σ/5.
+    gamma0 : float
+        Step-to-boundary fraction of the first iteration (paper 0.9; Siconos 0.999);
+        afterwards γ = 0.9 + 0.09 α of the previous step.
+    extended_jordan : bool
+        Jordan operations, NT scaling and step lengths in numpy.longdouble.
+    extended_residuals : bool
+        Residuals, right-hand sides and iterates in numpy.longdouble.
+    refine_max : int
+        Maximum iterative-refinement steps per linear solve (0 disables refinement).
+    refine_extended : bool
+        Iterative-refinement residuals in numpy.longdouble.
+    static_reg : float
+        Static regularisation δ (relative to the largest diagonal entry of the KKT matrix)
+        added with the sign that keeps the symmetric forms quasi-definite; refinement
+        against the unregularised matrix removes its effect.
+    stall_iterations : int
+        ``InsufficientProgress`` after this many iterations without improving the best merit
+        by a factor 0.9 or with steps α < 1e-10.
+    reduce_cones, drop_free_bodies, split_components : bool
+        Presolve reductions (DESIGN §4).
+    """
+
+    tol: float = 1e-10
+    almost_factor: float = 100.0
+    max_iter: int = 100
+    sigma_rule: str = "paper"
+    gamma0: float = 0.9
+    extended_jordan: bool = True
+    extended_residuals: bool = True
+    refine_max: int = 10
+    refine_extended: bool = True
+    static_reg: float = 1e-12
+    stall_iterations: int = 8
+    reduce_cones: bool = True
+    drop_free_bodies: bool = True
+    split_components: bool = True
+
+    def __post_init__(self):
+        if not (self.tol > 0 and np.isfinite(self.tol)):
+            raise ValueError(f"tol = {self.tol!r} must be a positive finite number")
+        if self.max_iter < 1:
+            raise ValueError(f"max_iter = {self.max_iter!r} must be ≥ 1")
+        if self.sigma_rule not in ("paper", "siconos"):
+            raise ValueError(f"sigma_rule = {self.sigma_rule!r} must be 'paper' or 'siconos'")
+        if not 0 < self.gamma0 < 1:
+            raise ValueError(f"gamma0 = {self.gamma0!r} must be in (0, 1)")
+        if self.refine_max < 0:
+            raise ValueError("refine_max must be ≥ 0")
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def names(cls):
+        return [f.name for f in fields(cls)]
+
+
+TRACE_FIELDS = ("iter", "pinfeas", "dinfeas", "mu", "sigma", "alpha_aff", "alpha", "gamma",
+                "min_lam2_z", "min_lam2_z_cone", "min_lam2_s", "min_lam2_s_cone", "max_cond_Qp",
+                "solve_residual", "refine_steps", "time")
+"""Per-iteration trace columns.  ``min_lam2_*_cone`` is the index of the cone (see
+``LiftedProblem.cone_contact``/``cone_part`` for its contact); ``solve_residual`` is the
+largest relative residual of the linear solves of that iteration after refinement; ``time``
+is seconds since the start of the solve."""
+
+
+@dataclass
+class SolveResult:
+    """Result of :func:`rfverify.solve` (scipy ``OptimizeResult``-like).
+
+    Attributes
+    ----------
+    v : ndarray (m,)          velocities
+    u : ndarray (5n,)         contact velocities, recomputed as Hᵀ v + w
+    r : ndarray (5n,)         contact reactions, r = P r̃ (zero on components the cone forces to 0)
+    status : Status
+    success : bool            status is Solved
+    message : str             human-readable reason (names iteration/operation/cone on errors)
+    nit : int                 iterations performed
+    pinfeas, dinfeas, mu : float   final measures of the returned iterate (DESIGN §4)
+    trace : dict of ndarray   per-iteration columns, see TRACE_FIELDS
+    timings : dict            seconds: total, factor, solve, presolve, ...
+    method : str
+    settings : Settings
+    presolve : dict           reductions applied (cone kinds, free bodies, components)
+    extras : dict             method-specific extras (e.g. Clarabel's own status)
+    """
+
+    v: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    status: Status
+    message: str
+    nit: int
+    pinfeas: float
+    dinfeas: float
+    mu: float
+    trace: dict
+    timings: dict
+    method: str
+    settings: Settings
+    presolve: dict = field(default_factory=dict)
+    extras: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.status is Status.SOLVED
+
+    def __getitem__(self, key):  # OptimizeResult-style access
+        return getattr(self, key)
+
+    def __repr__(self) -> str:
+        return (f"SolveResult(method={self.method!r}, status={self.status}, nit={self.nit}, "
+                f"pinfeas={self.pinfeas:.2e}, dinfeas={self.dinfeas:.2e}, mu={self.mu:.2e})")
