@@ -1,6 +1,6 @@
 """Command-line interface: ``rfverify <command> ...``.
 
-Exit codes: 0 success; 2 bad input (unreadable or invalid problem, bad arguments) with a
+Exit codes: 0 success; 1 a solve that did not reach its tolerance; 2 bad input (unreadable or invalid problem, bad arguments) with a
 one-line message on stderr; 3 an internal error (a bug: please report it; set
 ``RFVERIFY_DEBUG=1`` for the traceback).
 """
@@ -19,6 +19,7 @@ from . import __version__
 from .errors import RfverifyError
 
 EXIT_OK = 0
+EXIT_NOT_SOLVED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 3
 
@@ -40,7 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="rfverify",
         description="Verification-focused toolkit for rolling-friction contact problems "
                     "(FCLIB conventions: M v = H r + f, u = Hᵀ v + w, K* ∋ u ⊥ r ∈ K).",
-        epilog="Exit codes: 0 success, 2 bad input or arguments, 3 internal error.",
+        epilog="Exit codes: 0 success, 1 tolerance not reached (solve), 2 bad input or "
+               "arguments, 3 internal error.",
     )
     parser.add_argument("--version", action="version", version=f"rfverify {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -61,6 +63,35 @@ def build_parser() -> argparse.ArgumentParser:
                       help="relative residual up to which a stored solution is called "
                            "consistent (default: %(default)g)")
     info.set_defaults(func=cmd_info)
+
+    from .solver.result import METHODS
+
+    sol = sub.add_parser(
+        "solve", help="solve a problem with Algorithm 1 (or the Clarabel peer)",
+        description="Solve the convex relaxation of a rolling-friction problem with the "
+                    "mixed-precision interior-point method (Algorithm 1, DESIGN §4). Exit code "
+                    "0 only when max(pinfeas, dinfeas, mu) <= --tol was reached; 1 when the "
+                    "solver stopped without reaching it (the status says why).",
+    )
+    sol.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
+    sol.add_argument("--method", choices=METHODS, default="jqinv",
+                     help="linear-system form: jqinv (14), qp2 (11), reduced (15), noscaling (6), "
+                          "or clarabel, the same problem handed to Clarabel (default: %(default)s)")
+    sol.add_argument("--tol", type=_positive_float, default=1e-10, metavar="T",
+                     help="stop when max(pinfeas, dinfeas, mu) <= T (default: %(default)g)")
+    sol.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",
+                     help="iteration limit (default: %(default)s)")
+    sol.add_argument("--out", metavar="SOL.h5",
+                     help="write the problem data plus /solution/{v,u,r} (FCLIB layout) here")
+    sol.add_argument("--json", action="store_true",
+                     help="print status, iterations, time and final residuals as JSON")
+    sol.add_argument("--verbose", action="store_true",
+                     help="print a settings header and the per-iteration table")
+    sol.add_argument("--no-presolve", action="store_true",
+                     help="switch off the presolve reductions (cone reduction for mu = 0 / "
+                          "mu_r = 0 requires them; such problems are refused)")
+    _add_load_options(sol)
+    sol.set_defaults(func=cmd_solve)
     return parser
 
 
@@ -75,6 +106,16 @@ def _positive_float(text: str) -> float:
     val = _float(text)
     if not val > 0:
         raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
+    return val
+
+
+def _positive_int(text: str) -> int:
+    try:
+        val = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if val < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} must be ≥ 1")
     return val
 
 
@@ -212,6 +253,87 @@ def _json_default(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+# ---------------------------------------------------------------------- solve
+def _header(problem, result_settings, method, lp_counts) -> str:
+    st = result_settings
+    lines = [
+        "-" * 78,
+        f"rfverify {__version__}: Algorithm 1 (Mehrotra predictor-corrector, NT scaling)"
+        if method != "clarabel" else f"rfverify {__version__}: Clarabel peer",
+        "-" * 78,
+        f"problem:  {problem.title or problem.source}",
+        f"          m = {problem.n_dofs} dofs, n = {problem.n_contacts} contacts, "
+        f"nnz(M) = {problem.M.nnz}, nnz(H) = {problem.H.nnz}",
+        "cones:    " + ", ".join(f"{v} {k}" for k, v in lp_counts.items() if v)
+        + " (full: L3×L3, coulomb/rolling: L3, normal: L1)",
+        f"settings: method = {method}, tol = {st.tol:g}, max_iter = {st.max_iter}, "
+        f"sigma_rule = {st.sigma_rule}, gamma0 = {st.gamma0}",
+        f"          extended: jordan = {st.extended_jordan}, residuals = {st.extended_residuals}, "
+        f"refinement = {st.refine_extended} (max {st.refine_max} steps)",
+        f"presolve: reduce_cones = {st.reduce_cones}, drop_free_bodies = {st.drop_free_bodies}",
+    ]
+    return "\n".join(lines)
+
+
+def _table(trace) -> str:
+    cols = ("iter", "pinfeas", "dinfeas", "mu", "sigma", "alpha_aff", "alpha", "min_lam2_z",
+            "min_lam2_s", "max_cond_Qp", "solve_residual", "time")
+    head = " ".join(f"{c[:10]:>10}" for c in cols)
+    rows = [head, "-" * len(head)]
+    for k in range(len(trace.get("iter", []))):
+        cells = []
+        for c in cols:
+            val = trace[c][k]
+            cells.append(f"{int(val):>10d}" if c == "iter" else f"{float(val):>10.2e}")
+        rows.append(" ".join(cells))
+    return "\n".join(rows)
+
+
+def cmd_solve(args) -> int:
+    import time
+
+    from .io import save
+    from .lifting import lift
+    from .problem import StoredSolution
+    from .solver import solve
+
+    problem = _load(args)
+    options = {}
+    if args.no_presolve:
+        options.update(reduce_cones=False, drop_free_bodies=False)
+        if np.any(problem.mu == 0) or np.any(problem.mu_r == 0):
+            from .errors import InvalidProblemError
+
+            raise InvalidProblemError("mu", "has zero coefficients, which the unreduced lifting "
+                                            "would divide by", fix="drop --no-presolve")
+    t0 = time.perf_counter()
+    result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, **options)
+    wall = time.perf_counter() - t0
+    if args.verbose and not args.json:
+        print(_header(problem, result.settings, args.method,
+                      lift(problem, reduce_cones=result.settings.reduce_cones).reduction_counts()))
+        if result.trace:
+            print(_table(result.trace))
+        print("-" * 78)
+    if args.out:
+        save(problem.with_solution(StoredSolution(v=result.v, u=result.u, r=result.r)), args.out)
+    summary = {
+        "status": str(result.status), "success": result.success, "message": result.message,
+        "method": result.method, "iterations": result.nit, "time": wall, "tol": args.tol,
+        "pinfeas": result.pinfeas, "dinfeas": result.dinfeas, "mu": result.mu,
+        "presolve": result.presolve, "out": args.out,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2, default=_json_default))
+    else:
+        print(f"status {result.status}: {result.message}")
+        print(f"iterations {result.nit}, time {wall:.3f} s; pinfeas {result.pinfeas:.2e}, "
+              f"dinfeas {result.dinfeas:.2e}, mu {result.mu:.2e}")
+        if args.out:
+            print(f"solution written to {args.out}")
+    return EXIT_OK if result.success else EXIT_NOT_SOLVED
 
 
 # ---------------------------------------------------------------------- entry point
