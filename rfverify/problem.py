@@ -237,6 +237,7 @@ class Problem:
                           f" ({bad.size} negative in all)",
                     index=int(bad[0]), fix="friction coefficients must be ≥ 0")
 
+        _check_positive_diagonal(M)  # before symmetry: a zero diagonal is not an asymmetry
         symmetry = symmetry_report(M)
         if not symmetry.scaled <= max_asymmetry:
             raise InvalidProblemError(
@@ -252,10 +253,8 @@ class Problem:
         blocks = block_structure_and_definiteness(M_sym)
 
         if solution is not None:
-            _check_solution_shapes("solution", solution, m, n)
-        guesses = tuple(guesses)
-        for k, g in enumerate(guesses):
-            _check_solution_shapes(f"guesses[{k}]", g, m, n)
+            solution = _frozen_solution("solution", solution, m, n)
+        guesses = tuple(_frozen_solution(f"guesses[{k}]", g, m, n) for k, g in enumerate(guesses))
 
         problem = cls(
             M=_freeze_sparse(M), H=_freeze_sparse(H), f=_freeze(f), w=_freeze(w),
@@ -299,7 +298,7 @@ class Problem:
     def with_solution(self, solution: StoredSolution | None) -> "Problem":
         """A copy of this problem with ``solution`` replaced (shapes checked)."""
         if solution is not None:
-            _check_solution_shapes("solution", solution, self.n_dofs, self.n_contacts)
+            solution = _frozen_solution("solution", solution, self.n_dofs, self.n_contacts)
         return dataclasses.replace(self, solution=solution)
 
     def __repr__(self) -> str:
@@ -313,12 +312,15 @@ def symmetry_report(M: sp.spmatrix) -> SymmetryReport:
     M = sp.csc_matrix(M)
     A = (M - M.T).tocoo()
     A.eliminate_zeros()
-    normM = sp.linalg.norm(M)
-    frob = float(sp.linalg.norm(A) / normM) if normM > 0 else 0.0
+    # Frobenius norms of pre-scaled data: squares of entries near 1e154 would overflow.
+    big = float(np.abs(M.data).max(initial=0.0))
+    normM = sp.linalg.norm(M / big) if big > 0 else 0.0
+    frob = float(sp.linalg.norm(A / big) / normM) if normM > 0 else 0.0
     if A.nnz == 0:
         return SymmetryReport(0.0, frob, None, None)
-    d = np.abs(M.diagonal())
-    scale = np.sqrt(d[A.row] * d[A.col])
+    # sqrt(d_i)·sqrt(d_j), not sqrt(d_i d_j): the product under/overflows at extreme scales.
+    d = np.sqrt(np.abs(M.diagonal()))
+    scale = d[A.row] * d[A.col]
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(scale > 0, np.abs(A.data) / scale, np.inf)
     k = int(np.argmax(rel))
@@ -340,15 +342,7 @@ def block_structure_and_definiteness(M_sym: sp.csc_matrix) -> BlockStructure:
     InvalidProblemError
         field ``"M"``, index = the failing block and its dof range.
     """
-    m = M_sym.shape[0]
-    diag = M_sym.diagonal()
-    bad = np.flatnonzero(~(diag > 0))
-    if bad.size:
-        j = int(bad[0])
-        raise InvalidProblemError(
-            "M", f"diagonal entry M[{j},{j}] = {diag[j]!r} is not positive, so M is not "
-                 f"positive definite ({bad.size} such diagonal entries)",
-            index=(j, j), fix="every dof needs a positive mass or inertia")
+    _check_positive_diagonal(M_sym)
     n_blocks, labels = connected_components(M_sym, directed=False)
     sizes = np.bincount(labels, minlength=n_blocks)
     min_eig = np.full(n_blocks, np.nan)
@@ -380,6 +374,17 @@ def block_structure_and_definiteness(M_sym: sp.csc_matrix) -> BlockStructure:
                 if not pivots.min() > 8 * np.finfo(float).eps * size * abs(block).max():
                     _raise_not_pd(int(b), dofs, f"LDLᵀ pivot {pivots.min():.3e}")
     return BlockStructure(labels=labels, sizes=sizes, min_eigenvalues=min_eig, min_pivots=min_piv)
+
+
+def _check_positive_diagonal(M: sp.spmatrix):
+    diag = M.diagonal()
+    bad = np.flatnonzero(~(diag > 0))
+    if bad.size:
+        j = int(bad[0])
+        raise InvalidProblemError(
+            "M", f"diagonal entry M[{j},{j}] = {diag[j]!r} is not positive, so M is not "
+                 f"positive definite ({bad.size} such diagonal entries)",
+            index=(j, j), fix="every dof needs a positive mass or inertia")
 
 
 def _gather_blocks(csr: sp.csr_matrix, dofs: np.ndarray) -> np.ndarray:
@@ -425,7 +430,7 @@ def _raise_not_pd(block: int, dofs: np.ndarray, detail: str):
 def _as_csc(name: str, A) -> sp.csc_matrix:
     try:
         if sp.issparse(A):
-            A = sp.csc_matrix(A, dtype=np.float64)
+            A = sp.csc_matrix(A, dtype=np.float64, copy=True)  # never sort the caller's matrix
         else:
             arr = np.asarray(A, dtype=np.float64)
             if arr.ndim != 2:
@@ -476,14 +481,20 @@ def _check_finite_sparse(name: str, A: sp.csc_matrix):
                                   index=(row, col), fix="remove NaN/Inf from the data")
 
 
-def _check_solution_shapes(where: str, s: StoredSolution, m: int, n: int):
+def _frozen_solution(where: str, s: StoredSolution, m: int, n: int) -> StoredSolution:
+    """Check shapes/finiteness and return read-only float64 copies (no aliasing of inputs)."""
+    out = {}
     for name, arr, size in (("v", s.v, m), ("u", s.u, SPACEDIM * n), ("r", s.r, SPACEDIM * n)):
         if arr is None:
+            out[name] = None
             continue
         if np.ndim(arr) != 1 or np.size(arr) != size:
             raise InvalidProblemError(f"{where}.{name}", f"has shape {np.shape(arr)}, expected ({size},)",
                                       fix="store one value per dof (v) or 5 per contact (u, r)")
-        _check_finite_vector(f"{where}.{name}", np.asarray(arr))
+        vec = _as_vector(f"{where}.{name}", arr)
+        _check_finite_vector(f"{where}.{name}", vec)
+        out[name] = _freeze(vec)
+    return StoredSolution(**out)
 
 
 def _freeze(a: np.ndarray) -> np.ndarray:
