@@ -113,3 +113,40 @@ def check_solution(problem: Problem, solution: StoredSolution) -> SolutionCheck:
 def _rel(residual, *terms) -> float:
     scale = max(max(np.abs(t).max(initial=0.0) for t in terms), _TINY)
     return float(np.abs(residual).max(initial=0.0) / scale)
+
+
+def criterion(problem: Problem, v, u, r, dtype=np.longdouble) -> dict:
+    """The stopping criterion of Algorithm 1 recomputed from (v, u, r) in the original
+    variables, in ``dtype`` (default longdouble), from the problem data only.
+
+    Returns relative measures ``dinfeas`` = ‖Mv − f − Hr‖₂/max(‖Mv‖, ‖f‖, ‖Hr‖) (H̃ᵀr̃ = Hr),
+    ``velocity`` (u = Hᵀv + w), ``mu`` = |uᵀr|/n (= zᵀJᵀr̃/n when Jz = ũ), ``cone`` = the
+    larger of the K and K* violations (in place of pinfeas: the split of u0 between the two
+    lifted cones is not part of a stored solution), and ``max`` of all four.
+    """
+    M = problem.M_sym.astype(dtype)
+    H = problem.H.astype(dtype)
+    v, u, r = (np.asarray(x, dtype=dtype) for x in (v, u, r))
+    f, w = problem.f.astype(dtype), problem.w.astype(dtype)
+    Mv, Hr, HTv = M @ v, H @ r, H.T @ v
+
+    def nrm(x):
+        s = np.abs(x).max(initial=0)
+        return s * np.sqrt(np.sum((x / s) ** 2)) if s > 0 else s
+
+    tiny = np.finfo(dtype).tiny
+    dinf = nrm(Mv - f - Hr) / max(nrm(Mv), nrm(f), nrm(Hr), tiny)
+    vel = nrm(u - HTv - w) / max(nrm(u), nrm(HTv), nrm(w), tiny)
+    mu_gap = abs(u @ r) / problem.n_contacts
+    rc, uc = r.reshape(-1, SPACEDIM), u.reshape(-1, SPACEDIM)
+    mu, mu_r = problem.mu.astype(dtype), problem.mu_r.astype(dtype)
+    primal = np.maximum.reduce([np.hypot(rc[:, 1], rc[:, 2]) - mu * rc[:, 0],
+                                np.hypot(rc[:, 3], rc[:, 4]) - mu_r * rc[:, 0], -rc[:, 0],
+                                np.zeros(len(mu), dtype)])
+    dual = np.maximum.reduce([mu * np.hypot(uc[:, 1], uc[:, 2]) + mu_r * np.hypot(uc[:, 3], uc[:, 4])
+                              - uc[:, 0], -uc[:, 0], np.zeros(len(mu), dtype)])
+    u_scale = max(np.abs(u).max(initial=0), np.abs(HTv).max(initial=0), np.abs(w).max(initial=0), tiny)
+    cone = max(primal.max() / max(np.abs(r).max(initial=0), tiny), dual.max() / u_scale)
+    out = {"dinfeas": float(dinf), "velocity": float(vel), "mu": float(mu_gap), "cone": float(cone)}
+    out["max"] = max(out.values())
+    return out

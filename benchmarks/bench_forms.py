@@ -1,0 +1,84 @@
+"""Wall time and independently verified accuracy of the linear-system forms and Clarabel.
+
+Runs every method on the same problems in one process, one after the other, several
+repetitions each (median kept), and prints a table plus the time ratios to Clarabel.
+Accuracy is the stopping criterion recomputed in longdouble from the returned (v, u, r)
+(:func:`rfverify.check.criterion`), never the solver's own numbers; a run counts as solved at
+a tolerance only when that recomputation meets it.  Not a test: timings on a shared 2-core
+machine are noisy, so compare the ratios measured within one run.
+
+    python benchmarks/bench_forms.py                 # default sizes
+    python benchmarks/bench_forms.py --sizes 100,500,1000 --seeds 3 --repeat 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+import rfverify
+from rfverify.check import criterion
+from rfverify.random_problems import random_problem
+from rfverify.solver import solve
+
+METHODS = ["jqinv", "qp2", "reduced", "noscaling", "clarabel"]
+TOLS = [1e-8, 1e-9, 1e-10]
+
+
+def problems(sizes, seeds):
+    for name in ("chute", "cube", "sphere", "sphere-from-global"):
+        yield f"bundled:{name}", rfverify.load(f"bundled:{name}")
+    for n in sizes:
+        for seed in range(seeds):
+            nb = max(2, int(0.6 * n))
+            yield (f"random-n{n}-s{seed}",
+                   random_problem(nb, n, seed=seed, mu_zero_fraction=0.05, mu_r_zero_fraction=0.1,
+                                  free_bodies=nb // 10))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", default="50,200,500,1000", help="contact counts of generated problems")
+    ap.add_argument("--seeds", type=int, default=2, help="problems per size")
+    ap.add_argument("--repeat", type=int, default=3, help="timed repetitions per run (median kept)")
+    ap.add_argument("--methods", default=",".join(METHODS))
+    args = ap.parse_args()
+    sizes = [int(s) for s in args.sizes.split(",") if s]
+    methods = args.methods.split(",")
+    rows = []
+    print(f"{'problem':24s} {'n':>5s} {'method':10s} {'status':22s} {'nit':>4s} {'time[s]':>8s} {'verified':>9s}")
+    for name, prob in problems(sizes, args.seeds):
+        for method in methods:
+            times = []
+            for _ in range(args.repeat):
+                t0 = time.perf_counter()
+                res = solve(prob, method=method, tol=min(TOLS))
+                times.append(time.perf_counter() - t0)
+            err = criterion(prob, res.v, res.u, res.r)["max"]
+            t = statistics.median(times)
+            rows.append((name, prob.n_contacts, method, t, err))
+            print(f"{name:24s} {prob.n_contacts:5d} {method:10s} {str(res.status):22s} {res.nit:4d} "
+                  f"{t:8.3f} {err:9.1e}", flush=True)
+    print("\nshare of problems whose verified criterion meets the tolerance")
+    print(f"{'method':10s} " + " ".join(f"{tol:>8.0e}" for tol in TOLS))
+    for method in methods:
+        errs = [r[4] for r in rows if r[2] == method]
+        print(f"{method:10s} " + " ".join(f"{np.mean([e <= tol for e in errs]):8.0%}" for tol in TOLS))
+    if "clarabel" in methods:
+        print("\nmedian time ratio method / clarabel over problems with n >= 500 (both verified at 1e-8)")
+        for method in methods:
+            ratios = []
+            for name in {r[0] for r in rows if r[1] >= 500}:
+                mine = [r for r in rows if r[0] == name and r[2] == method]
+                peer = [r for r in rows if r[0] == name and r[2] == "clarabel"]
+                if mine and peer and mine[0][4] <= 1e-8 and peer[0][4] <= 1e-8:
+                    ratios.append(mine[0][3] / peer[0][3])
+            if ratios:
+                print(f"{method:10s} {statistics.median(ratios):6.2f}x  ({len(ratios)} problems)")
+
+
+if __name__ == "__main__":
+    main()
