@@ -302,7 +302,7 @@ def cmd_solve(args) -> int:
     problem = _load(args)
     options = {}
     if args.no_presolve:
-        options.update(reduce_cones=False, drop_free_bodies=False)
+        options.update(reduce_cones=False, drop_free_bodies=False, split_components=False)
         if np.any(problem.mu == 0) or np.any(problem.mu_r == 0):
             from .errors import InvalidProblemError
 

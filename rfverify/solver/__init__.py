@@ -57,31 +57,50 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     presolve = {"cone_kinds": lp.reduction_counts()}
 
     # Bodies no contact touches decouple: v = M⁻¹ f on their dofs (whole blocks of M).
-    v = np.zeros(m)
-    active = np.arange(m)
-    if settings.drop_free_bodies:
-        free = problem.contact_free_dofs
-        if free.size:
-            active = np.setdiff1d(np.arange(m), free)
-            v[free] = splu(M[free][:, free].tocsc()).solve(problem.f[free])
-        presolve["free_dofs"] = int(free.size)
+    v = np.zeros(m, dtype=np.longdouble)
+    free = problem.contact_free_dofs if (settings.drop_free_bodies or settings.split_components) \
+        else np.empty(0, dtype=np.int64)
+    if free.size:
+        v[free] = splu(M[free][:, free].tocsc()).solve(problem.f[free])
+    presolve["free_dofs"] = int(free.size)
+
+    groups = _components(problem, lp, free) if settings.split_components else None
+    if groups is not None and len(groups) > settings.max_components:
+        presolve["components"] = f"{len(groups)} (> max_components = {settings.max_components}: solved together)"
+        groups = None
+    if groups is None:
+        active = np.setdiff1d(np.arange(m), free)
+        groups = [(active, np.arange(lp.nk), np.arange(lp.nz), np.arange(lp.n_cones), problem.n_contacts)]
+    else:
+        presolve["components"] = len(groups)
     t_pre = time.perf_counter() - t0
 
     from . import ipm
 
-    M_a = M[active][:, active].tocsc()
-    H_a = lp.H_t[:, active].tocsr()
-    cones = ProductCone(lp.n3, lp.n1)
+    r_t = np.zeros(lp.nk, dtype=np.longdouble)
+    z = np.zeros(lp.nz, dtype=np.longdouble)
+    runs = []
+    for dofs, rows, zidx, cone_ids, n_c in groups:
+        n3_c = int(np.sum(cone_ids < lp.n3))
+        cones = ProductCone(n3_c, cone_ids.size - n3_c)
 
-    def describe(k):
-        part = ("friction (N,T) cone", "rolling (N,R) cone", "normal cone")[lp.cone_part[k]]
-        c = lp.cone_contact[k]
-        return f"contact {c} {part} [{KIND_NAMES[lp.kinds[c]]} contact]"
+        def describe(k, cone_ids=cone_ids):
+            g = cone_ids[k]
+            part = ("friction (N,T) cone", "rolling (N,R) cone", "normal cone")[lp.cone_part[g]]
+            c = lp.cone_contact[g]
+            return f"contact {c} {part} [{KIND_NAMES[lp.kinds[c]]} contact]"
 
-    out = ipm.run(M_a, problem.f[active], H_a, lp.w_t, lp.J, cones, problem.n_contacts, method,
-                  settings, describe_cone=describe)
-    v[active] = np.asarray(out["v"], dtype=np.float64)
-    r = lp.r_from_lifted(np.asarray(out["r_t"], dtype=np.float64))
+        out = ipm.run(M[dofs][:, dofs].tocsc(), problem.f[dofs], lp.H_t[rows][:, dofs].tocsr(),
+                      lp.w_t[rows], lp.J[rows][:, zidx].tocsr(), cones, n_c, method, settings,
+                      describe_cone=describe)
+        v[dofs] = out["v"]
+        r_t[rows] = out["r_t"]
+        z[zidx] = out["z"]
+        runs.append(out)
+
+    out = runs[0] if len(runs) == 1 else _merge(runs, lp, M, problem, v, r_t, z)
+    v = np.asarray(v, dtype=np.float64)
+    r = lp.r_from_lifted(np.asarray(r_t, dtype=np.float64))
     u = lp.u_from_v(v)
     timings = dict(out["timings"])
     timings["presolve"] = t_pre
@@ -90,6 +109,79 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
         v=v, u=u, r=r, status=out["status"], message=out["message"], nit=out["nit"],
         pinfeas=out["pinfeas"], dinfeas=out["dinfeas"], mu=out["mu"], trace=out["trace"],
         timings=timings, method=method, settings=settings, presolve=presolve,
-        extras={"factorisations": out["factorisations"], "r_t": out["r_t"], "z": out["z"],
-                "n_cones": {"L3": lp.n3, "L1": lp.n1}},
+        extras={"factorisations": out["factorisations"], "r_t": r_t, "z": z,
+                "n_cones": {"L3": lp.n3, "L1": lp.n1},
+                "component_runs": [{k: o[k] for k in ("status", "message", "nit", "trace")} for o in runs]
+                if len(runs) > 1 else []},
     )
+
+
+_SEVERITY = [Status.SOLVED, Status.ALMOST_SOLVED, Status.MAX_ITERATIONS, Status.INSUFFICIENT_PROGRESS,
+             Status.NUMERICAL_ERROR]
+
+
+def _components(problem, lp, free):
+    """Independent connected components of the body–contact graph (contact-free blocks
+    excluded).  Returns a list of (dofs, kept rows, z indices, cone indices, n_contacts)."""
+    from scipy.sparse.csgraph import connected_components
+
+    n = problem.n_contacts
+    blocks = problem.blocks
+    HT = problem.H.T.tocoo()
+    contact = HT.row // 5
+    block = blocks.labels[HT.col]
+    nb = blocks.count
+    adj = sp.coo_matrix((np.ones(contact.size), (contact, n + block)), shape=(n + nb, n + nb))
+    _, lab = connected_components(adj, directed=False)
+    contact_comp = lab[:n]
+    comps, contact_comp = np.unique(contact_comp, return_inverse=True)
+    dof_lab = lab[n + blocks.labels]
+    dof_comp = np.searchsorted(comps, dof_lab)
+    active = np.ones(problem.n_dofs, dtype=bool)
+    active[free] = False
+    row_comp = contact_comp[lp.keep // 5]
+    cone_comp = contact_comp[lp.cone_contact]
+    cone_ids = np.arange(lp.n_cones)
+    out = []
+    dofs_all = np.flatnonzero(active)
+    by_dof = _group(dof_comp[dofs_all], dofs_all, comps.size)
+    by_row = _group(row_comp, np.arange(lp.nk), comps.size)
+    by_cone = _group(cone_comp, cone_ids, comps.size)
+    by_contact = np.bincount(contact_comp, minlength=comps.size)
+    for c in range(comps.size):
+        cids = by_cone[c]
+        l3 = cids[cids < lp.n3]
+        l1 = cids[cids >= lp.n3]
+        zidx = np.concatenate(((3 * l3[:, None] + np.arange(3)).ravel(), 3 * lp.n3 + (l1 - lp.n3)))
+        out.append((by_dof[c], by_row[c], zidx, cids, int(by_contact[c])))
+    return out
+
+
+def _group(keys, values, count):
+    order = np.argsort(keys, kind="stable")
+    bounds = np.searchsorted(keys[order], np.arange(count + 1))
+    return [values[order[bounds[i]:bounds[i + 1]]] for i in range(count)]
+
+
+def _merge(runs, lp, M, problem, v, r_t, z):
+    """Combine per-component runs: worst status, max iterations, global measures."""
+    from .clarabel_peer import lifted_measures
+
+    worst = max(runs, key=lambda o: _SEVERITY.index(o["status"]))
+    pinf, dinf, mu = lifted_measures(M, problem.f, lp.H_t, lp.w_t, lp.J, np.asarray(v, dtype=np.float64),
+                                     np.asarray(r_t, dtype=np.float64), np.asarray(z, dtype=np.float64),
+                                     problem.n_contacts)
+    bad = [o["message"] for o in runs if o["status"] is not Status.SOLVED]
+    status = worst["status"]
+    message = (f"all {len(runs)} components solved" if not bad
+               else f"{len(bad)} of {len(runs)} components not solved; first: {bad[0]}")
+    merit = max(pinf, dinf, mu)
+    # Each component met the tolerance in its own relative measures; the combined relative
+    # residuals can exceed it by up to √3, so the whole problem is judged again.
+    if status is Status.SOLVED and not merit <= runs[0]["tol"]:
+        status = Status.ALMOST_SOLVED
+        message += f", but the combined max(pinfeas, dinfeas, mu) = {merit:.2e} > tol"
+    timings = {k: sum(o["timings"].get(k, 0.0) for o in runs) for k in ("factor", "solve", "total")}
+    return dict(status=status, message=message, nit=max(o["nit"] for o in runs),
+                pinfeas=pinf, dinfeas=dinf, mu=mu, trace=max(runs, key=lambda o: o["nit"])["trace"],
+                timings=timings, factorisations=sum(o["factorisations"] for o in runs))

@@ -187,7 +187,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                 nit=len(trace["iter"]) - 1 if trace["iter"] else 0,
                 pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o),
                 trace={key: np.asarray(val) for key, val in trace.items()}, timings=timings,
-                factorisations=system.factor_count)
+                factorisations=system.factor_count, tol=settings.tol)
 
 
 def _sigma(rule: str, mu_aff: float, mu: float, alpha_aff: float) -> float:

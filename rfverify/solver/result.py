@@ -59,7 +59,12 @@ class Settings:
         ``InsufficientProgress`` after this many iterations without improving the best merit
         by a factor 0.9 or with steps α < 1e-10.
     reduce_cones, drop_free_bodies, split_components : bool
-        Presolve reductions (DESIGN §4).
+        Presolve reductions (DESIGN §4).  Splitting solves each connected component of the
+        body–contact graph by its own run of Algorithm 1 (own step lengths); it implies that
+        contact-free blocks are solved directly.
+    max_components : int
+        Above this many components they are solved together (one run), to bound the
+        per-run overhead.
     """
 
     tol: float = 1e-10
@@ -76,6 +81,7 @@ class Settings:
     reduce_cones: bool = True
     drop_free_bodies: bool = True
     split_components: bool = True
+    max_components: int = 64
 
     def __post_init__(self):
         if not (self.tol > 0 and np.isfinite(self.tol)):
