@@ -71,7 +71,7 @@ class ProductCone:
 
     def arrow_solve(self, x, y):
         """Solve x ∘ d = y for d (Arw(x)⁻¹ y)."""
-        return self._flat(_arrow_solve_tmp, x, y, op="arrow_solve")
+        return self._flat(jordan.arrow_solve, x, y, op="arrow_solve")
 
     def quad_apply(self, p, y):
         return self._flat(jordan.quad_apply, p, y, op="quad_apply")
@@ -95,14 +95,16 @@ class ProductCone:
         return np.concatenate(parts) if parts else np.empty(0)
 
     def nt_scaling(self, z, s):
-        """NT point p and scaled point λ = Q_p z = Q_{p⁻¹} s, flat."""
+        """NT scaling of the pair, flat: (p, p⁻¹, λ = Q_p z = Q_{p⁻¹} s, cond(Q_p) per cone)."""
         r3, r1 = self._map(jordan.nt_scaling, z, s, op="nt_scaling")
         dtype = np.result_type(z, s)
-        p = self.join(r3.p if r3 is not None else np.empty((0, 3), dtype),
-                      r1.p if r1 is not None else np.empty((0, 1), dtype))
-        lam = self.join(r3.lam if r3 is not None else np.empty((0, 3), dtype),
-                        r1.lam if r1 is not None else np.empty((0, 1), dtype))
-        return p, lam
+        empty3, empty1 = np.empty((0, 3), dtype), np.empty((0, 1), dtype)
+        p = self.join(r3.p if r3 is not None else empty3, r1.p if r1 is not None else empty1)
+        p_inv = self.join(r3.p_inv if r3 is not None else empty3, r1.p_inv if r1 is not None else empty1)
+        lam = self.join(r3.lam if r3 is not None else empty3, r1.lam if r1 is not None else empty1)
+        cond = np.concatenate((np.asarray(r3.cond if r3 is not None else np.empty(0), dtype=np.float64).ravel(),
+                               np.asarray(r1.cond if r1 is not None else np.empty(0), dtype=np.float64).ravel()))
+        return p, p_inv, lam, cond
 
     def max_step(self, x, dx) -> float:
         """Largest α ≥ 0 (possibly ∞) with x + α dx in the cone, for x strictly interior."""
@@ -125,19 +127,6 @@ class ProductCone:
             parts.append(x1[:, 0])
         return np.concatenate(parts)
 
-    def max_cond_quad(self, p):
-        """(max cond(Q_p) = (λ1/λ2)² over cones, its cone index)."""
-        x3, x1 = self.split(p)
-        parts = []
-        if self.n3:
-            l1, l2 = jordan.spectral_values(x3)
-            with np.errstate(divide="ignore", over="ignore"):
-                parts.append(np.asarray((l1 / l2) ** 2, dtype=np.float64))
-        if self.n1:
-            parts.append(np.ones(self.n1))
-        c = np.concatenate(parts)
-        k = int(np.argmax(c))
-        return float(c[k]), k
 
 
 def _strip(exc: ConeDomainError) -> str:
@@ -145,11 +134,3 @@ def _strip(exc: ConeDomainError) -> str:
     head = f"{exc.operation} (cone {exc.cone}): " if exc.cone is not None else f"{exc.operation}: "
     return text[len(head):] if text.startswith(head) else text
 
-
-def _arrow_solve_tmp(x, y):
-    x0, xb = x[:, 0], x[:, 1:]
-    y0, yb = y[:, 0], y[:, 1:]
-    d = jordan.det(x)
-    d0 = (x0 * y0 - np.sum(xb * yb, axis=1)) / d
-    db = (yb - d0[:, None] * xb) / x0[:, None]
-    return np.concatenate((d0[:, None], db), axis=1)

@@ -110,11 +110,11 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             zj, sj = z.astype(jd), s.astype(jd)
             tf = time.perf_counter()
             if system.symmetric:
-                p, lam = cones.nt_scaling(zj, sj)
-                system.set_point(p)
-                record["max_cond_Qp"] = cones.max_cond_quad(p)[0]
+                p, p_inv, lam, cond = cones.nt_scaling(zj, sj)
+                system.set_point(p, p_inv)
+                record["max_cond_Qp"] = float(cond.max(initial=1.0))
             else:
-                system.set_point(None, z=zj, s=sj)
+                system.set_point(z=zj, s=sj)
             try:
                 system.factor()
             except Exception as exc:  # qdldl/SuperLU report singular pivots this way

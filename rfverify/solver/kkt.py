@@ -85,10 +85,10 @@ class KKTSystem:
         self.factor_count = 0
 
     # ------------------------------------------------------------------ exact operator
-    def set_point(self, p, z=None, s=None):
-        """Store the scaling for this iteration (p for NT forms; z, s for noscaling)."""
+    def set_point(self, p=None, p_inv=None, z=None, s=None):
+        """Store the scaling for this iteration (p, p⁻¹ for NT forms; z, s for noscaling)."""
         self.p = p
-        self.p_inv = self.cones.inverse(p) if p is not None else None
+        self.p_inv = p_inv
         self.z = z
         self.s = s
 
