@@ -76,6 +76,17 @@ class ProductCone:
     def quad_apply(self, p, y):
         return self._flat(jordan.quad_apply, p, y, op="quad_apply")
 
+    def quad_apply_sum(self, p1, y1, p2, y2):
+        """Q_{p1} y1 + Q_{p2} y2 with one vectorised call per family (the IR operator)."""
+        out = []
+        for (a, b, c, d), n_fam in ((tuple(self.split(t)[0] for t in (p1, y1, p2, y2)), self.n3),
+                                    (tuple(self.split(t)[1] for t in (p1, y1, p2, y2)), self.n1)):
+            if n_fam == 0:
+                continue
+            q = jordan.quad_apply(np.concatenate((a, c)), np.concatenate((b, d)))
+            out.append((q[:n_fam] + q[n_fam:]).ravel())
+        return np.concatenate(out) if out else np.empty(0, dtype=np.result_type(p1, y1))
+
     def inverse(self, x):
         return self._flat(jordan.inverse, x, op="inverse")
 
@@ -110,6 +121,25 @@ class ProductCone:
         """Largest α ≥ 0 (possibly ∞) with x + α dx in the cone, for x strictly interior."""
         a3, a1 = self._map(lambda a, b: jordan.step_to_boundary(a, b), x, dx, op="step_to_boundary")
         vals = [np.min(a) for a in (a3, a1) if a is not None and np.size(a)]
+        return float(min(vals)) if vals else float("inf")
+
+    def max_step_pair(self, z, dz, s, ds) -> float:
+        """min(max_step(z, dz), max_step(s, ds)) in one vectorised call per family."""
+        z3, z1 = self.split(z)
+        s3, s1 = self.split(s)
+        d3, d1 = self.split(dz)
+        e3, e1 = self.split(ds)
+        vals = []
+        for x, dx, off in ((np.concatenate((z3, s3)), np.concatenate((d3, e3)), 0),
+                           (np.concatenate((z1, s1)), np.concatenate((d1, e1)), self.n3)):
+            if x.shape[0] == 0:
+                continue
+            try:
+                vals.append(np.min(jordan.step_to_boundary(x, dx)))
+            except ConeDomainError as exc:
+                n_fam = x.shape[0] // 2
+                cone = None if exc.cone is None else off + exc.cone % n_fam
+                raise ConeDomainError("step_to_boundary", _strip(exc), cone=cone, value=exc.value) from exc
         return float(min(vals)) if vals else float("inf")
 
     def min_lambda2(self, x):

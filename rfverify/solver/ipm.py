@@ -134,7 +134,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                                                          refine_extended=settings.refine_extended)
             _check_finite(k, "predictor", form, dv_a, dr_a, dz_a)
             ds_a = JTx @ dr_a
-            alpha_aff = min(1.0, cones.max_step(zj, dz_a.astype(jd)), cones.max_step(sj, ds_a.astype(jd)))
+            alpha_aff = min(1.0, cones.max_step_pair(zj, dz_a.astype(jd), sj, ds_a.astype(jd)))
             mu_aff = float((z + alpha_aff * dz_a) @ (s + alpha_aff * ds_a)) / n_contacts
             sigma = _sigma(settings.sigma_rule, mu_aff, mu, alpha_aff)
 
@@ -153,7 +153,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             _check_finite(k, "corrector", form, dv, dr, dz)
             ds = JTx @ dr
             timings["solve"] += time.perf_counter() - ts
-            alpha_max = min(cones.max_step(zj, dz.astype(jd)), cones.max_step(sj, ds.astype(jd)))
+            alpha_max = cones.max_step_pair(zj, dz.astype(jd), sj, ds.astype(jd))
             alpha = min(1.0, gamma * alpha_max)
             record.update(sigma=sigma, alpha_aff=alpha_aff, alpha=alpha, gamma=gamma,
                           solve_residual=max(res_a, res), refine_steps=st_a + st)

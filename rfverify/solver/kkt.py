@@ -98,13 +98,16 @@ class KKTSystem:
         b = -(self.H_ref @ dv) + self.J_ref @ dz
         JTdr = self.JT_ref @ dr
         if self.symmetric:
-            c = self.cones.quad_apply(self.p, dz) + self.cones.quad_apply(self.p_inv, JTdr)
+            c = self.cones.quad_apply_sum(self.p, dz, self.p_inv, JTdr)
         else:
             c = self.cones.product(self.s, dz) + self.cones.product(self.z, JTdr)
         return a, b, c
 
     def norm_estimate(self) -> float:
-        return float(abs(self._K).sum(axis=1).max()) if self._K is not None else 1.0
+        """‖K‖∞ of the factored matrix, computed once per factorisation."""
+        if self._knorm is None:
+            self._knorm = float(abs(self._K).sum(axis=1).max()) if self._K is not None else 1.0
+        return self._knorm
 
     # ------------------------------------------------------------------ to be provided
     def factor(self):
@@ -166,6 +169,7 @@ class JQinvSystem(KKTSystem):
         self._fixed = (Mc.data, -Hc.data)
         self._solver = None
         self._K = None
+        self._knorm = None
 
     def factor(self):
         import qdldl
@@ -177,6 +181,7 @@ class JQinvSystem(KKTSystem):
                                np.full(self.nk, -self.static_reg * diag_scale)))
         K = self.asm.matrix(vals)
         self._K = K + sp.triu(K, 1).T
+        self._knorm = None
         if self._solver is None:
             self._solver = qdldl.Solver(K, upper=True)
         else:
@@ -212,6 +217,7 @@ class QP2System(KKTSystem):
         self._fixed = (Mc.data, -Hc.data)
         self._solver = None
         self._K = None
+        self._knorm = None
 
     def factor(self):
         import qdldl
@@ -224,6 +230,7 @@ class QP2System(KKTSystem):
                                np.full(self.nk, -self.static_reg * diag_scale)))
         K = self.asm.matrix(vals)
         self._K = K + sp.triu(K, 1).T
+        self._knorm = None
         if self._solver is None:
             self._solver = qdldl.Solver(K, upper=True)
         else:
@@ -257,6 +264,7 @@ class ReducedSystem(KKTSystem):
         self._fixed = (Mc.data, -Hc.data)
         self._solver = None
         self._K = None
+        self._knorm = None
 
     def factor(self):
         import qdldl
@@ -268,6 +276,7 @@ class ReducedSystem(KKTSystem):
         vals = np.concatenate((Mdata, Hdata, -g, np.full(self.nk, -self.static_reg * diag_scale)))
         K = self.asm.matrix(vals)
         self._K = K + sp.triu(K, 1).T
+        self._knorm = None
         if self._solver is None:
             self._solver = qdldl.Solver(K, upper=True)
         else:
@@ -307,6 +316,7 @@ class NoScalingSystem(KKTSystem):
         self._fixed = (Mf.data, -Hc.data, -Hc.data, np.ones(nz))
         self._lu = None
         self._K = None
+        self._knorm = None
 
     def factor(self):
         from scipy.sparse.linalg import splu
@@ -315,6 +325,7 @@ class NoScalingSystem(KKTSystem):
         arw_s = self.cones.arrow_blocks(self.s)
         vals = np.concatenate((*self._fixed, arw_z, arw_s))
         self._K = self.asm.matrix(vals)
+        self._knorm = None
         self._lu = splu(self._K)
         self.factor_count += 1
 

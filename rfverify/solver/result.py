@@ -81,7 +81,7 @@ class Settings:
     reduce_cones: bool = True
     drop_free_bodies: bool = True
     split_components: bool = True
-    max_components: int = 64
+    max_components: int = 4
 
     def __post_init__(self):
         if not (self.tol > 0 and np.isfinite(self.tol)):
