@@ -83,6 +83,31 @@ class KKTSystem:
         self._Mcoo = sp.triu(self.M, format="coo")
         self._Hcoo = self.H_t.tocoo()
         self.factor_count = 0
+        self._solver = None
+        self._K = None
+        self._knorm = None
+
+    def _set_pattern(self, rows, cols, size):
+        self.N = size
+        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (size, size))
+
+    def _factor_quasidefinite(self, *varying):
+        """Assemble the upper triangle — M and −H̃ᵀ (fixed), this iteration's blocks
+        ``varying``, then −δ on the dr̃ diagonal — and factor it with QDLDL, reusing the
+        symbolic analysis after the first call."""
+        import qdldl
+
+        Mdata, Hdata = self._Mcoo.data, -self._Hcoo.data
+        diag_scale = max(np.abs(Mdata).max(initial=1.0), *(np.abs(v).max(initial=1.0) for v in varying), 1.0)
+        vals = np.concatenate((Mdata, Hdata, *varying, np.full(self.nk, -self.static_reg * diag_scale)))
+        K = self.asm.matrix(vals)
+        self._K = K + sp.triu(K, 1).T
+        self._knorm = None
+        if self._solver is None:
+            self._solver = qdldl.Solver(K, upper=True)
+        else:
+            self._solver.update(K, upper=True)
+        self.factor_count += 1
 
     # ------------------------------------------------------------------ exact operator
     def set_point(self, p=None, p_inv=None, z=None, s=None):
@@ -164,29 +189,10 @@ class JQinvSystem(KKTSystem):
         up = self.rho[cones.bd_rows]  # J row of the Q row
         rows = [Mc.row, Hc.col, m + up, m + nk + np.arange(nz), m + np.arange(nk)]
         cols = [Mc.col, m + Hc.row, m + nk + cones.bd_cols, m + nk + np.arange(nz), m + np.arange(nk)]
-        self.N = m + nk + nz
-        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (self.N, self.N))
-        self._fixed = (Mc.data, -Hc.data)
-        self._solver = None
-        self._K = None
-        self._knorm = None
+        self._set_pattern(rows, cols, m + nk + nz)
 
     def factor(self):
-        import qdldl
-
-        qinv = self.cones.quad_blocks(self.p_inv)
-        Mdata, Hdata = self._fixed
-        diag_scale = max(np.abs(Mdata).max(initial=1.0), np.abs(qinv).max(initial=1.0), 1.0)
-        vals = np.concatenate((Mdata, Hdata, qinv, np.ones(self.nz),
-                               np.full(self.nk, -self.static_reg * diag_scale)))
-        K = self.asm.matrix(vals)
-        self._K = K + sp.triu(K, 1).T
-        self._knorm = None
-        if self._solver is None:
-            self._solver = qdldl.Solver(K, upper=True)
-        else:
-            self._solver.update(K, upper=True)
-        self.factor_count += 1
+        self._factor_quasidefinite(self.cones.quad_blocks(self.p_inv), np.ones(self.nz))
 
     def solve_once(self, a, b, c):
         m, nk = self.m, self.nk
@@ -212,30 +218,11 @@ class QP2System(KKTSystem):
         rows = [Mc.row, Hc.col, m + self.rho, m + nk + cones.bd_rows[upper], m + np.arange(nk)]
         cols = [Mc.col, m + Hc.row, m + nk + np.arange(nz), m + nk + cones.bd_cols[upper],
                 m + np.arange(nk)]
-        self.N = m + nk + nz
-        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (self.N, self.N))
-        self._fixed = (Mc.data, -Hc.data)
-        self._solver = None
-        self._K = None
-        self._knorm = None
+        self._set_pattern(rows, cols, m + nk + nz)
 
     def factor(self):
-        import qdldl
-
-        p2 = self.cones.power(self.p, 2)
-        q2 = self.cones.quad_blocks(p2)[self._upper]
-        Mdata, Hdata = self._fixed
-        diag_scale = max(np.abs(Mdata).max(initial=1.0), np.abs(q2).max(initial=1.0), 1.0)
-        vals = np.concatenate((Mdata, Hdata, np.ones(self.nz), q2,
-                               np.full(self.nk, -self.static_reg * diag_scale)))
-        K = self.asm.matrix(vals)
-        self._K = K + sp.triu(K, 1).T
-        self._knorm = None
-        if self._solver is None:
-            self._solver = qdldl.Solver(K, upper=True)
-        else:
-            self._solver.update(K, upper=True)
-        self.factor_count += 1
+        q2 = self.cones.quad_blocks(self.cones.power(self.p, 2))[self._upper]
+        self._factor_quasidefinite(np.ones(self.nz), q2)
 
     def solve_once(self, a, b, c):
         m, nk = self.m, self.nk
@@ -259,29 +246,11 @@ class ReducedSystem(KKTSystem):
         self._upper = upper
         rows = [Mc.row, Hc.col, m + gr[upper], m + np.arange(nk)]
         cols = [Mc.col, m + Hc.row, m + gc[upper], m + np.arange(nk)]
-        self.N = m + nk
-        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (self.N, self.N))
-        self._fixed = (Mc.data, -Hc.data)
-        self._solver = None
-        self._K = None
-        self._knorm = None
+        self._set_pattern(rows, cols, m + nk)
 
     def factor(self):
-        import qdldl
-
         self.p_inv2 = self.cones.power(self.p, -2)
-        g = self.cones.quad_blocks(self.p_inv2)[self._upper]
-        Mdata, Hdata = self._fixed
-        diag_scale = max(np.abs(Mdata).max(initial=1.0), np.abs(g).max(initial=1.0), 1.0)
-        vals = np.concatenate((Mdata, Hdata, -g, np.full(self.nk, -self.static_reg * diag_scale)))
-        K = self.asm.matrix(vals)
-        self._K = K + sp.triu(K, 1).T
-        self._knorm = None
-        if self._solver is None:
-            self._solver = qdldl.Solver(K, upper=True)
-        else:
-            self._solver.update(K, upper=True)
-        self.factor_count += 1
+        self._factor_quasidefinite(-self.cones.quad_blocks(self.p_inv2)[self._upper])
 
     def solve_once(self, a, b, c):
         m = self.m
@@ -311,12 +280,9 @@ class NoScalingSystem(KKTSystem):
                 m + nk + cones.bd_rows]
         cols = [Mf.col, m + Hc.row, Hc.col, m + nk + np.arange(nz), m + self.rho[cones.bd_cols],
                 m + nk + cones.bd_cols]
-        self.N = m + nk + nz
-        self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (self.N, self.N))
+        self._set_pattern(rows, cols, m + nk + nz)
         self._fixed = (Mf.data, -Hc.data, -Hc.data, np.ones(nz))
         self._lu = None
-        self._K = None
-        self._knorm = None
 
     def factor(self):
         from scipy.sparse.linalg import splu
