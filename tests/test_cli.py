@@ -140,3 +140,8 @@ def test_console_script_one_line_error(tmp_path):
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert proc.stderr.count("\n") == 1 and "no such file" in proc.stderr
+
+
+def test_solve_out_to_missing_directory_is_one_line(capsys, tmp_path):
+    _one_line_error(capsys, "solve", "bundled:cube", "--out", str(tmp_path / "no" / "x.h5"),
+                    expect="does not exist")

@@ -233,8 +233,14 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
             raise ValueError(f"storage for {name}: {fmt!r} is not one of {STORAGE_FORMATS}")
         fmts[name] = fmt
     tmp = path.with_name(path.name + ".partial")
+    if not path.parent.is_dir():
+        raise ProblemFileError(path, f"cannot write: directory {path.parent} does not exist")
     try:
-        with h5py.File(tmp, "w") as fh:
+        fh_ctx = h5py.File(tmp, "w")
+    except OSError as exc:
+        raise ProblemFileError(path, f"cannot write ({_first_line(exc)})") from None
+    try:
+        with fh_ctx as fh:
             g = fh.create_group(ROOT)
             _write_matrix(g, "M", problem.M, fmts["M"])
             _write_matrix(g, "H", problem.H, fmts["H"])
