@@ -141,8 +141,8 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             # ---- corrector
             mu_c = gap / cones.n_cones
             if system.symmetric:
-                dzs = cones.quad_apply(p, dz_a.astype(jd))
-                dss = cones.quad_apply(system.p_inv, ds_a.astype(jd))
+                dzs = system.Qp(dz_a.astype(jd))
+                dss = system.Qp_inv(ds_a.astype(jd))
                 xi = sigma * mu_c * cones.identity(jd) - cones.product(lam, lam) - cones.product(dzs, dss)
                 c = cones.arrow_solve(lam, xi)
             else:

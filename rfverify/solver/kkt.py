@@ -101,8 +101,12 @@ class KKTSystem:
         diag_scale = max(np.abs(Mdata).max(initial=1.0), *(np.abs(v).max(initial=1.0) for v in varying), 1.0)
         vals = np.concatenate((Mdata, Hdata, *varying, np.full(self.nk, -self.static_reg * diag_scale)))
         K = self.asm.matrix(vals)
-        self._K = K + sp.triu(K, 1).T
-        self._knorm = None
+        # ‖K‖∞ of the symmetric matrix from its upper triangle U: row sums of |U| plus
+        # column sums of |U| minus the diagonal counted twice (K itself is never formed).
+        absU = abs(K)
+        rows = np.asarray(absU.sum(axis=1)).ravel() + np.asarray(absU.sum(axis=0)).ravel() - absU.diagonal()
+        self._K = None
+        self._knorm = float(rows.max(initial=0.0))
         if self._solver is None:
             self._solver = qdldl.Solver(K, upper=True)
         else:
@@ -111,11 +115,17 @@ class KKTSystem:
 
     # ------------------------------------------------------------------ exact operator
     def set_point(self, p=None, p_inv=None, z=None, s=None):
-        """Store the scaling for this iteration (p, p⁻¹ for NT forms; z, s for noscaling)."""
+        """Store the scaling for this iteration (p, p⁻¹ for NT forms; z, s for noscaling),
+        with Q_p, Q_{p⁻¹} as operators in the working precision and in float64."""
         self.p = p
         self.p_inv = p_inv
         self.z = z
         self.s = s
+        if p is not None:
+            self.Qp = self.cones.quad_operator(p)
+            self.Qp_inv = self.cones.quad_operator(p_inv)
+            self.Qp64 = self.cones.quad_operator(np.asarray(p, dtype=np.float64))
+            self.Qp_inv64 = self.cones.quad_operator(np.asarray(p_inv, dtype=np.float64))
 
     def apply(self, dv, dr, dz):
         """The three-block operator of the module docstring, in the dtype of its inputs."""
@@ -123,7 +133,7 @@ class KKTSystem:
         b = -(self.H_ref @ dv) + self.J_ref @ dz
         JTdr = self.JT_ref @ dr
         if self.symmetric:
-            c = self.cones.quad_apply_sum(self.p, dz, self.p_inv, JTdr)
+            c = self.Qp(dz) + self.Qp_inv(JTdr)
         else:
             c = self.cones.product(self.s, dz) + self.cones.product(self.z, JTdr)
         return a, b, c
@@ -131,7 +141,7 @@ class KKTSystem:
     def norm_estimate(self) -> float:
         """‖K‖∞ of the factored matrix, computed once per factorisation."""
         if self._knorm is None:
-            self._knorm = float(abs(self._K).sum(axis=1).max()) if self._K is not None else 1.0
+            self._knorm = float(abs(self._K).sum(axis=1).max())
         return self._knorm
 
     # ------------------------------------------------------------------ to be provided
@@ -199,7 +209,7 @@ class JQinvSystem(KKTSystem):
         rhs = np.concatenate((a, b, c)).astype(np.float64)
         x = self._solver.solve(rhs)
         dv, dr, y = x[:m], x[m:m + nk], x[m + nk:]
-        dz = self.cones.quad_apply(np.asarray(self.p_inv, dtype=np.float64), y)
+        dz = self.Qp_inv64(y)
         return dv, dr, dz
 
 
@@ -226,7 +236,7 @@ class QP2System(KKTSystem):
 
     def solve_once(self, a, b, c):
         m, nk = self.m, self.nk
-        qc = self.cones.quad_apply(np.asarray(self.p, dtype=np.float64), np.asarray(c, dtype=np.float64))
+        qc = self.Qp64(np.asarray(c, dtype=np.float64))
         x = self._solver.solve(np.concatenate((np.asarray(a, np.float64), np.asarray(b, np.float64), qc)))
         return x[:m], x[m:m + nk], x[m + nk:]
 
@@ -249,18 +259,17 @@ class ReducedSystem(KKTSystem):
         self._set_pattern(rows, cols, m + nk)
 
     def factor(self):
-        self.p_inv2 = self.cones.power(self.p, -2)
-        self._factor_quasidefinite(-self.cones.quad_blocks(self.p_inv2)[self._upper])
+        p_inv2 = self.cones.power(self.p, -2)
+        self.Qp_inv2_64 = self.cones.quad_operator(np.asarray(p_inv2, dtype=np.float64))
+        self._factor_quasidefinite(-self.cones.quad_blocks(p_inv2)[self._upper])
 
     def solve_once(self, a, b, c):
         m = self.m
-        c64 = np.asarray(c, dtype=np.float64)
-        pinv = np.asarray(self.p_inv, dtype=np.float64)
-        qc = self.cones.quad_apply(pinv, c64)
+        qc = self.Qp_inv64(np.asarray(c, dtype=np.float64))
         rhs = np.concatenate((np.asarray(a, np.float64), np.asarray(b, np.float64) - self.J @ qc))
         x = self._solver.solve(rhs)
         dv, dr = x[:m], x[m:]
-        dz = qc - self.cones.quad_apply(np.asarray(self.p_inv2, dtype=np.float64), self.J.T @ dr)
+        dz = qc - self.Qp_inv2_64(self.J.T @ dr)
         return dv, dr, dz
 
 
