@@ -24,7 +24,7 @@ from rfverify.check import criterion
 from rfverify.random_problems import random_problem
 from rfverify.solver import solve
 
-METHODS = ["jqinv", "qp2", "reduced", "noscaling", "clarabel"]
+METHODS = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel"]
 TOLS = [1e-8, 1e-9, 1e-10]
 
 

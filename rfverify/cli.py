@@ -75,8 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sol.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     sol.add_argument("--method", choices=METHODS, default="jqinv",
-                     help="linear-system form: jqinv (14), qp2 (11), reduced (15), noscaling (6), "
-                          "or clarabel, the same problem handed to Clarabel (default: %(default)s)")
+                     help="linear-system form: jqinv (14), qp2 (11), reduced (15), "
+                          "reduced_factored (16), noscaling (6), or clarabel, the same problem "
+                          "handed to Clarabel (default: %(default)s)")
     sol.add_argument("--tol", type=_positive_float, default=1e-10, metavar="T",
                      help="stop when max(pinfeas, dinfeas, mu) <= T (default: %(default)g)")
     sol.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",

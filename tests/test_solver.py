@@ -16,7 +16,7 @@ from rfverify.cli import main
 from rfverify.random_problems import random_problem
 from rfverify.solver import Status, solve
 
-FORMS = ["jqinv", "qp2", "reduced", "noscaling"]
+FORMS = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling"]
 BUNDLED = ["chute", "chute-dat", "sphere", "cube", "sphere-from-global"]
 
 

@@ -23,7 +23,7 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     Parameters
     ----------
     problem : Problem
-    method : {"jqinv", "qp2", "reduced", "noscaling", "clarabel"}
+    method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel"}
         Linear-system form (DESIGN §4); ``clarabel`` hands the same convex problem to Clarabel.
     tol : float
         Stop when max(pinfeas, dinfeas, μ) ≤ tol.

@@ -12,6 +12,7 @@ but factors a different matrix:
 ``jqinv``   (14)  [[M, −H̃ᵀ, 0], [−H̃, 0, J Q_{p⁻¹}], [0, Q_{p⁻¹} Jᵀ, I]],  unknowns (dv, dr̃, Q_p dz)
 ``qp2``     (11)  [[M, −H̃ᵀ, 0], [−H̃, 0, J], [0, Jᵀ, Q_{p²}]],            unknowns (dv, dr̃, dz)
 ``reduced`` (15)  [[M, −H̃ᵀ], [−H̃, −J Q_{p⁻²} Jᵀ]],                       unknowns (dv, dr̃)
+``reduced_factored`` (16)  [[M, −(L⁻¹H̃)ᵀ], [−L⁻¹H̃, −I]], L Lᵀ = J Q_{p⁻²} Jᵀ, unknowns (dv, Lᵀdr̃)
 ``noscaling`` (6) [[M, −H̃ᵀ, 0], [−H̃, 0, J], [0, Arw(z) Jᵀ, Arw(s)]],      unsymmetric
 
 The symmetric forms are quasi-definite once a small static regularisation −δI is put on the
@@ -311,5 +312,121 @@ class NoScalingSystem(KKTSystem):
         return x[:m], x[m:m + nk], x[m + nk:]
 
 
+class ReducedFactoredSystem(KKTSystem):
+    """Form (16): the reduced form with G = J Q_{p⁻²} Jᵀ = P Pᵀ, P = J Q_{p⁻¹}, and dr̃ = L⁻ᵀ y
+    where G = L Lᵀ:
+
+        [[M, −Bᵀ], [−B, −I]] [dv; y] = [a; L⁻¹(b − J Q_{p⁻¹} c)],   B = L⁻¹ H̃,
+
+    quasi-definite with an identity block, so it needs no regularisation; then
+    dr̃ = L⁻ᵀ y and dz = Q_{p⁻¹}c − Q_{p⁻²}Jᵀdr̃.  G is block diagonal by contact (5×5, 3×3
+    or 1×1).  L is taken from a QR factorisation of Pᵀ contact by contact (Pᵀ = QR gives
+    G = RᵀR, L = Rᵀ), never from a Cholesky factorisation of G: forming G squares the
+    condition number of Q_{p⁻¹} (up to 1e20 near convergence), which made a Cholesky of G
+    fail in double precision in the last iterations (measured on the bundled cube problem).
+    The blocks are padded to 5×5 with identity and factored by one batched QR call.
+    """
+
+    name = "reduced_factored"
+
+    def __init__(self, *args, **kw):
+        from scipy.sparse.csgraph import connected_components
+
+        super().__init__(*args, **kw)
+        m, nk = self.m, self.nk
+        cones = self.cones
+        # Contact blocks of G: kept rows joined through the cones they feed.
+        cone_of_z = np.concatenate((np.arange(3 * cones.n3) // 3, cones.n3 + np.arange(cones.n1)))
+        graph = sp.coo_matrix((np.ones(self.nz), (self.rho, nk + cone_of_z)),
+                              shape=(nk + cones.n_cones, nk + cones.n_cones))
+        _, lab = connected_components(graph, directed=False)
+        block = lab[:nk]
+        _, block = np.unique(block, return_inverse=True)
+        self.n_blocks = int(block.max()) + 1 if nk else 0
+        order = np.argsort(block, kind="stable")
+        sizes = np.bincount(block, minlength=self.n_blocks)
+        if sizes.max(initial=0) > 5:
+            raise ValueError("a contact block of J Q Jᵀ is larger than 5")
+        first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+        local = np.empty(nk, dtype=np.int64)
+        local[order] = np.arange(nk) - np.repeat(first, sizes)
+        self.block, self.local, self.sizes = block, local, sizes
+        self.pad_idx = np.full((self.n_blocks, 5), nk, dtype=np.int64)  # nk = the zero slot
+        self.pad_idx[block, local] = np.arange(nk)
+        self.pad_mask = self.pad_idx < nk
+        # P = J Q_{p⁻¹} contributions (kept row, z column of the same contact), quad_blocks order,
+        # with z columns numbered within their contact (≤ 6: two L3 cones).
+        zblock = block[self.rho]
+        zorder = np.argsort(zblock, kind="stable")
+        zsizes = np.bincount(zblock, minlength=self.n_blocks)
+        zlocal = np.empty(self.nz, dtype=np.int64)
+        zlocal[zorder] = np.arange(self.nz) - np.repeat(np.concatenate(([0], np.cumsum(zsizes)[:-1])), zsizes)
+        if zlocal.max(initial=0) > 5:
+            raise ValueError("a contact has more than 6 lifted cone components")
+        gr = self.rho[cones.bd_rows]
+        self._g = (block[gr], local[gr], zlocal[cones.bd_cols])
+        # Padding rows get a unit entry in a column the contact does not use (a contact with
+        # k < 5 kept rows has exactly k cone components), so every padded block has full rank.
+        pad_b, pad_l = np.nonzero(self.pad_idx == nk)
+        self._pad = (pad_b, pad_l)
+        # B = L⁻¹H̃: each H̃ entry (b, j) feeds rows a of its block, value Linv[a, b]·H̃[b, j].
+        Hc = self._Hcoo
+        hb = block[Hc.row]
+        la = np.tile(np.arange(5), Hc.nnz)
+        rep = np.repeat(np.arange(Hc.nnz), 5)
+        keep = la < sizes[hb[rep]]
+        rep, la = rep[keep], la[keep]
+        self._b = (hb[rep], la, local[Hc.row[rep]], Hc.data[rep])
+        b_rows = self.pad_idx[hb[rep], la]
+        b_cols = Hc.col[rep]
+        Mc = self._Mcoo
+        rows = [Mc.row, b_cols, m + np.arange(nk)]
+        cols = [Mc.col, m + b_rows, m + np.arange(nk)]
+        self._set_pattern(rows, cols, m + nk)
+
+    def factor(self):
+        import qdldl
+
+        p_inv2 = self.cones.power(self.p, -2)
+        self.Qp_inv2_64 = self.cones.quad_operator(np.asarray(p_inv2, dtype=np.float64))
+        P = np.zeros((self.n_blocks, 5, 6))
+        gb, gl, gk = self._g
+        P[gb, gl, gk] = self.cones.quad_blocks(self.p_inv)  # one J entry per z: no sums
+        P[self._pad[0], self._pad[1], self._pad[1]] = 1.0
+        R = np.linalg.qr(np.swapaxes(P, 1, 2), mode="r")  # Pᵀ = QR, so G = P Pᵀ = RᵀR
+        L = np.swapaxes(R, 1, 2)
+        if not np.all(np.abs(np.diagonal(L, axis1=1, axis2=2)) > 0):
+            raise ArithmeticError("a contact block of P = J Q_{p⁻¹} is rank deficient")
+        self.Linv = np.linalg.solve(L, np.broadcast_to(np.eye(5), L.shape))
+        hb, la, lb, hv = self._b
+        vals = np.concatenate((self._Mcoo.data, -self.Linv[hb, la, lb] * hv, -np.ones(self.nk)))
+        K = self.asm.matrix(vals)
+        absU = abs(K)
+        rows = np.asarray(absU.sum(axis=1)).ravel() + np.asarray(absU.sum(axis=0)).ravel() - absU.diagonal()
+        self._knorm = float(rows.max(initial=0.0))
+        if self._solver is None:
+            self._solver = qdldl.Solver(K, upper=True)
+        else:
+            self._solver.update(K, upper=True)
+        self.factor_count += 1
+
+    def _blocks(self, x, transpose=False):
+        """Apply L⁻¹ (or L⁻ᵀ) block by block to a kept-row vector."""
+        padded = np.append(x, 0.0)[self.pad_idx]
+        op = np.swapaxes(self.Linv, 1, 2) if transpose else self.Linv
+        out = np.einsum("nij,nj->ni", op, padded)
+        return out[self.pad_mask][np.argsort(self.pad_idx[self.pad_mask])]
+
+    def solve_once(self, a, b, c):
+        m = self.m
+        qc = self.Qp_inv64(np.asarray(c, dtype=np.float64))
+        rhs2 = self._blocks(np.asarray(b, np.float64) - self.J @ qc)
+        x = self._solver.solve(np.concatenate((np.asarray(a, np.float64), rhs2)))
+        dv, y = x[:m], x[m:]
+        dr = self._blocks(y, transpose=True)
+        dz = qc - self.Qp_inv2_64(self.J.T @ dr)
+        return dv, dr, dz
+
+
 FORMS = {"jqinv": JQinvSystem, "qp2": QP2System, "reduced": ReducedSystem,
-         "noscaling": NoScalingSystem}
+         "reduced_factored": ReducedFactoredSystem, "noscaling": NoScalingSystem}

@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
-METHODS = ("jqinv", "qp2", "reduced", "noscaling", "clarabel")
+METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel")
 """Linear-system forms of Algorithm 1 (DESIGN §4), plus the Clarabel peer."""
 
 
