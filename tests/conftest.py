@@ -58,3 +58,23 @@ def _restore_numpy_errstate():
     after = np.geterr()
     np.seterr(**before)
     assert after == before, f"test changed numpy error state: {before} -> {after}"
+
+
+@pytest.fixture(autouse=True)
+def _mpmath_precision_is_restored():
+    """Fail loudly if a test leaks a changed global mpmath precision (``mpmath.mp.prec``).
+
+    The reference implementation must never change the global precision (it computes in the
+    context of its inputs); tests that need another precision use a private
+    ``mpmath.MPContext()`` or ``mpmath.workprec``/``workdps``, which restore it.  Like
+    mpmath's own conftest (which resets ``mp.dps`` before every test) the precision is
+    restored either way, so one leak does not cascade into later tests; unlike it, the test
+    that leaked fails.
+    """
+    import mpmath
+
+    before = mpmath.mp.prec
+    yield
+    after = mpmath.mp.prec
+    mpmath.mp.prec = before
+    assert after == before, f"test changed mpmath.mp.prec: {before} -> {after}"
