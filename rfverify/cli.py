@@ -93,6 +93,30 @@ def build_parser() -> argparse.ArgumentParser:
                           "mu_r = 0 requires them; such problems are refused)")
     _add_load_options(sol)
     sol.set_defaults(func=cmd_solve)
+
+    cert = sub.add_parser(
+        "certify", help="certify how many digits of a solution are right (mpmath reference)",
+        description="Check a double-precision solution: residuals in high precision first, then "
+                    "(when they do not already rule it out, or with --always-reference) the "
+                    "mpmath reference solution, and the digits of agreement in v, u and Hr (and "
+                    "r where it is unique). Exit code 0 only when --digits are certified.",
+    )
+    cert.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
+    cert.add_argument("--solution", metavar="SOL.h5",
+                      help="FCLIB file whose /solution/{v,u,r} is certified (default: the "
+                           "problem file's own /solution)")
+    cert.add_argument("--digits", type=_positive_int, default=10, metavar="K",
+                      help="digits to certify (default: %(default)s)")
+    cert.add_argument("--dps", type=_positive_int, default=50, metavar="D",
+                      help="accuracy of the reference solve in decimal digits (default: %(default)s)")
+    cert.add_argument("--always-reference", action="store_true",
+                      help="run the reference even when the cheap residual check already fails")
+    cert.add_argument("--json", action="store_true", help="print the certificate as JSON")
+    cert.add_argument("--out", metavar="CERT.h5",
+                      help="write the problem, the given solution and the reference solution at "
+                           "full precision (decimal strings under /reference) to this file")
+    _add_load_options(cert)
+    cert.set_defaults(func=cmd_certify)
     return parser
 
 
@@ -335,6 +359,58 @@ def cmd_solve(args) -> int:
         if args.out:
             print(f"solution written to {args.out}")
     return EXIT_OK if result.success else EXIT_NOT_SOLVED
+
+
+# ---------------------------------------------------------------------- certify
+def cmd_certify(args) -> int:
+    from .certify import certify
+    from .errors import ProblemFileError
+    from .io import load
+
+    problem = _load(args)
+    if args.solution:
+        sol = load(args.solution, max_asymmetry=np.inf).solution
+        where = args.solution
+    else:
+        sol, where = problem.solution, args.problem
+    if sol is None or sol.v is None or sol.r is None:
+        raise ProblemFileError(where, "has no /solution with v and r to certify (use --solution SOL.h5)")
+    u = sol.u if sol.u is not None else problem.H.T @ sol.v + problem.w
+    cert = certify(problem, sol.v, u, sol.r, digits=args.digits, dps=args.dps,
+                   always_reference=args.always_reference)
+    if args.out:
+        _write_certificate(problem, sol, u, cert, args.out)
+    if args.json:
+        print(json.dumps(cert.as_dict(), indent=2, default=_json_default))
+    else:
+        print(cert.verdict)
+        print("residuals (high precision): " + ", ".join(f"{k} {v:.2e}" for k, v in cert.residuals.items()))
+        if cert.r_unique is False:
+            print(f"r is not unique (H is rank deficient on the active contacts): distance to the "
+                  f"reference's r is information only ({cert.r_info_digits:.1f} digits)")
+    return EXIT_OK if cert.certified else EXIT_NOT_SOLVED
+
+
+def _write_certificate(problem, sol, u, cert, path):
+    import h5py
+
+    from .io import save
+    from .problem import StoredSolution
+
+    save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), path)
+    with h5py.File(path, "a") as fh:
+        grp = fh.create_group("certificate")
+        grp.attrs["verdict"] = cert.verdict
+        grp.attrs["certified"] = cert.certified
+        grp.attrs["requested_digits"] = cert.requested
+        if cert.reference is not None:
+            ref = cert.reference
+            rg = fh.create_group("reference")
+            rg.attrs["dps"] = ref.dps
+            rg.attrs["status"] = ref.status
+            for name in ("v", "u", "r"):
+                strings = [ref.ctx.nstr(x, ref.dps + 5, strip_zeros=False) for x in getattr(ref, name)]
+                rg.create_dataset(name, data=np.array(strings, dtype=h5py.string_dtype()))
 
 
 # ---------------------------------------------------------------------- entry point
