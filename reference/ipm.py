@@ -199,8 +199,9 @@ class _Cholesky:
 
 # ---------------------------------------------------------------------- the solver
 def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str = "paper",
-          gamma0: float = 0.9) -> ReferenceResult:
-    """Algorithm 1 at ``dps`` significant digits, independent mode (standard infeasible start).
+          gamma0: float = 0.9, warm_start=None) -> ReferenceResult:
+    """Algorithm 1 at ``dps`` significant digits: independent mode (the standard infeasible
+    start) by default, warm mode when ``warm_start`` is given.
 
     Parameters
     ----------
@@ -213,6 +214,13 @@ def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str
         digits (see the comment in the code for the measurement behind this).
     tol : number, optional
         Stop when max(pinfeas, dinfeas, μ) ≤ tol; default 10^(−dps+10).
+    warm_start : dict, optional
+        Continue from an iterate of another implementation (the mixed-precision path):
+        ``{"v": (m,), "r_t": (nk,), "z": list of cone vectors}`` in this module's lifted layout
+        (kept components in contact order; cones contact by contact: friction, rolling, or
+        the normal-only ray).  Numbers (float64, longdouble) are converted exactly.  The point
+        must be strictly interior (z and Jᵀr̃ in the cone interiors); otherwise the run
+        falls back to the standard start and says so in ``message``.
     """
     t0 = time.perf_counter()
     # The arithmetic runs at twice the requested digits: the reduced system's condition number
@@ -315,6 +323,22 @@ def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str
         r_t[rows[0]] = mpf(1)
     z = [J.identity(ctx, len(rows)) for rows in lifted.cones]
     n_cones = len(lifted.cones)
+    warm_note = ""
+    if warm_start is not None:
+        wv, wr, wz = warm_start["v"], warm_start["r_t"], warm_start["z"]
+        if len(wv) != m or len(wr) != nk or len(wz) != n_cones or \
+                any(len(zc) != len(rows) for zc, rows in zip(wz, lifted.cones)):
+            raise ValueError("warm_start does not match the lifted layout of this problem")
+        v_w = J.to_ctx(ctx, list(wv))
+        r_w = J.to_ctx(ctx, list(wr))
+        z_w = [J.to_ctx(ctx, list(zc)) for zc in wz]
+        s_w = [[r_w[row] for row in rows] for rows in lifted.cones]
+        interior = all(J.spectral_values(c)[1] > 0 for c in z_w + s_w)
+        if interior:
+            v, r_t, z = v_w, r_w, z_w
+            warm_note = " (warm start)"
+        else:
+            warm_note = " (warm start not interior: standard start used)"
     gamma = mpf(gamma0)
     trace = {k: [] for k in ("pinfeas", "dinfeas", "mu", "sigma", "alpha")}
 
@@ -417,6 +441,6 @@ def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str
     u = list(w)
     for i, j, x in zip(Hc.row, Hc.col, Hc.data):
         u[int(j)] += mpf(float(x)) * v[int(i)]
-    return ReferenceResult(v=v, u=u, r=r, status=status, message=message,
+    return ReferenceResult(v=v, u=u, r=r, status=status, message=message + warm_note,
                            nit=len(trace["pinfeas"]) - 1, pinfeas=pinf, dinfeas=dinf, mu=mu,
                            dps=dps, ctx=ctx, trace=trace, time=time.perf_counter() - t0)

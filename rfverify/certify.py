@@ -8,10 +8,16 @@ Steps, cheapest first:
     correct digits (with a margin of 100 for the data's scale factors); the reference is then
     only run when asked (``always_reference``), to say how many digits it does have.
 (b) the reference solution (:func:`reference.solve`, independent mode, ``dps`` digits).
-(c) digits = −log10(‖x − x_ref‖∞ / ‖x_ref‖∞) for v, u and Hr, which are unique; for r only
+(c) digits = −log10(‖x − x_ref‖∞ / scale) for v, u and Hr, which are unique; for r only
     when it is unique — decided as: H restricted to the columns of the contacts the reference
     finds active (r_N > 0) has full numerical column rank (SVD, σ_min > 1e-10·σ_max) —
     otherwise the distance in r is reported as information only.
+    The scale is ‖x_ref‖∞ for v and r.  u = Hᵀv + w and Hr = Mv − f are differences that are
+    exactly zero at sticking contacts and at contact-free equilibria, where a relative error
+    has no meaning (any double value would have "−∞ digits"); they are measured against the
+    terms they are computed from: max(‖u_ref‖, ‖Hᵀv_ref‖, ‖w‖) and max(‖Hr_ref‖, ‖M v_ref‖,
+    ‖f‖).  DESIGN §6 writes ‖x_ref‖∞; for these two it is the same whenever x_ref is not
+    small compared with its terms.
 (d) the verdict: certified to k digits when min(digits of v, u, Hr [, r]) ≥ k.
 
 A claim is only made from the comparison with the reference; residuals alone never certify.
@@ -93,8 +99,8 @@ def high_precision_residuals(problem: Problem, v, u, r, dps: int = 40) -> dict:
     return out
 
 
-def _digits(x: np.ndarray, x_ref: np.ndarray) -> float:
-    scale = np.max(np.abs(x_ref))
+def _digits(x: np.ndarray, x_ref: np.ndarray, *terms) -> float:
+    scale = max([np.max(np.abs(x_ref), initial=0.0)] + [np.max(np.abs(t), initial=0.0) for t in terms])
     if scale == 0:
         return math.inf if not np.any(x) else 0.0
     err = np.max(np.abs(x - x_ref)) / scale
@@ -144,8 +150,9 @@ def certify(problem: Problem, v, u, r, *, digits: int = 10, dps: int = 50,
         return Certificate(digits, False, f"not certified: the reference did not converge ({ref.message})",
                            res, reference=ref, reference_ran=True)
     v_ref, u_ref, r_ref = ref.as_float("v"), ref.as_float("u"), ref.as_float("r")
-    d = {"v": _digits(v, v_ref), "u": _digits(u, u_ref),
-         "Hr": _digits(problem.H @ r, problem.H @ r_ref)}
+    d = {"v": _digits(v, v_ref),
+         "u": _digits(u, u_ref, problem.H.T @ v_ref, problem.w),
+         "Hr": _digits(problem.H @ r, problem.H @ r_ref, problem.M_sym @ v_ref, problem.f)}
     unique = r_is_unique(problem, r_ref)
     r_digits = _digits(r, r_ref)
     if unique:

@@ -88,6 +88,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="print status, iterations, time and final residuals as JSON")
     sol.add_argument("--verbose", action="store_true",
                      help="print a settings header and the per-iteration table")
+    sol.add_argument("--digits", type=_positive_int, default=None, metavar="K",
+                     help="produce a solution right to K significant digits: the double solve, "
+                          "then warm iterations of the mpmath reference, rounded to double and "
+                          "certified by an independent reference run; exit code 0 only when "
+                          "certified")
     sol.add_argument("--no-presolve", action="store_true",
                      help="switch off the presolve reductions (cone reduction for mu = 0 / "
                           "mu_r = 0 requires them; such problems are refused)")
@@ -333,6 +338,8 @@ def cmd_solve(args) -> int:
 
             raise InvalidProblemError("mu", "has zero coefficients, which the unreduced lifting "
                                             "would divide by", fix="drop --no-presolve")
+    if args.digits is not None:
+        return _solve_digits(args, problem, options)
     t0 = time.perf_counter()
     result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, **options)
     wall = time.perf_counter() - t0
@@ -359,6 +366,39 @@ def cmd_solve(args) -> int:
         if args.out:
             print(f"solution written to {args.out}")
     return EXIT_OK if result.success else EXIT_NOT_SOLVED
+
+
+def _solve_digits(args, problem, options) -> int:
+    import time
+
+    from .io import save
+    from .problem import StoredSolution
+    from .refine import solve_to_digits
+
+    if args.method == "clarabel":
+        from .errors import InvalidProblemError
+
+        raise InvalidProblemError("method", "--digits needs an Algorithm 1 method, not clarabel",
+                                  fix="use --method jqinv (default)")
+    t0 = time.perf_counter()
+    out = solve_to_digits(problem, digits=args.digits, method=args.method, tol=args.tol,
+                          max_iter=args.max_iter, **options)
+    wall = time.perf_counter() - t0
+    if args.out:
+        save(problem.with_solution(StoredSolution(v=out.v, u=out.u, r=out.r)), args.out)
+    summary = {"status": "Certified" if out.success else "NotCertified",
+               "success": out.success, "digits_requested": args.digits,
+               "certificate": out.certificate.as_dict(), "double_status": str(out.double.status),
+               "double_iterations": out.double.nit, "warm_iterations": out.warm.nit,
+               "warm_status": out.warm.status, "time": wall, "out": args.out}
+    if args.json:
+        print(json.dumps(summary, indent=2, default=_json_default))
+    else:
+        print(f"double solve: {out.double.status} in {out.double.nit} iterations; "
+              f"warm high-precision iterations: {out.warm.nit} ({out.warm.status})")
+        print(out.certificate.verdict)
+        print(f"time {wall:.2f} s" + (f"; solution written to {args.out}" if args.out else ""))
+    return EXIT_OK if out.success else EXIT_NOT_SOLVED
 
 
 # ---------------------------------------------------------------------- certify
