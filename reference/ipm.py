@@ -42,7 +42,8 @@ class ReferenceResult:
     ``v`` (m), ``u`` (5n), ``r`` (5n) are lists of mpf numbers of the solver's private context
     ``ctx`` (arithmetic at 2·``dps`` digits); ``v_float`` etc. are float64 roundings.  ``status``
     is ``"Solved"``, ``"MaxIterations"`` or ``"NumericalError"``; ``trace`` holds per-iteration
-    floats (pinfeas, dinfeas, mu, alpha, sigma).
+    floats (pinfeas, dinfeas, mu, alpha, sigma).  ``r_t`` (nk) and ``z`` (cone by cone) are the
+    final lifted iterate, in the layout of ``warm_start``.
     """
 
     v: list
@@ -58,6 +59,8 @@ class ReferenceResult:
     ctx: object
     trace: dict = field(default_factory=dict)
     time: float = 0.0
+    r_t: list = field(default_factory=list)
+    z: list = field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -443,4 +446,5 @@ def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str
         u[int(j)] += mpf(float(x)) * v[int(i)]
     return ReferenceResult(v=v, u=u, r=r, status=status, message=message + warm_note,
                            nit=len(trace["pinfeas"]) - 1, pinfeas=pinf, dinfeas=dinf, mu=mu,
-                           dps=dps, ctx=ctx, trace=trace, time=time.perf_counter() - t0)
+                           dps=dps, ctx=ctx, trace=trace, time=time.perf_counter() - t0,
+                           r_t=r_t, z=z)

@@ -37,6 +37,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .solver.result import METHODS
+
     parser = _Parser(
         prog="rfverify",
         description="Verification-focused toolkit for rolling-friction contact problems "
@@ -63,8 +65,6 @@ def build_parser() -> argparse.ArgumentParser:
                       help="relative residual up to which a stored solution is called "
                            "consistent (default: %(default)g)")
     info.set_defaults(func=cmd_info)
-
-    from .solver.result import METHODS
 
     sol = sub.add_parser(
         "solve", help="solve a problem with Algorithm 1 (or the Clarabel peer)",
@@ -122,6 +122,28 @@ def build_parser() -> argparse.ArgumentParser:
                            "full precision (decimal strings under /reference) to this file")
     _add_load_options(cert)
     cert.set_defaults(func=cmd_certify)
+
+    diag = sub.add_parser(
+        "diagnose", help="run the double solver and the reference in lockstep",
+        description="For every iteration of a double-precision run, take the exact step from the "
+                    "double iterate with the mpmath reference and print the digits of agreement "
+                    "of the next iterate, max cond(Q_p), min λ2 of z and Jᵀr̃ in double and in "
+                    "the reference (flagging double λ2 that underflowed or went non-positive "
+                    "while the exact one is positive), and where and why a failed run stopped.",
+    )
+    diag.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
+    diag.add_argument("--method", choices=[m for m in METHODS if m != "clarabel"], default="jqinv",
+                      help="linear-system form of the double run (default: %(default)s)")
+    diag.add_argument("--tol", type=_positive_float, default=1e-10, metavar="T",
+                      help="tolerance of the double run; set it below what double precision "
+                           "reaches (e.g. 1e-25) to watch it fail (default: %(default)g)")
+    diag.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",
+                      help="iteration limit of the double run (default: %(default)s)")
+    diag.add_argument("--dps", type=_positive_int, default=40, metavar="D",
+                      help="digits of the reference steps (default: %(default)s)")
+    diag.add_argument("--json", action="store_true", help="print the diagnosis as JSON")
+    _add_load_options(diag)
+    diag.set_defaults(func=cmd_diagnose)
     return parser
 
 
@@ -399,6 +421,32 @@ def _solve_digits(args, problem, options) -> int:
         print(out.certificate.verdict)
         print(f"time {wall:.2f} s" + (f"; solution written to {args.out}" if args.out else ""))
     return EXIT_OK if out.success else EXIT_NOT_SOLVED
+
+
+# ---------------------------------------------------------------------- diagnose
+def cmd_diagnose(args) -> int:
+    from .diagnose import diagnose
+
+    problem = _load(args)
+    d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps)
+    if args.json:
+        print(json.dumps(d, indent=2, default=_json_default))
+        return EXIT_OK
+    print(f"double run ({d['method']}): {d['status']} after {d['nit']} iterations: {d['message']}")
+    head = (f"{'iter':>4} {'mu':>9} {'digits v':>8} {'r~':>5} {'z':>5} {'cond(Qp)':>9} "
+            f"{'λ2(z) dbl':>10} {'λ2(z) ref':>10} {'λ2(s) dbl':>10} {'λ2(s) ref':>10}  flags")
+    print(head)
+    print("-" * len(head))
+    for r in d["iterations"]:
+        print(f"{r['iter']:>4} {r['mu']:>9.2e} {r['digits_v']:>8.1f} {r['digits_r_t']:>5.1f} "
+              f"{r['digits_z']:>5.1f} {r['max_cond_Qp']:>9.1e} {r['min_lam2_z']['double']:>10.2e} "
+              f"{r['min_lam2_z']['reference']:>10.2e} {r['min_lam2_s']['double']:>10.2e} "
+              f"{r['min_lam2_s']['reference']:>10.2e}  {'; '.join(r['flags'])}")
+    if d["failure"]:
+        flagged = [r for r in d["iterations"] if r["flags"]]
+        first = f"; first flagged iteration {flagged[0]['iter']}: {flagged[0]['flags'][0]}" if flagged else ""
+        print(f"failure: {d['failure']}{first}")
+    return EXIT_OK
 
 
 # ---------------------------------------------------------------------- certify

@@ -17,7 +17,7 @@ __all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS"]
 
 
 def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter: int = 100,
-          **options) -> SolveResult:
+          keep_iterates: bool = False, **options) -> SolveResult:
     """Solve a rolling-friction problem with Algorithm 1 (or the Clarabel peer).
 
     Parameters
@@ -28,6 +28,9 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     tol : float
         Stop when max(pinfeas, dinfeas, μ) ≤ tol.
     max_iter : int
+    keep_iterates : bool
+        Store every iterate in ``extras["iterates"]`` as (v, r̃, z) with v on
+        ``extras["active_dofs"]`` (for lockstep diagnosis; implies no component splitting).
     **options
         Any other :class:`Settings` field (``sigma_rule``, ``extended_jordan``, ``refine_max``,
         ``reduce_cones``, ``drop_free_bodies``, ...).
@@ -44,6 +47,8 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     if unknown:
         raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}; "
                         f"valid: {', '.join(Settings.names())}")
+    if keep_iterates:
+        options["split_components"] = False
     settings = Settings(tol=tol, max_iter=max_iter, **options)
     t0 = time.perf_counter()
     if method == "clarabel":
@@ -92,7 +97,7 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
 
         out = ipm.run(M[dofs][:, dofs].tocsc(), problem.f[dofs], lp.H_t[rows][:, dofs].tocsr(),
                       lp.w_t[rows], lp.J[rows][:, zidx].tocsr(), cones, n_c, method, settings,
-                      describe_cone=describe)
+                      describe_cone=describe, keep_iterates=keep_iterates)
         v[dofs] = out["v"]
         r_t[rows] = out["r_t"]
         z[zidx] = out["z"]
@@ -112,7 +117,9 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
         extras={"factorisations": out["factorisations"], "r_t": r_t, "z": z,
                 "n_cones": {"L3": lp.n3, "L1": lp.n1},
                 "component_runs": [{k: o[k] for k in ("status", "message", "nit", "trace")} for o in runs]
-                if len(runs) > 1 else []},
+                if len(runs) > 1 else [],
+                "iterates": runs[0]["iterates"] if keep_iterates else [],
+                "active_dofs": groups[0][0] if keep_iterates else None},
     )
 
 

@@ -34,10 +34,11 @@ def _norm(x) -> float:
 
 
 def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, settings: Settings,
-        describe_cone=lambda k: f"cone {k}"):
+        describe_cone=lambda k: f"cone {k}", keep_iterates: bool = False):
     """Run Algorithm 1.  Returns a dict with v, r_t, z, status, message, nit, trace, measures.
 
     ``describe_cone(k)`` turns a global cone index into words (contact and part) for messages.
+    ``keep_iterates`` stores every iterate (v, r̃, z) in ``iterates`` (for lockstep diagnosis).
     """
     t0 = time.perf_counter()
     ext = np.longdouble if settings.extended_residuals else np.float64
@@ -66,8 +67,11 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     status, message = Status.MAX_ITERATIONS, f"reached max_iter = {settings.max_iter}"
     k = 0
     record = None
+    iterates = []
     try:
         for k in range(settings.max_iter + 1):
+            if keep_iterates:
+                iterates.append((v.copy(), r_t.copy(), z.copy()))
             s = JTx @ r_t
             Mv, HTr, Hv, Jz = Mx @ v, HTx @ r_t, Hx @ v, Jx @ z
             r_d = Mv - HTr - f_x
@@ -187,7 +191,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                 nit=len(trace["iter"]) - 1 if trace["iter"] else 0,
                 pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o),
                 trace={key: np.asarray(val) for key, val in trace.items()}, timings=timings,
-                factorisations=system.factor_count, tol=settings.tol)
+                factorisations=system.factor_count, tol=settings.tol, iterates=iterates)
 
 
 def _sigma(rule: str, mu_aff: float, mu: float, alpha_aff: float) -> float:
