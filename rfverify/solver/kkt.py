@@ -96,11 +96,15 @@ class KKTSystem:
         """Assemble the upper triangle — M and −H̃ᵀ (fixed), this iteration's blocks
         ``varying``, then −δ on the dr̃ diagonal — and factor it with QDLDL, reusing the
         symbolic analysis after the first call."""
-        import qdldl
-
         Mdata, Hdata = self._Mcoo.data, -self._Hcoo.data
         diag_scale = max(np.abs(Mdata).max(initial=1.0), *(np.abs(v).max(initial=1.0) for v in varying), 1.0)
-        vals = np.concatenate((Mdata, Hdata, *varying, np.full(self.nk, -self.static_reg * diag_scale)))
+        self._factor_upper(np.concatenate((Mdata, Hdata, *varying,
+                                           np.full(self.nk, -self.static_reg * diag_scale))))
+
+    def _factor_upper(self, vals):
+        """Assemble the upper triangle from ``vals`` (pattern order) and factor it with QDLDL."""
+        import qdldl
+
         K = self.asm.matrix(vals)
         # ‖K‖∞ of the symmetric matrix from its upper triangle U: row sums of |U| plus
         # column sums of |U| minus the diagonal counted twice (K itself is never formed).
@@ -385,8 +389,6 @@ class ReducedFactoredSystem(KKTSystem):
         self._set_pattern(rows, cols, m + nk)
 
     def factor(self):
-        import qdldl
-
         p_inv2 = self.cones.power(self.p, -2)
         self.Qp_inv2_64 = self.cones.quad_operator(np.asarray(p_inv2, dtype=np.float64))
         P = np.zeros((self.n_blocks, 5, 6))
@@ -399,16 +401,7 @@ class ReducedFactoredSystem(KKTSystem):
             raise ArithmeticError("a contact block of P = J Q_{p⁻¹} is rank deficient")
         self.Linv = np.linalg.solve(L, np.broadcast_to(np.eye(5), L.shape))
         hb, la, lb, hv = self._b
-        vals = np.concatenate((self._Mcoo.data, -self.Linv[hb, la, lb] * hv, -np.ones(self.nk)))
-        K = self.asm.matrix(vals)
-        absU = abs(K)
-        rows = np.asarray(absU.sum(axis=1)).ravel() + np.asarray(absU.sum(axis=0)).ravel() - absU.diagonal()
-        self._knorm = float(rows.max(initial=0.0))
-        if self._solver is None:
-            self._solver = qdldl.Solver(K, upper=True)
-        else:
-            self._solver.update(K, upper=True)
-        self.factor_count += 1
+        self._factor_upper(np.concatenate((self._Mcoo.data, -self.Linv[hb, la, lb] * hv, -np.ones(self.nk))))
 
     def _blocks(self, x, transpose=False):
         """Apply L⁻¹ (or L⁻ᵀ) block by block to a kept-row vector."""
