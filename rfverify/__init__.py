@@ -5,6 +5,10 @@ Public API (this release):
 - :func:`load` / :func:`save` — FCLIB HDF5 and Siconos ``.dat`` problem files.
 - :class:`Problem` — a validated global rolling-friction problem (FCLIB conventions).
 - :func:`check_solution` — recompute the residuals of a candidate (v, u, r).
+- :func:`solve` — Algorithm 1 (forms jqinv, qp2, reduced, reduced_factored, noscaling) or the
+  Clarabel peer; :func:`solve_to_digits` — the certified k-digit path.
+- :func:`certify` — digits of a solution against the mpmath reference; :func:`diagnose` —
+  lockstep double/reference run.
 - :mod:`rfverify.jordan` — Jordan algebra of Lorentz cones, vectorised, float64/longdouble.
 - Errors: :class:`RfverifyError`, :class:`InvalidProblemError`, :class:`ProblemFileError`,
   :class:`ConeDomainError`.
@@ -14,11 +18,35 @@ from .check import SolutionCheck, check_solution
 from .errors import ConeDomainError, InvalidProblemError, ProblemFileError, RfverifyError
 from .io import bundled_problems, load, save
 from .problem import Problem, StoredSolution
+from .solver import SolveResult, Settings, Status, solve
+
+
+def certify(problem, solution, u=None, r=None, **kwargs):
+    """See :func:`rfverify.certify.certify` (imported lazily: it loads the mpmath reference)."""
+    from .certify import certify as _certify
+
+    return _certify(problem, solution, u, r, **kwargs)
+
+
+def solve_to_digits(problem, digits=10, **kwargs):
+    """See :func:`rfverify.refine.solve_to_digits`."""
+    from .refine import solve_to_digits as _solve_to_digits
+
+    return _solve_to_digits(problem, digits=digits, **kwargs)
+
+
+def diagnose(problem, **kwargs):
+    """See :func:`rfverify.diagnose.diagnose`."""
+    from .diagnose import diagnose as _diagnose
+
+    return _diagnose(problem, **kwargs)
+
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Problem", "StoredSolution", "load", "save", "bundled_problems", "check_solution",
     "SolutionCheck", "RfverifyError", "InvalidProblemError", "ProblemFileError",
-    "ConeDomainError", "__version__",
+    "ConeDomainError", "__version__", "solve", "SolveResult", "Settings", "Status", "certify",
+    "solve_to_digits", "diagnose",
 ]

@@ -123,9 +123,14 @@ def r_is_unique(problem: Problem, r_ref: np.ndarray) -> bool:
     return bool(s[-1] > 1e-10 * s[0])
 
 
-def certify(problem: Problem, v, u, r, *, digits: int = 10, dps: int = 50,
+def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, dps: int = 50,
             always_reference: bool = False) -> Certificate:
-    """Certify the double-precision solution (v, u, r) of ``problem`` to ``digits`` digits.
+    """Certify the double-precision solution of ``problem`` to ``digits`` digits.
+
+    The solution is given either as arrays ``v`` (m,), ``u`` (5n,), ``r`` (5n,), or as one
+    object with attributes ``v, u, r`` (a :class:`rfverify.solver.SolveResult`, a
+    :class:`rfverify.StoredSolution`): ``certify(problem, result, digits=10)``.  A missing u
+    is taken as Hᵀv + w.
 
     Returns a :class:`Certificate`; ``certified`` is True only if the comparison with the
     reference solution shows at least ``digits`` correct digits in v, u, Hr (and r when it is
@@ -133,6 +138,10 @@ def certify(problem: Problem, v, u, r, *, digits: int = 10, dps: int = 50,
     """
     import reference
 
+    if u is None and r is None and hasattr(v, "v"):
+        v, u, r = v.v, getattr(v, "u", None), v.r
+    if u is None:
+        u = problem.H.T @ np.asarray(v, dtype=np.float64) + problem.w
     v, u, r = (np.asarray(x, dtype=np.float64) for x in (v, u, r))
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
         return Certificate(digits, False, "not certified: the solution contains NaN or Inf", {})

@@ -147,3 +147,12 @@ def test_cli_solve_digits_then_certify_the_file(tmp_path, capsys):
     assert s["status"] == "Certified" and s["certificate"]["certified"]
     assert main(["certify", "bundled:cube", "--solution", str(sol), "--digits", "10"]) == 0
     assert "certified to 10 digits" in capsys.readouterr().out
+
+
+def test_public_api_shapes():
+    problem = rfverify.load("bundled:sphere")
+    result = rfverify.solve(problem, method="jqinv", tol=1e-10)
+    cert = rfverify.certify(problem, result, digits=6)
+    assert cert.certified and cert.reference_ran
+    refined = rfverify.solve_to_digits(problem, digits=10)
+    assert refined.success and refined.v.dtype == np.float64
