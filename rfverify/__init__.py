@@ -18,28 +18,10 @@ from .check import SolutionCheck, check_solution
 from .errors import ConeDomainError, InvalidProblemError, ProblemFileError, RfverifyError
 from .io import bundled_problems, load, save
 from .problem import Problem, StoredSolution
+from .certification import Certificate, certify
+from .diagnosis import diagnose
+from .refine import RefinedSolution, solve_to_digits
 from .solver import SolveResult, Settings, Status, solve
-
-
-def certify(problem, solution, u=None, r=None, **kwargs):
-    """See :func:`rfverify.certify.certify` (imported lazily: it loads the mpmath reference)."""
-    from .certify import certify as _certify
-
-    return _certify(problem, solution, u, r, **kwargs)
-
-
-def solve_to_digits(problem, digits=10, **kwargs):
-    """See :func:`rfverify.refine.solve_to_digits`."""
-    from .refine import solve_to_digits as _solve_to_digits
-
-    return _solve_to_digits(problem, digits=digits, **kwargs)
-
-
-def diagnose(problem, **kwargs):
-    """See :func:`rfverify.diagnose.diagnose`."""
-    from .diagnose import diagnose as _diagnose
-
-    return _diagnose(problem, **kwargs)
 
 
 __version__ = "0.1.0"
@@ -48,5 +30,5 @@ __all__ = [
     "Problem", "StoredSolution", "load", "save", "bundled_problems", "check_solution",
     "SolutionCheck", "RfverifyError", "InvalidProblemError", "ProblemFileError",
     "ConeDomainError", "__version__", "solve", "SolveResult", "Settings", "Status", "certify",
-    "solve_to_digits", "diagnose",
+    "solve_to_digits", "RefinedSolution", "diagnose", "Certificate",
 ]

@@ -425,7 +425,7 @@ def _solve_digits(args, problem, options) -> int:
 
 # ---------------------------------------------------------------------- diagnose
 def cmd_diagnose(args) -> int:
-    from .diagnose import diagnose
+    from .diagnosis import diagnose
 
     problem = _load(args)
     d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps)
@@ -451,7 +451,7 @@ def cmd_diagnose(args) -> int:
 
 # ---------------------------------------------------------------------- certify
 def cmd_certify(args) -> int:
-    from .certify import certify
+    from .certification import certify
     from .errors import ProblemFileError
     from .io import load
 

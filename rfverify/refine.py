@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .certify import Certificate, certify
+from .certification import Certificate, certify
 from .lifting import lift
 from .problem import Problem
 from .solver import SolveResult, solve

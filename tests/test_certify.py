@@ -11,7 +11,7 @@ import pytest
 
 import reference
 import rfverify
-from rfverify.certify import certify, high_precision_residuals
+from rfverify.certification import certify, high_precision_residuals
 from rfverify.cli import main
 from rfverify.solver import solve
 

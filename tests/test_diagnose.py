@@ -7,7 +7,7 @@ import json
 
 import rfverify
 from rfverify.cli import main
-from rfverify.diagnose import diagnose
+from rfverify.diagnosis import diagnose
 
 
 def test_lockstep_agreement_on_a_healthy_run():
