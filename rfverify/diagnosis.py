@@ -12,6 +12,7 @@ operation and cone where it stopped (the solver's own diagnosed message).
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -49,11 +50,9 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
         v_k, r_k, z_k = iterates[k]
         v_full = np.array(res.v, dtype=np.longdouble)
         v_full[active] = v_k
-        fake = type("Iterate", (), {})()
-        fake.v, fake.settings = v_full, res.settings
-        fake.extras = {"r_t": r_k, "z": z_k}
         # Same step-length fraction γ and σ rule as the double run at this iteration.
-        step = reference.solve(problem, dps=dps, tol=0, max_iter=1, warm_start=warm_start_from(problem, fake),
+        start = warm_start_from(problem, _with(res, v_full, r_k, z_k))
+        step = reference.solve(problem, dps=dps, tol=0, max_iter=1, warm_start=start,
                                gamma0=float(res.trace["gamma"][k]), sigma_rule=res.settings.sigma_rule)
         v1, r1, z1 = iterates[k + 1]
         ref_v = np.array([float(x) for x in step.v])[active]
@@ -93,10 +92,8 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
 
 
 def _with(res, v_full, r_t, z):
-    fake = type("Iterate", (), {})()
-    fake.v, fake.settings = v_full, res.settings
-    fake.extras = {"r_t": r_t, "z": z}
-    return fake
+    """A stand-in result holding one stored iterate, in the shape warm_start_from reads."""
+    return SimpleNamespace(v=v_full, settings=res.settings, extras={"r_t": r_t, "z": z})
 
 
 def _reference_cone_rows(step, lp, order):
