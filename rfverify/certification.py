@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import mpmath
 import numpy as np
 
+from .errors import InvalidProblemError
 from .problem import SPACEDIM, Problem
 
 
@@ -140,9 +141,16 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, dps: int =
 
     if u is None and r is None and hasattr(v, "v"):
         v, u, r = v.v, getattr(v, "u", None), v.r
-    if u is None:
-        u = problem.H.T @ np.asarray(v, dtype=np.float64) + problem.w
-    v, u, r = (np.asarray(x, dtype=np.float64) for x in (v, u, r))
+    v = np.asarray(v, dtype=np.float64).ravel()
+    if u is None and v.size == problem.n_dofs:
+        u = problem.H.T @ v + problem.w
+    u = v if u is None else u  # wrong-sized v: reported below, before any arithmetic
+    v, u, r = (np.asarray(x, dtype=np.float64).ravel() for x in (v, u, r))
+    for name, arr, size in (("v", v, problem.n_dofs), ("u", u, SPACEDIM * problem.n_contacts),
+                            ("r", r, SPACEDIM * problem.n_contacts)):
+        if arr.size != size:
+            raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {size}",
+                                      fix="certify a solution of this problem")
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
         return Certificate(digits, False, "not certified: the solution contains NaN or Inf", {})
     res = high_precision_residuals(problem, v, u, r, dps=max(30, dps // 2 + 10))

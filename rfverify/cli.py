@@ -457,7 +457,9 @@ def cmd_certify(args) -> int:
 
     problem = _load(args)
     if args.solution:
-        sol = load(args.solution, max_asymmetry=np.inf).solution
+        other = load(args.solution, max_asymmetry=np.inf)
+        _require_same_problem(problem, other, args.solution)
+        sol = other.solution
         where = args.solution
     else:
         sol, where = problem.solution, args.problem
@@ -477,6 +479,20 @@ def cmd_certify(args) -> int:
             print(f"r is not unique (H is rank deficient on the active contacts): distance to the "
                   f"reference's r is information only ({cert.r_info_digits:.1f} digits)")
     return EXIT_OK if cert.certified else EXIT_NOT_SOLVED
+
+
+def _require_same_problem(problem, other, path):
+    """A solution is only certified against the problem it was computed for."""
+    from .errors import InvalidProblemError
+
+    same = (problem.M.shape == other.M.shape and problem.H.shape == other.H.shape
+            and all(np.array_equal(getattr(problem, k), getattr(other, k)) for k in ("f", "w", "mu", "mu_r"))
+            and (problem.M != other.M).nnz == 0 and (problem.H != other.H).nnz == 0)
+    if not same:
+        raise InvalidProblemError(
+            "solution", f"{path} holds a different problem (m = {other.n_dofs}, n = {other.n_contacts} "
+                        f"vs m = {problem.n_dofs}, n = {problem.n_contacts}, or different data)",
+            fix="pass the solution file written for this problem (rfverify solve ... --out)")
 
 
 def _write_certificate(problem, sol, u, cert, path):

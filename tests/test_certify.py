@@ -156,3 +156,14 @@ def test_public_api_shapes():
     assert cert.certified and cert.reference_ran
     refined = rfverify.solve_to_digits(problem, digits=10)
     assert refined.success and refined.v.dtype == np.float64
+
+
+def test_solution_of_another_problem_is_refused(tmp_path, capsys):
+    sol = tmp_path / "chute.h5"
+    assert main(["solve", "bundled:chute", "--out", str(sol)]) == 0
+    capsys.readouterr()
+    code = main(["certify", "bundled:cube", "--solution", str(sol)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "different problem" in err
+    with pytest.raises(rfverify.InvalidProblemError, match="solution.v"):
+        certify(rfverify.load("bundled:cube"), np.zeros(768), None, np.zeros(10))
