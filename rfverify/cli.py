@@ -144,6 +144,10 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--json", action="store_true", help="print the diagnosis as JSON")
     _add_load_options(diag)
     diag.set_defaults(func=cmd_diagnose)
+
+    from .bench.commands import add_parsers as add_bench_parsers
+
+    add_bench_parsers(sub)
     return parser
 
 

@@ -1,0 +1,198 @@
+"""One benchmark task, run in its own process: solve, verify independently, save.
+
+Task kinds
+----------
+``solve``       one method at one tolerance, timed; the final (v, u, r) is saved and rechecked
+                in high precision (:mod:`rfverify.bench.verify`).
+``trajectory``  one Algorithm 1 method at a tight tolerance with every iterate kept; each
+                iterate (mapped back to the original variables) is rechecked, giving the
+                verified error against elapsed time (work–precision data) and how far double
+                precision gets.
+``digits``      the mixed-precision path (:func:`rfverify.refine.solve_to_digits`, timed in
+                its parts) and its certificate; the certificate's independent reference
+                solution is saved and serves as the problem's reference for forward errors.
+
+Each task writes ``<stem>.npz`` (arrays) then ``<stem>.json`` (record); the JSON is written
+last, atomically, so its presence means the task finished (what resume relies on).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+from .verify import HighPrecisionChecker
+
+FORMAT_VERSION = 1
+
+
+def task_stem(task: dict) -> str:
+    """File stem of a task's outputs inside its problem directory."""
+    if task["kind"] == "solve":
+        return f"{task['method']}@{task['tol']:.0e}"
+    if task["kind"] == "trajectory":
+        return f"trajectory-{task['method']}@{task['tol']:.0e}"
+    return f"digits{task['digits']}"
+
+
+def task_label(task: dict) -> str:
+    if task["kind"] == "digits":
+        return f"{task['problem']} · {task['digits']}-digit path"
+    return f"{task['problem']} · {task['kind'] if task['kind'] != 'solve' else ''}{' ' if task['kind'] != 'solve' else ''}" \
+           f"{task['method']} {task['tol']:.0e}"
+
+
+def write_json(path: Path, record: dict) -> None:
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(record, indent=1, default=_json_default, allow_nan=True))
+    os.replace(tmp, path)
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)
+
+
+def run_task(task: dict, out_dir: str) -> None:
+    """Entry point of the child process: run ``task``, write its record (also on failure)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = task_stem(task)
+    # The absolute path is this machine's business; the manifest keeps a portable one.
+    record = {"format": FORMAT_VERSION, **{k: v for k, v in task.items() if k != "path"}, "complete": True}
+    try:
+        from ..io import load
+
+        problem = load(task["path"])
+        record.update(n_contacts=problem.n_contacts, n_dofs=problem.n_dofs)
+        if task["kind"] == "solve":
+            record.update(_solve(problem, task, out / f"{stem}.npz"))
+        elif task["kind"] == "trajectory":
+            record.update(_trajectory(problem, task, out / f"{stem}.npz"))
+        else:
+            record.update(_digits(problem, task, out / f"{stem}.npz"))
+    except Exception as exc:  # a crash is a result too: recorded with its cause
+        record.update(status="Error", solved=False,
+                      message=f"{type(exc).__name__}: {' '.join(str(exc).split())}",
+                      traceback=traceback.format_exc(limit=8))
+    write_json(out / f"{stem}.json", record)
+
+
+def _solve(problem, task, npz_path) -> dict:
+    from ..solver import solve
+
+    t0 = time.perf_counter()
+    res = solve(problem, method=task["method"], tol=task["tol"], max_iter=task.get("max_iter", 100))
+    elapsed = time.perf_counter() - t0
+    trace = {k: np.asarray(v, dtype=np.float64) for k, v in res.trace.items()}
+    np.savez_compressed(npz_path, v=res.v, u=res.u, r=res.r, **{f"trace_{k}": v for k, v in trace.items()})
+    verified = HighPrecisionChecker(problem, task.get("dps", 30)).criterion(res.v, res.u, res.r)
+    return {
+        "status": str(res.status), "message": res.message, "nit": int(res.nit), "time": elapsed,
+        "solver_claims_solved": bool(res.success),
+        "solver_measures": {"pinfeas": res.pinfeas, "dinfeas": res.dinfeas, "mu": res.mu},
+        "verified": verified, "solved": bool(verified["max"] <= task["tol"]),
+        "max_cond_Qp": _nan_extreme(trace.get("max_cond_Qp"), np.nanmax),
+        "min_lam2": _min_lam2(trace),
+        "presolve": res.presolve,
+    }
+
+
+def _nan_extreme(values, reducer) -> float | None:
+    """``reducer`` (np.nanmax/np.nanmin) of a trace column, None when it holds no number
+    (Clarabel has no trace; forms without Q_p record NaN)."""
+    if values is None:
+        return None
+    values = np.asarray(values, dtype=np.float64)
+    values = values[~np.isnan(values)]
+    return float(reducer(values)) if values.size else None
+
+
+def _min_lam2(trace) -> float | None:
+    vals = [x for x in (_nan_extreme(trace.get(k), np.nanmin) for k in ("min_lam2_z", "min_lam2_s")) if x is not None]
+    return min(vals) if vals else None
+
+
+def _trajectory(problem, task, npz_path) -> dict:
+    from ..lifting import lift
+    from ..solver import solve
+
+    t0 = time.perf_counter()
+    res = solve(problem, method=task["method"], tol=task["tol"], max_iter=task.get("max_iter", 100),
+                keep_iterates=True)
+    elapsed = time.perf_counter() - t0
+    lp = lift(problem, reduce_cones=res.settings.reduce_cones)
+    active = res.extras["active_dofs"]
+    checker = HighPrecisionChecker(problem, task.get("dps", 30))
+    times = np.asarray(res.trace["time"], dtype=np.float64)
+    vs, rs, crit = [], [], []
+    for k, (v_k, r_t_k, _z) in enumerate(res.extras["iterates"]):
+        v = np.array(res.v, dtype=np.float64)
+        v[active] = np.asarray(v_k, dtype=np.float64)
+        r = lp.r_from_lifted(np.asarray(r_t_k, dtype=np.float64))
+        u = lp.u_from_v(v)
+        vs.append(v)
+        rs.append(r)
+        crit.append(checker.criterion(v, u, r))
+    n_it = min(len(vs), times.size)
+    np.savez_compressed(npz_path, v=np.array(vs[:n_it]), r=np.array(rs[:n_it]), time=times[:n_it])
+    return {
+        "status": str(res.status), "message": res.message, "nit": int(res.nit), "time": elapsed,
+        "iterates": [{"time": float(times[k]), "verified_max": crit[k]["max"],
+                      "mu": float(res.trace["mu"][k]),
+                      "max_cond_Qp": _finite(res.trace["max_cond_Qp"][k]),
+                      "min_lam2_z": _finite(res.trace["min_lam2_z"][k]),
+                      "min_lam2_s": _finite(res.trace["min_lam2_s"][k])}
+                     for k in range(n_it)],
+        "best_verified_max": float(min((c["max"] for c in crit), default=math.inf)),
+        "solved": False,  # a trajectory is data for curves, not a counted run
+    }
+
+
+def _finite(x):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _digits(problem, task, npz_path) -> dict:
+    import reference
+
+    from ..certification import certify
+    from ..refine import warm_start_from
+    from ..solver import solve
+
+    digits = int(task["digits"])
+    dps = 2 * digits + 16
+    t0 = time.perf_counter()
+    double = solve(problem, method="jqinv", tol=1e-10)
+    t1 = time.perf_counter()
+    warm = reference.solve(problem, dps=dps, tol=10.0 ** (-(2 * digits + 6)),
+                           warm_start=warm_start_from(problem, double))
+    v, u, r = warm.as_float("v"), warm.as_float("u"), warm.as_float("r")
+    t2 = time.perf_counter()
+    cert = certify(problem, v, u, r, digits=digits, dps=dps, always_reference=True)
+    t3 = time.perf_counter()
+    ref = cert.reference
+    arrays = {"v": v, "u": u, "r": r}
+    if ref is not None:
+        arrays.update(ref_v=ref.as_float("v"), ref_u=ref.as_float("u"), ref_r=ref.as_float("r"))
+    np.savez_compressed(npz_path, **arrays)
+    verified = HighPrecisionChecker(problem, max(30, dps)).criterion(v, u, r)
+    return {
+        "status": "Certified" if cert.certified else "NotCertified", "message": cert.verdict,
+        "time": t2 - t0, "time_double": t1 - t0, "time_warm": t2 - t1, "time_certify": t3 - t2,
+        "double_status": str(double.status), "warm_iterations": int(getattr(warm, "nit", 0) or 0),
+        "certified": bool(cert.certified), "certified_digits": cert.digits,
+        "r_unique": cert.r_unique, "has_reference": ref is not None,
+        "reference_status": None if ref is None else str(ref.status),
+        "verified": verified, "solved": bool(cert.certified),
+    }
