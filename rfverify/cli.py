@@ -148,7 +148,63 @@ def build_parser() -> argparse.ArgumentParser:
     from .bench.commands import add_parsers as add_bench_parsers
 
     add_bench_parsers(sub)
+
+    from .scenes import DEFAULT_STEPS, SCENES
+
+    gen = sub.add_parser(
+        "generate", help="generate FCLIB problem collections from rigid-body scenes",
+        description="Build a rigid-body scene by a fast geometric method, take a few "
+                    "Moreau-Jean steps (theta = 1, velocity level) from each stage of its run and "
+                    "write the one-step problems as FCLIB HDF5 files SCENE-ndof-M-nc-N-K.hdf5 "
+                    "(K = index in the trace). Deterministic for a given seed and options.\n\n"
+                    "scenes:\n" + "\n".join(f"  {k}: {v.summary}" for k, v in SCENES.items()),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    gen.add_argument("scene", metavar="SCENE", nargs="?", type=_scene_name,
+                     help="scene name (case-insensitive): " + ", ".join(SCENES))
+    gen.add_argument("--list", action="store_true",
+                     help="list the scenes with their default size and parameters, then exit")
+    gen.add_argument("--count", type=_positive_int, default=1, metavar="N",
+                     help="problems in the trace; problem K comes from stage K/(N-1) of the run "
+                          "(default: %(default)s)")
+    gen.add_argument("--seed", type=_nonneg_int, default=0, metavar="S",
+                     help="random seed (default: %(default)s)")
+    gen.add_argument("--size", type=_positive_int, default=None, metavar="K",
+                     help="bodies at the last stage (default: the scene's published size, "
+                          "e.g. 250 for SpheresPile; use e.g. 20 for quick small instances)")
+    gen.add_argument("--steps", type=_positive_int, default=DEFAULT_STEPS, metavar="J",
+                     help="Moreau-Jean steps per stage; the last is dumped (default: %(default)s)")
+    gen.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                     help="override a numeric scene parameter (repeatable; see --list)")
+    gen.add_argument("--out", metavar="DIR",
+                     help="directory for the HDF5 files (created if missing); required "
+                          "unless --list")
+    gen.add_argument("--quiet", action="store_true",
+                     help="no progress bar (it is also off when stderr is not a terminal)")
+    gen.add_argument("--json", action="store_true",
+                     help="print one JSON object describing the written files")
+    gen.set_defaults(func=cmd_generate)
     return parser
+
+
+def _scene_name(text: str) -> str:
+    from .scenes import resolve_scene
+    from .scenes.stepper import SceneError
+
+    try:
+        return resolve_scene(text).name
+    except SceneError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _nonneg_int(text: str) -> int:
+    try:
+        val = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if val < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be ≥ 0")
+    return val
 
 
 def _add_load_options(p: argparse.ArgumentParser):
@@ -519,6 +575,82 @@ def _write_certificate(problem, sol, u, cert, path):
             for name in ("v", "u", "r"):
                 strings = [ref.ctx.nstr(x, ref.dps + 5, strip_zeros=False) for x in getattr(ref, name)]
                 rg.create_dataset(name, data=np.array(strings, dtype=h5py.string_dtype()))
+
+
+# ---------------------------------------------------------------------- generate
+def cmd_generate(args) -> int:
+    import time
+
+    from .scenes import SCENES, generate, save_collection, scene_parameters
+    from .scenes.stepper import SceneError
+
+    if args.list:
+        for name, sc in SCENES.items():
+            print(f"{name} (default size {sc.default_size} {sc.size_unit}): {sc.summary}")
+            print("    parameters: " + ", ".join(f"{k}={v:g}" for k, v in sc.defaults.items()))
+        return EXIT_OK
+    if args.scene is None or args.out is None:
+        raise SceneError("generate needs SCENE and --out DIR (or --list)")
+    params = {}
+    for item in args.param:
+        key, sep, val = item.partition("=")
+        if not sep or not key.strip():
+            raise SceneError(f"--param {item!r}: expected KEY=VALUE")
+        params[key.strip()] = val.strip()
+    scene_parameters(args.scene, args.size, **params)  # bad names/values fail before any work
+    bar = _ProgressBar(enabled=not args.quiet and not args.json and sys.stderr.isatty())
+    t0 = time.perf_counter()
+    try:
+        problems = generate(args.scene, count=args.count, seed=args.seed, size=args.size,
+                            steps=args.steps, progress=bar.update, **params)
+    finally:
+        bar.close()
+    paths = save_collection(problems, args.out)
+    wall = time.perf_counter() - t0
+    files = []
+    for path, prob in zip(paths, problems):
+        pv = prob.provenance
+        files.append({"path": str(path), "m": prob.n_dofs, "n": prob.n_contacts,
+                      "trace_index": pv["trace_index"], "failed_solves": pv["failed_solves"],
+                      "solves": [s["status"] for s in pv["solves"]]})
+        if pv["failed_solves"]:
+            print(f"rfverify generate: warning: {path.name}: {pv['failed_solves']} of "
+                  f"{len(pv['solves'])} step solve(s) did not reach the tolerance "
+                  f"({', '.join(s['status'] for s in pv['solves'])}); advanced with the best "
+                  "iterate (recorded in info/description)", file=sys.stderr)
+    if args.json:
+        print(json.dumps({"scene": args.scene, "seed": args.seed, "count": args.count,
+                          "size": problems[0].provenance["size"], "time": wall, "files": files},
+                         indent=2))
+    else:
+        for f in files:
+            print(f"{f['path']}  m = {f['m']}, n = {f['n']}")
+        print(f"{len(files)} problem(s) of {args.scene} written to {args.out} in {wall:.1f} s")
+    return EXIT_OK
+
+
+class _ProgressBar:
+    """A one-line text progress bar on stderr (no dependency); silent when disabled."""
+
+    def __init__(self, enabled: bool, width: int = 30):
+        self.enabled = enabled
+        self.width = width
+        self.shown = False
+
+    def update(self, fraction: float, text: str = ""):
+        if not self.enabled:
+            return
+        fraction = min(max(fraction, 0.0), 1.0)
+        full = int(round(fraction * self.width))
+        sys.stderr.write(f"\r[{'#' * full}{'.' * (self.width - full)}] {100 * fraction:5.1f}% "
+                         f"{text[:60]:<60}")
+        sys.stderr.flush()
+        self.shown = True
+
+    def close(self):
+        if self.enabled and self.shown:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
 
 
 # ---------------------------------------------------------------------- entry point

@@ -1,0 +1,221 @@
+"""Rigid-body scenes whose Moreau–Jean one-step problems form FCLIB-like collections.
+
+The FCLIB rolling-friction collections (Chute, SpheresPile, PrimitiveSoup) cannot be
+downloaded here, so rfverify makes its own the way FCLIB was made: a velocity-level time
+stepping of rigid bodies whose one-step problems are dumped along the run (DESIGN §8).  A full
+simulation would be far too slow on two cores, so each scene builds its configurations by a
+fast geometric method (:mod:`.deposition`) and takes only a few Moreau–Jean steps
+(:mod:`.stepper`) from each of them.
+
+Python API::
+
+    from rfverify.scenes import SCENES, generate, save_collection, contact_state_mix
+    problems = generate("SpheresPile", count=3, seed=1, size=20)   # list[Problem]
+    paths = save_collection(problems, "out/")                      # FCLIB HDF5 files
+
+CLI: ``rfverify generate SCENE --count N --seed S --out DIR [--size K]``.
+
+Conventions (FCLIB, DESIGN §1): 6 dofs per body (velocity and angular velocity in the world
+frame), M = diag(m·I3, R I_body Rᵀ) per body, u = Hᵀ v + w with u_i = (N, T1, T2, R1, R2),
+N from body B to body A, (u_N, u_T) = Fᵀ(v_A + ω_A×ρ_A − v_B − ω_B×ρ_B),
+u_R = (T1, T2)ᵀ(ω_A − ω_B); static obstacles have no dofs; w_N = max(gap, 0)/h.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from .analysis import StateMix, contact_state_mix, contacts_per_body, free_velocity, h_structure
+from .assembly import contact_matrix, mass_matrix, relative_velocity
+from .geometry import Bodies, Contacts, Statics, detect_contacts
+from .library import ALIASES, SCENES, Scene, World, resolve_scene
+from .stepper import MoreauJean, SceneError, StepRecord
+from ..problem import Problem
+
+GENERATOR_VERSION = "1"
+"""Bumped whenever the same (scene, seed, options) would give different arrays."""
+
+DEFAULT_STEPS = 3
+"""Moreau–Jean steps taken from each stage configuration; the last one is dumped."""
+
+__all__ = ["SCENES", "Scene", "World", "generate", "save_collection", "fclib_name",
+           "contact_state_mix", "StateMix", "h_structure", "contacts_per_body", "free_velocity",
+           "MoreauJean", "StepRecord", "SceneError", "Bodies", "Statics", "Contacts",
+           "detect_contacts", "mass_matrix", "contact_matrix", "relative_velocity",
+           "resolve_scene", "scene_parameters", "GENERATOR_VERSION", "DEFAULT_STEPS"]
+
+
+def scene_parameters(scene, size=None, **params) -> tuple[Scene, dict, int]:
+    """(scene, parameters, size) after applying overrides to the scene's defaults.
+
+    Raises SceneError for an unknown scene, an unknown parameter name, a non-finite value or
+    a size below the scene's minimum.
+    """
+    sc = resolve_scene(scene)
+    unknown = sorted(set(params) - set(sc.defaults))
+    if unknown:
+        raise SceneError(f"{sc.name}: unknown parameter(s) {', '.join(unknown)}; parameters: "
+                         f"{', '.join(sorted(sc.defaults))}")
+    p = dict(sc.defaults)
+    for k, val in params.items():
+        try:
+            val = float(val)
+        except (TypeError, ValueError):
+            raise SceneError(f"{sc.name}: parameter {k} = {val!r} is not a number") from None
+        if not math.isfinite(val):
+            raise SceneError(f"{sc.name}: parameter {k} = {val!r} must be finite")
+        p[k] = val
+    for k in ("h", "margin"):
+        if k in p and not p[k] > 0:
+            raise SceneError(f"{sc.name}: parameter {k} = {p[k]!r} must be > 0")
+    size = sc.default_size if size is None else int(size)
+    if size < sc.min_size:
+        raise SceneError(f"{sc.name}: size {size} is below the minimum of {sc.min_size} {sc.size_unit}")
+    return sc, p, size
+
+
+def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
+             steps: int = DEFAULT_STEPS, method: str = "jqinv", tol: float = 1e-10,
+             max_iter: int = 100, progress=None, **params) -> list:
+    """Generate ``count`` one-step problems of ``scene`` (a name from :data:`SCENES`).
+
+    Parameters
+    ----------
+    scene : str
+        Scene name (case-insensitive), e.g. ``"SpheresPile"``.
+    count : int
+        Problems in the trace.  Problem K (0-based) comes from stage φ = K/(count−1) of the
+        run (φ = 1 when count = 1): for growing scenes the bodies present grow from the
+        scene's first-stage size to ``size``.
+    seed : int
+        Seeds a ``numpy.random.SeedSequence``: one child for the base configuration, one per
+        stage.  The same (scene, count, seed, size, steps, params) gives identical arrays.
+    size : int, optional
+        Bodies at the last stage (default: the scene's published size, e.g. 250 spheres).
+    steps : int
+        Moreau–Jean steps per stage; the problem of the last one is returned (if it has no
+        contact the run goes on, up to 10·steps more steps).
+    method, tol, max_iter
+        Solver of the stepping (:func:`rfverify.solve`).  A step whose solve does not reach
+        ``tol`` advances with the solver's best iterate; this is recorded in the problem's
+        description and ``provenance["solves"]``.
+    progress : callable(fraction, text), optional
+        Called as the work advances (for a progress bar).
+    **params
+        Overrides of the scene's numeric parameters (``SCENES[name].defaults``).
+
+    Returns
+    -------
+    list of Problem
+        title = scene name; description = human-readable scene, parameters, seed, stage and
+        step, generator version; ``provenance`` holds the same as a dict plus the sizes.
+    """
+    from .. import __version__
+
+    sc, p, size = scene_parameters(scene, size, **params)
+    if int(count) < 1:
+        raise SceneError(f"count = {count!r} must be ≥ 1")
+    if int(steps) < 1:
+        raise SceneError(f"steps = {steps!r} must be ≥ 1")
+    count, steps = int(count), int(steps)
+    children = np.random.SeedSequence(int(seed)).spawn(count + 1)
+    say = progress or (lambda frac, text: None)
+    say(0.0, f"{sc.name}: base configuration")
+    t0 = time.perf_counter()
+    base = sc.prepare(p, size, np.random.default_rng(children[0]))
+    t_base = time.perf_counter() - t0
+    out = []
+    for K in range(count):
+        phi = K / (count - 1) if count > 1 else 1.0
+        t1 = time.perf_counter()
+        world = sc.stage(base, p, size, phi, np.random.default_rng(children[K + 1]))
+        stepper = MoreauJean(world.bodies, world.statics, h=world.h, gravity=world.gravity,
+                             margin=world.margin, mu_table=world.mu_table,
+                             mu_r_table=world.mu_r_table, method=method, tol=tol,
+                             max_iter=max_iter)
+        records = []
+        dumped = None
+        limit = steps + 10 * steps
+        while dumped is None and len(records) < limit:
+            k = len(records)
+            rec = stepper.step(keep_problem=k >= steps - 1)
+            records.append(rec)
+            if rec.problem is not None:
+                dumped = rec
+            say((K + len(records) / (steps + 1)) / count,
+                f"{sc.name} {K + 1}/{count}: step {len(records)}, {rec.n_contacts} contacts")
+        if dumped is None:
+            raise SceneError(f"{sc.name} stage {K} (phi = {phi:.3f}): no contact in "
+                             f"{len(records)} steps; nothing to dump")
+        t_stage = time.perf_counter() - t1
+        solves = [{"step": r.step, "contacts": r.n_contacts, "status": r.status,
+                   "iterations": r.nit, "time": round(r.solve_time, 4),
+                   **({"message": r.message} if not r.success else {})} for r in records]
+        prov = {
+            "generator": "rfverify.scenes", "generator_version": GENERATOR_VERSION,
+            "rfverify_version": __version__, "scene": sc.name, "seed": int(seed),
+            "count": count, "trace_index": K, "stage": phi, "size": size,
+            "steps": steps, "dumped_step": dumped.step, "time": dumped.time,
+            "parameters": p, "units": sc.units, "notes": world.notes,
+            "solver": {"method": method, "tol": tol, "max_iter": max_iter},
+            "solves": solves, "failed_solves": sum(not r.success for r in records),
+            "timing": {"base_configuration": round(t_base, 3),
+                       "stage_without_solves": round(t_stage - sum(r.solve_time for r in records), 3),
+                       "solves": round(sum(r.solve_time for r in records), 3)},
+        }
+        raw = dumped.problem
+        arrays = sc.convert({k: getattr(raw, k) for k in ("M", "H", "f", "w", "mu", "mu_r")})
+        problem = Problem.from_arrays(**arrays, title=sc.name, provenance=prov)
+        problem = replace(problem, description=_description(sc, prov, problem))
+        out.append(problem)
+    say(1.0, f"{sc.name}: done")
+    return out
+
+
+def _description(sc: Scene, prov: dict, problem) -> str:
+    p = prov
+    nb = problem.n_dofs // 6
+    solves = ", ".join(f"{s['status']} ({s['iterations']} it)" for s in p["solves"])
+    lines = [
+        f"rfverify.scenes {sc.name} (generator version {p['generator_version']}, "
+        f"rfverify {p['rfverify_version']})",
+        f"scene: {sc.summary}",
+        f"configuration: {sc.configuration}",
+        f"seed {p['seed']}; problem K = {p['trace_index']} of {p['count']} in the trace "
+        f"(stage {p['stage']:.4f}); size {p['size']} {sc.size_unit} at the last stage",
+        f"bodies {nb} (m = {problem.n_dofs} dofs), contacts {problem.n_contacts}",
+        f"time stepping: Moreau-Jean, theta = 1, h = {p['parameters']['h']:g}, e = 0, "
+        f"w_N = max(gap, 0)/h (speculative contacts within margin {p['parameters']['margin']:g}); "
+        f"dumped step {p['dumped_step'] + 1} of the stage, t = {p['time']:.6g}",
+        f"step solves ({p['solver']['method']}, tol {p['solver']['tol']:g}): {solves}"
+        + (f"; {p['failed_solves']} step(s) advanced with the best iterate" if p["failed_solves"] else ""),
+        f"units: {p['units']}",
+        "parameters: " + json.dumps(p["parameters"], sort_keys=True),
+        "stage: " + json.dumps(p["notes"], sort_keys=True, default=float),
+    ]
+    return "\n".join(lines)
+
+
+def fclib_name(problem, index: int) -> str:
+    """FCLIB-style file name ``SCENE-ndof-M-nc-N-K.hdf5``."""
+    return f"{problem.title}-ndof-{problem.n_dofs}-nc-{problem.n_contacts}-{int(index)}.hdf5"
+
+
+def save_collection(problems, out_dir, *, start_index: int = 0) -> list:
+    """Write problems as FCLIB HDF5 files named by :func:`fclib_name` (K = start_index + i)
+    into ``out_dir`` (created if missing).  Returns the paths."""
+    from ..io import save
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, prob in enumerate(problems):
+        K = prob.provenance.get("trace_index", start_index + i) if prob.provenance else start_index + i
+        paths.append(save(prob, out / fclib_name(prob, K)))
+    return paths
