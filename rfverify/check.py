@@ -146,7 +146,9 @@ def criterion(problem: Problem, v, u, r, dtype=np.longdouble) -> dict:
     dual = np.maximum.reduce([mu * np.hypot(uc[:, 1], uc[:, 2]) + mu_r * np.hypot(uc[:, 3], uc[:, 4])
                               - uc[:, 0], -uc[:, 0], np.zeros(len(mu), dtype)])
     u_scale = max(np.abs(u).max(initial=0), np.abs(HTv).max(initial=0), np.abs(w).max(initial=0), tiny)
-    cone = max(primal.max() / max(np.abs(r).max(initial=0), tiny), dual.max() / u_scale)
+    # r shares units with M v and f; at an all-open solution r is noise and no scale itself.
+    r_scale = max(np.abs(r).max(initial=0), np.abs(Mv).max(initial=0), np.abs(f).max(initial=0), tiny)
+    cone = max(primal.max() / r_scale, dual.max() / u_scale)
     out = {"dinfeas": float(dinf), "velocity": float(vel), "mu": float(mu_gap), "cone": float(cone)}
     out["max"] = max(out.values())
     return out
