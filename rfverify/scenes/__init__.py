@@ -155,7 +155,7 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
                              f"{len(records)} steps; nothing to dump")
         t_stage = time.perf_counter() - t1
         solves = [{"step": r.step, "contacts": r.n_contacts, "status": r.status,
-                   "iterations": r.nit, "time": round(r.solve_time, 4),
+                   "iterations": r.nit, "solves": r.desaxce_solves, "time": round(r.solve_time, 4),
                    **({"message": r.message} if not r.success else {})} for r in records]
         prov = {
             "generator": "rfverify.scenes", "generator_version": GENERATOR_VERSION,

@@ -9,9 +9,10 @@
   mechanically stable sphere by sphere.  Gravity is −e_z in the deposition frame.
 * :func:`place_random` — random sequential addition of non-overlapping bodies in a box region
   (loose "in flight" bodies).
-* :func:`relax_fire` — gravity settling of capsules and spheres in a container by energy
-  minimisation (penalty overlap energy + potential energy) with FIRE (Bitzek et al., PRL 97,
-  170201, 2006); used where deposition by rolling is not exact (capsules).
+* :func:`place_bodies_random` — the same with exact capsule geometry.
+* :func:`collapse_downwards` — lower every body straight down until it touches something
+  (exact for capsules): turns a loose arrangement (capsules in the cages of their deposited
+  bounding spheres) into one where every body rests on at least one contact.
 * :func:`fcc_positions` — close-packed face-centred cubic stacking (square layers).
 * :func:`open_cluster` — a connected cluster of spheres with all gaps in a prescribed band.
 
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import Bodies, Statics, candidate_pairs, detect_contacts, quat_exp, quat_mul
+from .geometry import Bodies
 
 _UP = np.array([0.0, 0.0, 1.0])
 _DOWN = -_UP
@@ -319,192 +320,67 @@ def place_bodies_random(bodies: Bodies, lo, hi, rng: np.random.Generator, *, exi
     return allb.pos[placed:].copy()
 
 
-# ---------------------------------------------------------------------- FIRE relaxation
+# ---------------------------------------------------------------------- collapse
 @dataclass
-class Relaxation:
-    """Result of :func:`relax_fire`: iterations, final scaled residual force, largest overlap
-    (as a fraction of the smallest radius), and whether ``ftol`` was reached."""
+class Collapse:
+    """Result of :func:`collapse_downwards`: how far bodies were lowered (length) and how many
+    ended resting on another body or on the floor."""
 
-    iterations: int
-    residual: float
-    max_overlap: float
-    converged: bool
-
-
-def penalty_forces(bodies: Bodies, statics: Statics, gravity, stiffness: float, pairs=None):
-    """Generalised forces (nb, 6) of gravity plus a linear penalty k·overlap along the contact
-    normal at each overlapping contact (force on A, its opposite on B, torques about the
-    centres); and the contacts."""
-    c = detect_contacts(bodies, statics, 0.0, pairs=pairs)
-    nb = bodies.count
-    F = np.zeros((nb, 6))
-    F[:, :3] = bodies.mass[:, None] * np.asarray(gravity)[None, :]
-    over = c.gap < 0
-    if over.any():
-        a, b = c.a[over], c.b[over]
-        f = (-stiffness * c.gap[over])[:, None] * c.normal[over]
-        ta = np.cross(c.point[over] - bodies.pos[a], f)
-        G = np.concatenate((f, ta), axis=1)
-        for comp in range(6):
-            F[:, comp] += np.bincount(a, weights=G[:, comp], minlength=nb)
-        hb = b >= 0
-        if hb.any():
-            tb = np.cross(c.point[over][hb] - bodies.pos[b[hb]], -f[hb])
-            Gb = np.concatenate((-f[hb], tb), axis=1)
-            for comp in range(6):
-                F[:, comp] += np.bincount(b[hb], weights=Gb[:, comp], minlength=nb)
-    return F, c
+    mean_drop: float
+    max_drop: float
+    on_bodies: int
+    on_floor: int
 
 
-def compress_column(bodies: Bodies, statics: Statics, up=(0.0, 0.0, 1.0), iters: int = 30) -> float:
-    """Lower a loose arrangement towards the floor without creating overlaps: each body's
-    height above its lowest admissible height, h_i = z_i − R_i (R = bounding radius), is
-    multiplied by the smallest λ ∈ [0, 1] (bisection) for which no two bodies overlap.  Keeps
-    the random arrangement but removes most of the empty space a fall would have to cross.
-    Modifies ``bodies.pos``; returns λ."""
-    up = np.asarray(up, float)
-    z = bodies.pos @ up
-    Rb = bodies.bounding_radius
-    base = bodies.pos - np.outer(z - Rb, up)
-    lo, hi = 0.0, 1.0
-    for _ in range(iters):
-        lam = 0.5 * (lo + hi)
-        bodies.pos = base + np.outer((z - Rb) * lam, up)
-        c = detect_contacts(bodies, statics, 0.0)
-        if c.count and c.gap.min() < 0:
-            lo = lam
-        else:
-            hi = lam
-    bodies.pos = base + np.outer((z - Rb) * hi, up)
-    return hi
+def collapse_downwards(bodies: Bodies, floor_offset: float = 0.0, max_iter: int = 500) -> Collapse:
+    """Lower every body straight down (−z) until it touches another body or the floor
+    z = ``floor_offset``, bottom-up (by lowest point), the others held where they are.
 
-
-def relax_fire(bodies: Bodies, statics: Statics, gravity, *, stiffness: float,
-               max_iter: int = 3000, ftol: float = 1e-2, soft_factor: float = 0.1,
-               fall_height: float | None = None, skin: float | None = None,
-               callback=None) -> Relaxation:
-    """Settle ``bodies`` (modified in place: pos, quat; vel = omega = 0 on return) under
-    ``gravity`` in the container ``statics`` by minimising potential + penalty energy.
-
-    Two phases; the path is not physical, only the minimum is:
-
-    1. *Sedimentation* with penalty stiffness ``soft_factor``·stiffness (larger stable steps)
-       for about twice the free-fall time from ``fall_height``: damped dynamics whose velocity
-       test is done per body (a body moving against its net force is stopped), so bodies still
-       falling keep their speed while those landing are damped — a global FIRE reset would
-       stop the whole column whenever one body lands.
-    2. *FIRE* (Bitzek et al., PRL 97, 170201, 2006) at full ``stiffness`` until every body's
-       net force is below ``ftol``·m|g| and its net torque below ``ftol``·m|g|·R, or
-       ``max_iter`` iterations in all.
-
-    Fictitious isotropic inertia m·R² (R = bounding radius) makes the rotational contact
-    stiffness at most the translational one, so one step size serves both.  Speeds are capped so that a Verlet list with ``skin`` stays valid for
-    several steps.  Overlaps left are of order (load)/stiffness.
+    Exact for capsules and spheres, by conservative advancement: the gap between two bodies
+    changes at most as fast as one of them is translated (it is 1-Lipschitz in the drop s), so
+    stepping s by the smallest current gap never passes the first contact, and converges to it
+    (to 1e-10 of the smallest radius).  Only bodies whose bounding spheres the sweep can meet
+    are examined.  The result never overlaps.  Vertical walls do not stop a vertical drop.
+    Modifies ``bodies.pos``.
     """
-    g = np.asarray(gravity, dtype=float)
-    gnorm = float(np.linalg.norm(g))
-    m = bodies.mass
+    from .geometry import segment_closest_points
+
+    nb = bodies.count
+    axis = bodies.axis() * bodies.half_length[:, None]
+    r = bodies.radius
     Rb = bodies.bounding_radius
-    I_f = m * Rb ** 2
-    skin = 0.5 * float(bodies.radius.min()) if skin is None else skin
-    if fall_height is None:
-        fall_height = float(np.ptp(bodies.pos @ (-g / gnorm))) + 1e-12
-    k_soft = soft_factor * stiffness
-    dt_soft = 0.25 * np.sqrt(m.min() / k_soft)
-    n_soft = int(min(max_iter // 2, 2 * np.sqrt(2 * fall_height / gnorm) / dt_soft + 50))
-    vel = np.zeros((bodies.count, 3))
-    omg = np.zeros((bodies.count, 3))
-    state = {"pairs": None, "ends": None}
-
-    def forces(k):
-        P, Q = bodies.endpoints()
-        if state["pairs"] is None or max(np.abs(P - state["ends"][0]).max(),
-                                         np.abs(Q - state["ends"][1]).max()) > 0.5 * skin:
-            state["pairs"] = candidate_pairs(bodies, skin)
-            state["ends"] = (P, Q)
-        F, _ = penalty_forces(bodies, statics, g, k, state["pairs"])
-        resid = max(np.max(np.linalg.norm(F[:, :3], axis=1) / (m * gnorm)),
-                    np.max(np.linalg.norm(F[:, 3:], axis=1) / (m * gnorm * Rb)))
-        return F, resid
-
-    def move(dt):
-        # Cap the displacement per step at skin/8 (Verlet list valid ≥ 4 steps).
-        vmax = skin / (8 * dt)
-        sp = np.linalg.norm(vel, axis=1)
-        fast = sp > vmax
-        vel[fast] *= (vmax / sp[fast])[:, None]
-        wmax = vmax / Rb
-        sw = np.linalg.norm(omg, axis=1)
-        fast = sw > wmax
-        omg[fast] *= (wmax[fast] / sw[fast])[:, None]
-        bodies.pos = bodies.pos + dt * vel
-        q = quat_mul(quat_exp(dt * omg), bodies.quat)
-        bodies.quat = q / np.linalg.norm(q, axis=1, keepdims=True)
-
-    def mix(alpha, F, per_body):
-        for x, f in ((vel, F[:, :3]), (omg, F[:, 3:])):
-            if per_body:
-                fn = np.linalg.norm(f, axis=1)
-                xn = np.linalg.norm(x, axis=1)
-                ok = fn > 0
-                x[ok] = (1 - alpha) * x[ok] + alpha * (xn[ok] / fn[ok])[:, None] * f[ok]
-            else:
-                fn = np.linalg.norm(f)
-                if fn > 0:
-                    xn = np.linalg.norm(x)
-                    x *= 1 - alpha
-                    x += alpha * xn * f / fn
-
-    it = 0
-    resid = np.inf
-    for it in range(1, n_soft + 1):  # phase 1: sedimentation
-        F, resid = forces(k_soft)
-        power = np.einsum("ij,ij->i", F[:, :3], vel) + np.einsum("ij,ij->i", F[:, 3:], omg)
-        stop = power < 0
-        vel[stop] = 0.0
-        omg[stop] = 0.0
-        vel += dt_soft * F[:, :3] / m[:, None]
-        omg += dt_soft * F[:, 3:] / I_f[:, None]
-        mix(0.1, F, per_body=True)
-        move(dt_soft)
-        if callback is not None and it % 100 == 0:
-            callback(it, resid)
-    # phase 2: FIRE at full stiffness
-    dt_max = 0.25 * np.sqrt(m.min() / stiffness)
-    dt = 0.2 * dt_max
-    alpha0, alpha, f_alpha, f_inc, f_dec, n_delay = 0.1, 0.1, 0.99, 1.1, 0.5, 5
-    n_pos = 0
-    vel[:] = 0.0
-    omg[:] = 0.0
-    while it < max_iter:
-        it += 1
-        F, resid = forces(stiffness)
-        if resid <= ftol:
-            break
-        power = np.sum(F[:, :3] * vel) + np.sum(F[:, 3:] * omg)
-        if power > 0:
-            n_pos += 1
-            if n_pos > n_delay:
-                dt = min(dt * f_inc, dt_max)
-                alpha *= f_alpha
-        else:
-            n_pos = 0
-            dt *= f_dec
-            alpha = alpha0
-            vel[:] = 0.0
-            omg[:] = 0.0
-        vel += dt * F[:, :3] / m[:, None]
-        omg += dt * F[:, 3:] / I_f[:, None]
-        mix(alpha, F, per_body=False)
-        move(dt)
-        if callback is not None and it % 100 == 0:
-            callback(it, resid)
-    c = detect_contacts(bodies, statics, 0.0)
-    overlap = float(max(0.0, -c.gap.min())) if c.count else 0.0
-    bodies.vel = np.zeros((bodies.count, 3))
-    bodies.omega = np.zeros((bodies.count, 3))
-    return Relaxation(iterations=it, residual=float(resid),
-                      max_overlap=overlap / float(bodies.radius.min()), converged=bool(resid <= ftol))
+    lowest = bodies.pos[:, 2] - np.abs(axis[:, 2]) - r
+    tol = 1e-10 * float(r.min())
+    drops = np.zeros(nb)
+    on_body = np.zeros(nb, dtype=bool)
+    for i in np.argsort(lowest, kind="stable"):
+        c = bodies.pos
+        s_floor = max(0.0, c[i, 2] - abs(axis[i, 2]) - r[i] - floor_offset)
+        D = Rb[i] + Rb
+        dxy2 = np.sum((c[:, :2] - c[i, :2]) ** 2, axis=1)
+        cand = np.flatnonzero((dxy2 < D ** 2) & (np.arange(nb) != i)
+                              & (c[:, 2] - Rb < c[i, 2] + Rb[i]))
+        Pj, Qj = c[cand] - axis[cand], c[cand] + axis[cand]
+        k = cand.size
+        s = 0.0
+        gap_min = s_floor
+        for _ in range(max_iter):
+            gap_min = s_floor - s
+            if k:
+                Pi = np.broadcast_to(c[i] - axis[i] - [0.0, 0.0, s], (k, 3))
+                Qi = np.broadcast_to(c[i] + axis[i] - [0.0, 0.0, s], (k, 3))
+                a, b = segment_closest_points(Pi, Qi, Pj, Qj)
+                d = (Pi + a[:, None] * (Qi - Pi)) - (Pj + b[:, None] * (Qj - Pj))
+                gaps = np.sqrt(np.einsum("ij,ij->i", d, d)) - r[i] - r[cand]
+                gap_min = min(gap_min, float(gaps.min()))
+            if gap_min <= tol:
+                break
+            s += gap_min
+        bodies.pos[i, 2] -= s
+        drops[i] = s
+        on_body[i] = s < s_floor - tol
+    return Collapse(mean_drop=float(drops.mean()), max_drop=float(drops.max()),
+                    on_bodies=int(on_body.sum()), on_floor=int((~on_body).sum()))
 
 
 # ---------------------------------------------------------------------- lattices, clusters

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .deposition import (deposit_spheres, fcc_positions, open_cluster, place_bodies_random,
-                         place_random, relax_fire)
+from .deposition import (collapse_downwards, deposit_spheres, fcc_positions, open_cluster,
+                         place_bodies_random, place_random)
 from .geometry import Bodies, Statics, random_quaternions
 from .stepper import SceneError
 
@@ -104,7 +104,7 @@ class SpheresPile(Scene):
                      "fall, roll without friction to a stable rest on 3 supports or the ground); "
                      "stage = the first spheres of the deposit, the last one arriving from "
                      "above at its first-touch point, the most recent ones still agitated")
-    defaults = dict(diameter=0.02, density=1300.0, h=1e-3, mu=0.3, mu_r=1e-3, margin=2e-3,
+    defaults = dict(diameter=0.02, density=1300.0, h=1e-3, mu=0.3, mu_r=1e-3, margin=1e-3,
                     drop_radius=0.05, box_half_width=0.16, box_depth=0.05, fall_height=0.04,
                     agitation=0.05, recent_fraction=0.1, first_stage_bodies=4, tilt=0.0)
     default_size = 250
@@ -446,12 +446,11 @@ class PrimitiveSoup(Scene):
                "m = 6000, h = 5e-4 s, mu = 0.7); all bodies present, the settled fraction grows")
     configuration = ("Visscher-Bolsterli deposition of the bodies' bounding spheres into the "
                      "container, each body placed in its sphere with a random orientation, then "
-                     "a short energy relaxation (penalty + gravity, FIRE) that lets the capsules "
-                     "settle into contact; stage = the lowest fraction of that packing at rest, "
-                     "the other bodies raining from above at random positions")
+                     "every body lowered straight down, bottom-up, until it touches a body or the "
+                     "floor (exact); stage = the lowest fraction of that packing at rest, the "
+                     "other bodies raining from above at random positions")
     defaults = dict(capsule_fraction=0.5, density=1000.0, h=5e-4, mu=0.7, mu_r=1e-3,
-                    margin=2e-3, first_bed_fraction=0.01, rain_speed=1.0, relax_iterations=400,
-                    stiffness_factor=1000.0, rain_packing=0.12)
+                    margin=2e-3, first_bed_fraction=0.01, rain_speed=1.0, rain_packing=0.05)
     default_size = 1000
     min_size = 2
     SPHERE_RADII = (0.01, 0.015, 0.02)
@@ -474,10 +473,8 @@ class PrimitiveSoup(Scene):
         src = dep.source
         bodies = Bodies.make(r[src], hl[src], p["density"], dep.centers,
                              random_quaternions(rng, size))
-        k = p["stiffness_factor"] * float(bodies.mass.mean()) * G / float(r.min())
-        relax = relax_fire(bodies, statics, [0.0, 0.0, -G], stiffness=k,
-                           max_iter=int(p["relax_iterations"]), fall_height=0.3 * float(Rb.max()))
-        return {"bodies": bodies, "statics": statics, "side": S, "relaxation": relax}
+        collapse = collapse_downwards(bodies)
+        return {"bodies": bodies, "statics": statics, "side": S, "collapse": collapse}
 
     def stage(self, base, p, size, phi, rng):
         settled, S = base["bodies"], base["side"]
@@ -500,15 +497,15 @@ class PrimitiveSoup(Scene):
             rain.omega = 0.5 * v / rain.bounding_radius[:, None] * rng.normal(size=(n_rain, 3))
             parts.append(rain)
         bodies = Bodies.concatenate(parts)
-        rel = base["relaxation"]
+        col = base["collapse"]
         return World(bodies=bodies, statics=base["statics"], gravity=np.array([0.0, 0.0, -G]),
                      h=p["h"], margin=p["margin"], mu_table=_table(p["mu"]),
                      mu_r_table=_table(p["mu_r"]),
                      notes={"bodies": size, "settled": n_bed, "raining": n_rain,
                             "capsules": int(np.sum(bodies.half_length > 0)), "container_side": S,
-                            "relaxation": {"iterations": rel.iterations,
-                                           "max_force_over_weight": round(rel.residual, 3),
-                                           "max_overlap_over_rmin": round(rel.max_overlap, 5)}})
+                            "collapse": {"mean_drop": col.mean_drop, "max_drop": col.max_drop,
+                                         "resting_on_bodies": col.on_bodies,
+                                         "resting_on_floor": col.on_floor}})
 
 
 # ---------------------------------------------------------------------- registry
