@@ -16,7 +16,7 @@
 * :func:`fcc_positions` — close-packed face-centred cubic stacking (square layers).
 * :func:`open_cluster` — a connected cluster of spheres with all gaps in a prescribed band.
 
-All take a ``numpy.random.Generator``; none uses global random state.
+Those that draw random numbers take a ``numpy.random.Generator``; none uses global random state.
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """The scenes: configurations of bodies and obstacles, one per stage of a run.
 
 A scene builds, once per seed, a *base configuration* by a fast geometric method (deposition,
-relaxation, lattice; see :mod:`.deposition`), and from it one :class:`World` per stage of the
+collapse, lattice; see :mod:`.deposition`), and from it one :class:`World` per stage of the
 trace: stage φ ∈ [0, 1] (φ = K/(count−1) for the K-th of ``count`` problems) holds the part of
 the run reached at that time — the first spheres of a pile, the bodies already landed in a
-chute, the settled fraction of a soup — with the velocities of bodies in motion.  The
+chute, the landed part of a soup — with the velocities of bodies in motion.  The
 generator (:func:`rfverify.scenes.generate`) then takes a few Moreau–Jean steps from each world
 and dumps the last one's problem.
 
@@ -443,7 +443,7 @@ class PrimitiveSoup(Scene):
     name = "PrimitiveSoup"
     summary = ("about 1000 bodies of mixed shapes and sizes (spheres of 3 radii, capsules of 2 "
                "radii and random lengths) poured into a square container (FCLIB PrimitiveSoup: "
-               "m = 6000, h = 5e-4 s, mu = 0.7); all bodies present, the settled fraction grows")
+               "m = 6000, h = 5e-4 s, mu = 0.7); all bodies present, the landed fraction grows")
     configuration = ("Visscher-Bolsterli deposition of the bodies' bounding spheres into the "
                      "container, each body placed in its sphere with a random orientation, then "
                      "every body lowered straight down, bottom-up, until it touches a body or the "
