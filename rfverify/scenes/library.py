@@ -90,9 +90,6 @@ class Scene:
         """The world at stage φ ∈ [0, 1] (1 = the full-size, last stage)."""
         raise NotImplementedError
 
-    def describe(self, p: dict, size: int) -> str:
-        return self.summary
-
 
 # ---------------------------------------------------------------------- piles of spheres
 class SpheresPile(Scene):

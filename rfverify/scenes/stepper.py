@@ -38,7 +38,7 @@ the unshifted FCLIB problem (w_N = max(gap, 0)/h), like the problems Siconos wri
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -121,7 +121,6 @@ class MoreauJean:
     desaxce_iterations: int = 4
     time: float = 0.0
     steps_done: int = 0
-    records: list = field(default_factory=list)
 
     def __post_init__(self):
         self.bodies = self.bodies.copy()
@@ -188,7 +187,6 @@ class MoreauJean:
                                 v=result.v, u=H.T @ result.v + w, r=result.r,
                                 desaxce_solves=iterations, **rec_kw)
         self._advance(v)
-        self.records.append(record)
         return record
 
     def _solve_desaxce(self, problem, H, w, mu, mu_r, v0):
