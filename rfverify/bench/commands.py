@@ -7,7 +7,7 @@ import json
 import shlex
 import sys
 
-from ..cli import _json_default, _positive_float, _positive_int
+from ..cli import _json_default, _nonneg_int, _positive_float, _positive_int
 from ..solver.result import METHODS
 
 DEFAULT_METHODS = "jqinv,qp2,noscaling,reduced,clarabel"
@@ -28,16 +28,6 @@ def _tol_list(text: str) -> list:
     if not items:
         raise argparse.ArgumentTypeError("give at least one tolerance")
     return sorted({_positive_float(t) for t in items}, reverse=True)
-
-
-def _nonneg_int(text: str) -> int:
-    try:
-        val = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if val < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be ≥ 0")
-    return val
 
 
 def add_parsers(sub) -> None:
