@@ -9,11 +9,13 @@ machine are noisy, so compare the ratios measured within one run.
 
     python benchmarks/bench_forms.py                 # default sizes
     python benchmarks/bench_forms.py --sizes 100,500,1000 --seeds 3 --repeat 3
+    python benchmarks/bench_forms.py --sizes "" --files DIR   # FCLIB files, e.g. from `rfverify generate`
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import statistics
 import time
 
@@ -28,9 +30,11 @@ METHODS = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel
 TOLS = [1e-8, 1e-9, 1e-10]
 
 
-def problems(sizes, seeds):
+def problems(sizes, seeds, files=()):
     for name in ("chute", "cube", "sphere", "sphere-from-global"):
         yield f"bundled:{name}", rfverify.load(f"bundled:{name}")
+    for path in files:
+        yield Path(path).stem, rfverify.load(path)
     for n in sizes:
         for seed in range(seeds):
             nb = max(2, int(0.6 * n))
@@ -45,12 +49,23 @@ def main():
     ap.add_argument("--seeds", type=int, default=2, help="problems per size")
     ap.add_argument("--repeat", type=int, default=3, help="timed repetitions per run (median kept)")
     ap.add_argument("--methods", default=",".join(METHODS))
+    ap.add_argument("--files", nargs="*", default=[],
+                    help="FCLIB .hdf5 files or directories of them (added to the bundled and generated problems)")
     args = ap.parse_args()
+    files = []
+    for item in args.files:
+        path = Path(item)
+        if path.is_dir():
+            files += sorted(path.glob("*.hdf5"))
+        elif path.is_file():
+            files.append(path)
+        else:
+            ap.error(f"--files: {item} is neither a file nor a directory")
     sizes = [int(s) for s in args.sizes.split(",") if s]
     methods = args.methods.split(",")
     rows = []
-    print(f"{'problem':24s} {'n':>5s} {'method':10s} {'status':22s} {'nit':>4s} {'time[s]':>8s} {'verified':>9s}")
-    for name, prob in problems(sizes, args.seeds):
+    print(f"{'problem':40s} {'n':>5s} {'method':10s} {'status':22s} {'nit':>4s} {'time[s]':>8s} {'verified':>9s}")
+    for name, prob in problems(sizes, args.seeds, files):
         for method in methods:
             times = []
             for _ in range(args.repeat):
@@ -60,7 +75,7 @@ def main():
             err = criterion(prob, res.v, res.u, res.r)["max"]
             t = statistics.median(times)
             rows.append((name, prob.n_contacts, method, t, err))
-            print(f"{name:24s} {prob.n_contacts:5d} {method:10s} {str(res.status):22s} {res.nit:4d} "
+            print(f"{name[:40]:40s} {prob.n_contacts:5d} {method:10s} {str(res.status):22s} {res.nit:4d} "
                   f"{t:8.3f} {err:9.1e}", flush=True)
     print("\nshare of problems whose verified criterion meets the tolerance")
     print(f"{'method':10s} " + " ".join(f"{tol:>8.0e}" for tol in TOLS))

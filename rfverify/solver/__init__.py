@@ -26,7 +26,8 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel"}
         Linear-system form (DESIGN §4); ``clarabel`` hands the same convex problem to Clarabel.
     tol : float
-        Stop when max(pinfeas, dinfeas, μ) ≤ tol.
+        Stop when max(pinfeas, dinfeas, μ, |ũᵀr̃|/n) ≤ tol (μ = zᵀJᵀr̃/n as in DESIGN §4;
+        |ũᵀr̃|/n is the gap of the returned velocities, ũ = H̃v + w̃).
     max_iter : int
     keep_iterates : bool
         Store every iterate in ``extras["iterates"]`` as (v, r̃, z) with v on
@@ -114,7 +115,9 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
         v=v, u=u, r=r, status=out["status"], message=out["message"], nit=out["nit"],
         pinfeas=out["pinfeas"], dinfeas=out["dinfeas"], mu=out["mu"], trace=out["trace"],
         timings=timings, method=method, settings=settings, presolve=presolve,
-        extras={"factorisations": out["factorisations"], "r_t": r_t, "z": z,
+        extras={"factorisations": out["factorisations"],
+                "unregularised_factorisations": out["unregularised_factorisations"],
+                "r_t": r_t, "z": z,
                 "n_cones": {"L3": lp.n3, "L1": lp.n1},
                 "component_runs": [{k: o[k] for k in ("status", "message", "nit", "trace")} for o in runs]
                 if len(runs) > 1 else [],
@@ -191,4 +194,5 @@ def _merge(runs, lp, M, problem, v, r_t, z):
     timings = {k: sum(o["timings"].get(k, 0.0) for o in runs) for k in ("factor", "solve", "total")}
     return dict(status=status, message=message, nit=max(o["nit"] for o in runs),
                 pinfeas=pinf, dinfeas=dinf, mu=mu, trace=max(runs, key=lambda o: o["nit"])["trace"],
-                timings=timings, factorisations=sum(o["factorisations"] for o in runs))
+                timings=timings, factorisations=sum(o["factorisations"] for o in runs),
+                unregularised_factorisations=sum(o["unregularised_factorisations"] for o in runs))

@@ -6,11 +6,13 @@ one step length for primal and dual, on the lifted Lorentz-cone form
 The linear-system form is pluggable (:mod:`rfverify.solver.kkt`).  Centring: the central path
 is z ∘ s = τ e cone by cone, which sums to zᵀs = τ·(number of cones) because eᵀe = 1 per
 cone; the corrector therefore targets σ·μ_c·e with μ_c = zᵀs / n_cones.  The stopping test
-uses DESIGN's μ = zᵀs / n (n contacts).
+uses DESIGN's μ = zᵀs / n (n contacts) and, in addition, the gap |ũᵀr̃|/n of the velocities
+that are returned (ũ = H̃v + w̃), which is what an independent check recomputes.
 """
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -45,7 +47,12 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     jd = np.longdouble if settings.extended_jordan else np.float64
     work = np.result_type(ext, jd)
     system = FORMS[form](M, H_t, J, cones, dtype_ref=np.longdouble if settings.refine_extended else np.float64,
-                         static_reg=settings.static_reg)
+                         static_reg=settings.static_reg, adaptive_reg=settings.adaptive_reg)
+    solve_kkt = functools.partial(system.solve, refine_max=settings.refine_max,
+                                  refine_extended=settings.refine_extended, refine_tol=settings.refine_tol)
+    # A refined backward error this far above the refinement target means δ is in the way.
+    eps_ref = float(np.finfo(np.longdouble if settings.refine_extended else np.float64).eps)
+    reg_fallback_above = max(1e3 * eps_ref, 10 * (settings.refine_tol or 0.0))
     Mx, Hx, HTx = M.astype(work), H_t.astype(work), H_t.T.tocsr().astype(work)
     Jx, JTx = J.astype(work), J.T.tocsr().astype(work)
     f_x = np.asarray(f, dtype=work)
@@ -64,6 +71,8 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     gamma = settings.gamma0
     best = None  # (merit, k, v, r_t, z, pinf, dinf, mu)
     since_best = 0
+    best_each = [np.inf, np.inf, np.inf]  # best pinfeas, dinfeas, μ so far
+    engaged = False  # a step with α ≥ 0.5 was taken
     status, message = Status.MAX_ITERATIONS, f"reached max_iter = {settings.max_iter}"
     k = 0
     record = None
@@ -80,13 +89,25 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             dinf = _norm(r_d) / max(_norm(Mv), _norm(f_x), _norm(HTr), _TINY)
             gap = float(z @ s)
             mu = gap / n_contacts
-            merit = max(pinf, dinf, mu)
+            # The user checks the gap of what is returned, |ũᵀr̃| with ũ = H̃v + w̃, not zᵀJᵀr̃;
+            # they differ by r_pᵀr̃, which in large units (Millimetre scene: r ~ 1e6) exceeded
+            # tol while μ did not.  The merit (stop, best iterate) takes both.
+            mu_u = abs(float((Hv + w_x) @ r_t)) / n_contacts
+            merit = max(pinf, dinf, mu, mu_u)
             if not np.isfinite(merit):
                 raise _Stop(Status.NUMERICAL_ERROR, f"iteration {k}: residuals are not finite")
-            if best is None or merit < 0.9 * best[0]:
-                since_best = 0
-            else:
-                since_best += 1
+            # Progress = some measure not yet at tol fell 10% below its own best.  Judging
+            # the merit alone stopped badly scaled problems at iteration 0: there μ rises
+            # 1000-fold while the infeasibilities fall (measured on the Millimetre scene).
+            improved = False
+            for i, val in enumerate((pinf, dinf, mu)):
+                if val > settings.tol and val < 0.9 * best_each[i]:
+                    improved = True
+                best_each[i] = min(best_each[i], val)
+            # The unit start can be far from a badly scaled problem's scale; the first steps
+            # are then tiny (α ~ 1e-5 … 1e-3, growing) and nothing improves by 10% for several
+            # iterations before the first long step.  Stall counting starts after that step.
+            since_best = 0 if improved or not engaged else since_best + 1
             if best is None or merit < best[0]:
                 best = (merit, k, v.copy(), r_t.copy(), z.copy(), pinf, dinf, mu)
             lam2_z, cz = cones.min_lambda2(z)
@@ -96,14 +117,14 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                           min_lam2_s=lam2_s, min_lam2_s_cone=cs, max_cond_Qp=np.nan,
                           solve_residual=np.nan, refine_steps=0, time=time.perf_counter() - t0)
             if merit <= settings.tol:
-                status, message = Status.SOLVED, f"max(pinfeas, dinfeas, mu) = {merit:.2e} ≤ tol"
+                status, message = Status.SOLVED, f"max(pinfeas, dinfeas, mu, |ũᵀr̃|/n) = {merit:.2e} ≤ tol"
                 break
             if k == settings.max_iter:
                 break
             if since_best >= settings.stall_iterations:
                 raise _Stop(Status.INSUFFICIENT_PROGRESS,
-                            f"iteration {k}: no 10% improvement of max(pinfeas, dinfeas, mu) in "
-                            f"{since_best} iterations (best {best[0]:.2e} at iteration {best[1]})")
+                            f"iteration {k}: none of pinfeas, dinfeas, mu above tol improved by 10% in "
+                            f"{since_best} iterations (best max {best[0]:.2e} at iteration {best[1]})")
             if lam2_z <= 0 or lam2_s <= 0:
                 which, c, val = ("z", cz, lam2_z) if lam2_z <= 0 else ("Jᵀr̃", cs, lam2_s)
                 raise _Stop(Status.NUMERICAL_ERROR,
@@ -134,8 +155,15 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                 c_aff = -lam
             else:
                 c_aff = -cones.product(zj, sj)
-            dv_a, dr_a, dz_a, res_a, st_a = system.solve(a, b, c_aff, refine_max=settings.refine_max,
-                                                         refine_extended=settings.refine_extended)
+            dv_a, dr_a, dz_a, res_a, st_a = solve_kkt(a, b, c_aff)
+            if settings.adaptive_reg and system.regularised and res_a > reg_fallback_above:
+                # Refinement against the true matrix did not converge: δ is in the way.
+                if system.refactor_unregularised():
+                    retry = solve_kkt(a, b, c_aff)
+                    if retry[3] < res_a:
+                        dv_a, dr_a, dz_a, res_a, st_a = retry
+                    else:  # no better: back to the regularised factorisation
+                        system.factor()
             _check_finite(k, "predictor", form, dv_a, dr_a, dz_a)
             ds_a = JTx @ dr_a
             alpha_aff = min(1.0, cones.max_step_pair(zj, dz_a.astype(jd), sj, ds_a.astype(jd)))
@@ -152,8 +180,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             else:
                 c = (sigma * mu_c * cones.identity(jd) - cones.product(zj, sj)
                      - cones.product(dz_a.astype(jd), ds_a.astype(jd)))
-            dv, dr, dz, res, st = system.solve(a, b, c, refine_max=settings.refine_max,
-                                               refine_extended=settings.refine_extended)
+            dv, dr, dz, res, st = solve_kkt(a, b, c)
             _check_finite(k, "corrector", form, dv, dr, dz)
             ds = JTx @ dr
             timings["solve"] += time.perf_counter() - ts
@@ -167,6 +194,9 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             r_t = r_t + alpha * dr.astype(work)
             z = z + alpha * dz.astype(work)
             gamma = 0.9 + 0.09 * alpha
+            if not engaged and alpha >= 0.5:
+                engaged = True
+                best_each = [np.inf, np.inf, np.inf]  # μ may have grown on the way: judge from here
     except _Stop as stop:
         status, message = stop.status, stop.message
     except ConeDomainError as exc:
@@ -191,7 +221,8 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                 nit=len(trace["iter"]) - 1 if trace["iter"] else 0,
                 pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o),
                 trace={key: np.asarray(val) for key, val in trace.items()}, timings=timings,
-                factorisations=system.factor_count, tol=settings.tol, iterates=iterates)
+                factorisations=system.factor_count,
+                unregularised_factorisations=system.unregularised_count, tol=settings.tol, iterates=iterates)
 
 
 def _sigma(rule: str, mu_aff: float, mu: float, alpha_aff: float) -> float:

@@ -32,7 +32,8 @@ class Settings:
     Attributes
     ----------
     tol : float
-        Stop when max(pinfeas, dinfeas, μ) ≤ tol (DESIGN §4; μ = zᵀJᵀr̃ / n).
+        Stop when max(pinfeas, dinfeas, μ, |ũᵀr̃|/n) ≤ tol (DESIGN §4; μ = zᵀJᵀr̃ / n; the
+        last term is the gap of the returned ũ = H̃v + w̃, which differs from μ by r_pᵀr̃/n).
     almost_factor : float
         A run that ends otherwise but whose best iterate reached ``almost_factor·tol`` is
         ``AlmostSolved``.
@@ -51,13 +52,26 @@ class Settings:
         Maximum iterative-refinement steps per linear solve (0 disables refinement).
     refine_extended : bool
         Iterative-refinement residuals in numpy.longdouble.
+    refine_tol : float or None
+        Refinement stops once the normwise backward error of the unreduced system is at
+        most this; ``None`` (default) means 4·eps of the refinement precision.
     static_reg : float
         Static regularisation δ (relative to the largest diagonal entry of the KKT matrix)
-        added with the sign that keeps the symmetric forms quasi-definite; refinement
-        against the unregularised matrix removes its effect.
+        added on the dr̃ diagonal with the sign that keeps the symmetric forms
+        quasi-definite; refinement against the unregularised matrix removes its effect
+        where it converges.
+    adaptive_reg : bool
+        When refinement of a predictor solve ends above 1e3·eps (of the refinement
+        precision), factor the same matrix without δ and use that factorisation for the
+        iteration if it has the true inertia and solves better (default).  Needed on
+        problems with redundant contacts (hyperstatic piles, lattices), see
+        :meth:`rfverify.solver.kkt.KKTSystem.refactor_unregularised`.
     stall_iterations : int
-        ``InsufficientProgress`` after this many iterations without improving the best merit
-        by a factor 0.9 or with steps α < 1e-10.
+        ``InsufficientProgress`` after this many consecutive iterations in which none of
+        pinfeas, dinfeas, μ that is still above ``tol`` fell below 0.9 × its own best,
+        counted from the first step with α ≥ 0.5, with the bests reset there (before it, a
+        badly scaled start may take several tiny but growing steps while μ grows 1e6-fold;
+        ``max_iter`` bounds that phase).
     reduce_cones, drop_free_bodies, split_components : bool
         Presolve reductions (DESIGN §4).  Splitting solves each connected component of the
         body–contact graph by its own run of Algorithm 1 (own step lengths); it implies that
@@ -76,7 +90,9 @@ class Settings:
     extended_residuals: bool = True
     refine_max: int = 10
     refine_extended: bool = True
+    refine_tol: float | None = None
     static_reg: float = 1e-12
+    adaptive_reg: bool = True
     stall_iterations: int = 8
     reduce_cones: bool = True
     drop_free_bodies: bool = True
