@@ -581,6 +581,7 @@ def _write_certificate(problem, sol, u, cert, path):
 def cmd_generate(args) -> int:
     import time
 
+    from .progress import Progress
     from .scenes import SCENES, generate, save_collection, scene_parameters
     from .scenes.stepper import SceneError
 
@@ -598,11 +599,11 @@ def cmd_generate(args) -> int:
             raise SceneError(f"--param {item!r}: expected KEY=VALUE")
         params[key.strip()] = val.strip()
     scene_parameters(args.scene, args.size, **params)  # bad names/values fail before any work
-    bar = _ProgressBar(enabled=not args.quiet and not args.json and sys.stderr.isatty())
+    bar = Progress(100, f"generate {args.scene} (%)", quiet=args.quiet or args.json)
     t0 = time.perf_counter()
     try:
         problems = generate(args.scene, count=args.count, seed=args.seed, size=args.size,
-                            steps=args.steps, progress=bar.update, **params)
+                            steps=args.steps, progress=bar.update_fraction, **params)
     finally:
         bar.close()
     paths = save_collection(problems, args.out)
@@ -627,30 +628,6 @@ def cmd_generate(args) -> int:
             print(f"{f['path']}  m = {f['m']}, n = {f['n']}")
         print(f"{len(files)} problem(s) of {args.scene} written to {args.out} in {wall:.1f} s")
     return EXIT_OK
-
-
-class _ProgressBar:
-    """A one-line text progress bar on stderr (no dependency); silent when disabled."""
-
-    def __init__(self, enabled: bool, width: int = 30):
-        self.enabled = enabled
-        self.width = width
-        self.shown = False
-
-    def update(self, fraction: float, text: str = ""):
-        if not self.enabled:
-            return
-        fraction = min(max(fraction, 0.0), 1.0)
-        full = int(round(fraction * self.width))
-        sys.stderr.write(f"\r[{'#' * full}{'.' * (self.width - full)}] {100 * fraction:5.1f}% "
-                         f"{text[:60]:<60}")
-        sys.stderr.flush()
-        self.shown = True
-
-    def close(self):
-        if self.enabled and self.shown:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
 
 
 # ---------------------------------------------------------------------- entry point

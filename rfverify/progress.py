@@ -48,6 +48,20 @@ class Progress:
             self.stream.write(f"{self.label} [{self.done}/{self.total}] {self._elapsed()} {note}\n")
             self.stream.flush()
 
+    def update_fraction(self, fraction: float, note: str = "") -> None:
+        """For work measured as a fraction in [0, 1] (``total`` should then be 100).  Off a
+        terminal it writes a line only when another tenth is complete, so logs stay short."""
+        done = int(round(min(max(float(fraction), 0.0), 1.0) * self.total))
+        if self.quiet or done == self.done:
+            return
+        crossed = done * 10 // max(self.total, 1) != self.done * 10 // max(self.total, 1)
+        self.done = done
+        if self.tty:
+            self._draw(note)
+        elif crossed:
+            self.stream.write(f"{self.label} [{self.done}/{self.total}] {self._elapsed()} {note}\n")
+            self.stream.flush()
+
     def close(self) -> None:
         if self.tty and not self.quiet:
             self.stream.write("\n")

@@ -227,3 +227,20 @@ def _problem_path(data, key):
     from rfverify.bench.runner import resolve_spec
 
     return resolve_spec(data.problems[key]["spec"], data.run_dir)
+
+
+def test_progress_fraction_lines_off_a_terminal():
+    import io
+
+    from rfverify.progress import Progress
+
+    out = io.StringIO()  # not a TTY: one line per completed tenth, none for smaller steps
+    bar = Progress(100, "gen", stream=out)
+    for frac in (0.02, 0.05, 0.12, 0.15, 0.19, 0.31, 1.0, 1.0):
+        bar.update_fraction(frac, "x")
+    bar.close()
+    lines = out.getvalue().splitlines()
+    assert [ln.split()[1] for ln in lines] == ["[12/100]", "[31/100]", "[100/100]"]
+    quiet = io.StringIO()
+    Progress(100, "gen", stream=quiet, quiet=True).update_fraction(0.5)
+    assert quiet.getvalue() == ""
