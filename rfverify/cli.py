@@ -180,7 +180,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="directory for the HDF5 files (created if missing); required "
                           "unless --list")
     gen.add_argument("--quiet", action="store_true",
-                     help="no progress bar (it is also off when stderr is not a terminal)")
+                     help="no progress on stderr (otherwise a redrawn bar on a terminal, one line per "
+                          "completed tenth when stderr is not a terminal; --json also silences it)")
     gen.add_argument("--json", action="store_true",
                      help="print one JSON object describing the written files")
     gen.set_defaults(func=cmd_generate)
@@ -384,6 +385,8 @@ def _header(problem, result_settings, method, lp_counts) -> str:
         f"sigma_rule = {st.sigma_rule}, gamma0 = {st.gamma0}",
         f"          extended: jordan = {st.extended_jordan}, residuals = {st.extended_residuals}, "
         f"refinement = {st.refine_extended} (max {st.refine_max} steps)",
+        f"          static_reg = {st.static_reg:g}, adaptive_reg = {st.adaptive_reg}, "
+        f"stall_iterations = {st.stall_iterations}",
         f"presolve: reduce_cones = {st.reduce_cones}, drop_free_bodies = {st.drop_free_bodies}",
     ]
     return "\n".join(lines)
