@@ -98,7 +98,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                 raise _Stop(Status.NUMERICAL_ERROR, f"iteration {k}: residuals are not finite")
             # Progress = some measure not yet at tol fell 10% below its own best.  Judging
             # the merit alone stopped badly scaled problems at iteration 0: there μ rises
-            # 1000-fold while the infeasibilities fall (measured on the Millimetre scene).
+            # 1e6-fold while the infeasibilities fall (measured on the Millimetre scene).
             improved = False
             for i, val in enumerate((pinf, dinf, mu)):
                 if val > settings.tol and val < 0.9 * best_each[i]:
