@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 import rfverify
+from rfverify.bench.runner import BenchInputError, discover_problems
 from rfverify.check import criterion
 from rfverify.random_problems import random_problem
 from rfverify.solver import solve
@@ -50,17 +51,12 @@ def main():
     ap.add_argument("--repeat", type=int, default=3, help="timed repetitions per run (median kept)")
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--files", nargs="*", default=[],
-                    help="FCLIB .hdf5 files or directories of them (added to the bundled and generated problems)")
+                    help="problem files, directories of them or bundled:NAME (added to the bundled and generated problems)")
     args = ap.parse_args()
-    files = []
-    for item in args.files:
-        path = Path(item)
-        if path.is_dir():
-            files += sorted(path.glob("*.hdf5"))
-        elif path.is_file():
-            files.append(path)
-        else:
-            ap.error(f"--files: {item} is neither a file nor a directory")
+    try:  # the bench's own discovery: files, directories of them, bundled:NAME
+        files = [Path(e.path) for e in discover_problems(args.files)] if args.files else []
+    except BenchInputError as exc:
+        ap.error(f"--files: {exc}")
     sizes = [int(s) for s in args.sizes.split(",") if s]
     methods = args.methods.split(",")
     rows = []

@@ -25,6 +25,7 @@ import numpy as np
 
 import reference
 import rfverify
+from rfverify.bench.runner import BenchInputError, discover_problems
 from rfverify.check import criterion
 from rfverify.scenes.analysis import contact_state_mix, free_velocity
 
@@ -38,19 +39,14 @@ def digits(x, x_ref, scale) -> float:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("paths", nargs="*", default=[str(DEFAULT)], help="FCLIB .hdf5 files or directories")
+    ap.add_argument("paths", nargs="*", default=[str(DEFAULT)], help="problem files, directories of them or bundled:NAME")
     ap.add_argument("--tol", type=float, default=1e-10)
     ap.add_argument("--max-contacts", type=int, default=60, help="largest problem given to the reference")
     args = ap.parse_args()
-    files = []
-    for item in args.paths:
-        path = Path(item)
-        if path.is_dir():
-            files += sorted(path.glob("*.hdf5"))
-        elif path.is_file():
-            files.append(path)
-        else:
-            ap.error(f"{item} is neither a file nor a directory")
+    try:  # the bench's own discovery: files, directories of them, bundled:NAME
+        files = [Path(e.path) for e in discover_problems(args.paths)] if args.paths else []
+    except BenchInputError as exc:
+        ap.error(f"{exc}")
     head = (f"{'problem':36s} {'n':>4s} | {'jqinv':>13s} {'crit':>7s} {'dig':>5s} | {'clarabel':>20s} {'crit':>7s} "
             f"{'dig':>5s} | {'agree':>5s} | mix open/stick/slide/roll")
     print(head)
