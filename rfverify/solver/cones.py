@@ -4,6 +4,12 @@ A thin layer over :mod:`rfverify.jordan`: each operation splits a flat cone vect
 nz = 3·n3 + n1) into its two families and makes one vectorised Jordan call per family, so
 nothing loops over contacts.  Domain errors are re-raised with the *global* cone index, which
 :class:`~rfverify.lifting.LiftedProblem` maps to a contact.
+
+The operations the interior-point method calls every iteration first try the column-wise
+kernels of :mod:`rfverify.solver.columns` (same formulas, no per-call validation or
+rescaling) and fall back to :mod:`rfverify.jordan` whenever a kernel declines — extreme
+magnitudes, a point not interior, a non-finite result — so errors are still reported by
+the validated implementation, with the cone that caused them.
 """
 
 from __future__ import annotations
@@ -12,6 +18,7 @@ import numpy as np
 
 from .. import jordan
 from ..errors import ConeDomainError
+from . import columns
 
 
 class ProductCone:
@@ -42,6 +49,10 @@ class ProductCone:
         e[3 * self.n3:] = 1
         return e
 
+    def _same_dtype(self, *args):
+        dtype = np.result_type(*args, np.float64)
+        return [np.asarray(a, dtype=dtype) for a in args]
+
     def _map(self, fn, *args, op: str):
         """Apply ``fn`` family by family; re-raise domain errors with the global cone index."""
         out3 = out1 = None
@@ -67,11 +78,13 @@ class ProductCone:
 
     # ------------------------------------------------------------------ algebra
     def product(self, x, y):
-        return self._flat(jordan.jordan_product, x, y, op="jordan_product")
+        fast = columns.product(*self._same_dtype(x, y), self.n3)
+        return fast if fast is not None else self._flat(jordan.jordan_product, x, y, op="jordan_product")
 
     def arrow_solve(self, x, y):
         """Solve x ∘ d = y for d (Arw(x)⁻¹ y)."""
-        return self._flat(jordan.arrow_solve, x, y, op="arrow_solve")
+        fast = columns.arrow_solve(*self._same_dtype(x, y), self.n3)
+        return fast if fast is not None else self._flat(jordan.arrow_solve, x, y, op="arrow_solve")
 
     def quad_apply(self, p, y):
         return self._flat(jordan.quad_apply, p, y, op="quad_apply")
@@ -88,6 +101,9 @@ class ProductCone:
 
     def quad_blocks(self, p) -> np.ndarray:
         """Values of the block-diagonal Q_p in the order of (bd_rows, bd_cols), float64."""
+        fast = columns.quad_blocks(*self._same_dtype(p), self.n3)
+        if fast is not None:
+            return fast
         q3, q1 = self._map(jordan.quad_matrix, p, op="quad_matrix")
         parts = [np.asarray(q, dtype=np.float64).ravel() for q in (q3, q1) if q is not None]
         return np.concatenate(parts) if parts else np.empty(0)
@@ -100,6 +116,9 @@ class ProductCone:
 
     def nt_scaling(self, z, s):
         """NT scaling of the pair, flat: (p, p⁻¹, λ = Q_p z = Q_{p⁻¹} s, cond(Q_p) per cone)."""
+        fast = columns.nt_scaling(*self._same_dtype(z, s), self.n3)
+        if fast is not None:
+            return fast.p, fast.p_inv, fast.lam, fast.cond
         r3, r1 = self._map(jordan.nt_scaling, z, s, op="nt_scaling")
         dtype = np.result_type(z, s)
         empty3, empty1 = np.empty((0, 3), dtype), np.empty((0, 1), dtype)
@@ -118,6 +137,11 @@ class ProductCone:
 
     def max_step_pair(self, z, dz, s, ds) -> float:
         """min(max_step(z, dz), max_step(s, ds)) in one vectorised call per family."""
+        z_, dz_, s_, ds_ = self._same_dtype(z, dz, s, ds)
+        a_z = columns.step(z_, dz_, self.n3)
+        a_s = columns.step(s_, ds_, self.n3) if a_z is not None else None
+        if a_s is not None:
+            return float(min(a_z.min(initial=np.inf), a_s.min(initial=np.inf)))
         z3, z1 = self.split(z)
         s3, s1 = self.split(s)
         d3, d1 = self.split(dz)
@@ -142,6 +166,9 @@ class ProductCone:
         return float(lam[k]), k
 
     def lambda2(self, x) -> np.ndarray:
+        fast = columns.lambda2(*self._same_dtype(x), self.n3)
+        if fast is not None:
+            return fast
         x3, x1 = self.split(x)
         parts = []
         if self.n3:
@@ -167,12 +194,7 @@ class QuadOperator:
         self.cones = cones
         self.p = p
         p3, p1 = cones.split(p)
-        self._p3, self._p1 = p3, p1
-        dt = np.result_type(p, np.float64)
-        limit = np.ldexp(dt.type(1), np.finfo(dt).maxexp // 4)  # squares and 4th powers stay finite
-        big = np.abs(p).max(initial=0.0)
-        small = np.abs(p3[:, 0]).min(initial=np.inf) if p3.size else np.inf
-        self._direct = bool(big < limit and small > 1 / limit)
+        self._direct = columns.moderate(np.asarray(p))
         if self._direct:
             self._det3 = jordan.det(p3) if p3.shape[0] else np.empty(0, p.dtype)
             self._sq1 = p1[:, 0] * p1[:, 0]
@@ -180,14 +202,7 @@ class QuadOperator:
     def __call__(self, y):
         if not self._direct:
             return self.cones.quad_apply(self.p, y)
-        y3, y1 = self.cones.split(y)
-        p3 = self._p3
-        q3 = 2 * np.einsum("ij,ij->i", p3, y3)[:, None] * p3 - self._det3[:, None] * y3 * _R3
-        q1 = self._sq1[:, None] * y1
-        return np.concatenate((q3.ravel(), q1.ravel()))
-
-
-_R3 = np.array([1.0, -1.0, -1.0])
+        return columns.quad_apply(self.p, self._det3, self._sq1, y, self.cones.n3)
 
 
 def _strip(exc: ConeDomainError) -> str:
