@@ -152,6 +152,14 @@ def step(x, dx, n3):
     return alpha
 
 
+def det3(p, n3):
+    """det p = (p0 + ‖p̄‖)(p0 − ‖p̄‖) per L3 cone (the factored form of
+    :func:`rfverify.jordan.det`), for p already vetted by :func:`moderate`."""
+    p0, p1, p2, _ = cols(p, n3)
+    nb = np.hypot(p1, p2)
+    return (p0 + nb) * (p0 - nb)
+
+
 def quad_blocks(p, n3):
     """Entries of the block-diagonal Q_p = 2ppᵀ − det(p) R, cone by cone, row-major, or None."""
     if not moderate(p):

@@ -196,7 +196,7 @@ class QuadOperator:
         p3, p1 = cones.split(p)
         self._direct = columns.moderate(np.asarray(p))
         if self._direct:
-            self._det3 = jordan.det(p3) if p3.shape[0] else np.empty(0, p.dtype)
+            self._det3 = columns.det3(p, cones.n3)
             self._sq1 = p1[:, 0] * p1[:, 0]
 
     def __call__(self, y):

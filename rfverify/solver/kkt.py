@@ -34,6 +34,13 @@ import scipy.sparse as sp
 from .cones import ProductCone
 
 
+def _amax(x) -> float:
+    """‖x‖∞, taken on the float64 image of x: a norm needs no more than float64's relative
+    precision, and longdouble arithmetic costs five times as much."""
+    with np.errstate(over="ignore"):
+        return float(np.abs(x.astype(np.float64, copy=False)).max(initial=0.0))
+
+
 class SparseAssembler:
     """A fixed sparsity pattern assembled from (row, col) contributions, duplicates summed.
 
@@ -50,10 +57,21 @@ class SparseAssembler:
         col_of = uniq // shape[0]
         self.indptr = np.searchsorted(col_of, np.arange(shape[1] + 1)).astype(np.int32)
         self.nnz = uniq.size
+        self._col_of = col_of
+        self._diag = self.indices == col_of
 
     def matrix(self, values) -> sp.csc_matrix:
         data = np.bincount(self.slot, weights=np.asarray(values, dtype=np.float64), minlength=self.nnz)
         return sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
+
+    def symmetric_inf_norm(self, K: sp.csc_matrix) -> float:
+        """‖S‖∞ of the symmetric S whose upper triangle is K (assembled by :meth:`matrix`):
+        row sums of |K| plus column sums minus the diagonal, which both count."""
+        n = self.shape[0]
+        a = np.abs(K.data)
+        rows = (np.bincount(self.indices, weights=a, minlength=n) + np.bincount(self._col_of, weights=a, minlength=n)
+                - np.bincount(self.indices[self._diag], weights=a[self._diag], minlength=n))
+        return float(rows.max(initial=0.0))
 
 
 class KKTSystem:
@@ -142,12 +160,8 @@ class KKTSystem:
         import qdldl
 
         K = self.asm.matrix(vals)
-        # ‖K‖∞ of the symmetric matrix from its upper triangle U: row sums of |U| plus
-        # column sums of |U| minus the diagonal counted twice (K itself is never formed).
-        absU = abs(K)
-        rows = np.asarray(absU.sum(axis=1)).ravel() + np.asarray(absU.sum(axis=0)).ravel() - absU.diagonal()
         self._K = None
-        self._knorm = float(rows.max(initial=0.0))
+        self._knorm = self.asm.symmetric_inf_norm(K)
         if self._solver is None:
             self._solver = qdldl.Solver(K, upper=True)
         else:
@@ -162,11 +176,23 @@ class KKTSystem:
         self.p_inv = p_inv
         self.z = z
         self.s = s
+        self._Qp64 = self._Qp_inv64 = None
         if p is not None:
             self.Qp = self.cones.quad_operator(p)
             self.Qp_inv = self.cones.quad_operator(p_inv)
-            self.Qp64 = self.cones.quad_operator(np.asarray(p, dtype=np.float64))
-            self.Qp_inv64 = self.cones.quad_operator(np.asarray(p_inv, dtype=np.float64))
+
+    # float64 copies for the factorised solves, built on first use (each form needs one).
+    @property
+    def Qp64(self):
+        if self._Qp64 is None:
+            self._Qp64 = self.cones.quad_operator(np.asarray(self.p, dtype=np.float64))
+        return self._Qp64
+
+    @property
+    def Qp_inv64(self):
+        if self._Qp_inv64 is None:
+            self._Qp_inv64 = self.cones.quad_operator(np.asarray(self.p_inv, dtype=np.float64))
+        return self._Qp_inv64
 
     def apply(self, x):
         """The three-block operator of the module docstring applied to x = (dv, dr̃, dz),
@@ -205,14 +231,13 @@ class KKTSystem:
         target = 4 * float(np.finfo(work).eps) if refine_tol is None else refine_tol
         rhs = np.concatenate([np.asarray(t, dtype=work) for t in (a, b, c)])
         x = self.solve_once(rhs).astype(work)
-        rhs_norm = np.abs(rhs).max(initial=0)
+        rhs_norm = _amax(rhs)
         knorm = self.norm_estimate()
         best_rel, best_x, prev = np.inf, x, np.inf
         steps = 0
         for steps in range(refine_max + 1):
             r = rhs - self.apply(x)
-            rel = float(np.abs(r).max(initial=0) / max(knorm * np.abs(x).max(initial=0) + rhs_norm,
-                                                       np.finfo(float).tiny))
+            rel = _amax(r) / max(knorm * _amax(x) + rhs_norm, np.finfo(float).tiny)
             if not np.isfinite(rel):
                 best_rel, best_x = float("nan"), x
                 break
