@@ -114,16 +114,49 @@ def lambda2(x, n3):
     return out if _finite(out) else None
 
 
-def step(x, dx, n3):
-    """Largest α per cone with x + α dx in the cone (∞ if never), or None.
+class StepPoint:
+    """Step lengths from one interior point x to the cone boundary along several directions.
 
-    The route of :func:`rfverify.jordan.step_to_boundary`: y = Q_{x^{-1/2}} dx, α = −1/λ2(y)
-    when λ2(y) < 0; for L1 this is α = −x/dx when dx < 0.
+    The route of :func:`rfverify.jordan.step_to_boundary`: x + α dx ∈ L iff e + α y ∈ L with
+    y = Q_{x^{-1/2}} dx, so the largest step is α = −1/λ2(y) when λ2(y) < 0 (L1: α = −x/dx
+    when dx < 0).  x^{-1/2} depends on x only, and the predictor and the corrector both
+    measure their steps from the same iterate, so it is computed once here.
+    Build with :func:`step_point`, which returns None where the kernels decline.
     """
-    if not moderate(x, dx):
+
+    def __init__(self, x, n3, w, det_w, xt):
+        self.x, self.n3 = x, n3
+        self._w, self._det_w, self._xt = w, det_w, xt
+
+    def min_step(self, dx):
+        """min over cones of the largest α with x + α dx in the cone (∞ if none), or None."""
+        if not moderate(dx):
+            return None
+        w0, w1, w2 = self._w
+        det_w = self._det_w
+        d0, d1, d2, dt = cols(dx, self.n3)
+        with np.errstate(all="ignore"):
+            wd2 = 2 * (w0 * d0 + w1 * d1 + w2 * d2)
+            y0 = wd2 * w0 - det_w * d0
+            y1 = wd2 * w1 + det_w * d1
+            y2 = wd2 * w2 + det_w * d2
+            # α = −1/λ2(y) is decreasing in −λ2(y): the smallest step belongs to the most
+            # negative λ2, so one reduction replaces a division per cone.
+            lo = min(np.min(y0 - np.hypot(y1, y2), initial=np.inf), np.min(dt / self._xt, initial=np.inf))
+            if not np.isfinite(lo) and not lo == np.inf:
+                return None  # NaN or −inf: let the careful route name it
+            if lo >= 0:
+                return np.inf
+            alpha = -1 / lo
+        # An overflowing step (subnormal λ2): the careful route clips it to the largest float.
+        return float(alpha) if np.isfinite(alpha) else None
+
+
+def step_point(x, n3):
+    """A :class:`StepPoint` for the interior point x, or None (see the module contract)."""
+    if not moderate(x):
         return None
     x0, x1, x2, xt = cols(x, n3)
-    d0, d1, d2, dt = cols(dx, n3)
     with np.errstate(all="ignore"):
         nb = np.hypot(x1, x2)
         l1, l2 = x0 + nb, x0 - nb
@@ -138,18 +171,9 @@ def step(x, dx, n3):
         w2 = -(x2 / t) / rr
         nw = np.hypot(w1, w2)
         det_w = (w0 + nw) * (w0 - nw)
-        wd2 = 2 * (w0 * d0 + w1 * d1 + w2 * d2)
-        y0 = wd2 * w0 - det_w * d0
-        y1 = wd2 * w1 + det_w * d1
-        y2 = wd2 * w2 + det_w * d2
-        if not _finite(y0, y1, y2):
-            return None
-        ly2 = np.concatenate((y0 - np.hypot(y1, y2), dt / xt))
-        neg = ly2 < 0
-        alpha = np.where(neg, -1 / np.where(neg, ly2, -1), np.inf)
-    if np.isnan(alpha).any() or np.isinf(alpha[neg]).any():
-        return None  # the careful route clips overflowing steps and names NaNs
-    return alpha
+    if not _finite(w0, w1, w2, det_w):
+        return None
+    return StepPoint(x, n3, (w0, w1, w2), det_w, xt)
 
 
 def det3(p, n3):

@@ -132,7 +132,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                             "iterate left the cone interior by rounding")
 
             # ---- scaling and factorisation
-            zj, sj = z.astype(jd), s.astype(jd)
+            zj, sj = z.astype(jd, copy=False), s.astype(jd, copy=False)
             tf = time.perf_counter()
             if system.symmetric:
                 p, p_inv, lam, cond = cones.nt_scaling(zj, sj)
@@ -166,7 +166,8 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                         system.factor()
             _check_finite(k, "predictor", form, dv_a, dr_a, dz_a)
             ds_a = JTx @ dr_a
-            alpha_aff = min(1.0, cones.max_step_pair(zj, dz_a.astype(jd), sj, ds_a.astype(jd)))
+            max_step = cones.stepper(zj, sj)  # predictor and corrector step from the same point
+            alpha_aff = min(1.0, max_step(dz_a.astype(jd), ds_a.astype(jd)))
             mu_aff = float((z + alpha_aff * dz_a) @ (s + alpha_aff * ds_a)) / n_contacts
             sigma = _sigma(settings.sigma_rule, mu_aff, mu, alpha_aff)
 
@@ -184,7 +185,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             _check_finite(k, "corrector", form, dv, dr, dz)
             ds = JTx @ dr
             timings["solve"] += time.perf_counter() - ts
-            alpha_max = cones.max_step_pair(zj, dz.astype(jd), sj, ds.astype(jd))
+            alpha_max = max_step(dz.astype(jd), ds.astype(jd))
             alpha = min(1.0, gamma * alpha_max)
             record.update(sigma=sigma, alpha_aff=alpha_aff, alpha=alpha, gamma=gamma,
                           solve_residual=max(res_a, res), refine_steps=st_a + st)
