@@ -50,6 +50,8 @@ class Settings:
         Residuals, right-hand sides and iterates in numpy.longdouble.
     refine_max : int
         Maximum iterative-refinement steps per linear solve (0 disables refinement).
+        Refinement also stops, keeping its best iterate, once a step reduces the backward
+        error by less than 20%.
     refine_extended : bool
         Iterative-refinement residuals in numpy.longdouble.
     refine_tol : float or None
@@ -63,8 +65,10 @@ class Settings:
     adaptive_reg : bool
         When refinement of a predictor solve ends above 1e3·eps (of the refinement
         precision), factor the same matrix without δ and use that factorisation for the
-        iteration if it has the true inertia and solves better (default).  Needed on
-        problems with redundant contacts (hyperstatic piles, lattices), see
+        iteration if it has the true inertia and solves better (default).  The next
+        iteration then tries the factorisation without δ first, and goes back to δ when its
+        predictor solve refines badly.  Needed on problems with redundant contacts
+        (hyperstatic piles, lattices), see
         :meth:`rfverify.solver.kkt.KKTSystem.refactor_unregularised`.
     stall_iterations : int
         ``InsufficientProgress`` after this many consecutive iterations in which none of
