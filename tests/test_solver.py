@@ -286,6 +286,18 @@ def test_redundant_contacts_keep_the_unregularised_factorisation():
     assert res.extras["factorisations"] < res.nit + n_unreg
 
 
+@pytest.mark.parametrize("method", FORMS)
+def test_unrefined_solves_take_the_regularisation_fallback_only_where_it_exists(method):
+    # Without refinement every predictor solve ends far above the fallback threshold, so the
+    # δ fallback runs at each iteration; forms (16) and (6) have no δ to drop and must not
+    # enter it (a crash on reduced_factored before the regularisable flag).
+    problem = rfverify.load("bundled:chute")
+    res = solve(problem, method=method, refine_max=0)
+    assert res.status in (Status.SOLVED, Status.ALMOST_SOLVED), res.message
+    n_unreg = res.extras["unregularised_factorisations"]
+    assert (n_unreg > 0) if method in ("jqinv", "qp2", "reduced") else (n_unreg == 0)
+
+
 def test_always_regularising_stalls_on_redundant_contacts():
     # The mechanism behind adaptive_reg: with −δI on the dr̃ block at every iteration the
     # primal residual of the lattice cannot fall (measured: pinfeas stuck near 0.3-0.5).  If

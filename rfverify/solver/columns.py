@@ -251,13 +251,12 @@ def nt_scaling(z, s, n3):
     return out
 
 
-def quad_apply(p, det_p, sq_tail, y, n3, out=None):
+def quad_apply(p, det_p, sq_tail, y, n3):
     """Q_p y = 2(pᵀy)p − det(p) R y given det(p) per L3 cone and p² per L1 cone, unchecked:
     the caller (:class:`rfverify.solver.cones.QuadOperator`) has vetted p and det_p."""
     p0, p1, p2, _ = cols(p, n3)
     y0, y1, y2, yt = cols(y, n3)
-    if out is None:
-        out = np.empty(y.shape[0], dtype=np.result_type(p, y))
+    out = np.empty(y.shape[0], dtype=np.result_type(p, y))
     h = 2 * (p0 * y0 + p1 * y1 + p2 * y2)
     out[0:3 * n3:3] = h * p0 - det_p * y0
     out[1:3 * n3:3] = h * p1 + det_p * y1

@@ -156,7 +156,8 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             else:
                 c_aff = -cones.product(zj, sj)
             dv_a, dr_a, dz_a, res_a, st_a = solve_kkt(a, b, c_aff)
-            if settings.adaptive_reg and res_a > reg_fallback_above and system.regularised:
+            adaptive = settings.adaptive_reg and system.regularisable
+            if adaptive and res_a > reg_fallback_above and system.regularised:
                 # Refinement against the true matrix did not converge: δ is in the way.
                 if system.refactor_unregularised():
                     retry = solve_kkt(a, b, c_aff)
@@ -164,7 +165,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                         dv_a, dr_a, dz_a, res_a, st_a = retry
                     else:  # no better: back to the regularised factorisation
                         system.refactor_regularised()
-            elif settings.adaptive_reg and res_a > reg_fallback_above:
+            elif adaptive and res_a > reg_fallback_above:
                 # The factorisation without δ carried over from the last iteration solves
                 # badly now: try δ again and keep whichever solves better.
                 system.refactor_regularised()
@@ -176,7 +177,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             # Redundant contacts need the factorisation without δ for several iterations in a
             # row (measured: 7 of the 34 iterations on a 1380-contact Chute); trying it first
             # there saves a regularised factorisation and a refined solve each time.
-            system.prefer_unregularised = settings.adaptive_reg and not system.regularised
+            system.prefer_unregularised = adaptive and not system.regularised
             _check_finite(k, "predictor", form, dv_a, dr_a, dz_a)
             ds_a = JTx @ dr_a
             max_step = cones.stepper(zj, sj)  # predictor and corrector step from the same point

@@ -79,6 +79,9 @@ class KKTSystem:
 
     symmetric = True
     name = "base"
+    # Forms factored through _factor_quasidefinite, with −δ on the dr̃ diagonal that can be
+    # dropped (refactor_unregularised); the others need no δ (16) or pivot (6).
+    regularisable = False
 
     def __init__(self, M, H_t, J, cones: ProductCone, *, dtype_ref=np.longdouble, static_reg=1e-12,
                  adaptive_reg=True):
@@ -277,6 +280,7 @@ class JQinvSystem(KKTSystem):
     """Form (14): unknowns (dv, dr̃, y = Q_p dz)."""
 
     name = "jqinv"
+    regularisable = True
 
     def __init__(self, *args, **kw):
         super().__init__(*args, **kw)
@@ -302,6 +306,7 @@ class QP2System(KKTSystem):
     """Form (11): unknowns (dv, dr̃, dz); third row multiplied by Q_p: Jᵀdr̃ + Q_{p²} dz = Q_p c."""
 
     name = "qp2"
+    regularisable = True
 
     def __init__(self, *args, **kw):
         super().__init__(*args, **kw)
@@ -330,6 +335,7 @@ class ReducedSystem(KKTSystem):
     """Form (15): [[M, −H̃ᵀ], [−H̃, −G]], G = J Q_{p⁻²} Jᵀ; dz = Q_{p⁻¹}c − Q_{p⁻²}Jᵀdr̃."""
 
     name = "reduced"
+    regularisable = True
 
     def __init__(self, *args, **kw):
         super().__init__(*args, **kw)
