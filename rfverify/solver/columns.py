@@ -73,6 +73,12 @@ def _interleave(c0, c1, c2, tail, dtype):
     return out
 
 
+def _spectral(x0, x1, x2):
+    """(λ1, λ2) = x0 ± ‖x̄‖ per L3 cone, ‖x̄‖ by hypot as in :mod:`rfverify.jordan`."""
+    nb = np.hypot(x1, x2)
+    return x0 + nb, x0 - nb
+
+
 def _finite(*arrays) -> bool:
     return all(bool(np.isfinite(a).all()) for a in arrays)
 
@@ -96,8 +102,7 @@ def arrow_solve(x, y, n3):
     x0, x1, x2, xt = cols(x, n3)
     y0, y1, y2, yt = cols(y, n3)
     with np.errstate(all="ignore"):
-        nb = np.hypot(x1, x2)
-        l1, l2 = x0 + nb, x0 - nb
+        l1, l2 = _spectral(x0, x1, x2)
         if not (np.all(l1 != 0) and np.all(l2 != 0) and np.all(x0 != 0) and np.all(xt != 0)):
             return None
         d0 = ((x0 * y0 - (x1 * y1 + x2 * y2)) / l1) / l2
@@ -158,8 +163,7 @@ def step_point(x, n3):
         return None
     x0, x1, x2, xt = cols(x, n3)
     with np.errstate(all="ignore"):
-        nb = np.hypot(x1, x2)
-        l1, l2 = x0 + nb, x0 - nb
+        l1, l2 = _spectral(x0, x1, x2)
         if not (np.all(l2 > 0) and np.all(xt > 0)):
             return None
         r1, r2 = np.sqrt(l1), np.sqrt(l2)
@@ -169,8 +173,7 @@ def step_point(x, n3):
         w0 = (t / 2) / rr
         w1 = -(x1 / t) / rr
         w2 = -(x2 / t) / rr
-        nw = np.hypot(w1, w2)
-        det_w = (w0 + nw) * (w0 - nw)
+        det_w = np.multiply(*_spectral(w0, w1, w2))
     if not _finite(w0, w1, w2, det_w):
         return None
     return StepPoint(x, n3, (w0, w1, w2), det_w, xt)
@@ -179,9 +182,7 @@ def step_point(x, n3):
 def det3(p, n3):
     """det p = (p0 + ‖p̄‖)(p0 − ‖p̄‖) per L3 cone (the factored form of
     :func:`rfverify.jordan.det`), for p already vetted by :func:`moderate`."""
-    p0, p1, p2, _ = cols(p, n3)
-    nb = np.hypot(p1, p2)
-    return (p0 + nb) * (p0 - nb)
+    return np.multiply(*_spectral(*cols(p, n3)[:3]))
 
 
 def quad_blocks(p, n3):
@@ -191,8 +192,7 @@ def quad_blocks(p, n3):
     p3 = p[:3 * n3].reshape(n3, 3)
     pt = p[3 * n3:]
     with np.errstate(all="ignore"):
-        nb = np.hypot(p3[:, 1], p3[:, 2])
-        det = (p3[:, 0] + nb) * (p3[:, 0] - nb)
+        det = det3(p, n3)
         q = 2 * p3[:, :, None] * p3[:, None, :]
         q[:, 0, 0] -= det
         q[:, 1, 1] += det
@@ -215,10 +215,8 @@ def nt_scaling(z, s, n3):
     s0, s1, s2, st = cols(s, n3)
     dtype = np.result_type(z, s)
     with np.errstate(all="ignore"):
-        nz_ = np.hypot(z1, z2)
-        ns_ = np.hypot(s1, s2)
-        l1z, l2z = z0 + nz_, z0 - nz_
-        l1s, l2s = s0 + ns_, s0 - ns_
+        l1z, l2z = _spectral(z0, z1, z2)
+        l1s, l2s = _spectral(s0, s1, s2)
         if not (np.all(l2z > 0) and np.all(l2s > 0) and np.all(zt > 0) and np.all(st > 0)):
             return None
         rz = np.sqrt(l1z) * np.sqrt(l2z)
