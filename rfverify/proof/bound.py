@@ -1,0 +1,379 @@
+"""The a-posteriori error bound of DESIGN §6, evaluated rigorously.
+
+Theorem (convex relaxation, M := (M + Mᵀ)/2 ≻ 0).  For any v with u(v) = Hᵀv + w ∈ K* and
+any r ∈ K, with g = Mv − Hr − f,
+
+    ½‖v − v*‖²_M  ≤  P(v) − P*  ≤  P(v) − D(r)  =  ½ gᵀM⁻¹g + rᵀu(v),
+
+(strong convexity of P(v) = ½vᵀMv − fᵀv with modulus 1 in the M-norm, and weak duality), so
+
+    ‖v − v*‖_M ≤ ε := √(gᵀM⁻¹g + 2 rᵀu(v)).
+
+Consequences, per component (Cauchy–Schwarz in the M inner product):
+
+* |v_j − v*_j| ≤ √((M⁻¹)_jj) ε;
+* u − u* = Hᵀ(v − v*):  |u_k − u*_k| ≤ √(h_kᵀM⁻¹h_k) ε  (h_k = column k of H);
+* Hr* = Mv* − f:  Hr − Hr* = −g + M(v − v*), so |(Hr − Hr*)_i| ≤ |g_i| + √(M_ii) ε;
+* r* is unique on the contacts that can carry load when H restricted to their (kept) columns
+  has full column rank: if u* is proven to lie in the interior of K*_i, then r*_i = 0 for
+  every solution; on the others (set S), ‖r_S − r*_S‖₂ ≤ ‖H_S r_S − Hr*‖₂ / σmin(H_S).
+
+A *point* (v_p, r_p) — an extended-precision interior-point iterate — is evaluated **exactly**
+(dyadic rationals, :mod:`.dyadic`): cone membership by comparing squares, g, rᵀu; the
+norms of M⁻¹ come from :mod:`.massbounds` (verified floating point).  The triangle inequality
+then carries the bound to the returned double solution (v, u, r):
+|v_j − v*_j| ≤ |v_j − v_p,j| + √((M⁻¹)_jj) ε, and likewise for u, Hr and r.  Every float
+that enters a bound is rounded upwards (``np.nextafter`` after each operation, or the
+a-priori factors of :mod:`.massbounds`).
+
+Digits.  For each quantity x the certificate states the proven absolute bound
+‖x − x*‖∞ ≤ e, a rigorous lower bound s of ‖x*‖∞ (‖x‖∞ − e), and digits = −log10(e / s), a
+lower bound on the correct significant digits relative to ‖x*‖∞.  When s ≤ e (x* = 0: all
+contacts sticking give u* = 0 and often v* = 0; all contacts open give r* = 0) no relative
+digits exist; the absolute bound is reported against a stated *data scale* (‖M⁻¹f‖∞ for v,
+‖Hᵀ M⁻¹f + w‖∞ for u, ‖f‖∞ for Hr, ‖f‖∞ / max_k ‖h_k‖₂ for r), and x is certified to k
+digits in that sense when ‖x‖∞ + e ≤ 10⁻ᵏ·scale (x* is zero at the requested accuracy) and
+e ≤ 10⁻ᵏ·scale.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..problem import SPACEDIM, Problem
+from .dyadic import Dyadic, DyadicCSR, fraction_upper_float, sqrt_upper
+from .massbounds import MassBounds, gamma, inflate, upper_sum, verify_lambda_min_sparse, verify_mass_matrix
+
+FLOAT64_DIGITS = 53 * math.log10(2)  # ≈ 15.95: what a float64 can carry relative to its norm
+MAX_CERTIFIABLE_DIGITS = 15
+QUANTITIES = ("v", "u", "Hr", "r")
+DATA_SCALE_NAMES = {"v": "‖M⁻¹f‖∞", "u": "‖HᵀM⁻¹f + w‖∞", "Hr": "‖f‖∞", "r": "‖f‖∞ / max_k ‖h_k‖₂"}
+
+
+def _up(x):
+    return np.nextafter(np.asarray(x, dtype=np.float64), np.inf)
+
+
+def _down(x):
+    return np.nextafter(np.asarray(x, dtype=np.float64), -np.inf)
+
+
+@dataclass
+class QuantityBound:
+    """Proven error of one returned quantity (``v``, ``u``, ``Hr`` or ``r``).
+
+    ``abs_bound`` ≥ ‖x − x*‖∞ (rigorous); ``norm`` = ‖x‖∞ of the returned vector;
+    ``own_scale`` ≤ ‖x*‖∞ (rigorous, 0 when unknown); ``digits`` = −log10(abs_bound/own_scale)
+    (None when own_scale ≤ abs_bound), capped at what float64 carries; ``mode`` is
+    ``"relative"`` (digits against ‖x*‖∞), ``"absolute"`` (x* is zero at the requested
+    accuracy: judged against ``data_scale``) or ``"information"`` (r where it is not unique).
+    """
+
+    name: str
+    abs_bound: float
+    norm: float
+    own_scale: float
+    data_scale: float
+    data_scale_name: str
+    digits: float | None
+    mode: str
+    certified: bool
+    note: str = ""
+
+    def describe(self) -> str:
+        if self.mode == "information":
+            return f"{self.name}: not unique ({self.note}); error bound not available"
+        if self.mode == "absolute":
+            return (f"{self.name}: |error| ≤ {self.abs_bound:.2e} absolute ({self.name}* is zero at this "
+                    f"accuracy: ‖{self.name}‖∞ = {self.norm:.2e}; data scale {self.data_scale_name} = "
+                    f"{self.data_scale:.2e})")
+        d = "no relative digits" if self.digits is None else f"{self.digits:.1f} digits"
+        return f"{self.name}: {d} (|error| ≤ {self.abs_bound:.2e}, ‖{self.name}*‖∞ ≥ {self.own_scale:.2e})"
+
+    def as_dict(self) -> dict:
+        return {"abs_bound": self.abs_bound, "norm": self.norm, "own_scale": self.own_scale,
+                "data_scale": self.data_scale, "data_scale_name": self.data_scale_name,
+                "digits": self.digits, "mode": self.mode, "certified": self.certified, "note": self.note}
+
+
+@dataclass
+class Proof:
+    """Outcome of :func:`prove`.  ``valid`` is False when a hypothesis of the theorem could not
+    be verified (point outside a cone, M not proven positive definite); then ``failure`` says
+    which and no quantity is certified.  ``eps_M`` ≥ ‖v_p − v*‖_M; ``terms`` keeps every
+    intermediate norm (for the certificate file)."""
+
+    valid: bool
+    requested: int
+    eps_M: float
+    quantities: dict
+    terms: dict
+    failure: str = ""
+    seconds: float = 0.0
+    arithmetic: str = ("exact dyadic rationals (Python integers) for the point's residuals; "
+                       "verified float64 with a-priori rounding-error bounds for M and H norms")
+
+    @property
+    def certified(self) -> bool:
+        return self.valid and all(q.certified for q in self.quantities.values() if q.mode != "information")
+
+    def weakest(self) -> str | None:
+        bad = [q for q in self.quantities.values() if q.mode != "information" and not q.certified]
+        return bad[0].name if bad else None
+
+    def summary(self) -> str:
+        if not self.valid:
+            return f"no proof: {self.failure}"
+        parts = []
+        for q in self.quantities.values():
+            if q.mode == "information":
+                parts.append(f"{q.name} not unique")
+            elif q.mode == "absolute":
+                parts.append(f"{q.name} ≈ 0, |err| ≤ {q.abs_bound:.1e}")
+            else:
+                parts.append(f"{q.name} {q.digits:.1f}" if q.digits is not None else f"{q.name} –")
+        return ", ".join(parts)
+
+
+class ExactData:
+    """The problem data as exact dyadic matrices/vectors, built once per problem."""
+
+    def __init__(self, problem: Problem):
+        self.problem = problem
+        self.H = DyadicCSR.from_scipy(problem.H)
+        self.HT = self.H.transpose()
+        self.M = DyadicCSR.from_scipy(problem.M)
+        self.MT = self.M.transpose()
+        self.f = Dyadic.from_float(problem.f)
+        self.w = Dyadic.from_float(problem.w)
+        self.mu = Dyadic.from_float(problem.mu)
+        self.mu_r = Dyadic.from_float(problem.mu_r)
+
+    def M_sym_apply(self, v: Dyadic) -> Dyadic:
+        """(M + Mᵀ)/2 · v exactly."""
+        return (self.M.matvec(v) + self.MT.matvec(v)).scale2(-1)
+
+
+def cone_violations(data: ExactData, u: Dyadic, r: Dyadic):
+    """Exact membership tests: indices of contacts with u_i ∉ K*_i and with r_i ∉ K_i."""
+    n = data.problem.n_contacts
+    idx = np.arange(n) * SPACEDIM
+    uN, uT1, uT2, uR1, uR2 = (u[idx + k] for k in range(SPACEDIM))
+    rN, rT1, rT2, rR1, rR2 = (r[idx + k] for k in range(SPACEDIM))
+    mu2, mur2 = data.mu.square(), data.mu_r.square()
+    # K: r_N ≥ 0, ‖r_T‖² ≤ μ² r_N², ‖r_R‖² ≤ μr² r_N² (μ = 0 forces r_T = 0 exactly).
+    rN2 = rN.square()
+    k_bad = (rN.sign() < 0) | ((mu2 * rN2 - (rT1.square() + rT2.square())).sign() < 0) \
+        | ((mur2 * rN2 - (rR1.square() + rR2.square())).sign() < 0)
+    # K*: u_N ≥ μ‖u_T‖ + μr‖u_R‖  ⟺  u_N ≥ 0, c = u_N² − a − b ≥ 0 and c² ≥ 4ab,
+    # with a = μ²‖u_T‖², b = μr²‖u_R‖² (squares only, exact).
+    a = mu2 * (uT1.square() + uT2.square())
+    b = mur2 * (uR1.square() + uR2.square())
+    c = uN.square() - a - b
+    ks_bad = (uN.sign() < 0) | (c.sign() < 0) | ((c.square() - (a * b).scale2(2)).sign() < 0)
+    return np.flatnonzero(ks_bad), np.flatnonzero(k_bad)
+
+
+def data_scales(problem: Problem) -> dict:
+    """Non-vanishing data scales, float64 (stated with the certificate; not part of a bound)."""
+    from scipy.sparse.linalg import splu
+
+    try:
+        v_free = splu(problem.M_sym.tocsc()).solve(problem.f)
+    except RuntimeError:
+        v_free = np.zeros(problem.n_dofs)
+    u_free = problem.H.T @ v_free + problem.w
+    col_norm = np.sqrt(np.asarray(problem.H.power(2).sum(axis=0)).ravel())
+    f_inf = float(np.max(np.abs(problem.f), initial=0.0))
+    # The scales are only compared with bounds, so a relative inaccuracy of 1e-12 is removed.
+    shrink = 1 - 1e-10
+    return {"v": float(np.max(np.abs(v_free), initial=0.0)) * shrink,
+            "u": float(np.max(np.abs(u_free), initial=0.0)) * shrink,
+            "Hr": f_inf,
+            "r": (f_inf / float(col_norm.max(initial=0.0)) * shrink) if col_norm.max(initial=0.0) > 0 else 0.0}
+
+
+def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, requested: int = 10,
+          mass: MassBounds | None = None, exact: ExactData | None = None,
+          scales: dict | None = None, w_diag: np.ndarray | None = None) -> Proof:
+    """Evaluate the bound for the point (point_v, point_r) and carry it to the returned float64
+    solution (v (m,), u (5n,), r (5n,)).  Reusable pieces (``mass``, ``exact``, ``scales``,
+    ``w_diag``) can be passed in when proving several points of one problem."""
+    t0 = time.perf_counter()
+    requested = validate_digits(requested)
+    m, n = problem.n_dofs, problem.n_contacts
+    v, u, r = (np.asarray(x, dtype=np.float64).ravel() for x in (v, u, r))
+    for name, arr, size in (("v", v, m), ("u", u, SPACEDIM * n), ("r", r, SPACEDIM * n)):
+        if arr.size != size:
+            from ..errors import InvalidProblemError
+
+            raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {size}",
+                                      fix="certify a solution of this problem")
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
+        return _invalid(requested, "the solution contains NaN or Inf", t0)
+    exact = exact or ExactData(problem)
+    mass = mass or verify_mass_matrix(problem.M, problem.M_sym)
+    scales = scales or data_scales(problem)
+    if not mass.proven:
+        fb = mass.failures[0]
+        return _invalid(requested, f"M = (M + Mᵀ)/2 is not proven positive definite: block {fb.block} "
+                                   f"(dofs {fb.dofs[:6].tolist()}{'…' if fb.dofs.size > 6 else ''}): {fb.reason}", t0)
+    if len(point_v) != m or len(point_r) != SPACEDIM * n:
+        raise ValueError("the point does not match the problem's sizes")
+
+    # ---- exact residuals of the point
+    u_p = exact.HT.matvec(point_v) + exact.w
+    bad_dual, bad_primal = cone_violations(exact, u_p, point_r)
+    if bad_dual.size or bad_primal.size:
+        what = []
+        if bad_dual.size:
+            what.append(f"u(v) = Hᵀv + w ∉ K* at {bad_dual.size} contact(s), first {int(bad_dual[0])}")
+        if bad_primal.size:
+            what.append(f"r ∉ K at {bad_primal.size} contact(s), first {int(bad_primal[0])}")
+        return _invalid(requested, "the extended-precision point is not in the cones (" + "; ".join(what) + ")", t0)
+    Hr_p = exact.H.matvec(point_r)
+    g = exact.M_sym_apply(point_v) - Hr_p - exact.f
+    gap = point_r.dot(u_p)  # ≥ 0: a sum of products of cone-dual pairs
+    # gᵀM⁻¹g ≤ Σ_b ‖g_b‖² / λ_b
+    g_sq = g.square()
+    order = np.argsort(mass.labels, kind="stable")
+    nb = mass.lam_lower.size
+    counts = np.bincount(mass.labels, minlength=nb)
+    starts = np.concatenate(([0], np.cumsum(counts)))[:-1]
+    per_block = g_sq[order].segment_sums(starts, starts + counts).abs_upper()
+    q_g = float(_up(math.fsum(_up(per_block / mass.lam_lower).tolist())))
+    gap_up = fraction_upper_float(gap)
+    eps2 = float(_up(q_g + float(_up(2.0 * gap_up))))
+    eps = float(_up(math.sqrt(eps2)))
+
+    # ---- carry to the returned solution
+    vd = Dyadic.from_float(v)
+    e_v = upper_sum((vd - point_v).abs_upper(), _up(_up(np.sqrt(mass.minv_diag_upper)) * eps))
+    if w_diag is None:
+        w_diag = mass.quad_upper_columns(problem.H)
+    sqrtW = _up(np.sqrt(w_diag))
+    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up(sqrtW * eps))
+    Hr_ret = exact.H.matvec(Dyadic.from_float(r))
+    g_abs = g.abs_upper()
+    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up(_up(np.sqrt(mass.m_diag_upper)) * eps))
+
+    terms = {"eps_M": eps, "gap_rTu": gap_up, "gMinvg_upper": q_g, "g_inf": float(np.max(g_abs, initial=0.0)),
+             "lam_min_M_lower": float(np.nanmin(mass.lam_lower)), "lam_max_M_upper": mass.lam_max_upper,
+             "max_sqrt_Minv_jj": float(np.max(np.sqrt(mass.minv_diag_upper), initial=0.0)),
+             "max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)),
+             "M_blocks_dense": mass.dense_blocks, "M_blocks_sparse": mass.sparse_blocks}
+    q = {}
+    q["v"] = _quantity("v", e_v, v, scales, requested)
+    q["u"] = _quantity("u", e_u, u, scales, requested)
+    Hr_float = Hr_ret.nearest()
+    q["Hr"] = _quantity("Hr", e_Hr, Hr_float, scales, requested)
+
+    # ---- r, where it is unique
+    e_r, r_note, r_terms = _r_bound(problem, exact, mass, u_p, sqrtW * eps, point_r, Hr_p, g, eps, r)
+    terms.update(r_terms)
+    if e_r is None:
+        q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
+                               DATA_SCALE_NAMES["r"], None, "information", False, r_note)
+    else:
+        q["r"] = _quantity("r", e_r, r, scales, requested, note=r_note)
+    return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0)
+
+
+def validate_digits(digits) -> int:
+    """Requested digits must be an integer in [1, 15]: a float64 carries at most 15.95."""
+    from ..errors import InvalidArgumentError
+
+    if isinstance(digits, bool) or not isinstance(digits, (int, np.integer)):
+        if isinstance(digits, float) and digits.is_integer():
+            digits = int(digits)
+        else:
+            raise InvalidArgumentError("digits", f"must be an integer, got {digits!r}",
+                                       fix=f"ask for 1 … {MAX_CERTIFIABLE_DIGITS} digits, e.g. digits=10")
+    digits = int(digits)
+    if not 1 <= digits <= MAX_CERTIFIABLE_DIGITS:
+        raise InvalidArgumentError("digits", f"is {digits}; a float64 solution carries at most "
+                                             f"{FLOAT64_DIGITS:.2f} significant digits",
+                                   fix=f"ask for 1 … {MAX_CERTIFIABLE_DIGITS} digits")
+    return digits
+
+
+def _invalid(requested, why, t0) -> Proof:
+    return Proof(False, requested, math.inf, {}, {}, failure=why, seconds=time.perf_counter() - t0)
+
+
+def _quantity(name, e, x, scales, requested, note="") -> QuantityBound:
+    e_inf = float(np.max(e, initial=0.0))
+    norm = float(np.max(np.abs(x), initial=0.0))
+    own = max(float(_down(norm - e_inf)), 0.0) if math.isfinite(e_inf) else 0.0
+    data = scales[name]
+    digits = None
+    if own > e_inf and e_inf >= 0:
+        digits = min(FLOAT64_DIGITS, -math.log10(e_inf / own)) if e_inf > 0 else FLOAT64_DIGITS
+    tol = 10.0 ** (-requested)
+    if digits is not None and digits >= requested:
+        return QuantityBound(name, e_inf, norm, own, data, DATA_SCALE_NAMES[name], digits, "relative", True, note)
+    # x* may be zero: judge absolutely against the data scale when it is negligible there.
+    if data > 0 and float(_up(norm + e_inf)) <= tol * data and e_inf <= tol * data:
+        return QuantityBound(name, e_inf, norm, own, data, DATA_SCALE_NAMES[name], digits, "absolute", True,
+                             note or f"‖{name}*‖∞ ≤ {float(_up(norm + e_inf)):.2e} ≤ 1e-{requested}·{DATA_SCALE_NAMES[name]}")
+    return QuantityBound(name, e_inf, norm, own, data, DATA_SCALE_NAMES[name], digits, "relative", False, note)
+
+
+def _r_bound(problem, exact, mass, u_p: Dyadic, u_radius, point_r, Hr_p, g, eps, r):
+    """Per-component bound on r − r* when r* is unique on the loaded contacts, else None."""
+    n = problem.n_contacts
+    mu, mur = problem.mu, problem.mu_r
+    lo, hi = u_p.lower(), u_p.upper()
+    uc_lo, uc_hi = lo.reshape(n, SPACEDIM), hi.reshape(n, SPACEDIM)
+    rad = np.asarray(u_radius).reshape(n, SPACEDIM)
+    # u* ∈ int K*_i is proven when the whole box u_p ± radius is inside: a sufficient test in
+    # float64 with every rounding pushed against it.
+    mag_hi = _up(np.maximum(np.abs(uc_lo), np.abs(uc_hi)) + rad)
+    nT = _up(np.hypot(mag_hi[:, 1], mag_hi[:, 2]))
+    nR = _up(np.hypot(mag_hi[:, 3], mag_hi[:, 4]))
+    rhs = inflate(mu * nT + mur * nR, 6)
+    lhs = _down(_down(uc_lo[:, 0] - rad[:, 0]) * (1 - 4 * 2.0 ** -53))
+    open_ = lhs > rhs
+    S = np.flatnonzero(~open_)
+    terms = {"contacts_proven_open": int(open_.sum()), "contacts_possibly_loaded": int(S.size)}
+    kept = [np.zeros(S.size, dtype=bool) + True, mu[S] > 0, mu[S] > 0, mur[S] > 0, mur[S] > 0]
+    cols = np.concatenate([SPACEDIM * S[kept[k]] + k for k in range(SPACEDIM)]) if S.size else np.zeros(0, dtype=np.int64)
+    cols = np.sort(cols)
+    m = problem.n_dofs
+    if cols.size > m:
+        return None, (f"H has {cols.size} columns on the {S.size} possibly loaded contacts and only {m} rows: "
+                      "r is not unique (hyperstatic), Hr is"), terms
+    lam = math.inf
+    if cols.size:
+        HS = problem.H[:, cols].tocsc()
+        A = (HS.T @ HS).tocsc()
+        absHS = abs(HS)
+        kmax = int(np.max(np.diff(HS.indptr), initial=1))
+        A_err = (absHS.T @ absHS) * gamma(kmax + 2)
+        lam, why = verify_lambda_min_sparse(A, A_err)
+        terms["sigma_min_HS_sq_lower"] = lam
+        if why:
+            return None, (f"full column rank of H on the {S.size} possibly loaded contacts not proven ({why}): "
+                          "r may not be unique, Hr is"), terms
+    # ‖H_S r_S − Hr*‖₂ ≤ ‖H_S r_S − H r_p‖₂ + ‖g‖₂ + √λmax(M) ε
+    r_S = np.zeros_like(r)
+    r_S[cols] = r[cols]
+    d = exact.H.matvec(Dyadic.from_float(r_S)) - Hr_p
+    dist = sqrt_upper(d.square().total())
+    gnorm = sqrt_upper(g.square().total())
+    total = float(_up(_up(dist + gnorm) + _up(math.sqrt(mass.lam_max_upper)) * eps))
+    total = float(_up(total + float(_up(math.sqrt(mass.lam_max_upper) * 4 * 2.0 ** -53 * eps))))
+    e = np.abs(r).astype(np.float64)  # off S (and dropped components): r* = 0 there
+    if cols.size:
+        e_S = float(_up(total / float(_down(math.sqrt(lam) * (1 - 4 * 2.0 ** -53)))))
+        e[cols] = e_S
+    terms["r_residual_2norm"] = total
+    note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), H of full column rank on the other "
+            f"{S.size}")
+    return e, note, terms
