@@ -11,11 +11,14 @@ Public API (this release):
   lockstep double/reference run.
 - :mod:`rfverify.jordan` — Jordan algebra of Lorentz cones, vectorised, float64/longdouble.
 - Errors: :class:`RfverifyError`, :class:`InvalidProblemError`, :class:`ProblemFileError`,
-  :class:`ConeDomainError`.
+  :class:`InvalidArgumentError`, :class:`OutputPathError`, :class:`ConeDomainError`.
 """
 
+import functools as _functools
+
 from .check import SolutionCheck, check_solution
-from .errors import ConeDomainError, InvalidProblemError, ProblemFileError, RfverifyError
+from .errors import (ConeDomainError, InvalidArgumentError, InvalidProblemError, OutputPathError,
+                     ProblemFileError, RfverifyError)
 from .io import bundled_problems, load, save
 from .problem import Problem, StoredSolution
 from .certification import Certificate, certify
@@ -24,11 +27,60 @@ from .refine import RefinedSolution, solve_to_digits
 from .solver import SolveResult, Settings, Status, solve
 
 
+def _checked(func, *, tol=False):
+    """``func`` with its ``problem`` (and ``tol``, ``max_iter``, ``method``) arguments checked
+    first, so that wrong types raise InvalidArgumentError (an RfverifyError naming the fix)
+    instead of a TypeError/AttributeError from deep inside."""
+    import inspect
+
+    from .errors import require_positive_int, require_positive_number, require_problem
+
+    signature = inspect.signature(func)
+
+    @_functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            given = signature.bind(*args, **kwargs).arguments
+        except TypeError as exc:
+            raise InvalidArgumentError(func.__name__, str(exc),
+                                       fix=f"see help(rfverify.{func.__name__})") from None
+        require_problem(given.get("problem"))
+        if tol and "tol" in given:
+            require_positive_number(given["tol"], "tol")
+        if tol and "max_iter" in given:
+            require_positive_int(given["max_iter"], "max_iter")
+        if tol and given.get("options"):
+            from .solver import Settings as _Settings
+
+            unknown = sorted(set(given["options"]) - set(_Settings.names()) - {"keep_iterates"})
+            if unknown:
+                raise InvalidArgumentError(", ".join(unknown), "unknown solver option(s)",
+                                           fix=f"use fields of rfverify.Settings: {', '.join(_Settings.names())}")
+        method = given.get("method")
+        if tol and method is not None:
+            from .solver.result import METHODS
+
+            if not isinstance(method, str) or method not in METHODS:
+                raise InvalidArgumentError("method", f"{method!r} is not one of {', '.join(METHODS)}",
+                                           fix="pass method='jqinv' (the default) or another listed form")
+        return func(*args, **kwargs)
+
+    return wrapper
+
+
+solve = _checked(solve, tol=True)
+diagnose = _checked(diagnose, tol=True)
+solve_to_digits = _checked(solve_to_digits, tol=True)
+certify = _checked(certify)
+check_solution = _checked(check_solution)
+
+
 __version__ = "0.1.0"
 
 __all__ = [
     "Problem", "StoredSolution", "load", "save", "bundled_problems", "check_solution",
     "SolutionCheck", "RfverifyError", "InvalidProblemError", "ProblemFileError",
+    "InvalidArgumentError", "OutputPathError",
     "ConeDomainError", "__version__", "solve", "SolveResult", "Settings", "Status", "certify",
     "solve_to_digits", "RefinedSolution", "diagnose", "Certificate",
 ]

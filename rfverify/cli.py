@@ -12,6 +12,7 @@ import json
 import math
 import os
 import sys
+import warnings
 
 import numpy as np
 
@@ -61,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     info.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     _add_load_options(info)
-    info.add_argument("--solution-tol", type=_positive_float, default=1e-6, metavar="TOL",
+    info.add_argument("--solution-tol", type=_tolerance, default=1e-6, metavar="TOL",
                       help="relative residual up to which a stored solution is called "
                            "consistent (default: %(default)g)")
     info.set_defaults(func=cmd_info)
@@ -78,12 +79,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="linear-system form: jqinv (14), qp2 (11), reduced (15), "
                           "reduced_factored (16), noscaling (6), or clarabel, the same problem "
                           "handed to Clarabel (default: %(default)s)")
-    sol.add_argument("--tol", type=_positive_float, default=1e-10, metavar="T",
+    sol.add_argument("--tol", type=_tolerance, default=1e-10, metavar="T",
                      help="stop when max(pinfeas, dinfeas, mu) <= T (default: %(default)g)")
     sol.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",
                      help="iteration limit (default: %(default)s)")
-    sol.add_argument("--out", metavar="SOL.h5",
-                     help="write the problem data plus /solution/{v,u,r} (FCLIB layout) here")
+    sol.add_argument("--out", metavar="SOL.h5", type=_out_path,
+                     help="write the problem data plus /solution/{v,u,r} (FCLIB layout) here; "
+                          "naming the input .hdf5 file itself replaces only its /solution and "
+                          "keeps everything else in it")
     sol.add_argument("--json", action="store_true",
                      help="print status, iterations, time and final residuals as JSON")
     sol.add_argument("--verbose", action="store_true",
@@ -117,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     cert.add_argument("--always-reference", action="store_true",
                       help="run the reference even when the cheap residual check already fails")
     cert.add_argument("--json", action="store_true", help="print the certificate as JSON")
-    cert.add_argument("--out", metavar="CERT.h5",
+    cert.add_argument("--out", metavar="CERT.h5", type=_out_path,
                       help="write the problem, the given solution and the reference solution at "
                            "full precision (decimal strings under /reference) to this file")
     _add_load_options(cert)
@@ -134,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     diag.add_argument("--method", choices=[m for m in METHODS if m != "clarabel"], default="jqinv",
                       help="linear-system form of the double run (default: %(default)s)")
-    diag.add_argument("--tol", type=_positive_float, default=1e-10, metavar="T",
+    diag.add_argument("--tol", type=_tolerance, default=1e-10, metavar="T",
                       help="tolerance of the double run; set it below what double precision "
                            "reaches (e.g. 1e-25) to watch it fail (default: %(default)g)")
     diag.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",
@@ -176,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="Moreau-Jean steps per stage; the last is dumped (default: %(default)s)")
     gen.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                      help="override a numeric scene parameter (repeatable; see --list)")
-    gen.add_argument("--out", metavar="DIR",
+    gen.add_argument("--out", metavar="DIR", type=_out_path,
                      help="directory for the HDF5 files (created if missing); required "
                           "unless --list")
     gen.add_argument("--quiet", action="store_true",
@@ -220,6 +223,22 @@ def _positive_float(text: str) -> float:
     if not val > 0:
         raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
     return val
+
+
+def _tolerance(text: str) -> float:
+    """A tolerance: a finite number > 0 (inf would stop at once and call anything solved)."""
+    val = _positive_float(text)
+    if math.isinf(val):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number > 0, e.g. 1e-10")
+    return val
+
+
+def _out_path(text: str) -> str:
+    """An output path: not empty (an empty --out would silently write nothing)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path writes nothing; give a file name or "
+                                         "leave the option out")
+    return text
 
 
 def _positive_int(text: str) -> int:
@@ -354,7 +373,7 @@ def cmd_info(args) -> int:
     problem = _load(args)
     summary = problem_summary(problem, solution_tol=args.solution_tol)
     if args.json:
-        print(json.dumps(summary, indent=2, default=_json_default, allow_nan=True))
+        print(_dumps(summary, indent=2))
     else:
         print(_format_info(summary))
     return EXIT_OK
@@ -366,6 +385,14 @@ def _json_default(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def _dumps(obj, **kwargs) -> str:
+    """Strict JSON (non-finite numbers as null): what every --json output prints."""
+    from .io.output import dumps
+
+    return dumps(obj, **kwargs)
+
 
 
 # ---------------------------------------------------------------------- solve
@@ -409,9 +436,7 @@ def _table(trace) -> str:
 def cmd_solve(args) -> int:
     import time
 
-    from .io import save
     from .lifting import lift
-    from .problem import StoredSolution
     from .solver import solve
 
     problem = _load(args)
@@ -435,7 +460,7 @@ def cmd_solve(args) -> int:
             print(_table(result.trace))
         print("-" * 78)
     if args.out:
-        save(problem.with_solution(StoredSolution(v=result.v, u=result.u, r=result.r)), args.out)
+        _write_solution_file(args, problem, result.v, result.u, result.r)
     summary = {
         "status": str(result.status), "success": result.success, "message": result.message,
         "method": result.method, "iterations": result.nit, "time": wall, "tol": args.tol,
@@ -443,7 +468,7 @@ def cmd_solve(args) -> int:
         "presolve": result.presolve, "out": args.out,
     }
     if args.json:
-        print(json.dumps(summary, indent=2, default=_json_default))
+        print(_dumps(summary, indent=2))
     else:
         print(f"status {result.status}: {result.message}")
         print(f"iterations {result.nit}, time {wall:.3f} s; pinfeas {result.pinfeas:.2e}, "
@@ -470,14 +495,14 @@ def _solve_digits(args, problem, options) -> int:
                           max_iter=args.max_iter, **options)
     wall = time.perf_counter() - t0
     if args.out:
-        save(problem.with_solution(StoredSolution(v=out.v, u=out.u, r=out.r)), args.out)
+        _write_solution_file(args, problem, out.v, out.u, out.r)
     summary = {"status": "Certified" if out.success else "NotCertified",
                "success": out.success, "digits_requested": args.digits,
                "certificate": out.certificate.as_dict(), "double_status": str(out.double.status),
                "double_iterations": out.double.nit, "warm_iterations": out.warm.nit,
                "warm_status": out.warm.status, "time": wall, "out": args.out}
     if args.json:
-        print(json.dumps(summary, indent=2, default=_json_default))
+        print(_dumps(summary, indent=2))
     else:
         print(f"double solve: {out.double.status} in {out.double.nit} iterations; "
               f"warm high-precision iterations: {out.warm.nit} ({out.warm.status})")
@@ -493,7 +518,7 @@ def cmd_diagnose(args) -> int:
     problem = _load(args)
     d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps)
     if args.json:
-        print(json.dumps(d, indent=2, default=_json_default))
+        print(_dumps(d, indent=2))
         return EXIT_OK
     print(f"double run ({d['method']}): {d['status']} after {d['nit']} iterations: {d['message']}")
     head = (f"{'iter':>4} {'mu':>9} {'digits v':>8} {'r~':>5} {'z':>5} {'cond(Qp)':>9} "
@@ -534,7 +559,7 @@ def cmd_certify(args) -> int:
     if args.out:
         _write_certificate(problem, sol, u, cert, args.out)
     if args.json:
-        print(json.dumps(cert.as_dict(), indent=2, default=_json_default))
+        print(_dumps(cert.as_dict(), indent=2))
     else:
         print(cert.verdict)
         print("residuals (high precision): " + ", ".join(f"{k} {v:.2e}" for k, v in cert.residuals.items()))
@@ -623,9 +648,9 @@ def cmd_generate(args) -> int:
                   f"({', '.join(s['status'] for s in pv['solves'])}); advanced with the best "
                   "iterate (recorded in info/description)", file=sys.stderr)
     if args.json:
-        print(json.dumps({"scene": args.scene, "seed": args.seed, "count": args.count,
-                          "size": problems[0].provenance["size"], "time": wall, "files": files},
-                         indent=2))
+        print(_dumps({"scene": args.scene, "seed": args.seed, "count": args.count,
+                     "size": problems[0].provenance["size"], "time": wall, "files": files},
+                    indent=2))
     else:
         for f in files:
             print(f"{f['path']}  m = {f['m']}, n = {f['n']}")
@@ -633,13 +658,79 @@ def cmd_generate(args) -> int:
     return EXIT_OK
 
 
+# ---------------------------------------------------------------------- output files
+def _is_hdf5_input(spec) -> bool:
+    from .io import resolve_path
+
+    try:
+        with open(resolve_path(spec), "rb") as fh:
+            return fh.read(8) == b"\x89HDF\r\n\x1a\n"
+    except (OSError, RfverifyError):
+        return False
+
+
+def _check_outputs(args) -> None:
+    """Refuse an unusable output path before any work (README, "Guarantees")."""
+    from .io.output import check_output_dir, check_output_file
+
+    out = getattr(args, "out", None)
+    if out is None:
+        return
+    if args.command == "solve":
+        # FCLIB keeps /solution beside the problem: writing it into the input .hdf5 is allowed.
+        args.out_target = check_output_file(out, inputs=[args.problem],
+                                            in_place_ok=_is_hdf5_input(args.problem))
+    elif args.command == "certify":
+        args.out_target = check_output_file(out, inputs=[args.problem, args.solution])
+    elif args.command == "generate" and not args.list:
+        check_output_dir(out)
+    elif args.command == "bench":
+        check_output_dir(out)
+
+
+def _write_solution_file(args, problem, v, u, r) -> None:
+    """``solve --out``: the problem plus /solution, or only /solution written into the input
+    .hdf5 file itself when --out names it (everything else in that file is kept)."""
+    from .io import save, write_solution_in_place
+    from .io.output import check_output_file
+    from .problem import StoredSolution
+
+    target = getattr(args, "out_target", None) or check_output_file(
+        args.out, inputs=[args.problem], in_place_ok=_is_hdf5_input(args.problem))
+    solution = StoredSolution(v=v, u=u, r=r)
+    if target.in_place:
+        write_solution_in_place(target, problem.with_solution(solution).solution)
+    else:
+        save(problem.with_solution(solution), target)
+
+
 # ---------------------------------------------------------------------- entry point
+EXIT_BROKEN_PIPE = 141
+"""Exit code when stdout is closed early (``rfverify info ... | head -1``): 128 + SIGPIPE, what
+a shell reports for a program killed by the signal."""
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        with warnings.catch_warnings(record=True) as caught:
+            # numpy/matplotlib warnings are not for the user's terminal: they are recorded and
+            # shown only with RFVERIFY_DEBUG (commands turn the ones that matter into messages).
+            warnings.simplefilter("always")
+            _check_outputs(args)
+            code = args.func(args)
+            sys.stdout.flush()
+        if os.environ.get("RFVERIFY_DEBUG"):
+            for w in caught:
+                print(f"rfverify {args.command}: debug: {w.category.__name__}: {w.message} "
+                      f"({w.filename}:{w.lineno})", file=sys.stderr)
+        return code
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
     except RfverifyError as exc:
+        exc = _with_problem_file(exc, args)
         print(f"rfverify {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
@@ -651,6 +742,27 @@ def main(argv=None) -> int:
         print(f"rfverify {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
               "(please report; set RFVERIFY_DEBUG=1 for a traceback)", file=sys.stderr)
         return EXIT_INTERNAL
+
+
+def _silence_stdout() -> None:
+    """After EPIPE: point stdout at /dev/null so the interpreter's final flush stays quiet."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (e.g. captured in tests)
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    os.close(devnull)
+
+
+def _with_problem_file(exc, args):
+    """A data error raised after loading names the PROBLEM file it is about."""
+    from .errors import InvalidProblemError
+
+    spec = getattr(args, "problem", None)
+    if isinstance(exc, InvalidProblemError) and exc.path is None and spec:
+        return exc.with_path(spec)
+    return exc
 
 
 def _one_line(exc) -> str:

@@ -1,15 +1,27 @@
 """Exception hierarchy of rfverify.
 
 Every error the library raises on purpose derives from :class:`RfverifyError`, so a caller
-(and the CLI) can tell a diagnosed problem from a bug.  Each message names *what* is wrong
-(the field, index or operation), *why*, and *how to fix it*.
+(and the CLI) can tell a diagnosed problem from a bug.  Each message names *where* (the file,
+when there is one), *what* is wrong (the field, index, option or operation) and *how to fix
+it*, in the order ``<file>: <field>: <what>; fix: <what to do>``.
 """
 
 from __future__ import annotations
 
+import math
+import numbers
+
 
 class RfverifyError(Exception):
     """Base class of all errors raised deliberately by rfverify."""
+
+
+def _compose(path, where, problem, fix) -> str:
+    parts = [str(p) for p in (path, where) if p not in (None, "")]
+    msg = ": ".join(parts + [problem])
+    if fix:
+        msg += f"; fix: {fix}"
+    return msg
 
 
 class InvalidProblemError(RfverifyError, ValueError):
@@ -25,31 +37,68 @@ class InvalidProblemError(RfverifyError, ValueError):
         description), when there is one.
     fix : str
         What the user can do about it.
+    path : str or None
+        File the data came from, when known (set by :func:`rfverify.load`).
     """
 
-    def __init__(self, field: str, problem: str, *, index=None, fix: str = ""):
+    def __init__(self, field: str, problem: str, *, index=None, fix: str = "", path=None):
         self.field = field
         self.index = index
         self.problem = problem
         self.fix = fix
+        self.path = None if path is None else str(path)
         where = f"{field}" if index is None else f"{field}[{_fmt_index(index)}]"
-        msg = f"{where}: {problem}"
-        if fix:
-            msg += f"; fix: {fix}"
-        super().__init__(msg)
+        super().__init__(_compose(self.path, where, problem, fix))
+
+    def with_path(self, path) -> "InvalidProblemError":
+        """The same error, its message naming the file ``path`` the data came from."""
+        if self.path is not None:
+            return self
+        return InvalidProblemError(self.field, self.problem, index=self.index, fix=self.fix, path=path)
 
 
 class ProblemFileError(RfverifyError, OSError):
     """A problem file cannot be read: missing, unreadable, truncated, not the expected format,
     or missing a required group/dataset.  ``path`` and (when known) ``location`` (HDF5 path or
-    line number) say where."""
+    line number) say where; ``fix`` says what to do."""
 
-    def __init__(self, path, problem: str, *, location: str | None = None):
+    def __init__(self, path, problem: str, *, location: str | None = None, fix: str = ""):
         self.path = str(path)
         self.location = location
         self.problem = problem
-        where = self.path if location is None else f"{self.path} [{location}]"
-        super().__init__(f"{where}: {problem}")
+        self.fix = fix
+        super().__init__(_compose(self.path, location, problem, fix))
+
+    def __str__(self) -> str:  # OSError.__str__ would print the errno tuple form
+        return self.args[0]
+
+
+class InvalidArgumentError(RfverifyError, ValueError, TypeError):
+    """A function or command was called with an argument of the wrong type or value (the
+    ``argument`` is named).  It is both a ValueError and a TypeError so that callers catching
+    either keep working."""
+
+    def __init__(self, argument: str, problem: str, *, fix: str = ""):
+        self.argument = argument
+        self.problem = problem
+        self.fix = fix
+        super().__init__(_compose(None, argument, problem, fix))
+
+
+class OutputPathError(RfverifyError, OSError):
+    """An output path cannot (or must not) be written: it is an input of the same command, not
+    a regular file, in a missing or read-only directory, ...  ``option`` names the CLI option
+    or API argument that gave it."""
+
+    def __init__(self, path, problem: str, *, option: str = "--out", fix: str = ""):
+        self.path = str(path)
+        self.option = option
+        self.problem = problem
+        self.fix = fix
+        super().__init__(_compose(self.path if self.path else "''", option, problem, fix))
+
+    def __str__(self) -> str:
+        return self.args[0]
 
 
 class ConeDomainError(RfverifyError, ArithmeticError):
@@ -79,3 +128,38 @@ def _fmt_index(index) -> str:
     if isinstance(index, tuple):
         return ", ".join(str(i) for i in index)
     return str(index)
+
+
+# ---------------------------------------------------------------------- argument checks
+def require_problem(obj, argument: str = "problem"):
+    """Refuse anything but a :class:`rfverify.Problem` with an :class:`InvalidArgumentError`."""
+    from .problem import Problem
+
+    if not isinstance(obj, Problem):
+        raise InvalidArgumentError(
+            argument, f"expected an rfverify.Problem, got {type(obj).__name__}",
+            fix="pass the result of rfverify.load(path) or rfverify.Problem.from_arrays(...)")
+    return obj
+
+
+def require_positive_number(value, argument: str, *, finite: bool = True) -> float:
+    """A real number > 0 (finite unless ``finite=False``): not a string, not a bool."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InvalidArgumentError(argument, f"expected a number, got {type(value).__name__} {value!r}",
+                                   fix=f"pass a float, e.g. {argument}=1e-10")
+    val = float(value)
+    if math.isnan(val) or not val > 0 or (finite and math.isinf(val)):
+        raise InvalidArgumentError(argument, f"is {val!r}, expected a {'finite ' if finite else ''}number > 0",
+                                   fix=f"pass a positive{' finite' if finite else ''} number, e.g. {argument}=1e-10")
+    return val
+
+
+def require_positive_int(value, argument: str) -> int:
+    """An integer ≥ 1 (numpy integers accepted; bools, floats and strings refused)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise InvalidArgumentError(argument, f"expected an integer, got {type(value).__name__} {value!r}",
+                                   fix=f"pass a whole number ≥ 1, e.g. {argument}=100")
+    if int(value) < 1:
+        raise InvalidArgumentError(argument, f"is {int(value)}, expected an integer ≥ 1",
+                                   fix=f"pass a whole number ≥ 1, e.g. {argument}=100")
+    return int(value)

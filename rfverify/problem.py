@@ -233,7 +233,7 @@ class Problem:
             bad = np.flatnonzero(vec < 0)
             if bad.size:
                 raise InvalidProblemError(
-                    name, f"is negative ({vec[bad[0]]!r}) at contact {bad[0]}"
+                    name, f"is negative ({float(vec[bad[0]])!r}) at contact {bad[0]}"
                           f" ({bad.size} negative in all)",
                     index=int(bad[0]), fix="friction coefficients must be ≥ 0")
 
@@ -248,7 +248,7 @@ class Problem:
                 fix="check the matrix, or raise the limit (max_asymmetry=..., "
                     "CLI --max-asymmetry) to accept and symmetrise it")
 
-        M_sym = ((M + M.T) * 0.5).tocsc()
+        M_sym = _symmetrise(M)
         M_sym.sort_indices()
         blocks = block_structure_and_definiteness(M_sym)
 
@@ -284,7 +284,7 @@ class Problem:
     @cached_property
     def M_sym(self) -> sp.csc_matrix:
         """(M + Mᵀ)/2, the matrix every solver uses (computed at validation)."""
-        return _freeze_sparse(((self.M + self.M.T) * 0.5).tocsc())
+        return _freeze_sparse(_symmetrise(self.M))
 
     @cached_property
     def contact_free_dofs(self) -> np.ndarray:
@@ -307,6 +307,12 @@ class Problem:
 
 
 # ---------------------------------------------------------------------- helpers
+def _symmetrise(M: sp.spmatrix) -> sp.csc_matrix:
+    """(M + Mᵀ)/2 computed as M/2 + Mᵀ/2: the same value (halving is exact), but entries near
+    1e308 do not overflow to inf."""
+    return (M * 0.5 + M.T * 0.5).tocsc()
+
+
 def symmetry_report(M: sp.spmatrix) -> SymmetryReport:
     """Measure the asymmetry of a square sparse matrix (see :class:`SymmetryReport`)."""
     M = sp.csc_matrix(M)
@@ -382,7 +388,7 @@ def _check_positive_diagonal(M: sp.spmatrix):
     if bad.size:
         j = int(bad[0])
         raise InvalidProblemError(
-            "M", f"diagonal entry M[{j},{j}] = {diag[j]!r} is not positive, so M is not "
+            "M", f"diagonal entry M[{j},{j}] = {float(diag[j])!r} is not positive, so M is not "
                  f"positive definite ({bad.size} such diagonal entries)",
             index=(j, j), fix="every dof needs a positive mass or inertia")
 
@@ -465,7 +471,7 @@ def _as_vector(name: str, x) -> np.ndarray:
 def _check_finite_vector(name: str, x: np.ndarray):
     bad = np.flatnonzero(~np.isfinite(x))
     if bad.size:
-        raise InvalidProblemError(name, f"contains a non-finite value ({x[bad[0]]!r}) at index "
+        raise InvalidProblemError(name, f"contains a non-finite value ({float(x[bad[0]])!r}) at index "
                                         f"{bad[0]} ({bad.size} in all)",
                                   index=int(bad[0]), fix="remove NaN/Inf from the data")
 
@@ -476,7 +482,7 @@ def _check_finite_sparse(name: str, A: sp.csc_matrix):
         k = int(bad[0])
         col = int(np.searchsorted(A.indptr, k, side="right") - 1)
         row = int(A.indices[k])
-        raise InvalidProblemError(name, f"contains a non-finite value ({A.data[k]!r}) at "
+        raise InvalidProblemError(name, f"contains a non-finite value ({float(A.data[k])!r}) at "
                                         f"({row}, {col}) ({bad.size} in all)",
                                   index=(row, col), fix="remove NaN/Inf from the data")
 

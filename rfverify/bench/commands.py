@@ -7,7 +7,7 @@ import json
 import shlex
 import sys
 
-from ..cli import _json_default, _nonneg_int, _positive_float, _positive_int
+from ..cli import _dumps, _nonneg_int, _out_path, _positive_float, _positive_int, _tolerance
 from ..solver.result import METHODS
 
 DEFAULT_METHODS = "jqinv,qp2,noscaling,reduced,clarabel"
@@ -27,7 +27,7 @@ def _tol_list(text: str) -> list:
     items = [t.strip() for t in text.split(",") if t.strip()]
     if not items:
         raise argparse.ArgumentTypeError("give at least one tolerance")
-    return sorted({_positive_float(t) for t in items}, reverse=True)
+    return sorted({_tolerance(t) for t in items}, reverse=True)
 
 
 def add_parsers(sub) -> None:
@@ -48,7 +48,8 @@ def add_parsers(sub) -> None:
     bench.add_argument("inputs", nargs="+", metavar="DIR_OR_FILE",
                        help="problem files, directories of them (the directory name is the "
                             "collection), 'bundled' (every bundled problem) or 'bundled:NAME'")
-    bench.add_argument("--out", required=True, metavar="RUN_DIR", help="run directory (created or resumed)")
+    bench.add_argument("--out", required=True, metavar="RUN_DIR", type=_out_path,
+                       help="run directory (created or resumed)")
     bench.add_argument("--methods", type=_method_list, default=_method_list(DEFAULT_METHODS), metavar="M,M,...",
                        help=f"comma-separated methods (default: {DEFAULT_METHODS}; all: {','.join(METHODS)})")
     bench.add_argument("--tol", type=_tol_list, default=_tol_list(DEFAULT_TOLS), metavar="T,T,...",
@@ -60,7 +61,7 @@ def add_parsers(sub) -> None:
                        help="wall-clock limit per run in seconds (default: %(default)g)")
     bench.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",
                        help="iteration limit of each solve (default: %(default)s)")
-    bench.add_argument("--trajectory-tol", type=_positive_float, default=1e-14, metavar="T",
+    bench.add_argument("--trajectory-tol", type=_tolerance, default=1e-14, metavar="T",
                        help="tolerance of the per-iterate trajectory runs (default: %(default)g)")
     bench.add_argument("--no-trajectories", action="store_true", help="skip the trajectory runs")
     bench.add_argument("--digits", type=_nonneg_int, default=10, metavar="K",
@@ -107,7 +108,7 @@ def cmd_bench(args) -> int:
     if args.json:
         out = dict(out, counts=[{"method": m, "tol": t, "solved": s, "total": n}
                                 for (m, t), (s, n) in out["counts"].items()])
-        print(json.dumps(out, default=_json_default))
+        print(_dumps(out))
     else:
         print(f"bench: {out['ran']} runs done, {out['skipped']} already finished, {out['timeouts']} timed out; "
               f"records in {out['run_dir']}/runs. Next: rfverify report {out['run_dir']}")
@@ -123,7 +124,7 @@ def cmd_report(args) -> int:
                       diagnose_max_contacts=args.diagnose_max_contacts, diagnose_dps=args.dps,
                       quiet=args.quiet)
     if args.json:
-        print(json.dumps({"report": out["report"], "summary": out["summary"],
+        print(_dumps({"report": out["report"], "summary": out["summary"],
                           "counts": [{"collection": c, "method": m, "tol": t, "solved": s, "total": n}
                                      for (c, m, t), (s, n) in out["counts"].items()]}))
     else:

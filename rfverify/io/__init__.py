@@ -6,16 +6,19 @@
 
 from __future__ import annotations
 
+import numbers
+import os
 from pathlib import Path
 
-from ..errors import ProblemFileError
+from ..errors import InvalidArgumentError, ProblemFileError
 from ..problem import DEFAULT_MAX_ASYMMETRY, Problem
-from .fclib import read_fclib, write_fclib
+from ._paths import read_head
+from .fclib import read_fclib, write_fclib, write_solution_in_place
 from .siconos_dat import LocalProblem, lift_local, parse_siconos_dat, read_siconos_dat
 
 BUNDLED_PREFIX = "bundled:"
 
-__all__ = ["load", "save", "read_fclib", "write_fclib", "read_siconos_dat", "parse_siconos_dat",
+__all__ = ["load", "save", "read_fclib", "write_fclib", "write_solution_in_place", "read_siconos_dat", "parse_siconos_dat",
            "lift_local", "LocalProblem", "bundled_problems", "resolve_path", "BUNDLED_PREFIX"]
 
 
@@ -39,13 +42,19 @@ def bundled_problems() -> dict[str, Path]:
 
 def resolve_path(spec) -> Path:
     """``bundled:NAME`` → the bundled file's path; anything else → ``Path(spec)``."""
+    if isinstance(spec, bytes) or not isinstance(spec, (str, os.PathLike)):
+        raise InvalidArgumentError("path", f"expected a file path or 'bundled:NAME', got "
+                                           f"{type(spec).__name__}",
+                                   fix="pass a str or pathlib.Path naming a problem file")
     text = str(spec)
+    if text == "":
+        raise InvalidArgumentError("path", "is empty", fix="name a problem file")
     if text.startswith(BUNDLED_PREFIX):
         name = text[len(BUNDLED_PREFIX):]
         table = bundled_problems()
         if name not in table:
-            raise ProblemFileError(text, f"no bundled problem named {name!r}; bundled problems: "
-                                         f"{', '.join(sorted(table))}")
+            raise ProblemFileError(text, f"no bundled problem named {name!r}",
+                                   fix=f"use one of the bundled problems: {', '.join('bundled:' + k for k in sorted(table))}")
         return table[name]
     return Path(spec)
 
@@ -60,20 +69,22 @@ def load(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem:
     ProblemFileError
         the file is missing, unreadable or malformed (path and location named).
     InvalidProblemError
-        the data are not a valid problem (field and index named).
+        the data are not a valid problem (file, field and index named).
+    InvalidArgumentError
+        ``path`` is not a path, or ``max_asymmetry`` is not a number ≥ 0.
     """
     p = resolve_path(path)
-    if not p.exists():
-        raise ProblemFileError(p, "no such file")
-    if p.is_dir():
-        raise ProblemFileError(p, "is a directory, expected a problem file")
-    with open(p, "rb") as fh:
-        head = fh.read(8)
+    if isinstance(max_asymmetry, bool) or not isinstance(max_asymmetry, numbers.Real) \
+            or not float(max_asymmetry) >= 0:
+        raise InvalidArgumentError("max_asymmetry", f"is {max_asymmetry!r}, expected a number ≥ 0",
+                                   fix="pass e.g. max_asymmetry=1e-2 (or float('inf') to accept any)")
+    head = read_head(p, "an FCLIB .hdf5 file or a Siconos .dat file")
     if head == b"\x89HDF\r\n\x1a\n" or p.suffix.lower() in {".hdf5", ".h5", ".hdf"}:
         return read_fclib(p, max_asymmetry=max_asymmetry)
     if p.suffix.lower() == ".dat" or head[:1].isdigit():
         return read_siconos_dat(p, max_asymmetry=max_asymmetry)
-    raise ProblemFileError(p, "unrecognised format: expected an FCLIB HDF5 file or a Siconos .dat file")
+    raise ProblemFileError(p, "unrecognised format: expected an FCLIB HDF5 file or a Siconos .dat file",
+                           fix="pass a .hdf5/.h5 (FCLIB) or .dat (Siconos) problem file")
 
 
 def save(problem: Problem, path, **kwargs) -> Path:

@@ -17,13 +17,16 @@ i = column indices).  Index arrays are written as int32 like fclib.c, values as 
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import InvalidProblemError, ProblemFileError
-from ..problem import DEFAULT_MAX_ASYMMETRY, Problem, StoredSolution
+from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
+from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, StoredSolution
+from ._paths import read_head
+from .output import OutputTarget, atomic_output, check_output_file
 
 ROOT = "fclib_global_rolling"
 NZ_CSC = -1
@@ -37,61 +40,97 @@ def _h5py():
     return h5py
 
 
+MAX_INDEX = 2**31 - 1
+"""Largest size or index an FCLIB file can hold (fclib.c stores them as int32)."""
+
+_PLAUSIBLE_BYTES = 2**30
+_PLAUSIBLE_RATIO = 64
+"""A dataset over 1 GiB declared in a file 64 times smaller is refused before it is read
+(unwritten HDF5 data read as fill values; real FCLIB data do not compress that well)."""
+
+_EXACT_INT = 2**53
+"""Integers up to this magnitude convert to float64 exactly."""
+
+_FIX_LAYOUT = ("write the file with rfverify.save or fclib's fclib_write_global_rolling "
+               "(layout: DESIGN §7)")
+_FIX_INT = "store sizes and indices as integers (int32, as fclib.c writes them)"
+_FIX_REAL = "store the data as float64 (real numbers)"
+
+
 def read_fclib(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem:
     """Read a ``fclib_global_rolling`` HDF5 file into a validated :class:`Problem`.
+
+    Every dataset is checked for its HDF5 object kind, dtype and shape before it is read, and
+    the declared sizes are checked against each other before any matrix is allocated: what
+    cannot be read exactly (float or fractional indices, complex or compound values, strings
+    where numbers belong) is refused, never converted.
 
     Raises
     ------
     ProblemFileError
-        missing/unreadable/non-HDF5 file, missing group or dataset (its HDF5 path is named),
-        inconsistent matrix storage.
+        missing/unreadable/non-HDF5 file, missing or mistyped group or dataset (its HDF5 path
+        is named), inconsistent matrix storage.
     InvalidProblemError
-        the data read are not a valid problem (see :meth:`Problem.from_arrays`).
+        the data read are not a valid problem (see :meth:`Problem.from_arrays`); its message
+        names the file.
     """
     h5py = _h5py()
     path = Path(path)
-    if not path.exists():
-        raise ProblemFileError(path, "no such file")
-    if path.is_dir():
-        raise ProblemFileError(path, "is a directory, expected an FCLIB .hdf5 file")
+    read_head(path, "an FCLIB .hdf5 file")
     if not h5py.is_hdf5(path):
         raise ProblemFileError(path, "is not an HDF5 file (wrong format, or truncated: the "
-                                     "HDF5 signature is missing)")
+                                     "HDF5 signature is missing)",
+                               fix="pass an FCLIB .hdf5 file (or a Siconos .dat file)")
     try:
         with h5py.File(path, "r") as fh:
             return _read_open_file(fh, path, max_asymmetry)
-    except (InvalidProblemError, ProblemFileError):
+    except InvalidProblemError as exc:
+        raise exc.with_path(path) from None
+    except ProblemFileError:
         raise
     except (OSError, KeyError, RuntimeError) as exc:  # truncated or corrupt inside
-        raise ProblemFileError(path, f"cannot be read as HDF5 ({_first_line(exc)}); "
-                                     "the file is probably truncated or corrupt") from None
+        raise ProblemFileError(path, f"cannot be read as HDF5 ({_first_line(exc)})",
+                               fix="the file is probably truncated or corrupt: re-create or "
+                                   "re-download it") from None
 
 
 def _read_open_file(fh, path, max_asymmetry):
-    if ROOT not in fh:
+    h5py = _h5py()
+    if fh.get(ROOT, getlink=True) is None:
         other = [k for k in fh.keys() if k.startswith("fclib_")]
-        hint = f" (it holds {other[0]}: not a rolling-friction problem)" if other else ""
-        raise ProblemFileError(path, f"missing group /{ROOT}{hint}", location=f"/{ROOT}")
-    g = fh[ROOT]
-    if "G" in g or "b" in g.get("vectors", {}):
+        hint = f" (it holds /{other[0]}: not a rolling-friction problem)" if other else ""
+        raise ProblemFileError(path, f"missing group /{ROOT}{hint}", location=f"/{ROOT}",
+                               fix="pass an fclib_global_rolling problem (FCLIB rolling-friction "
+                                   "collections)")
+    g = _member(fh, ROOT, path, h5py.Group)
+    vectors = _member(g, "vectors", path, h5py.Group)
+    if g.get("G", getlink=True) is not None or vectors.get("b", getlink=True) is not None:
         raise ProblemFileError(path, "equality constraints (G, b) are not supported by rfverify",
-                               location=f"/{ROOT}/G")
-    M, M_fmt = _read_matrix(g, "M", path)
-    H, H_fmt = _read_matrix(g, "H", path)
-    vectors = _require(g, "vectors", path)
+                               location=f"/{ROOT}/G",
+                               fix="remove G and b (rfverify solves problems without them)")
+    # Vectors first: their sizes come from data actually stored, and bound every declared size.
     f = _read_vector(vectors, "f", path)
     w = _read_vector(vectors, "w", path)
     mu = _read_vector(vectors, "mu", path)
     mu_r = _read_vector(vectors, "mu_r", path)
-    spacedim = int(_scalar(_require(g, "spacedim", path), path))
-    info = g.get("info")
+    spacedim = _scalar_int(_member(g, "spacedim", path, h5py.Dataset), path)
+    M_meta = _matrix_meta(g, "M", path)
+    H_meta = _matrix_meta(g, "H", path)
+    _check_declared_sizes(M_meta, H_meta, f.size, mu.size, spacedim)
+    M, M_fmt = _read_matrix(M_meta, path)
+    H, H_fmt = _read_matrix(H_meta, path)
     title = description = math_info = ""
-    if info is not None:
-        title = _read_string(info, "title")
-        description = _read_string(info, "description")
-        math_info = _read_string(info, "math_info")
-    solution = _read_solution(fh["solution"], path, "/solution") if "solution" in fh else None
-    guesses = _read_guesses(fh["guesses"], path) if "guesses" in fh else ()
+    if g.get("info", getlink=True) is not None:
+        info = _member(g, "info", path, h5py.Group)
+        title = _read_string(info, "title", path)
+        description = _read_string(info, "description", path)
+        math_info = _read_string(info, "math_info", path)
+    solution = None
+    if fh.get("solution", getlink=True) is not None:
+        solution = _read_solution(_member(fh, "solution", path, h5py.Group), path)
+    guesses = ()
+    if fh.get("guesses", getlink=True) is not None:
+        guesses = _read_guesses(_member(fh, "guesses", path, h5py.Group), path)
     return Problem.from_arrays(
         M, H, f, w, mu, mu_r, title=title, description=description, math_info=math_info,
         solution=solution, guesses=guesses, storage={"M": M_fmt, "H": H_fmt},
@@ -99,108 +138,284 @@ def _read_open_file(fh, path, max_asymmetry):
     )
 
 
-def _require(group, name, path):
-    if name not in group:
-        raise ProblemFileError(path, f"missing {'group' if name in ('vectors', 'info') else 'dataset'}"
-                                     f" {group.name}/{name}", location=f"{group.name}/{name}")
-    return group[name]
+# ---------------------------------------------------------------------- typed access
+def _loc(group, name) -> str:
+    return f"{group.name.rstrip('/')}/{name}"
 
 
-def _scalar(ds, path):
-    arr = np.asarray(ds[()]).ravel()
+def _kind_name(obj) -> str:
+    h5py = _h5py()
+    if isinstance(obj, h5py.Group):
+        return "a group"
+    if isinstance(obj, h5py.Dataset):
+        return "a dataset"
+    if isinstance(obj, h5py.Datatype):
+        return "a named datatype"
+    return type(obj).__name__
+
+
+def _member(group, name, path, kind):
+    """``group[name]`` checked to exist, to be reachable (links) and to be a ``kind``
+    (h5py.Group or h5py.Dataset)."""
+    h5py = _h5py()
+    loc = _loc(group, name)
+    what = "group" if kind is h5py.Group else "dataset"
+    link = group.get(name, getlink=True)
+    if link is None:
+        raise ProblemFileError(path, f"missing {what} {loc}", location=loc, fix=_FIX_LAYOUT)
+    try:
+        obj = group[name]
+    except (KeyError, OSError, RuntimeError, ValueError) as exc:
+        raise ProblemFileError(path, f"is a {type(link).__name__} that cannot be followed "
+                                     f"({_first_line(exc)})", location=loc,
+                               fix="replace the link by the data it should point to") from None
+    if not isinstance(obj, kind):
+        extra = ""
+        if kind is h5py.Group and isinstance(obj, h5py.Dataset) and name in ("M", "H"):
+            extra = " (a dense matrix?); FCLIB stores a matrix as a group m, n, nz, nzmax, p, i, x"
+        raise ProblemFileError(path, f"is {_kind_name(obj)}, expected a {what}{extra}",
+                               location=loc, fix=_FIX_LAYOUT)
+    return obj
+
+
+def _dtype(ds, path):
+    try:
+        return ds.dtype
+    except (TypeError, ValueError) as exc:  # bitfield, reference, ...: no numpy equivalent
+        raise ProblemFileError(path, f"has an HDF5 type rfverify cannot read ({_first_line(exc)})",
+                               location=ds.name, fix=_FIX_REAL) from None
+
+
+def _read(ds, path) -> np.ndarray:
+    """All of ``ds``, after checking that its declared size is plausible: HDF5 datasets may be
+    declared far larger than the data stored (unwritten parts read as fill values), and a
+    hostile declaration must not exhaust memory."""
+    dt = _dtype(ds, path)
+    if ds.size > MAX_INDEX:
+        raise ProblemFileError(path, f"declares {ds.size} values, more than an FCLIB file can "
+                                     f"index ({MAX_INDEX})", location=ds.name, fix=_FIX_LAYOUT)
+    nbytes = ds.size * dt.itemsize
+    file_size = Path(ds.file.filename).stat().st_size
+    if nbytes > _PLAUSIBLE_BYTES and nbytes > _PLAUSIBLE_RATIO * file_size:
+        raise ProblemFileError(path, f"declares {ds.size} values ({nbytes / 2**30:.1f} GiB) in a "
+                                     f"file of {file_size} bytes; refusing to allocate them",
+                               location=ds.name, fix="check the file: its sizes are implausible")
+    try:
+        return np.asarray(ds[()])
+    except MemoryError:
+        raise ProblemFileError(path, f"is too large to read into memory ({ds.size} values)",
+                               location=ds.name, fix="check the file: its sizes are implausible") from None
+    except (OSError, TypeError, ValueError, RuntimeError, KeyError) as exc:
+        raise ProblemFileError(path, f"cannot be read ({_first_line(exc)})", location=ds.name,
+                               fix="the file is probably truncated or corrupt: re-create it") from None
+
+
+def _refuse_kind(dt, ds, path, expected: str, fix: str):
+    kind, why = dt.kind, ""
+    if dt.names is not None or kind == "V":
+        what = "a compound (record) dtype" if dt.names is not None else f"an opaque dtype ({dt})"
+    elif kind == "c":
+        what = f"complex values ({dt})"
+        why = "; dropping the imaginary part would change the problem"
+    elif kind in "SUO":
+        what = "strings"
+    elif kind == "b":
+        what = "booleans"
+    elif kind == "f":
+        what = f"floating-point values ({dt})"
+        why = "; sizes and indices are read exactly, never rounded"
+    else:
+        what = f"dtype {dt}"
+    raise ProblemFileError(path, f"holds {what}, expected {expected}{why}", location=ds.name, fix=fix)
+
+
+def _check_shape(ds, path, *, vector: bool):
+    shape = ds.shape
+    if shape is None:  # HDF5 null dataspace
+        raise ProblemFileError(path, "is an empty (null) dataset", location=ds.name, fix=_FIX_LAYOUT)
+    if len(shape) <= 1 or (len(shape) == 2 and 1 in shape):
+        return
+    expected = "a vector (1-D dataset)" if vector else "one value"
+    raise ProblemFileError(path, f"has shape {shape}, expected {expected}", location=ds.name,
+                           fix=_FIX_LAYOUT)
+
+
+def _real(ds, path) -> np.ndarray:
+    """A numeric dataset as a flat float64 array, refused unless every value is exact."""
+    dt = _dtype(ds, path)
+    if dt.names is not None or dt.kind not in "fiu":
+        _refuse_kind(dt, ds, path, "real numbers", _FIX_REAL)
+    _check_shape(ds, path, vector=True)
+    arr = _read(ds, path).ravel()
+    if dt.kind in "iu":
+        if arr.size and np.max(np.abs(arr.astype(np.float64))) > _EXACT_INT:
+            raise ProblemFileError(path, f"holds integers beyond 2^53 that float64 cannot "
+                                         "represent exactly", location=ds.name, fix=_FIX_REAL)
+        return arr.astype(np.float64)
+    if dt.itemsize > 8:  # longdouble data: keep it only if float64 holds every value exactly
+        with np.errstate(over="ignore"):
+            back = arr.astype(np.float64).astype(arr.dtype)
+        if not np.array_equal(back, arr, equal_nan=True):
+            raise ProblemFileError(path, f"holds {dt} values that float64 cannot represent "
+                                         "exactly", location=ds.name, fix=_FIX_REAL)
+    return arr.astype(np.float64)
+
+
+def _integers(ds, path, *, vector: bool = True) -> np.ndarray:
+    """An integer dataset as a flat int64 array; floats (even integral ones) are refused."""
+    dt = _dtype(ds, path)
+    if dt.names is not None or dt.kind not in "iu":
+        _refuse_kind(dt, ds, path, "integers", _FIX_INT)
+    _check_shape(ds, path, vector=vector)
+    arr = _read(ds, path).ravel()
+    if dt.kind == "u" and arr.size and arr.max() > np.iinfo(np.int64).max:
+        raise ProblemFileError(path, f"holds an index {arr.max()} beyond any FCLIB size",
+                               location=ds.name, fix=_FIX_INT)
+    return arr.astype(np.int64)
+
+
+def _scalar_int(ds, path) -> int:
+    arr = _integers(ds, path, vector=False)
     if arr.size != 1:
-        raise ProblemFileError(path, f"expected one value, found {arr.size}", location=ds.name)
-    return arr[0]
+        found = "no value (empty dataset)" if arr.size == 0 else f"{arr.size} values"
+        raise ProblemFileError(path, f"holds {found}, expected exactly one integer",
+                               location=ds.name, fix=_FIX_LAYOUT)
+    return int(arr[0])
 
 
 def _read_vector(group, name, path) -> np.ndarray:
-    ds = _require(group, name, path)
-    arr = np.asarray(ds[()])
-    if arr.dtype.kind not in "fiu":
-        raise ProblemFileError(path, f"has dtype {arr.dtype}, expected numbers", location=ds.name)
-    return np.asarray(arr, dtype=np.float64).ravel()
+    return _real(_member(group, name, path, _h5py().Dataset), path)
 
 
-def _read_string(group, name) -> str:
-    if name not in group:
+def _read_string(group, name, path) -> str:
+    if group.get(name, getlink=True) is None:
         return ""
-    val = group[name][()]
+    ds = _member(group, name, path, _h5py().Dataset)
+    dt = _dtype(ds, path)
+    if dt.kind not in "SUO":
+        _refuse_kind(dt, ds, path, "a string", "store info strings as UTF-8 text")
+    val = _read(ds, path)
     if isinstance(val, np.ndarray):
+        if val.size > 1:
+            raise ProblemFileError(path, f"holds {val.size} strings, expected one",
+                                   location=ds.name, fix="store one UTF-8 string")
         val = val.ravel()[0] if val.size else b""
-    if isinstance(val, bytes):
-        return val.decode("utf-8", errors="replace")
-    return str(val)
+    if isinstance(val, np.str_ | str):
+        return str(val)
+    if isinstance(val, bytes | np.bytes_):
+        try:
+            return bytes(val).decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ProblemFileError(path, f"is not valid UTF-8 (byte {exc.start})",
+                                   location=ds.name, fix="store info strings as UTF-8 text") from None
+    raise ProblemFileError(path, f"holds a {type(val).__name__}, expected a string",
+                           location=ds.name, fix="store info strings as UTF-8 text")
 
 
-def _read_matrix(g, name, path):
-    grp = _require(g, name, path)
-    loc = grp.name
-    fields = {}
-    for key in ("m", "n", "nz", "nzmax", "p", "i", "x"):
-        if key not in grp:
-            raise ProblemFileError(path, f"matrix {name} lacks dataset '{key}'", location=f"{loc}/{key}")
-        fields[key] = np.asarray(grp[key][()])
-    m, n, nz = (int(np.ravel(fields[k])[0]) for k in ("m", "n", "nz"))
-    p = fields["p"].astype(np.int64).ravel()
-    i = fields["i"].astype(np.int64).ravel()
-    x = np.asarray(fields["x"], dtype=np.float64).ravel()
-    if m < 0 or n < 0:
-        raise ProblemFileError(path, f"matrix {name} has negative size {m}×{n}", location=loc)
+# ---------------------------------------------------------------------- matrices
+def _matrix_meta(g, name, path) -> dict:
+    """A matrix group's sizes and storage code, checked; nothing of size n or nnz is read."""
+    h5py = _h5py()
+    grp = _member(g, name, path, h5py.Group)
+    meta = {"name": name, "group": grp, "loc": grp.name}
+    for key in ("m", "n", "nz", "nzmax"):
+        meta[key] = _scalar_int(_member(grp, key, path, h5py.Dataset), path)
+    for key in ("m", "n", "nzmax"):
+        if not 0 <= meta[key] <= MAX_INDEX:
+            raise ProblemFileError(path, f"{key} = {meta[key]} is outside 0..{MAX_INDEX}",
+                                   location=_loc(grp, key), fix=_FIX_LAYOUT)
+    if meta["nz"] < NZ_CSR or meta["nz"] > MAX_INDEX:
+        raise ProblemFileError(path, f"unknown storage nz = {meta['nz']} (expected ≥ 0 triplet, "
+                                     "-1 CSC or -2 CSR)", location=_loc(grp, "nz"), fix=_FIX_LAYOUT)
+    for key in ("p", "i", "x"):
+        meta[key] = _member(grp, key, path, h5py.Dataset)
+    return meta
 
-    def bad(msg):
-        return ProblemFileError(path, f"matrix {name}: {msg}", location=loc)
 
+def _check_declared_sizes(M, H, m_f, n_mu, spacedim):
+    """The declared m, n of M and H against the stored vectors, before anything of those sizes
+    is allocated (a file declaring m = 2^31 − 1 with a 768-entry f is refused here)."""
+    if spacedim != SPACEDIM:
+        return  # Problem.from_arrays explains a wrong spacedim better
+    if M["m"] != M["n"]:
+        raise InvalidProblemError("M", f"is declared {M['m']}×{M['n']} (M/m, M/n), must be square",
+                                  fix="M is the m×m mass matrix")
+    if M["m"] != m_f:
+        raise InvalidProblemError("M", f"declares m = {M['m']} dofs (M/m) but vectors/f has "
+                                       f"{m_f} entries", fix="f has one entry per dof of M: make "
+                                                           "M/m, M/n and f agree")
+    if (H["m"], H["n"]) != (m_f, SPACEDIM * n_mu):
+        raise InvalidProblemError("H", f"is declared {H['m']}×{H['n']} (H/m, H/n), expected "
+                                       f"(m, 5n) = ({m_f}, {SPACEDIM * n_mu}) from f ({m_f} "
+                                       f"entries) and mu ({n_mu} contacts)",
+                                  fix="H has one row per dof and 5 columns per contact")
+
+
+def _read_matrix(meta, path):
+    name, loc, m, n, nz = meta["name"], meta["loc"], meta["m"], meta["n"], meta["nz"]
+
+    def bad(msg, where=loc):
+        return ProblemFileError(path, f"matrix {name}: {msg}", location=where, fix=_FIX_LAYOUT)
+
+    sizes = {k: meta[k].size for k in ("p", "i", "x")}
     if nz >= 0:
-        if min(p.size, i.size, x.size) < nz:
-            raise bad(f"triplet with nz = {nz} but p/i/x hold {p.size}/{i.size}/{x.size} entries")
-        rows, cols, vals = i[:nz], p[:nz], x[:nz]
+        if min(sizes.values()) < nz:
+            raise bad(f"triplet with nz = {nz} but p/i/x hold {sizes['p']}/{sizes['i']}/"
+                      f"{sizes['x']} entries")
+        p = _integers(meta["p"], path)[:nz]
+        i = _integers(meta["i"], path)[:nz]
+        x = _real(meta["x"], path)[:nz]
+        rows, cols, vals = i, p, x
         if nz and (rows.min() < 0 or rows.max() >= m):
-            raise bad(f"row index out of range 0..{m - 1} (i holds {rows.min()}..{rows.max()})")
+            raise bad(f"row index out of range 0..{m - 1} (i holds {rows.min()}..{rows.max()})",
+                      f"{loc}/i")
         if nz and (cols.min() < 0 or cols.max() >= n):
-            raise bad(f"column index out of range 0..{n - 1} (p holds {cols.min()}..{cols.max()})")
+            raise bad(f"column index out of range 0..{n - 1} (p holds {cols.min()}..{cols.max()})",
+                      f"{loc}/p")
         A = sp.coo_matrix((vals, (rows, cols)), shape=(m, n)).tocsc()  # sums duplicates
         return A, "triplet"
-    if nz in (NZ_CSC, NZ_CSR):
-        outer, inner = (n, m) if nz == NZ_CSC else (m, n)
-        kind = "csc" if nz == NZ_CSC else "csr"
-        if p.size < outer + 1:
-            raise bad(f"{kind} pointer array p has {p.size} entries, needs {outer + 1}")
-        ptr = p[:outer + 1]
-        if ptr[0] != 0 or np.any(np.diff(ptr) < 0):
-            raise bad(f"{kind} pointer array p is not non-decreasing from 0")
-        nnz = int(ptr[-1])
-        if i.size < nnz or x.size < nnz:
-            raise bad(f"{kind} needs {nnz} entries, i/x hold {i.size}/{x.size}")
-        idx = i[:nnz]
-        if nnz and (idx.min() < 0 or idx.max() >= inner):
-            raise bad(f"index out of range 0..{inner - 1} in i")
-        cls = sp.csc_matrix if nz == NZ_CSC else sp.csr_matrix
-        A = cls((x[:nnz], idx, ptr), shape=(m, n))
-        A = sp.csc_matrix(A)
-        A.sum_duplicates()
-        return A, kind
-    raise bad(f"unknown storage nz = {nz} (expected ≥ 0 triplet, -1 CSC or -2 CSR)")
+    outer, inner = (n, m) if nz == NZ_CSC else (m, n)
+    kind = "csc" if nz == NZ_CSC else "csr"
+    if sizes["p"] < outer + 1:
+        raise bad(f"{kind} pointer array p has {sizes['p']} entries, needs {outer + 1}", f"{loc}/p")
+    ptr = _integers(meta["p"], path)[:outer + 1]
+    if ptr[0] != 0 or np.any(np.diff(ptr) < 0):
+        raise bad(f"{kind} pointer array p is not non-decreasing from 0", f"{loc}/p")
+    nnz = int(ptr[-1])
+    if sizes["i"] < nnz or sizes["x"] < nnz:
+        raise bad(f"{kind} needs {nnz} entries, i/x hold {sizes['i']}/{sizes['x']}")
+    idx = _integers(meta["i"], path)[:nnz]
+    x = _real(meta["x"], path)[:nnz]
+    if nnz and (idx.min() < 0 or idx.max() >= inner):
+        raise bad(f"index out of range 0..{inner - 1} in i (holds {idx.min()}..{idx.max()})",
+                  f"{loc}/i")
+    cls = sp.csc_matrix if nz == NZ_CSC else sp.csr_matrix
+    A = cls((x, idx, ptr), shape=(m, n))
+    A = sp.csc_matrix(A)
+    A.sum_duplicates()
+    return A, kind
 
 
-def _read_solution(grp, path, where) -> StoredSolution:
+# ---------------------------------------------------------------------- solutions
+def _read_solution(grp, path) -> StoredSolution:
     vals = {}
     for key in ("v", "u", "r"):
-        if key in grp:
-            arr = np.asarray(grp[key][()])
-            if arr.dtype.kind not in "fiu":
-                raise ProblemFileError(path, f"has dtype {arr.dtype}, expected numbers",
-                                       location=f"{where}/{key}")
-            vals[key] = np.asarray(arr, dtype=np.float64).ravel()
+        if grp.get(key, getlink=True) is not None:
+            vals[key] = _real(_member(grp, key, path, _h5py().Dataset), path)
     return StoredSolution(**vals)
 
 
 def _read_guesses(grp, path) -> tuple:
+    h5py = _h5py()
     keys = sorted((k for k in grp.keys() if k.isdigit()), key=int)
-    declared = int(_scalar(grp["number_of_guesses"], path)) if "number_of_guesses" in grp else len(keys)
+    declared = len(keys)
+    if grp.get("number_of_guesses", getlink=True) is not None:
+        declared = _scalar_int(_member(grp, "number_of_guesses", path, h5py.Dataset), path)
     if declared != len(keys):
         raise ProblemFileError(path, f"number_of_guesses = {declared} but {len(keys)} guess groups "
-                                     "are present", location="/guesses")
-    return tuple(_read_solution(grp[k], path, f"/guesses/{k}") for k in keys)
+                                     "are present", location="/guesses",
+                               fix="make number_of_guesses match the groups /guesses/1, /guesses/2, ...")
+    return tuple(_read_solution(_member(grp, k, path, h5py.Group), path) for k in keys)
 
 
 # ---------------------------------------------------------------------- writing
@@ -210,6 +425,10 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
 
     Parameters
     ----------
+    path : str, Path or rfverify.io.output.OutputTarget
+        A regular file (new or existing) in an existing, writable directory; a symbolic link
+        is written through.  Directories, FIFOs, devices and sockets are refused
+        (:class:`~rfverify.errors.OutputPathError`).
     storage : "triplet" | "csc" | "csr" | dict, optional
         Matrix storage; a dict may give one per matrix (``{"M": "csc", "H": "triplet"}``).
         Defaults to the format the problem was read in (``"csc"`` for problems built in memory;
@@ -217,12 +436,16 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
     overwrite : bool
         Refuse to replace an existing file when False.
 
-    Reading the file back gives bit-identical arrays (M, H, f, w, mu, mu_r, solution, guesses).
+    The file is written to a temporary file beside the target and renamed over it when
+    complete.  Reading it back gives bit-identical arrays (M, H, f, w, mu, mu_r, solution,
+    guesses).
     """
     h5py = _h5py()
-    path = Path(path)
+    target = path if isinstance(path, OutputTarget) else None
+    path = target.path if target is not None else Path(path)
     if path.exists() and not overwrite:
-        raise ProblemFileError(path, "exists already (pass overwrite=True to replace it)")
+        raise ProblemFileError(path, "exists already (pass overwrite=True to replace it)",
+                               fix="choose another path or pass overwrite=True")
     fmts = {}
     for name in ("M", "H"):
         fmt = storage.get(name) if isinstance(storage, dict) else storage
@@ -230,17 +453,12 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
         if fmt == "dense":
             fmt = "csc"
         if fmt not in STORAGE_FORMATS:
-            raise ValueError(f"storage for {name}: {fmt!r} is not one of {STORAGE_FORMATS}")
+            raise InvalidArgumentError("storage", f"for {name}: {fmt!r} is not one of {STORAGE_FORMATS}",
+                                       fix="use 'triplet', 'csc' or 'csr'")
         fmts[name] = fmt
-    tmp = path.with_name(path.name + ".partial")
-    if not path.parent.is_dir():
-        raise ProblemFileError(path, f"cannot write: directory {path.parent} does not exist")
-    try:
-        fh_ctx = h5py.File(tmp, "w")
-    except OSError as exc:
-        raise ProblemFileError(path, f"cannot write ({_first_line(exc)})") from None
-    try:
-        with fh_ctx as fh:
+    target = target or check_output_file(path, option="path")
+    with atomic_output(target) as tmp:
+        with h5py.File(tmp, "w") as fh:
             g = fh.create_group(ROOT)
             _write_matrix(g, "M", problem.M, fmts["M"])
             _write_matrix(g, "H", problem.H, fmts["H"])
@@ -258,11 +476,38 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
                 gg.create_dataset("number_of_guesses", data=np.array([len(problem.guesses)], dtype=np.int32))
                 for k, guess in enumerate(problem.guesses, start=1):
                     _write_solution(gg.create_group(str(k)), guess)
-        tmp.replace(path)  # never leave a half-written file under the final name
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
+
+
+def write_solution_in_place(target, solution: StoredSolution) -> Path:
+    """Replace ``/solution/{v, u, r}`` of an existing FCLIB file and keep every other group,
+    dataset and attribute (user data, ``info`` extras, ``/guesses``, attributes of
+    ``/solution`` itself) exactly as they are.
+
+    FCLIB keeps ``/solution`` beside the problem, so ``solve in.hdf5 --out in.hdf5`` is a
+    reasonable request; the file is copied, the copy updated and renamed over the original,
+    so an interrupted write leaves the original untouched.
+    """
+    h5py = _h5py()
+    target = target if isinstance(target, OutputTarget) else check_output_file(target, option="path")
+    if not target.real.exists():
+        raise ProblemFileError(target.path, "does not exist, so there is no file to add /solution to",
+                               fix="use write_fclib to write a new file")
+    with atomic_output(target) as tmp:
+        shutil.copyfile(target.real, tmp)
+        with h5py.File(tmp, "r+") as fh:
+            link = fh.get("solution", getlink=True)
+            if link is not None and not (isinstance(link, h5py.HardLink)
+                                         and isinstance(fh["solution"], h5py.Group)):
+                del fh["solution"]  # a link or a dataset: only the name /solution is replaced
+            grp = fh.require_group("solution")
+            for key in ("v", "u", "r"):
+                if grp.get(key, getlink=True) is not None:
+                    del grp[key]
+                arr = getattr(solution, key)
+                if arr is not None:
+                    grp.create_dataset(key, data=np.asarray(arr, dtype=np.float64))
+    return target.path
 
 
 def _write_matrix(g, name, A: sp.spmatrix, fmt: str):

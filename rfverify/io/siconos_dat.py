@@ -31,6 +31,7 @@ import scipy.sparse as sp
 
 from ..errors import InvalidProblemError, ProblemFileError
 from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem
+from ._paths import read_head
 
 STORAGE_DENSE = 0
 STORAGE_SPARSE_BLOCK = 1
@@ -41,12 +42,19 @@ _TINY = np.finfo(float).tiny
 CSPARSE_DIGITS = 6
 """Significant digits kept by CSparse's ``%g`` print-out."""
 
-_INT_RE = re.compile(r"^[+-]?\d+$")
-_TRIPLET_HDR = re.compile(r"triplet:\s*(\d+)-by-(\d+),\s*nzmax:\s*(\d+)\s+nnz:\s*(\d+)")
-_CSC_HDR = re.compile(r"^(\d+)-by-(\d+),\s*nzmax:\s*(\d+)\s+nnz:\s*(\d+)")
-_TRIPLET_ENTRY = re.compile(r"^(\d+)\s+(\d+)\s*:\s*(\S+)$")
-_CSC_COL = re.compile(r"^col\s+(\d+)\s*:\s*locations\s+(\d+)\s+to\s+(-?\d+)$")
-_CSC_ENTRY = re.compile(r"^(\d+)\s*:\s*(\S+)$")
+# Integers have at most 18 digits (they fit int64): a longer one is no plausible size or index.
+_INT_RE = re.compile(r"^[+-]?\d{1,18}$")
+_TRIPLET_HDR = re.compile(r"triplet:\s*(\d{1,18})-by-(\d{1,18}),\s*nzmax:\s*(\d{1,18})\s+nnz:\s*(\d{1,18})")
+_CSC_HDR = re.compile(r"^(\d{1,18})-by-(\d{1,18}),\s*nzmax:\s*(\d{1,18})\s+nnz:\s*(\d{1,18})")
+_TRIPLET_ENTRY = re.compile(r"^(\d{1,18})\s+(\d{1,18})\s*:\s*(\S+)$")
+_CSC_COL = re.compile(r"^col\s+(\d{1,18})\s*:\s*locations\s+(\d{1,18})\s+to\s+(-?\d{1,18})$")
+_CSC_ENTRY = re.compile(r"^(\d{1,18})\s*:\s*(\S+)$")
+
+_FIX_FORMAT = ("correct the file there (layout of Siconos' *_printInFile: DESIGN §7), or "
+               "re-export the problem")
+
+LOCAL_DENSE_LIMIT = 10000
+"""Largest W (rows) of a local problem: lifting it takes a dense eigendecomposition."""
 
 
 @dataclass(frozen=True)
@@ -85,6 +93,7 @@ class _Lines:
 
     def __init__(self, path: Path, text: str):
         self.path = path
+        self.chars = len(text)
         self.items = [(k + 1, s.strip()) for k, s in enumerate(text.splitlines()) if s.strip()]
         self.pos = 0
 
@@ -94,13 +103,22 @@ class _Lines:
     def next(self, what: str):
         if self.pos >= len(self.items):
             raise ProblemFileError(self.path, f"file ends early: expected {what}",
-                                   location=f"line {self.items[-1][0] + 1 if self.items else 1}")
+                                   location=f"line {self.items[-1][0] + 1 if self.items else 1}",
+                                   fix="the file is truncated: re-export or re-download it")
         item = self.items[self.pos]
         self.pos += 1
         return item
 
-    def error(self, lineno, msg):
-        return ProblemFileError(self.path, msg, location=f"line {lineno}")
+    def error(self, lineno, msg, fix=_FIX_FORMAT):
+        return ProblemFileError(self.path, msg, location=f"line {lineno}", fix=fix)
+
+    def size(self, lineno, value: int, what: str) -> int:
+        """A declared size, refused when the file is too short to hold that many entries
+        (every dimension of a valid file is the length of a printed vector)."""
+        if value > self.chars:
+            raise self.error(lineno, f"{what} = {value} is more than the file ({self.chars} "
+                                     "characters) can hold")
+        return value
 
     def integer(self, what: str) -> int:
         lineno, s = self.next(what)
@@ -119,15 +137,18 @@ def read_siconos_dat(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY,
     """
     kind, data, digits = parse_siconos_dat(path)
     provenance = {"format": "siconos-dat", "kind": kind, "significant_digits": digits}
-    if kind == "local":
-        lifted, report = lift_local(data, rank_tol=rank_tol, max_asymmetry=max_asymmetry)
-        provenance["lift"] = report.__dict__
-        return _with_provenance(lifted, provenance, str(path))
-    M, H, f, w, mu, mu_r, storage = data
-    problem = Problem.from_arrays(M, H, f, w, mu, mu_r, storage=storage,
-                                  max_asymmetry=max_asymmetry, source=str(path),
-                                  title=Path(path).stem,
-                                  description="read from a Siconos global rolling .dat file")
+    try:
+        if kind == "local":
+            lifted, report = lift_local(data, rank_tol=rank_tol, max_asymmetry=max_asymmetry)
+            provenance["lift"] = report.__dict__
+            return _with_provenance(lifted, provenance, str(path))
+        M, H, f, w, mu, mu_r, storage = data
+        problem = Problem.from_arrays(M, H, f, w, mu, mu_r, storage=storage,
+                                      max_asymmetry=max_asymmetry, source=str(path),
+                                      title=Path(path).stem,
+                                      description="read from a Siconos global rolling .dat file")
+    except InvalidProblemError as exc:
+        raise exc.with_path(path) from None
     return _with_provenance(problem, provenance, str(path))
 
 
@@ -140,23 +161,19 @@ def parse_siconos_dat(path):
     ``kind == "local"`` and ``data`` a :class:`LocalProblem`, or ``kind == "global"`` and
     ``data = (M, H, f, w, mu, mu_r, storage)``."""
     path = Path(path)
-    if not path.exists():
-        raise ProblemFileError(path, "no such file")
-    if path.is_dir():
-        raise ProblemFileError(path, "is a directory, expected a Siconos .dat file")
-    try:
-        text = path.read_text(encoding="ascii")
-    except UnicodeDecodeError:
-        raise ProblemFileError(path, "is not a text file (binary content); a Siconos .dat "
-                                     "problem is plain text") from None
+    read_head(path, "a Siconos .dat file")
+    text = _decode(path, path.read_bytes())
     lines = _Lines(path, text)
     d = lines.integer("the dimension d")
     if d != SPACEDIM:
         raise ProblemFileError(path, f"dimension d = {d}: not a rolling-friction problem "
-                                     f"(expected {SPACEDIM})", location="line 1")
+                                     f"(expected {SPACEDIM})", location="line 1",
+                               fix="pass a rolling-friction problem (RFC3D/GRFC3D, d = 5)")
     nc = lines.integer("the number of contacts nc")
     if nc <= 0:
-        raise ProblemFileError(path, f"number of contacts nc = {nc} must be positive", location="line 2")
+        raise ProblemFileError(path, f"number of contacts nc = {nc} must be positive",
+                               location="line 2", fix=_FIX_FORMAT)
+    lines.size(2, nc, "the number of contacts nc")
     A, A_fmt, A_digits = _read_matrix(lines, "first matrix")
     lineno, nxt = lines.peek()
     is_global = nxt is not None and _INT_RE.match(nxt) is not None
@@ -168,17 +185,46 @@ def parse_siconos_dat(path):
         m = M.shape[0]
         if H.shape != (m, SPACEDIM * nc):
             raise ProblemFileError(path, f"H is {H.shape[0]}×{H.shape[1]}, expected "
-                                         f"{m}×{SPACEDIM * nc} (m × 5nc)", location="H header")
+                                         f"{m}×{SPACEDIM * nc} (m × 5nc)", location="H header",
+                                   fix="H has one row per dof of M and 5 columns per contact")
         tokens = _remaining_floats(lines)
         f, w, mu, mu_r = _split(path, tokens, [("f", m), ("w", SPACEDIM * nc), ("mu", nc), ("mu_r", nc)])
         return "global", (M, H, f, w, mu, mu_r, {"M": A_fmt, "H": H_fmt}), digits
     if A.shape != (SPACEDIM * nc, SPACEDIM * nc):
         raise ProblemFileError(path, f"W is {A.shape[0]}×{A.shape[1]}, expected "
-                                     f"{SPACEDIM * nc}×{SPACEDIM * nc} (5nc × 5nc)", location="W header")
+                                     f"{SPACEDIM * nc}×{SPACEDIM * nc} (5nc × 5nc)", location="W header",
+                               fix="W has 5 rows and 5 columns per contact")
+    if A.shape[0] > LOCAL_DENSE_LIMIT:
+        raise ProblemFileError(path, f"W is {A.shape[0]}×{A.shape[1]}: too large for the dense "
+                                     f"lifting of a local problem (limit {LOCAL_DENSE_LIMIT} rows)",
+                               location="W header", fix="export the problem in global form (M, H)")
     tokens = _remaining_floats(lines)
     q, mu, mu_r = _split(path, tokens, [("q", SPACEDIM * nc), ("mu", nc), ("mu_r", nc)])
     W = A.toarray()
     return "local", LocalProblem(W=W, q=q, mu=mu, mu_r=mu_r, significant_digits=digits), digits
+
+
+def _decode(path: Path, data: bytes) -> str:
+    """The file's text; a .dat problem is ASCII, so anything else is named precisely."""
+    if b"\x00" in data:
+        raise ProblemFileError(path, "is not a text file (binary content: it contains NUL bytes)",
+                               fix="pass a Siconos .dat text file (or an FCLIB .hdf5 file)")
+    try:
+        return data.decode("ascii")
+    except UnicodeDecodeError as exc:
+        bad_at = exc.start
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ProblemFileError(path, f"is not a text file (binary content: byte {bad_at} is "
+                                     f"0x{data[bad_at]:02x}, not ASCII or UTF-8)",
+                               fix="pass a Siconos .dat text file (or an FCLIB .hdf5 file)") from None
+    line = data[:bad_at].count(b"\n") + 1
+    char = text[bad_at]  # everything before it is ASCII: one byte per character
+    raise ProblemFileError(path, f"is UTF-8 text with a non-ASCII character {char!r}; a Siconos "
+                                 ".dat file holds only ASCII numbers and headers",
+                           location=f"line {line}",
+                           fix="remove the non-ASCII characters (e.g. typographic minus signs)")
 
 
 def _min_digits(a, b):
@@ -193,7 +239,10 @@ def _read_matrix(lines: _Lines, what: str):
     cols = lines.integer(f"the number of columns of {what}")
     if rows < 0 or cols < 0:
         raise lines.error(lineno, f"{what} has negative size {rows}×{cols}")
+    lines.size(lineno, rows, f"the number of rows of {what}")
+    lines.size(lineno, cols, f"the number of columns of {what}")
     if storage == STORAGE_DENSE:
+        lines.size(lineno, rows * cols, f"the number of dense entries of {what}")
         ln, s = lines.next(f"the dense header of {what}")
         if [t for t in s.split()] != [str(rows), str(cols)]:
             raise lines.error(ln, f"dense header of {what} is {s!r}, expected '{rows} {cols}'")
@@ -218,7 +267,8 @@ def _read_matrix(lines: _Lines, what: str):
         raise lines.error(ln, f"unrecognised CSparse header for {what}: {hdr[:60]!r}")
     if storage == STORAGE_SPARSE_BLOCK:
         raise lines.error(lineno, f"{what} is stored as a Siconos sparse-block matrix (type 1), "
-                                  "which rfverify does not read; re-export it dense or sparse")
+                                  "which rfverify does not read",
+                          fix="re-export it dense (type 0) or sparse (type 2)")
     raise lines.error(lineno, f"unknown storage type {storage} for {what} (0 dense, 2 sparse)")
 
 
@@ -226,6 +276,7 @@ def _read_cs_triplet(lines, hdr_line, match, rows, cols, what):
     m, n, _nzmax, nnz = (int(g) for g in match.groups())
     if (m, n) != (rows, cols):
         raise lines.error(hdr_line, f"{what}: CSparse says {m}-by-{n}, header said {rows}×{cols}")
+    lines.size(hdr_line, nnz, f"nnz of {what}")
     r = np.empty(nnz, dtype=np.int64)
     c = np.empty(nnz, dtype=np.int64)
     x = np.empty(nnz)
@@ -234,10 +285,11 @@ def _read_cs_triplet(lines, hdr_line, match, rows, cols, what):
         me = _TRIPLET_ENTRY.match(s)
         if not me:
             raise lines.error(ln, f"expected 'row col : value' for {what}, found {s[:40]!r}")
-        r[k], c[k] = int(me.group(1)), int(me.group(2))
+        row, col = int(me.group(1)), int(me.group(2))
+        if row >= m or col >= n:
+            raise lines.error(ln, f"entry ({row}, {col}) outside {m}×{n} in {what}")
+        r[k], c[k] = row, col
         x[k] = _float(lines, ln, me.group(3))
-        if r[k] >= m or c[k] >= n:
-            raise lines.error(ln, f"entry ({r[k]}, {c[k]}) outside {m}×{n} in {what}")
     return sp.coo_matrix((x, (r, c)), shape=(m, n)).tocsc()
 
 
@@ -245,7 +297,7 @@ def _read_cs_csc(lines, hdr_line, match, rows, cols, what):
     m, n, _nzmax, nnz = (int(g) for g in match.groups())
     if (m, n) != (rows, cols):
         raise lines.error(hdr_line, f"{what}: CSparse says {m}-by-{n}, header said {rows}×{cols}")
-    indptr = np.zeros(n + 1, dtype=np.int64)
+    indptr = np.zeros(n + 1, dtype=np.int64)  # n was bounded by the file's size
     idx, vals = [], []
     for j in range(n):
         ln, s = lines.next(f"column {j} of {what}")
@@ -302,13 +354,15 @@ def _split(path, tokens, spec):
             raise ProblemFileError(path, f"vector {name} is short: the file has {len(tokens)} numbers "
                                          f"after the matrices, {total} expected "
                                          f"({', '.join(f'{n}:{s}' for n, s in spec)})",
-                                   location="end of file")
+                                   location="end of file",
+                                   fix="the file is truncated or nc is wrong: re-export it")
         result.append(np.array([v for _, v in tokens[pos:pos + size]], dtype=np.float64))
         pos += size
     if pos != len(tokens):
         ln = tokens[pos][0]
         raise ProblemFileError(path, f"{len(tokens) - pos} unexpected numbers after mu_r "
-                                     f"({total} expected after the matrices)", location=f"line {ln}")
+                                     f"({total} expected after the matrices)", location=f"line {ln}",
+                               fix="remove the extra numbers, or correct nc (line 2)")
     return result
 
 
@@ -336,13 +390,21 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
     """
     W = np.asarray(local.W, dtype=np.float64)
     dim = W.shape[0]
+    # q, mu, mu_r become w, mu, mu_r of the lifted problem: check them under their own names.
+    for name, vec in (("q", local.q), ("mu", local.mu), ("mu_r", local.mu_r)):
+        vec = np.asarray(vec, dtype=np.float64)
+        bad = np.flatnonzero(~np.isfinite(vec))
+        if bad.size:
+            raise InvalidProblemError(name, f"contains a non-finite value ({vec[bad[0]]!r}) at index "
+                                            f"{bad[0]} ({bad.size} in all)", index=int(bad[0]),
+                                      fix="remove NaN/Inf from the data")
     if not np.all(np.isfinite(W)):
         i, j = np.argwhere(~np.isfinite(W))[0]
-        raise InvalidProblemError("W", "contains a non-finite value", index=(int(i), int(j)),
+        raise InvalidProblemError("W", f"contains a non-finite value ({float(W[i, j])!r})", index=(int(i), int(j)),
                                   fix="remove NaN/Inf from the data")
     d = np.sqrt(np.abs(np.diag(W)))
-    asym = np.abs(W - W.T)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        asym = np.abs(W - W.T)  # an overflow here is an asymmetry too large to accept
         scaled = np.where(asym > 0, asym / np.outer(d, d), 0.0)
     scaled[np.isnan(scaled)] = np.inf
     asymmetry = float(scaled.max()) if scaled.size else 0.0
@@ -352,23 +414,32 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
                                        f"max_asymmetry = {max_asymmetry:.3g}",
                                   index=(int(i), int(j)),
                                   fix="check the data or raise max_asymmetry")
-    Ws = 0.5 * (W + W.T)
+    big = float(np.abs(W).max()) if W.size else 0.0
+    if big == 0.0:
+        raise InvalidProblemError("W", "is zero", fix="a local problem needs a non-zero Delassus matrix")
+    # Work on W / 2^k ≤ 1 (exact scaling): entries near 1e308 would overflow W + Wᵀ and the
+    # eigensolver's norms.
+    exp = int(np.frexp(big)[1])
+    Ws = 0.5 * (np.ldexp(W, -exp) + np.ldexp(W.T, -exp))
     lam, V = np.linalg.eigh(Ws)
-    norm = float(max(abs(lam[0]), abs(lam[-1]))) if lam.size else 0.0
+    norm_s = float(max(abs(lam[0]), abs(lam[-1])))
+    norm = float(np.ldexp(norm_s, exp))
     if rank_tol is None:
         if local.significant_digits:
-            abs_norm = float(np.linalg.norm(np.abs(Ws), 2))
-            rank_tol = 0.5 * 10.0 ** (1 - local.significant_digits) * abs_norm / max(norm, _TINY)
+            abs_norm_s = float(np.linalg.norm(np.abs(Ws), 2))
+            rank_tol = 0.5 * 10.0 ** (1 - local.significant_digits) * abs_norm_s / max(norm_s, _TINY)
         else:
             rank_tol = 100 * np.finfo(float).eps * dim
-    if norm == 0.0:
-        raise InvalidProblemError("W", "is zero", fix="a local problem needs a non-zero Delassus matrix")
-    if lam[0] < -rank_tol * norm:
+    if norm_s == 0.0:
+        raise InvalidProblemError("W", "is zero to working precision",
+                                  fix="a local problem needs a non-zero Delassus matrix")
+    if lam[0] < -rank_tol * norm_s:
         raise InvalidProblemError(
-            "W", f"is not positive semidefinite: eigenvalue {lam[0]:.3e} < -{rank_tol:.1e}·‖W‖ "
+            "W", f"is not positive semidefinite: eigenvalue {np.ldexp(lam[0], exp):.3e} < -{rank_tol:.1e}·‖W‖ "
                  f"(‖W‖ = {norm:.3e})",
             fix="a Delassus matrix W = H M⁻¹ Hᵀ is PSD; check the data or pass a larger rank_tol")
-    keep = lam > rank_tol * norm
+    keep = lam > rank_tol * norm_s
+    lam = np.ldexp(lam, exp)
     H = (V[:, keep] * np.sqrt(lam[keep])).T  # m × 5n
     m = H.shape[0]
     report = LiftReport(rank=int(m), dropped=int(dim - m), min_eigenvalue=float(lam[0]),
