@@ -8,6 +8,7 @@ one-line message on stderr; 3 an internal error (a bug: please report it; set
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -371,11 +372,15 @@ def _format_info(s: dict) -> str:
 
 def cmd_info(args) -> int:
     problem = _load(args)
-    summary = problem_summary(problem, solution_tol=args.solution_tol)
+    with _recorded_warnings() as caught:
+        summary = problem_summary(problem, solution_tol=args.solution_tol)
+    if caught:
+        summary["numerical_warnings"] = _warning_summary(caught)
     if args.json:
         print(_dumps(summary, indent=2))
     else:
         print(_format_info(summary))
+        _print_warnings(summary.get("numerical_warnings"), "while describing the problem")
     return EXIT_OK
 
 
@@ -385,6 +390,28 @@ def _json_default(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+@contextlib.contextmanager
+def _recorded_warnings():
+    """Record warnings (numpy floating-point, ...) instead of letting Python print them."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught
+
+
+def _warning_summary(caught) -> list[str]:
+    """Distinct warnings with their counts, e.g. ``"RuntimeWarning: overflow in add (×13)"``."""
+    counts = {}
+    for w in caught:
+        key = f"{w.category.__name__}: {' '.join(str(w.message).split())}"
+        counts[key] = counts.get(key, 0) + 1
+    return [f"{k} (×{n})" if n > 1 else k for k, n in counts.items()]
+
+
+def _print_warnings(items, where: str) -> None:
+    if items:
+        print(f"numerical warnings {where}: {'; '.join(items)}")
 
 
 def _dumps(obj, **kwargs) -> str:
@@ -451,7 +478,8 @@ def cmd_solve(args) -> int:
     if args.digits is not None:
         return _solve_digits(args, problem, options)
     t0 = time.perf_counter()
-    result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, **options)
+    with _recorded_warnings() as caught:
+        result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, **options)
     wall = time.perf_counter() - t0
     if args.verbose and not args.json:
         print(_header(problem, result.settings, args.method,
@@ -466,6 +494,7 @@ def cmd_solve(args) -> int:
         "method": result.method, "iterations": result.nit, "time": wall, "tol": args.tol,
         "pinfeas": result.pinfeas, "dinfeas": result.dinfeas, "mu": result.mu,
         "presolve": result.presolve, "out": args.out,
+        "numerical_warnings": _warning_summary(caught),
     }
     if args.json:
         print(_dumps(summary, indent=2))
@@ -475,6 +504,8 @@ def cmd_solve(args) -> int:
               f"dinfeas {result.dinfeas:.2e}, mu {result.mu:.2e}")
         if args.out:
             print(f"solution written to {args.out}")
+        _print_warnings(summary["numerical_warnings"], "during the solve (the status above is "
+                        "judged by the recomputed criterion, not by these)")
     return EXIT_OK if result.success else EXIT_NOT_SOLVED
 
 
@@ -516,7 +547,9 @@ def cmd_diagnose(args) -> int:
     from .diagnosis import diagnose
 
     problem = _load(args)
-    d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps)
+    with _recorded_warnings() as caught:
+        d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps)
+    d["numerical_warnings"] = _warning_summary(caught)
     if args.json:
         print(_dumps(d, indent=2))
         return EXIT_OK
@@ -534,6 +567,7 @@ def cmd_diagnose(args) -> int:
         flagged = [r for r in d["iterations"] if r["flags"]]
         first = f"; first flagged iteration {flagged[0]['iter']}: {flagged[0]['flags'][0]}" if flagged else ""
         print(f"failure: {d['failure']}{first}")
+    _print_warnings(d["numerical_warnings"], "in the double run")
     return EXIT_OK
 
 
