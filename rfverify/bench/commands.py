@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 
@@ -42,7 +41,10 @@ def add_parsers(sub) -> None:
                     "(work-precision data, how far double precision gets), and, for problems with "
                     "at most --reference-max-contacts contacts, the mixed-precision --digits path "
                     "with its certificate (whose independent reference gives correct digits). "
-                    "Resumable: finished runs are skipped when the problem file is unchanged. "
+                    "Resumable: a finished run is reused only when the problem file's content, "
+                    "the method, tolerance, settings and rfverify version are unchanged "
+                    "(--retry-failed also redoes timed-out, crashed and failed runs); one bench "
+                    "at a time per RUN_DIR. "
                     "Then run `rfverify report RUN_DIR`.",
     )
     bench.add_argument("inputs", nargs="+", metavar="DIR_OR_FILE",
@@ -70,6 +72,9 @@ def add_parsers(sub) -> None:
                        help="largest problem (contacts) given the mixed-precision path and a "
                             "reference solution; the reference costs ~1 min at 100 contacts "
                             "(default: %(default)s)")
+    bench.add_argument("--retry-failed", action="store_true",
+                       help="also re-run runs recorded as Timeout, Crashed or Error (e.g. with a "
+                            "longer --time-limit); other finished runs are reused as usual")
     bench.add_argument("--quiet", action="store_true", help="no progress output")
     bench.add_argument("--json", action="store_true", help="print the outcome as JSON")
     bench.set_defaults(func=cmd_bench)
@@ -104,7 +109,7 @@ def cmd_bench(args) -> int:
                     time_limit=args.time_limit, trajectory_tol=args.trajectory_tol,
                     trajectories=not args.no_trajectories, digits=args.digits,
                     reference_max_contacts=args.reference_max_contacts, max_iter=args.max_iter,
-                    quiet=args.quiet, command=command)
+                    quiet=args.quiet, command=command, retry_failed=args.retry_failed)
     if args.json:
         out = dict(out, counts=[{"method": m, "tol": t, "solved": s, "total": n}
                                 for (m, t), (s, n) in out["counts"].items()])
@@ -113,7 +118,7 @@ def cmd_bench(args) -> int:
         print(f"bench: {out['ran']} runs done, {out['skipped']} already finished, {out['timeouts']} timed out; "
               f"records in {out['run_dir']}/runs. Next: rfverify report {out['run_dir']}")
         for (method, tol), (solved, total) in sorted(out["counts"].items(), key=lambda kv: (kv[0][0], -kv[0][1])):
-            print(f"  {method:<16} tol {tol:.0e}: {solved}/{total} verified solved")
+            print(f"  {method:<16} tol {tol:g}: {solved}/{total} verified solved")
     return 0
 
 
@@ -123,10 +128,15 @@ def cmd_report(args) -> int:
     out = make_report(args.run_dir, diagnose_count=args.diagnose,
                       diagnose_max_contacts=args.diagnose_max_contacts, diagnose_dps=args.dps,
                       quiet=args.quiet)
+    if out["issues"]:
+        print(f"rfverify report: warning: {args.run_dir}: {len(out['issues'])} record(s) or array "
+              f"file(s) missing or damaged, e.g. {out['issues'][0]} (all listed in summary.md under "
+              "'Missing or damaged records')", file=sys.stderr)
     if args.json:
-        print(_dumps({"report": out["report"], "summary": out["summary"],
-                          "counts": [{"collection": c, "method": m, "tol": t, "solved": s, "total": n}
-                                     for (c, m, t), (s, n) in out["counts"].items()]}))
+        print(_dumps({"report": out["report"], "summary": out["summary"], "issues": out["issues"],
+                      "bench_running": out["running"],
+                      "counts": [{"collection": c, "method": m, "tol": t, "solved": s, "total": n}
+                                 for (c, m, t), (s, n) in out["counts"].items()]}))
     else:
         print(f"report: {out['report']}\nsummary: {out['summary']}")
     return 0

@@ -1,14 +1,20 @@
 """Scheduling of benchmark tasks: one process per task, K at a time, a wall-time limit per
-task, and resume (a task whose record exists is not run again).
+task, and resume (a task whose valid record exists is not run again).
 
 Layout of a run directory::
 
-    RUN_DIR/manifest.json                    problems (key, path, sha256, sizes), methods,
-                                             tolerances, options of the last invocation
+    RUN_DIR/.lock                            held (flock) by the bench working in it
+    RUN_DIR/manifest.json                    schema, problems (key, path, sha256, sizes),
+                                             methods, tolerances, planned tasks, options
     RUN_DIR/runs/<collection>/<problem>/     one directory per problem
         <method>@<tol>.json / .npz           a timed solve and its independent recheck
         trajectory-<method>@<tol>.json/.npz  every iterate, rechecked (work–precision data)
         digits<K>.json / .npz                mixed-precision path, certificate, reference
+
+Resume reuses a record only when its schema and its ``task_key`` — a hash of the problem
+file's content, the method, tolerance, iteration limit, recheck precision, every solver
+setting and rfverify's version — match the task, and its arrays are intact.  ``retry_failed``
+also re-runs records whose status is Timeout, Crashed or Error.
 """
 
 from __future__ import annotations
@@ -16,20 +22,30 @@ from __future__ import annotations
 import hashlib
 import json
 import multiprocessing as mp
+import os
+import signal
+import threading
 import time
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import RfverifyError
 from ..progress import Progress
-from .tasks import run_task, task_label, task_stem, write_json
+from .tasks import (FAILED_STATUSES, RECORD_SCHEMA, base_record, run_task, task_key, task_label,
+                    task_stem, write_json)
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
 ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling")
+MANIFEST_SCHEMA = 2
+"""2: adds ``schema``, ``rfverify_version`` and the planned ``tasks`` (what report expects)."""
+
+_FIX_MANIFEST = ("delete it and re-run the bench command: finished records under runs/ are "
+                 "checked and reused")
 
 
 class BenchInputError(RfverifyError):
-    """Bad benchmark input (no problems found, unknown method, bad run directory)."""
+    """Bad benchmark input (no problems found, unknown method, bad or busy run directory)."""
 
 
 @dataclass(frozen=True)
@@ -43,9 +59,13 @@ class ProblemEntry:
 
 def _sha256(path: Path) -> str:
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
+    try:
+        with open(path, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+    except OSError as exc:
+        raise BenchInputError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__}); "
+                              "fix: make it readable or leave it out") from None
     return h.hexdigest()
 
 
@@ -70,22 +90,23 @@ def discover_problems(inputs) -> list[ProblemEntry]:
         if p.is_dir():
             files = sorted(q for q in p.iterdir() if q.suffix.lower() in PROBLEM_SUFFIXES and q.is_file())
             if not files:
-                raise BenchInputError(f"{p}: directory holds no problem files ({', '.join(PROBLEM_SUFFIXES)})")
+                raise BenchInputError(f"{p}: directory holds no problem files ({', '.join(PROBLEM_SUFFIXES)}); "
+                                      "fix: name a directory of .hdf5/.dat problems")
             coll = p.resolve().name
             found += [ProblemEntry(f"{coll}/{q.stem}", coll, str(q.resolve()), _sha256(q), str(q)) for q in files]
         elif p.is_file():
             coll = p.resolve().parent.name
             found.append(ProblemEntry(f"{coll}/{p.stem}", coll, str(p.resolve()), _sha256(p), str(p)))
         else:
-            raise BenchInputError(f"{p}: no such file or directory (give problem files, directories "
-                                  "of them, 'bundled' or 'bundled:NAME')")
+            raise BenchInputError(f"{p}: no such file or directory; fix: give problem files, "
+                                  "directories of them, 'bundled' or 'bundled:NAME'")
     keys = [e.key for e in found]
     dup = {k for k in keys if keys.count(k) > 1}
     if dup:
-        raise BenchInputError(f"two inputs give the same problem key(s) {sorted(dup)}; rename or "
-                              "pass each collection once")
+        raise BenchInputError(f"two inputs give the same problem key(s) {sorted(dup)}; fix: rename "
+                              "them or pass each collection once")
     if not found:
-        raise BenchInputError("no problems given")
+        raise BenchInputError("no problems given; fix: name problem files or directories")
     return found
 
 
@@ -116,16 +137,42 @@ def problem_dir(run_dir: Path, key: str) -> Path:
     return run_dir / "runs" / key
 
 
-def is_done(run_dir: Path, task: dict) -> bool:
-    """A task is done when its record exists for the same problem file content."""
-    path = problem_dir(run_dir, task["problem"]) / f"{task_stem(task)}.json"
-    if not path.exists():
-        return False
+def record_path(run_dir: Path, task: dict) -> Path:
+    return problem_dir(run_dir, task["problem"]) / f"{task_stem(task)}.json"
+
+
+def read_record(path: Path) -> dict | None:
+    """A record as a dict, or None when it is missing, truncated or not a JSON object."""
     try:
-        rec = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError):
+        rec = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return rec if isinstance(rec, dict) else None
+
+
+def npz_intact(path: Path) -> bool:
+    """The arrays of a record are present and every member passes its CRC check."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return bool(z.namelist()) and z.testzip() is None
+    except (OSError, zipfile.BadZipFile, ValueError, EOFError):
         return False
-    return bool(rec.get("complete")) and rec.get("sha256") == task["sha256"]
+
+
+def is_done(run_dir: Path, task: dict, *, retry_failed: bool = False) -> bool:
+    """A task is done when its record is intact, of this schema, has this task's key (same
+    problem content, settings, tolerance and rfverify version) and its arrays are intact;
+    with ``retry_failed`` a Timeout/Crashed/Error record does not count as done."""
+    path = record_path(run_dir, task)
+    rec = read_record(path)
+    if rec is None or rec.get("complete") is not True:
+        return False
+    if rec.get("schema") != RECORD_SCHEMA or rec.get("task_key") != task_key(task):
+        return False
+    status = rec.get("status")
+    if status in FAILED_STATUSES:
+        return not retry_failed
+    return npz_intact(path.with_suffix(".npz"))
 
 
 def _context():
@@ -133,34 +180,180 @@ def _context():
     return mp.get_context("fork" if "fork" in methods else "spawn")
 
 
+# ---------------------------------------------------------------------- the run directory
+class RunLock:
+    """An exclusive ``flock`` on ``RUN_DIR/.lock`` for the life of a bench: a second bench on
+    the same directory is refused.  The kernel drops the lock when its holders die, so a
+    killed bench never leaves a stale lock."""
+
+    def __init__(self, run_dir: Path):
+        self.path = Path(run_dir) / ".lock"
+        self.fd = None
+
+    def __enter__(self):
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - no flock on this platform: no lock
+            return self
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.pread(self.fd, 64, 0).decode(errors="replace").strip() or "?"
+            os.close(self.fd)
+            self.fd = None
+            raise BenchInputError(f"{self.path.parent}: RUN_DIR is in use by another rfverify bench "
+                                  f"(pid {holder}); fix: wait for it to finish, or give another "
+                                  "--out directory") from None
+        os.ftruncate(self.fd, 0)
+        os.pwrite(self.fd, f"{os.getpid()}\n".encode(), 0)
+        return self
+
+    def __exit__(self, *exc):
+        if self.fd is not None:
+            os.close(self.fd)  # closing the last descriptor releases the lock
+            self.fd = None
+        return False
+
+
+def bench_running(run_dir: Path) -> bool:
+    """Whether a bench holds the lock of ``run_dir`` right now."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover
+        return False
+    path = Path(run_dir) / ".lock"
+    if not path.exists():
+        return False
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+def read_manifest(run_dir: Path, *, required: bool) -> dict:
+    """``RUN_DIR/manifest.json`` checked: a JSON object whose problems are a list of entries with
+    the right types.  Missing → {} (or an error when ``required``); damaged → BenchInputError
+    naming what is wrong and the fix."""
+    path = Path(run_dir) / "manifest.json"
+    if not path.exists():
+        if required:
+            raise BenchInputError(f"{run_dir}: not a bench run directory (no manifest.json); fix: "
+                                  "create one with `rfverify bench ... --out DIR`")
+        return {}
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise BenchInputError(f"{path}: cannot be read ({exc}); fix: {_FIX_MANIFEST}") from None
+    if not text.strip():
+        raise BenchInputError(f"{path}: manifest: is empty; fix: {_FIX_MANIFEST}")
+    try:
+        manifest = json.loads(text)
+    except ValueError as exc:
+        raise BenchInputError(f"{path}: manifest: is truncated or not JSON ({exc}); fix: "
+                              f"{_FIX_MANIFEST}") from None
+    if not isinstance(manifest, dict):
+        raise BenchInputError(f"{path}: manifest: is a JSON {type(manifest).__name__}, expected an "
+                              f"object; fix: {_FIX_MANIFEST}")
+    schema = manifest.get("schema", 1)
+    if schema not in (1, MANIFEST_SCHEMA):
+        raise BenchInputError(f"{path}: schema: is {schema!r}, this rfverify reads 1 and "
+                              f"{MANIFEST_SCHEMA}; fix: use the rfverify that wrote it, or "
+                              "re-run the bench into a new directory")
+    problems = manifest.get("problems")
+    types = {"key": str, "collection": str, "spec": str, "sha256": str, "n_contacts": int, "n_dofs": int}
+    if not isinstance(problems, list):
+        raise BenchInputError(f"{path}: problems: is missing or not a list; fix: {_FIX_MANIFEST}")
+    for k, entry in enumerate(problems):
+        bad = [f for f, t in types.items()
+               if not isinstance(entry, dict) or not isinstance(entry.get(f), t) or isinstance(entry.get(f), bool)]
+        if bad:
+            raise BenchInputError(f"{path}: problems[{k}].{bad[0]}: is missing or of the wrong type; "
+                                  f"fix: {_FIX_MANIFEST}")
+    for field in ("methods", "tols", "tasks"):
+        if field in manifest and not isinstance(manifest[field], list):
+            raise BenchInputError(f"{path}: {field}: is not a list; fix: {_FIX_MANIFEST}")
+    return manifest
+
+
+# ---------------------------------------------------------------------- workers
+def _worker(task: dict, out_dir: str, parent: int) -> None:
+    """Process target: die with the bench (never an orphan), then run the task."""
+    _die_with_parent(parent)
+    run_task(task, out_dir)
+
+
+def _die_with_parent(parent: int) -> None:
+    """Kill this worker when the bench process dies, however it dies (even SIGKILL): Linux's
+    PR_SET_PDEATHSIG where available, and a thread watching the parent id everywhere."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:  # the bench died before prctl took effect
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="rfverify-parent-watch").start()
+
+
+def _stop(procs) -> None:
+    for proc in procs:
+        if proc.is_alive():
+            proc.kill()
+    for proc in procs:
+        proc.join(timeout=5)
+
+
 def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced", "clarabel"),
               tols=(1e-8, 1e-9, 1e-10), jobs: int = 1, time_limit: float = 600.0,
               trajectory_tol: float = 1e-14, trajectories: bool = True, digits: int = 10,
               reference_max_contacts: int = 60, max_iter: int = 100, quiet: bool = False,
-              command: str | None = None) -> dict:
+              command: str | None = None, retry_failed: bool = False) -> dict:
     """Run (or resume) a benchmark.  Returns ``{"ran", "skipped", "timeouts", "total",
     "run_dir", "counts"}`` with ``counts[(method, tol)] = (verified solved, runs)`` over the
     problems of this invocation.  ``command`` (the CLI line) is recorded in the manifest so the
     report can say how to regenerate it.
 
     Every task runs in a fresh process; a task that exceeds ``time_limit`` seconds is killed
-    and recorded with status ``Timeout``; one that dies is recorded as ``Crashed``.
+    and recorded with status ``Timeout``; one that dies is recorded as ``Crashed``.  Workers
+    die with the bench.  ``retry_failed`` re-runs Timeout/Crashed/Error records (e.g. with a
+    longer ``time_limit``).
     """
+    import math
+
     from ..io import load
     from ..solver.result import METHODS
 
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
-        raise BenchInputError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}")
+        raise BenchInputError(f"unknown method(s) {', '.join(unknown)}; fix: choose from {', '.join(METHODS)}")
     if not methods:
-        raise BenchInputError("no methods given")
-    if not tols or any(not (t > 0) for t in tols):
-        raise BenchInputError("tolerances must be positive numbers")
-    if jobs < 1 or time_limit <= 0:
-        raise BenchInputError("--jobs must be ≥ 1 and --time-limit > 0")
+        raise BenchInputError("no methods given; fix: pass --methods jqinv,...")
+    if not tols or any(not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0) for t in tols):
+        raise BenchInputError(f"tolerances {list(tols)}: must be finite numbers > 0; fix: pass e.g. "
+                              "--tol 1e-8,1e-10")
+    if not math.isfinite(trajectory_tol) or not trajectory_tol > 0:
+        raise BenchInputError(f"trajectory tolerance {trajectory_tol!r}: must be a finite number > 0; "
+                              "fix: pass e.g. --trajectory-tol 1e-14")
+    if jobs < 1 or not time_limit > 0:
+        raise BenchInputError("--jobs must be ≥ 1 and --time-limit > 0; fix: pass e.g. --jobs 2 --time-limit 600")
     run_dir = Path(out_dir)
     if run_dir.exists() and not run_dir.is_dir():
-        raise BenchInputError(f"{run_dir}: exists and is not a directory")
+        raise BenchInputError(f"{run_dir}: exists and is not a directory; fix: give a new or "
+                              "existing directory to --out")
     problems = discover_problems(inputs)
     # Validate every problem up front (a bad file is an input error, not 15 failed runs).
     sizes = {}
@@ -172,24 +365,43 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
                        reference_max_contacts=reference_max_contacts,
                        sizes={k: v[0] for k, v in sizes.items()}, max_iter=max_iter)
     run_dir.mkdir(parents=True, exist_ok=True)
-    manifest_path = run_dir / "manifest.json"
-    old = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
+    with RunLock(run_dir):
+        return _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit,
+                           trajectory_tol, digits, reference_max_contacts, quiet, command,
+                           retry_failed)
+
+
+def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit, trajectory_tol,
+                digits, reference_max_contacts, quiet, command, retry_failed) -> dict:
+    from .. import __version__
+    from ..solver.result import METHODS
+
+    old = read_manifest(run_dir, required=False)
     known = {p["key"]: p for p in old.get("problems", [])}
     for e in problems:
         known[e.key] = {"key": e.key, "collection": e.collection, "spec": _portable(e, run_dir), "sha256": e.sha256,
                         "n_contacts": sizes[e.key][0], "n_dofs": sizes[e.key][1]}
+    planned = {(t.get("problem"), t.get("stem")): t for t in old.get("tasks", []) if isinstance(t, dict)}
+    for t in tasks:
+        entry = {"problem": t["problem"], "kind": t["kind"], "stem": task_stem(t)}
+        entry.update({k: t[k] for k in ("method", "tol", "digits") if k in t})
+        planned[(t["problem"], entry["stem"])] = entry
     manifest = {
+        "schema": MANIFEST_SCHEMA, "rfverify_version": __version__,
         "problems": sorted(known.values(), key=lambda p: p["key"]),
-        "methods": sorted(set(old.get("methods", [])) | set(methods), key=list(METHODS).index),
-        "tols": sorted(set(old.get("tols", [])) | {float(t) for t in tols}, reverse=True),
+        "methods": sorted({m for m in old.get("methods", []) if m in METHODS} | set(methods),
+                          key=list(METHODS).index),
+        "tols": sorted({t for t in old.get("tols", []) if isinstance(t, float)} | {float(t) for t in tols},
+                       reverse=True),
+        "tasks": sorted(planned.values(), key=lambda t: (t["problem"], t["stem"])),
         "trajectory_tol": trajectory_tol, "digits": digits,
         "reference_max_contacts": reference_max_contacts, "time_limit": time_limit, "jobs": jobs,
         "machine": _machine(),
         "command": command or old.get("command"),
     }
-    write_json(manifest_path, manifest)
+    write_json(run_dir / "manifest.json", manifest)
 
-    todo = [t for t in tasks if not is_done(run_dir, t)]
+    todo = [t for t in tasks if not is_done(run_dir, t, retry_failed=retry_failed)]
     # Largest problems first: the pool then ends on short tasks (less idle time at the end).
     todo.sort(key=lambda t: -sizes[t["problem"]][0])
     bar = Progress(len(todo), "bench", quiet=quiet)
@@ -197,43 +409,64 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
     running = {}
     timeouts = 0
     pending = list(todo)
-    while pending or running:
-        while pending and len(running) < jobs:
-            task = pending.pop(0)
-            out = problem_dir(run_dir, task["problem"])
-            out.mkdir(parents=True, exist_ok=True)
-            proc = ctx.Process(target=run_task, args=(task, str(out)), daemon=True)
-            proc.start()
-            running[proc] = (task, time.monotonic())
-        time.sleep(0.02)
-        for proc in list(running):
-            task, started = running[proc]
-            elapsed = time.monotonic() - started
-            if proc.is_alive() and elapsed <= time_limit:
-                continue
-            if proc.is_alive():
-                proc.kill()
-                proc.join()
-                timeouts += 1
-                _record_failure(run_dir, task, "Timeout",
-                                f"killed after the per-task time limit of {time_limit:g} s")
-            else:
-                proc.join()
-                if not is_done(run_dir, task):
-                    _record_failure(run_dir, task, "Crashed",
-                                    f"worker process exited with code {proc.exitcode} without a record")
-            del running[proc]
-            bar.advance(f"{task_label(task)}: {_outcome(run_dir, task)}")
-    bar.close()
+    previous = _terminate_on_sigterm()
+    try:
+        while pending or running:
+            while pending and len(running) < jobs:
+                task = pending.pop(0)
+                out = problem_dir(run_dir, task["problem"])
+                out.mkdir(parents=True, exist_ok=True)
+                # The attempt id tells this run's record from an outdated one left in place.
+                task = {**task, "attempt": os.urandom(8).hex()}
+                proc = ctx.Process(target=_worker, args=(task, str(out), os.getpid()), daemon=True)
+                proc.start()
+                running[proc] = (task, time.monotonic())
+            time.sleep(0.02)
+            for proc in list(running):
+                task, started = running[proc]
+                elapsed = time.monotonic() - started
+                if proc.is_alive() and elapsed <= time_limit:
+                    continue
+                if proc.is_alive():
+                    proc.kill()
+                    proc.join()
+                    timeouts += 1
+                    _record_failure(run_dir, task, "Timeout",
+                                    f"killed after the per-task time limit of {time_limit:g} s")
+                else:
+                    proc.join()
+                    rec = read_record(record_path(run_dir, task))
+                    if rec is None or rec.get("attempt") != task["attempt"]:
+                        _record_failure(run_dir, task, "Crashed",
+                                        f"worker process exited with code {proc.exitcode} without a record")
+                del running[proc]
+                bar.advance(f"{task_label(task)}: {_outcome(run_dir, task)}")
+    finally:
+        _stop(list(running))  # interrupted or killed by SIGTERM: no worker outlives the bench
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+        bar.close()
     counts = {}
     for t in tasks:
         if t["kind"] != "solve":
             continue
-        rec = json.loads((problem_dir(run_dir, t["problem"]) / f"{task_stem(t)}.json").read_text())
+        rec = read_record(record_path(run_dir, t)) or {}
         solved, total = counts.get((t["method"], t["tol"]), (0, 0))
-        counts[(t["method"], t["tol"])] = (solved + bool(rec.get("solved")), total + 1)
+        counts[(t["method"], t["tol"])] = (solved + (rec.get("solved") is True), total + 1)
     return {"ran": len(todo), "skipped": len(tasks) - len(todo), "timeouts": timeouts, "total": len(tasks),
             "run_dir": str(run_dir), "counts": counts}
+
+
+def _terminate_on_sigterm():
+    """SIGTERM (kill, a CI timeout) raises SystemExit in the main loop, so its ``finally`` stops
+    the workers; returns the previous handler (None when not in the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        raise SystemExit(128 + signum)
+
+    return signal.signal(signal.SIGTERM, handler)
 
 
 def _portable(entry: ProblemEntry, run_dir: Path) -> str:
@@ -255,21 +488,20 @@ def resolve_spec(spec: str, run_dir) -> str:
 
 
 def _record_failure(run_dir, task, status, message):
-    rec = {"format": 1, **{k: v for k, v in task.items() if k != "path"}, "complete": True,
-           "status": status, "message": message, "solved": False}
-    write_json(problem_dir(run_dir, task["problem"]) / f"{task_stem(task)}.json", rec)
+    rec = {**base_record(task), "status": status, "message": message, "solved": False}
+    write_json(record_path(run_dir, task), rec)
 
 
 def _outcome(run_dir, task) -> str:
-    try:
-        rec = json.loads((problem_dir(run_dir, task["problem"]) / f"{task_stem(task)}.json").read_text())
-    except (OSError, json.JSONDecodeError):
+    rec = read_record(record_path(run_dir, task))
+    if rec is None:
         return "no record"
-    verdict = "verified" if rec.get("solved") else "not verified"
+    verdict = "verified" if rec.get("solved") is True else "not verified"
     if task["kind"] == "trajectory":
-        verdict = f"best verified {rec.get('best_verified_max', float('nan')):.1e}"
+        best = rec.get("best_verified_max")
+        verdict = f"best verified {best:.1e}" if isinstance(best, (int, float)) else "no verified iterate"
     t = rec.get("time")
-    return f"{rec.get('status')} ({verdict}{'' if t is None else f', {t:.2f} s'})"
+    return f"{rec.get('status')} ({verdict}{f', {t:.2f} s' if isinstance(t, (int, float)) else ''})"
 
 
 def _machine() -> dict:

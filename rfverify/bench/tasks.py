@@ -18,48 +18,91 @@ last, atomically, so its presence means the task finished (what resume relies on
 
 from __future__ import annotations
 
-import json
+import hashlib
 import math
 import os
 import time
 import traceback
+import warnings
 from pathlib import Path
 
 import numpy as np
 
+from ..io.output import dumps
 from .verify import HighPrecisionChecker
 
-FORMAT_VERSION = 1
+RECORD_SCHEMA = 2
+"""Version of the record layout.  2: strict JSON (null for non-finite numbers), ``task_key``,
+exact tolerance stems.  Records of another schema are never reused by a resumed bench."""
+
+READABLE_SCHEMAS = (1, 2)
+"""Schemas ``rfverify report`` can read (1 differs only by what resume needs)."""
+
+FAILED_STATUSES = ("Timeout", "Crashed", "Error")
+"""Run outcomes that ``bench --retry-failed`` runs again."""
+
+
+def tol_text(tol: float) -> str:
+    """The shortest text that reads back as exactly ``tol`` (1e-08, 1.5e-10): distinct
+    tolerances never share a file name."""
+    return repr(float(tol))
 
 
 def task_stem(task: dict) -> str:
     """File stem of a task's outputs inside its problem directory."""
     if task["kind"] == "solve":
-        return f"{task['method']}@{task['tol']:.0e}"
+        return f"{task['method']}@{tol_text(task['tol'])}"
     if task["kind"] == "trajectory":
-        return f"trajectory-{task['method']}@{task['tol']:.0e}"
+        return f"trajectory-{task['method']}@{tol_text(task['tol'])}"
     return f"digits{task['digits']}"
+
+
+def task_key(task: dict) -> str:
+    """Hash of everything that determines a task's result: the problem file's content, the
+    kind, method, tolerance, iteration limit, recheck precision, digits, every solver setting
+    (defaults included: a changed default re-runs the task), rfverify's version and the
+    record schema."""
+    from .. import __version__
+    from ..solver import Settings
+
+    settings = {}
+    for name in Settings.names():
+        value = getattr(Settings(), name)
+        settings[name] = value if isinstance(value, (bool, int, float, str, type(None))) else repr(value)
+    what = {"schema": RECORD_SCHEMA, "rfverify": __version__, "sha256": task["sha256"],
+            "kind": task["kind"], "method": task.get("method"),
+            "tol": None if task.get("tol") is None else tol_text(task["tol"]),
+            "max_iter": task.get("max_iter"), "dps": task.get("dps"), "digits": task.get("digits"),
+            "settings": settings}
+    return hashlib.sha256(dumps(what, sort_keys=True).encode()).hexdigest()
 
 
 def task_label(task: dict) -> str:
     if task["kind"] == "digits":
         return f"{task['problem']} · {task['digits']}-digit path"
-    return f"{task['problem']} · {task['kind'] if task['kind'] != 'solve' else ''}{' ' if task['kind'] != 'solve' else ''}" \
-           f"{task['method']} {task['tol']:.0e}"
+    kind = "" if task["kind"] == "solve" else f"{task['kind']} "
+    return f"{task['problem']} · {kind}{task['method']} {task['tol']:g}"
+
+
+def base_record(task: dict) -> dict:
+    """The fields every record of ``task`` carries (the absolute path is this machine's
+    business; the manifest keeps a portable one)."""
+    from .. import __version__
+
+    return {"schema": RECORD_SCHEMA, "rfverify_version": __version__, "task_key": task_key(task),
+            **{k: v for k, v in task.items() if k != "path"}, "complete": True}
 
 
 def write_json(path: Path, record: dict) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(record, indent=1, default=_json_default, allow_nan=True))
-    os.replace(tmp, path)
-
-
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    return str(obj)
+    """Strict JSON (non-finite numbers as null), written to a temporary file and renamed: a
+    reader never sees half a record."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(dumps(record, indent=1, default=str))
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
 
 
 def run_task(task: dict, out_dir: str) -> None:
@@ -67,23 +110,31 @@ def run_task(task: dict, out_dir: str) -> None:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     stem = task_stem(task)
-    # The absolute path is this machine's business; the manifest keeps a portable one.
-    record = {"format": FORMAT_VERSION, **{k: v for k, v in task.items() if k != "path"}, "complete": True}
-    try:
-        from ..io import load
+    record = base_record(task)
+    with warnings.catch_warnings(record=True) as caught:
+        # A worker's stderr is the bench's: warnings go into the record instead.
+        warnings.simplefilter("always")
+        try:
+            from ..io import load
 
-        problem = load(task["path"])
-        record.update(n_contacts=problem.n_contacts, n_dofs=problem.n_dofs)
-        if task["kind"] == "solve":
-            record.update(_solve(problem, task, out / f"{stem}.npz"))
-        elif task["kind"] == "trajectory":
-            record.update(_trajectory(problem, task, out / f"{stem}.npz"))
-        else:
-            record.update(_digits(problem, task, out / f"{stem}.npz"))
-    except Exception as exc:  # a crash is a result too: recorded with its cause
-        record.update(status="Error", solved=False,
-                      message=f"{type(exc).__name__}: {' '.join(str(exc).split())}",
-                      traceback=traceback.format_exc(limit=8))
+            problem = load(task["path"])
+            record.update(n_contacts=problem.n_contacts, n_dofs=problem.n_dofs)
+            if task["kind"] == "solve":
+                record.update(_solve(problem, task, out / f"{stem}.npz"))
+            elif task["kind"] == "trajectory":
+                record.update(_trajectory(problem, task, out / f"{stem}.npz"))
+            else:
+                record.update(_digits(problem, task, out / f"{stem}.npz"))
+        except Exception as exc:  # a crash is a result too: recorded with its cause
+            record.update(status="Error", solved=False,
+                          message=f"{type(exc).__name__}: {' '.join(str(exc).split())}",
+                          traceback=traceback.format_exc(limit=8))
+    if caught:
+        counts = {}
+        for w in caught:
+            key = f"{w.category.__name__}: {' '.join(str(w.message).split())}"
+            counts[key] = counts.get(key, 0) + 1
+        record["numerical_warnings"] = [f"{k} (×{n})" if n > 1 else k for k, n in counts.items()]
     write_json(out / f"{stem}.json", record)
 
 

@@ -33,7 +33,8 @@ import numpy as np
 from ..errors import InvalidArgumentError, OutputPathError
 
 __all__ = ["OutputTarget", "check_output_file", "check_output_dir", "atomic_output",
-           "write_text_atomic", "json_safe", "dumps"]
+           "write_text_atomic", "write_bytes_atomic", "json_safe", "dumps", "tag_floats",
+           "untag_floats"]
 
 
 @dataclass(frozen=True)
@@ -229,6 +230,13 @@ def write_text_atomic(path, text: str, *, option: str = "RUN_DIR") -> Path:
     return Path(path)
 
 
+def write_bytes_atomic(path, data: bytes, *, option: str = "RUN_DIR") -> Path:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_output`)."""
+    with atomic_output(path, option=option) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
 # ---------------------------------------------------------------------- strict JSON
 def json_safe(obj):
     """A copy of ``obj`` that strict JSON can encode: numpy scalars and arrays become Python
@@ -253,6 +261,33 @@ def dumps(obj, **kwargs) -> str:
     """``json.dumps`` that never emits ``NaN``/``Infinity`` (non-finite numbers are ``null``)."""
     kwargs.setdefault("default", _default)
     return json.dumps(json_safe(obj), allow_nan=False, **kwargs)
+
+
+def tag_floats(obj):
+    """Like :func:`json_safe`, but a non-finite float becomes ``{"$float": "nan"|"inf"|"-inf"}``
+    so that a cache written as strict JSON reads back exactly (see :func:`untag_floats`)."""
+    if isinstance(obj, (float, np.floating)) and not math.isfinite(obj):
+        return {"$float": "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")}
+    if isinstance(obj, dict):
+        return {(k if isinstance(k, str) else str(k)): tag_floats(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [tag_floats(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return tag_floats(obj.tolist())
+    if isinstance(obj, np.generic):
+        return tag_floats(obj.item())
+    return obj
+
+
+def untag_floats(obj):
+    """Inverse of :func:`tag_floats`."""
+    if isinstance(obj, dict):
+        if set(obj) == {"$float"} and obj["$float"] in ("nan", "inf", "-inf"):
+            return float(obj["$float"])
+        return {k: untag_floats(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [untag_floats(v) for v in obj]
+    return obj
 
 
 def _default(obj):

@@ -12,9 +12,13 @@ from __future__ import annotations
 import html
 import json
 import math
+import warnings
 from datetime import datetime, timezone
 from pathlib import Path
 
+from .. import __version__
+from ..bench.tasks import tol_text
+from ..io.output import tag_floats, untag_floats, write_text_atomic
 from . import figures
 from .data import (SGM_SHIFT, RunData, double_limit, failures, load_run, mixed_precision,
                    success_table, worst_cases)
@@ -89,20 +93,31 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     dict with their paths and the success counts."""
     data = load_run(run_dir)
     out = Path(run_dir)
-    if not data.solves:
+    if not any(not r.get("_placeholder") for r in data.solves):
         from ..bench.runner import BenchInputError
 
-        raise BenchInputError(f"{out}: the run directory holds no finished solve runs yet")
+        damage = f" ({len(data.issues)} records missing or damaged, e.g. {data.issues[0]})" if data.issues else ""
+        raise BenchInputError(f"{out}: the run directory holds no usable finished solve runs yet"
+                              f"{damage}; fix: run or re-run `rfverify bench ... --out {out}`")
     diags = _diagnostics(data, diagnose_count, diagnose_max_contacts, diagnose_dps, quiet)
 
     doc = _Doc()
     doc.h(1, f"rfverify benchmark report — {out.resolve().name}")
+    if data.running:
+        doc.p("Warning: a bench is still running in this directory; this report shows the runs "
+              "finished so far.")
+    if data.issues:
+        doc.h(2, "Missing or damaged records")
+        doc.p(f"{len(data.issues)} file(s) of this run directory are missing or cannot be read. A "
+              "planned solve without a usable record is counted as a run that did not solve "
+              "(status Missing or Damaged), so no method loses runs silently.")
+        doc.bullets(data.issues)
     machine = data.manifest.get("machine", {})
     colls = {c: sum(p["collection"] == c for p in data.problems.values()) for c in data.collections}
     sizes = [p["n_contacts"] for p in data.problems.values()]
     doc.p(f"{len(data.problems)} problems ({', '.join(f'{c}: {k}' for c, k in colls.items())}; "
           f"{min(sizes)}–{max(sizes)} contacts), methods {', '.join(data.methods)}, tolerances "
-          f"{', '.join(f'{t:.0e}' for t in data.tols)}. Machine: {machine.get('platform', '?')}, "
+          f"{', '.join(f'{t:g}' for t in data.tols)}. Machine: {machine.get('platform', '?')}, "
           f"{machine.get('cpus', '?')} CPUs, Python {machine.get('python', '?')}, "
           f"{data.manifest.get('jobs', '?')} parallel job(s) (times are wall-clock per run; compare "
           "ratios, not absolute values, on a shared machine).")
@@ -119,8 +134,8 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     doc.bullets(_glance(data, table))
 
     doc.h(2, "Performance profiles")
-    doc.image(figures.profiles(data, out, "time"), "Dolan–Moré profiles of run time per tolerance")
-    doc.image(figures.profiles(data, out, "iterations"), "Dolan–Moré profiles of iterations per tolerance")
+    _figure(doc, "Dolan–Moré profiles of run time per tolerance", figures.profiles, data, out, "time")
+    _figure(doc, "Dolan–Moré profiles of iterations per tolerance", figures.profiles, data, out, "iterations")
 
     doc.h(2, "Success per collection, method and tolerance")
     doc.p(f"solved = verified runs / runs. Times are shifted geometric means (shift {SGM_SHIFT} s) over "
@@ -128,19 +143,19 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
           "on the same problems. 'false claims' = runs whose solver said Solved but the recheck refuted.")
     doc.table(["collection", "method", "tol", "solved", "SGM time (s)", "n common", "SGM iterations",
                "median digits of v", "false claims"],
-              [[r["collection"], r["method"], f"{r['tol']:.0e}", f"{r['solved']}/{r['total']}",
+              [[r["collection"], r["method"], f"{r['tol']:g}", f"{r['solved']}/{r['total']}",
                 _fmt(r["sgm_time_common"], ".4f"), r["n_common"], _fmt(r["sgm_iter_common"], ".1f"),
                 _dig(r["median_digits_v"]), r["false_claims"]] for r in table])
 
     doc.h(2, "Error against run time")
-    doc.image(figures.work_precision_aggregate(data, out),
-              "Correct digits of v against elapsed time (left) and share of problems reaching k digits (right)")
+    _figure(doc, "Correct digits of v against elapsed time (left) and share of problems reaching k "
+                 "digits (right)", figures.work_precision_aggregate, data, out)
     wp_keys = _wp_problems(data)
-    doc.image(figures.work_precision_problems(data, out, wp_keys),
-              "Per problem: verified error of every iterate against elapsed time")
+    _figure(doc, "Per problem: verified error of every iterate against elapsed time",
+            figures.work_precision_problems, data, out, wp_keys)
 
     doc.h(2, "How far double precision gets")
-    doc.p(f"Each Algorithm 1 method run at tol {data.manifest.get('trajectory_tol', 1e-14):.0e} with every "
+    doc.p(f"Each Algorithm 1 method run at tol {data.manifest.get('trajectory_tol', 1e-14):g} with every "
           "iterate rechecked: the best verified criterion and the best digits of v along the run.")
     doc.table(["problem", "method", "end status", "iterations", "best verified criterion", "best digits of v",
                "digits of v at end", "how it ended"],
@@ -162,29 +177,43 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     if not diags:
         doc.p("No problem was selected (none small enough for the lockstep reference).")
     for i, (key, method, tol, diag) in enumerate(diags):
-        doc.h(3, f"{key} — {method} at {tol:.0e}")
+        doc.h(3, f"{key} — {method} at {tol:g}")
         doc.p(_diag_summary(diag))
-        doc.image(figures.diagnostics(diag, key, out, i), f"Lockstep diagnosis of {key} ({method}, tol {tol:.0e})")
+        _figure(doc, f"Lockstep diagnosis of {key} ({method}, tol {tol:g})", figures.diagnostics,
+                diag, key, out, i)
 
     doc.h(2, "Failures and their diagnosed causes")
     fails = failures(data)
     diag_by = {(k, m, t): d for k, m, t, d in diags}
     doc.table(["problem", "method", "tol", "status", "cause"],
-              [[f["problem"], f["method"], f"{f['tol']:.0e}", f["status"],
+              [[f["problem"], f["method"], f"{f['tol']:g}", f["status"],
                 f["cause"] + (f" — lockstep: {_diag_summary(diag_by[(f['problem'], f['method'], f['tol'])])}"
                               if (f["problem"], f["method"], f["tol"]) in diag_by else "")]
                for f in fails])
 
     summary = out / "summary.md"
-    summary.write_text("\n".join(doc.md) + "\n")
+    write_text_atomic(summary, "\n".join(doc.md) + "\n")
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>rfverify report</title>"
             f"<style>{_CSS}</style></head><body>{''.join(doc.html)}"
             f"<p style='color:#888;font-size:0.8em'>generated {stamp}</p></body></html>")
     report = out / "report.html"
-    report.write_text(page)
+    write_text_atomic(report, page)
     counts = {(r["collection"], r["method"], r["tol"]): (r["solved"], r["total"]) for r in table}
-    return {"report": str(report), "summary": str(summary), "counts": counts}
+    return {"report": str(report), "summary": str(summary), "counts": counts, "issues": list(data.issues),
+            "running": data.running}
+
+
+def _figure(doc: _Doc, alt: str, make, *args) -> None:
+    """Draw a figure with its warnings recorded; a warning (an empty log axis, ...) becomes a
+    note under the figure instead of text on stderr."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        path = make(*args)
+    doc.image(path, alt)
+    notes = sorted({" ".join(str(w.message).split()) for w in caught})
+    if notes and path is not None:
+        doc.p("Figure note: " + "; ".join(notes))
 
 
 def _short(text, n=110):
@@ -194,13 +223,16 @@ def _short(text, n=110):
 
 def _glance(data: RunData, table) -> list[str]:
     lines = []
+    if data.issues:
+        lines.append(f"{len(data.issues)} record(s) or array file(s) missing or damaged: planned solves "
+                     "without a usable record count as not solved (see 'Missing or damaged records')")
     rows = [r for r in table if r["collection"] == "all"]
     for tol in data.tols:
         at = [r for r in rows if r["tol"] == tol]
         timed = [r for r in at if not math.isnan(r["sgm_time_common"])]
         best_solved = max(r["solved"] for r in at)
         robust = [r["method"] for r in at if r["solved"] == best_solved]
-        line = (f"tol {tol:.0e}: most robust {', '.join(robust)} ({best_solved}/{at[0]['total']} verified)")
+        line = (f"tol {tol:g}: most robust {', '.join(robust)} ({best_solved}/{at[0]['total']} verified)")
         if timed:
             fastest = min(timed, key=lambda r: r["sgm_time_common"])
             line += (f"; fastest {fastest['method']} (SGM {fastest['sgm_time_common']:.4f} s over "
@@ -224,7 +256,7 @@ def _glance(data: RunData, table) -> list[str]:
     at_tight = [r for r in data.solves if r["method"] == "jqinv" and r["tol"] == tight and r.get("digits_v") is not None]
     if at_tight:
         d = sorted(r["digits_v"] for r in at_tight)
-        lines.append(f"jqinv stopped at {tight:.0e} gives median {d[len(d) // 2]:.1f}, worst {d[0]:.1f} "
+        lines.append(f"jqinv stopped at {tight:g} gives median {d[len(d) // 2]:.1f}, worst {d[0]:.1f} "
                      "correct digits of v")
     mp = mixed_precision(data)
     if mp:
@@ -254,22 +286,30 @@ def _diagnostics(data: RunData, count, max_contacts, dps, quiet) -> list:
 
     chosen = worst_cases(data, count, max_contacts)
     cache = data.run_dir / "diagnostics"
-    cache.mkdir(exist_ok=True)
+    if chosen:
+        cache.mkdir(exist_ok=True)
     out = []
     bar = Progress(len(chosen), "report: lockstep diagnosis", quiet=quiet)
     for key, method, tol in chosen:
         sha = data.problems[key]["sha256"]
-        path = cache / f"{key.replace('/', '__')}__{method}@{tol:.0e}.json"
+        path = cache / f"{key.replace('/', '__')}__{method}@{tol_text(tol)}.json"
         diag = None
         if path.exists():
-            cached = json.loads(path.read_text())
-            if cached.get("sha256") == sha and cached.get("dps") == dps:
+            try:
+                cached = untag_floats(json.loads(path.read_text(encoding="utf-8")))
+            except (OSError, ValueError):
+                cached = None  # a damaged cache entry is recomputed
+            if isinstance(cached, dict) and cached.get("sha256") == sha and cached.get("dps") == dps \
+                    and cached.get("version") == __version__:
                 diag = cached
         if diag is None:
             problem = load(resolve_spec(data.problems[key]["spec"], data.run_dir))
-            diag = diagnose(problem, method=method, tol=tol, dps=dps)
-            diag.update(sha256=sha, dps=dps, tol=tol, problem=key)
-            path.write_text(json.dumps(diag, indent=1, default=float))
+            with warnings.catch_warnings(record=True):
+                warnings.simplefilter("always")  # the double run's warnings: not for stderr
+                diag = diagnose(problem, method=method, tol=tol, dps=dps)
+            diag.update(sha256=sha, dps=dps, tol=tol, problem=key, version=__version__)
+            # Tagged, so NaN/inf survive strict JSON (null would lose which one it was).
+            write_text_atomic(path, json.dumps(tag_floats(diag), indent=1, allow_nan=False, default=float))
         out.append((key, method, tol, diag))
         bar.advance(key)
     bar.close()

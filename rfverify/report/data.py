@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import zipfile
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +33,8 @@ class RunData:
     trajectories: list = field(default_factory=list)
     digits: dict = field(default_factory=dict)      # problem key -> record
     references: dict = field(default_factory=dict)  # problem key -> {"v","u","r"}
+    issues: list = field(default_factory=list)      # one line per missing or damaged file
+    running: bool = False                           # a bench holds the run directory's lock
 
     @property
     def methods(self) -> list:
@@ -54,35 +57,235 @@ class RunData:
         self._index = {(r["problem"], r["method"], r["tol"]): r for r in self.solves}
 
 
-def load_run(run_dir) -> RunData:
-    """Read every record of a run directory (see :mod:`rfverify.bench.runner`)."""
-    run_dir = Path(run_dir)
-    manifest_path = run_dir / "manifest.json"
-    if not manifest_path.exists():
-        from ..bench.runner import BenchInputError
+UNUSABLE = ("Missing", "Damaged")
+"""Statuses the report gives a planned solve whose record is absent or unreadable: it is
+counted as a run that did not solve, never silently left out."""
 
-        raise BenchInputError(f"{run_dir}: not a bench run directory (no manifest.json); "
-                              "create one with `rfverify bench ... --out DIR`")
-    manifest = json.loads(manifest_path.read_text())
-    data = RunData(run_dir, manifest, {p["key"]: p for p in manifest["problems"]})
-    for path in sorted((run_dir / "runs").rglob("*.json")):
-        rec = json.loads(path.read_text())
-        if rec.get("problem") not in data.problems:
+_FIX_RERUN = "re-run the same bench command (it redoes missing and damaged runs)"
+
+
+def _is_num(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _check_fields(rec: dict, spec: dict) -> str | None:
+    """The first field of ``rec`` that is missing or of the wrong type, as a phrase."""
+    for name, (test, what, required) in spec.items():
+        if name not in rec:
+            if required:
+                return f"field {name!r} is missing"
             continue
+        if not test(rec[name]):
+            return f"field {name!r} is {type(rec[name]).__name__} {str(rec[name])[:30]!r}, expected {what}"
+    return None
+
+
+_NUM_OR_NULL = (lambda x: x is None or _is_num(x), "a number or null")
+_COMMON = {"problem": (lambda x: isinstance(x, str), "a string", True),
+           "kind": (lambda x: x in ("solve", "trajectory", "digits"), "solve, trajectory or digits", True),
+           "status": (lambda x: isinstance(x, str), "a string", True),
+           "solved": (lambda x: isinstance(x, bool), "true or false", True),
+           "message": (lambda x: isinstance(x, str), "a string", False)}
+_METHOD_TOL = {"method": (lambda x: isinstance(x, str), "a method name", True),
+               "tol": (lambda x: _is_num(x) and math.isfinite(x) and x > 0, "a number > 0", True)}
+_FINISHED = {
+    "solve": {"time": (_is_num, "a number", True), "nit": (lambda x: x is None or _is_int(x), "an integer", False),
+              "verified": (lambda x: isinstance(x, dict) and _NUM_OR_NULL[0](x.get("max")),
+                           "an object with a numeric 'max'", True),
+              "max_cond_Qp": (*_NUM_OR_NULL, False), "min_lam2": (*_NUM_OR_NULL, False),
+              "solver_claims_solved": (lambda x: isinstance(x, bool), "true or false", False)},
+    "trajectory": {"time": (_is_num, "a number", True),
+                   "iterates": (lambda x: isinstance(x, list) and all(
+                       isinstance(i, dict) and _is_num(i.get("time")) and _NUM_OR_NULL[0](i.get("verified_max"))
+                       for i in x), "a list of {time, verified_max}", True),
+                   "best_verified_max": (*_NUM_OR_NULL, False)},
+    "digits": {"time": (_is_num, "a number", True), "time_certify": (*_NUM_OR_NULL, False),
+               "certified": (lambda x: isinstance(x, bool), "true or false", True),
+               "certified_digits": (lambda x: x is None or (isinstance(x, dict) and all(
+                   v is None or _is_num(v) for v in x.values())), "an object of numbers", False),
+               "has_reference": (lambda x: isinstance(x, bool), "true or false", False)},
+}
+
+
+def validate_record(rec, key: str, stem: str) -> str | None:
+    """Why a record cannot be used (None when it can): not an object, an unknown schema, a
+    missing or wrong-typed field, or a file name that does not match its contents."""
+    from ..bench.tasks import FAILED_STATUSES, READABLE_SCHEMAS, task_stem
+
+    if not isinstance(rec, dict):
+        return f"is a JSON {type(rec).__name__}, expected an object"
+    schema = rec.get("schema", rec.get("format"))
+    if schema not in READABLE_SCHEMAS:
+        return f"has schema {schema!r}; this rfverify reads {', '.join(map(str, READABLE_SCHEMAS))}"
+    reason = _check_fields(rec, _COMMON)
+    if reason is None and rec["kind"] != "digits":
+        reason = _check_fields(rec, _METHOD_TOL)
+    if reason is None and rec["kind"] == "digits" and not _is_int(rec.get("digits")):
+        reason = "field 'digits' is missing or not an integer"
+    if reason is None and rec["status"] not in FAILED_STATUSES:
+        reason = _check_fields(rec, _FINISHED[rec["kind"]])
+    if reason is not None:
+        return reason
+    if rec["problem"] != key:
+        return f"belongs to problem {rec['problem']!r}, not to its directory {key!r}"
+    if task_stem(rec) != stem:
+        return (f"holds {task_stem(rec)}, not what its file name says (an older rfverify gave "
+                "close tolerances one name)")
+    return None
+
+
+def _normalise(rec: dict) -> None:
+    """Strict JSON stores non-finite numbers as null: give them back the values the report's
+    arithmetic expects (an unverifiable criterion is +inf, an unknown measure NaN)."""
+    ver = rec.get("verified")
+    if isinstance(ver, dict):
+        if ver.get("max") is None:
+            ver["max"] = math.inf
+        for k in ("dinfeas", "velocity", "mu", "cone"):
+            if k in ver and ver[k] is None:
+                ver[k] = math.nan
+    if rec.get("kind") == "trajectory":
+        if rec.get("best_verified_max") is None:
+            rec["best_verified_max"] = math.inf
+        for it in rec.get("iterates") or []:
+            if it.get("verified_max") is None:
+                it["verified_max"] = math.inf
+    if rec.get("kind") == "digits" and isinstance(rec.get("certified_digits"), dict):
+        rec["certified_digits"] = {k: math.inf if v is None else v for k, v in rec["certified_digits"].items()}
+
+
+def _stem_task(stem: str) -> dict | None:
+    """(kind, method, tol) read back from a file stem, for records that cannot be read."""
+    kind = "solve"
+    if stem.startswith("trajectory-"):
+        kind, stem = "trajectory", stem[len("trajectory-"):]
+    if stem.startswith("digits"):
+        return {"kind": "digits"}
+    method, sep, tol = stem.partition("@")
+    try:
+        return {"kind": kind, "method": method, "tol": float(tol)} if sep else None
+    except ValueError:
+        return None
+
+
+def _placeholder(key: str, task: dict, status: str, message: str, npz: Path) -> dict:
+    return {"problem": key, "kind": "solve", "method": task["method"], "tol": task["tol"],
+            "status": status, "message": message, "solved": False, "time": None, "nit": None,
+            "verified": None, "_npz": str(npz), "_placeholder": True}
+
+
+def load_run(run_dir) -> RunData:
+    """Read every record of a run directory (see :mod:`rfverify.bench.runner`).
+
+    A damaged manifest is an error (BenchInputError, one line with the fix).  A record that is
+    missing, truncated, not an object, of an unknown schema or with a wrong-typed field, and
+    arrays that cannot be read, are listed in ``RunData.issues``; such a planned solve is kept
+    as a run with status Missing or Damaged (not solved), so no method silently loses runs."""
+    from ..bench.runner import bench_running, npz_intact, read_manifest
+    from ..bench.tasks import FAILED_STATUSES
+
+    run_dir = Path(run_dir)
+    manifest = read_manifest(run_dir, required=True)
+    data = RunData(run_dir, manifest, {p["key"]: p for p in manifest["problems"]})
+    data.running = bench_running(run_dir)
+    runs = run_dir / "runs"
+    found = set()
+    for path in sorted(runs.rglob("*.json")) if runs.is_dir() else []:
+        if path.name.startswith("."):
+            continue  # a record being written
+        key = path.parent.relative_to(runs).as_posix()
+        rel = path.relative_to(run_dir).as_posix()
+        stem = path.stem
+        found.add((key, stem))
+        if key not in data.problems:
+            data.issues.append(f"{rel}: its problem {key!r} is not listed in manifest.json, so it is "
+                               f"not shown; fix: {_FIX_RERUN}")
+            continue
+        try:
+            rec = json.loads(path.read_text(encoding="utf-8"))
+            reason = validate_record(rec, key, stem)
+        except (OSError, ValueError) as exc:
+            rec, reason = None, f"is truncated or not JSON ({' '.join(str(exc).split())[:80]})"
+        if reason is not None:
+            data.issues.append(f"{rel}: {reason}; fix: delete it and {_FIX_RERUN}")
+            task = _stem_task(stem)
+            if task and task["kind"] == "solve":
+                data.solves.append(_placeholder(key, task, "Damaged", f"record {reason}",
+                                                path.with_suffix(".npz")))
+            continue
+        _normalise(rec)
         rec["_npz"] = str(path.with_suffix(".npz"))
-        kind = rec.get("kind")
+        if rec["status"] not in FAILED_STATUSES and not npz_intact(Path(rec["_npz"])):
+            rec["_npz_damaged"] = True
+            data.issues.append(f"{rel[:-5]}.npz: missing or damaged; the record's verdict stands but "
+                               f"its arrays (correct digits, references) are not used; fix: {_FIX_RERUN}")
+        kind = rec["kind"]
         if kind == "solve":
             data.solves.append(rec)
         elif kind == "trajectory":
             data.trajectories.append(rec)
-        elif kind == "digits":
+        else:
             data.digits[rec["problem"]] = rec
-            if rec.get("has_reference") and Path(rec["_npz"]).exists():
-                with np.load(rec["_npz"]) as z:
-                    data.references[rec["problem"]] = {k: z[f"ref_{k}"] for k in ("v", "u", "r")}
+            if rec.get("has_reference") and not rec.get("_npz_damaged"):
+                ref = _load_reference(rec["_npz"])
+                if ref is None:
+                    data.issues.append(f"{rel[:-5]}.npz: holds no readable reference solution; "
+                                       f"fix: {_FIX_RERUN}")
+                else:
+                    data.references[rec["problem"]] = ref
+    for key, stem, task in _expected(data):
+        if (key, stem) in found:
+            continue
+        data.issues.append(f"runs/{key}/{stem}.json: missing (planned, never written or deleted); "
+                           f"counted as not solved; fix: {_FIX_RERUN}")
+        if task["kind"] == "solve":
+            data.solves.append(_placeholder(key, task, "Missing", "record missing",
+                                            runs / key / f"{stem}.npz"))
     data.build_index()
     _add_forward_errors(data)
     return data
+
+
+def _expected(data: RunData):
+    """(problem, stem, task) of every run the manifest planned.  Manifests before schema 2 did
+    not list their tasks: then every problem × method × tolerance solve is expected."""
+    from ..bench.tasks import task_stem
+
+    planned = data.manifest.get("tasks")
+    if isinstance(planned, list):
+        for t in planned:
+            if isinstance(t, dict) and t.get("problem") in data.problems and isinstance(t.get("stem"), str):
+                task = _stem_task(t["stem"]) or {"kind": "other"}
+                yield t["problem"], t["stem"], task
+        return
+    methods = [m for m in data.manifest.get("methods", []) if isinstance(m, str)]
+    tols = [t for t in data.manifest.get("tols", []) if _is_num(t)]
+    for key in data.problems:
+        for m in methods:
+            for t in tols:
+                task = {"kind": "solve", "method": m, "tol": float(t)}
+                yield key, task_stem(task), task
+
+
+def _load_reference(npz: str):
+    try:
+        with np.load(npz) as z:
+            return {k: np.asarray(z[f"ref_{k}"]) for k in ("v", "u", "r")}
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
+        return None
+
+
+def _saved(npz: str, keys):
+    """Arrays ``keys`` of a saved run, or None when they cannot be read."""
+    try:
+        with np.load(npz) as z:
+            return {k: np.asarray(z[k]) for k in keys}
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
+        return None
 
 
 def _add_forward_errors(data: RunData) -> None:
@@ -90,20 +293,20 @@ def _add_forward_errors(data: RunData) -> None:
     for rec in data.solves:
         ref = data.references.get(rec["problem"])
         rec["digits_v"] = rec["digits_u"] = None
-        if ref is None or not Path(rec["_npz"]).exists():
+        if ref is None or rec.get("_placeholder") or rec.get("_npz_damaged") or not Path(rec["_npz"]).exists():
             continue
-        with np.load(rec["_npz"]) as z:
-            if "v" in z:
-                rec["digits_v"] = forward_digits(z["v"], ref["v"])
-                rec["digits_u"] = forward_digits(z["u"], ref["u"])
+        z = _saved(rec["_npz"], ("v", "u"))
+        if z is not None:
+            rec["digits_v"] = forward_digits(z["v"], ref["v"])
+            rec["digits_u"] = forward_digits(z["u"], ref["u"])
     for rec in data.trajectories:
         ref = data.references.get(rec["problem"])
         rec["digits_v_iterates"] = None
-        if ref is None or not Path(rec["_npz"]).exists():
+        if ref is None or rec.get("_npz_damaged") or not Path(rec["_npz"]).exists():
             continue
-        with np.load(rec["_npz"]) as z:
-            if "v" in z:
-                rec["digits_v_iterates"] = [forward_digits(v, ref["v"]) for v in z["v"]]
+        z = _saved(rec["_npz"], ("v",))
+        if z is not None:
+            rec["digits_v_iterates"] = [forward_digits(v, ref["v"]) for v in z["v"]]
 
 
 # ----------------------------------------------------------------------- aggregates
@@ -185,12 +388,13 @@ def failure_cause(rec: dict) -> str:
     status = rec.get("status")
     msg = rec.get("message", "")
     ver = rec.get("verified") or {}
-    if status in ("Timeout", "Crashed", "Error"):
+    if status in ("Timeout", "Crashed", "Error") + UNUSABLE:
         return f"{status}: {msg}"
     if not ver.get("finite", True):
         return f"non-finite iterate returned ({status}: {msg})"
-    worst = max(("dinfeas", "velocity", "mu", "cone"), key=lambda k: ver.get(k, -1.0)) if ver else None
-    recheck = (f"recheck: {worst} = {ver[worst]:.2e} > tol {rec['tol']:.0e}" if worst else "no recheck")
+    measures = [k for k in ("dinfeas", "velocity", "mu", "cone") if _is_num(ver.get(k)) and not math.isnan(ver[k])]
+    worst = max(measures, key=lambda k: ver[k]) if measures else None
+    recheck = (f"recheck: {worst} = {ver[worst]:.2e} > tol {rec['tol']:g}" if worst else "no recheck")
     if status == "Solved":
         return f"solver claimed Solved but the independent {recheck} ({msg})"
     return f"{status}: {msg}; {recheck}"
@@ -244,13 +448,14 @@ def worst_cases(data: RunData, count: int, max_contacts: int) -> list[tuple]:
 
     small = {k for k, p in data.problems.items() if 0 < p["n_contacts"] <= max_contacts}
     failed = [r for r in data.solves if not r.get("solved") and r["method"] in ALGORITHM1_METHODS
-              and r["problem"] in small and r.get("status") not in ("Timeout", "Crashed", "Error")]
+              and r["problem"] in small and r.get("status") not in ("Timeout", "Crashed", "Error") + UNUSABLE]
     failed.sort(key=lambda r: (r["tol"], -(r.get("max_cond_Qp") or 0)))
     broke = [t for t in data.trajectories if t["problem"] in small and t.get("status") != "Solved"
              and t.get("status") not in ("Timeout", "Crashed", "Error")]
     broke.sort(key=lambda t: (t["method"] != "jqinv", -max((it.get("max_cond_Qp") or 0)
                                                             for it in t.get("iterates") or [{}])))
-    hard = [r for r in data.solves if r["method"] in ALGORITHM1_METHODS and r["problem"] in small]
+    hard = [r for r in data.solves if r["method"] in ALGORITHM1_METHODS and r["problem"] in small
+            and not r.get("_placeholder")]
     hard.sort(key=lambda r: -(r.get("max_cond_Qp") or 0))
     chosen, seen = [], set()
     for r in failed + broke + hard:

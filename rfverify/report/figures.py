@@ -34,6 +34,20 @@ def _log_x(ax):
     ax.xaxis.set_minor_formatter(NullFormatter())
 
 
+def _save(fig, path: Path) -> None:
+    """PNG written atomically: a reader never sees half a figure."""
+    import io
+
+    from ..io.output import write_bytes_atomic
+
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=110)
+    finally:
+        _plt().close(fig)
+    write_bytes_atomic(path, buf.getvalue())
+
+
 def _style(method):
     return _STYLE.get(method, ("gray", "."))
 
@@ -51,7 +65,7 @@ def profiles(data: RunData, out: Path, measure: str) -> Path:
         ax.set_xscale("log", base=2)
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlim(1, taus[-1])
-        ax.set_title(f"tol = {tol:.0e}")
+        ax.set_title(f"tol = {tol:g}")
         ax.set_xlabel(f"τ  ({measure} ≤ τ × best {measure})")
         ax.grid(True, which="both", alpha=0.3)
     axes[0][0].set_ylabel("share of problems solved (verified)")
@@ -61,8 +75,7 @@ def profiles(data: RunData, out: Path, measure: str) -> Path:
                  fontsize=10)
     fig.tight_layout()
     path = out / f"profile_{'time' if measure == 'time' else 'iterations'}.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
     return path
 
 
@@ -89,7 +102,8 @@ def work_precision_aggregate(data: RunData, out: Path) -> Path | None:
                 _time_to_digits(times, t["digits_v_iterates"], k) for k in ks]
     # The peer has no iterates: its points are its runs at each tolerance.
     for r in data.solves:
-        if r["method"] == "clarabel" and r["problem"] in data.references and r.get("digits_v") is not None:
+        if r["method"] == "clarabel" and r["problem"] in data.references and r.get("digits_v") is not None \
+                and r.get("time") is not None:
             row = series.setdefault("clarabel", {}).setdefault(r["problem"], [math.inf] * len(ks))
             for i, k in enumerate(ks):
                 if r["digits_v"] >= k:
@@ -124,8 +138,7 @@ def work_precision_aggregate(data: RunData, out: Path) -> Path | None:
     ax2.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     path = out / "work_precision.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
     return path
 
 
@@ -150,13 +163,15 @@ def work_precision_problems(data: RunData, out: Path, keys: list) -> Path | None
             else:
                 y = -np.log10(np.maximum([it["verified_max"] for it in t["iterates"]], 1e-30))
             ax.plot(np.maximum(times, 1e-4), y, color=color, marker=marker, ms=3, lw=1, label=t["method"])
-        pts = sorted((r["time"], r) for r in data.solves if r["problem"] == key and r["method"] == "clarabel")
+        pts = sorted(((r["time"], r) for r in data.solves if r["problem"] == key and r["method"] == "clarabel"
+                      and r.get("time") is not None), key=lambda p: p[0])
         if pts:
             xs = [p[0] for p in pts]
             if has_ref:
                 ys = [min(p[1].get("digits_v") or 0, 17) for p in pts]
             else:
                 ys = [-math.log10(max(p[1]["verified"]["max"], 1e-30)) if p[1].get("verified") else 0 for p in pts]
+                ys = [y if math.isfinite(y) else 0 for y in ys]
             color, marker = _style("clarabel")
             ax.plot(xs, ys, color=color, marker=marker, ls=":", label="clarabel (one run per tol)")
         d = data.digits.get(key)
@@ -174,8 +189,7 @@ def work_precision_problems(data: RunData, out: Path, keys: list) -> Path | None
     fig.suptitle("Verified error of each iterate against elapsed time", fontsize=10)
     fig.tight_layout()
     path = out / "work_precision_problems.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
     return path
 
 
@@ -214,10 +228,9 @@ def diagnostics(diag: dict, key: str, out: Path, index: int) -> Path:
     a3.set_ylabel("min λ2 over cones")
     a3.legend(fontsize=7)
     a3.grid(alpha=0.3, which="both")
-    fig.suptitle(f"{key}: {diag['method']} at tol {diag.get('tol', float('nan')):.0e} — {diag['status']}"
+    fig.suptitle(f"{key}: {diag['method']} at tol {diag.get('tol', float('nan')):g} — {diag['status']}"
                  f" after {diag['nit']} iterations", fontsize=10)
     fig.tight_layout()
     path = out / f"diagnostics_{index}.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
     return path
