@@ -166,7 +166,7 @@ def _member(group, name, path, kind):
     try:
         obj = group[name]
     except (KeyError, OSError, RuntimeError, ValueError) as exc:
-        raise ProblemFileError(path, f"is a {type(link).__name__} that cannot be followed "
+        raise ProblemFileError(path, f"is a link ({type(link).__name__}) that cannot be followed "
                                      f"({_first_line(exc)})", location=loc,
                                fix="replace the link by the data it should point to") from None
     if not isinstance(obj, kind):
