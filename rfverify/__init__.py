@@ -7,8 +7,8 @@ Public API (this release):
 - :func:`check_solution` — recompute the residuals of a candidate (v, u, r).
 - :func:`solve` — Algorithm 1 (forms jqinv, qp2, reduced, reduced_factored, noscaling) or the
   Clarabel peer; :func:`solve_to_digits` — the certified k-digit path.
-- :func:`certify` — digits of a solution against the mpmath reference; :func:`diagnose` —
-  lockstep double/reference run.
+- :func:`certify` — proven digits of a solution (a rigorous error bound, DESIGN §6), with the
+  mpmath reference as an optional cross-check; :func:`diagnose` — lockstep double/reference run.
 - :mod:`rfverify.jordan` — Jordan algebra of Lorentz cones, vectorised, float64/longdouble.
 - Errors: :class:`RfverifyError`, :class:`InvalidProblemError`, :class:`ProblemFileError`,
   :class:`InvalidArgumentError`, :class:`OutputPathError`, :class:`ConeDomainError`.
@@ -23,7 +23,7 @@ from .io import bundled_problems, load, save
 from .problem import Problem, StoredSolution
 from .certification import Certificate, certify
 from .diagnosis import diagnose
-from .refine import RefinedSolution, solve_to_digits
+from .digits import DigitsSolution, solve_to_digits
 from .solver import SolveResult, Settings, Status, solve
 
 
@@ -82,5 +82,5 @@ __all__ = [
     "SolutionCheck", "RfverifyError", "InvalidProblemError", "ProblemFileError",
     "InvalidArgumentError", "OutputPathError",
     "ConeDomainError", "__version__", "solve", "SolveResult", "Settings", "Status", "certify",
-    "solve_to_digits", "RefinedSolution", "diagnose", "Certificate",
+    "solve_to_digits", "DigitsSolution", "diagnose", "Certificate",
 ]

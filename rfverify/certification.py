@@ -1,31 +1,29 @@
-"""Certification of a double-precision solution against the mpmath reference (DESIGN §6).
+"""Certification of a float64 solution: a proof of its correct digits (DESIGN §6).
 
-Steps, cheapest first:
+:func:`certify` proves a lower bound on the correct significant digits of a given solution
+(v, u, r) of the convex relaxation:
 
-(a) residuals of the given (v, u, r) evaluated in high precision (mpmath, ``dps`` digits):
-    dynamics, velocity, complementarity and cone membership — no trust in the solver's
-    arithmetic.  If they already exceed 10^(−digits), the solution cannot have ``digits``
-    correct digits (with a margin of 100 for the data's scale factors); the reference is then
-    only run when asked (``always_reference``), to say how many digits it does have.
-(b) the reference solution (:func:`reference.solve`, independent mode, ``dps`` digits).
-(c) digits = −log10(‖x − x_ref‖∞ / scale) for v, u and Hr, which are unique; for r only
-    when it is unique — decided as: H restricted to the columns of the contacts the reference
-    finds active (r_N > 0) has full numerical column rank (SVD, σ_min > 1e-10·σ_max) —
-    otherwise the distance in r is reported as information only.
-    The scale is ‖x_ref‖∞ for v and r.  u = Hᵀv + w and Hr = Mv − f are differences that are
-    exactly zero at sticking contacts and at contact-free equilibria, where a relative error
-    has no meaning (any double value would have "−∞ digits"); they are measured against the
-    terms they are computed from: max(‖u_ref‖, ‖Hᵀv_ref‖, ‖w‖) and max(‖Hr_ref‖, ‖M v_ref‖,
-    ‖f‖).  DESIGN §6 writes ‖x_ref‖∞; for these two it is the same whenever x_ref is not
-    small compared with its terms.
-(d) the verdict: certified to k digits when min(digits of v, u, Hr [, r]) ≥ k.
+1. If the solution carries its extended-precision point (a :class:`rfverify.DigitsSolution`,
+   or a solution file written by ``solve --digits --out``), the bound is evaluated there.
+2. Otherwise a nearby interior extended-precision point is found by a short warm polish
+   (Algorithm 1 in double-double from the candidate pushed into the cone interiors), and the
+   bound at that point is carried to the candidate by the triangle inequality.
 
-A claim is only made from the comparison with the reference; residuals alone never certify.
+The bound (:mod:`rfverify.proof.bound`) is evaluated rigorously: exact dyadic arithmetic for
+the point's residuals and cone membership, verified floating point for the norms of M⁻¹.
+What it assumes: the problem is the convex relaxation with M := (M + Mᵀ)/2 exactly (the
+asymmetry of the file's M is symmetrised away, not modelled), and the data are the float64
+numbers in the file.  What it does not prove: anything about the physical (De Saxcé)
+problem, or about r where r is not unique.
+
+``cross_check=True`` also runs the independent mpmath reference (DESIGN §5) and reports the
+digits of agreement with it: a second opinion, not part of the proof.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import mpmath
@@ -33,34 +31,207 @@ import numpy as np
 
 from .errors import InvalidProblemError
 from .problem import SPACEDIM, Problem
+from .proof import FLOAT64_DIGITS, Point, Proof, ProofContext, validate_digits
 
 
 @dataclass
 class Certificate:
-    """Result of :func:`certify`.  ``digits`` maps "v", "u", "Hr" (and "r" when unique) to the
-    number of correct significant digits (inf when identical); ``certified`` is True when every
-    certified quantity has at least ``requested`` digits."""
+    """Result of :func:`certify` (and of the k-digit path).
+
+    ``certified`` is True only when the proof shows at least ``requested`` digits in v, u, Hr
+    and, where r is unique, r.  ``digits`` maps each certified-or-not quantity to its proven
+    digits (None where no relative digits exist); ``bounds`` to the proven ∞-norm bound on
+    its error; ``quantities`` holds the full per-quantity record (scale used, mode).
+    ``proof`` is the :class:`rfverify.proof.Proof`; ``cross_check`` the reference agreement
+    when asked for.
+    """
 
     requested: int
     certified: bool
     verdict: str
-    residuals: dict
-    digits: dict = field(default_factory=dict)
-    r_unique: bool | None = None
-    r_info_digits: float | None = None
-    reference: object = None
-    reference_ran: bool = False
+    proof: Proof | None = None
+    point: Point | None = None
+    cross_check: dict | None = None
+    extra: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def digits(self) -> dict:
+        if self.proof is None:
+            return {}
+        return {k: q.digits for k, q in self.proof.quantities.items() if q.mode != "information"}
+
+    @property
+    def bounds(self) -> dict:
+        if self.proof is None:
+            return {}
+        return {k: q.abs_bound for k, q in self.proof.quantities.items() if q.mode != "information"}
+
+    @property
+    def quantities(self) -> dict:
+        return {} if self.proof is None else self.proof.quantities
+
+    @property
+    def r_unique(self) -> bool | None:
+        if self.proof is None or "r" not in self.proof.quantities:
+            return None
+        return self.proof.quantities["r"].mode != "information"
 
     def as_dict(self) -> dict:
+        p = self.proof
         return {"requested_digits": self.requested, "certified": self.certified, "verdict": self.verdict,
-                "residuals": self.residuals, "digits": self.digits, "r_unique": self.r_unique,
-                "r_digits_informational": self.r_info_digits, "reference_ran": self.reference_ran,
-                "reference_status": None if self.reference is None else self.reference.status}
+                "method": "proof" if p is not None else None,
+                "valid_proof": None if p is None else p.valid,
+                "failure": None if p is None else (p.failure or None),
+                "quantities": {} if p is None else {k: q.as_dict() for k, q in p.quantities.items()},
+                "terms": {} if p is None else p.terms,
+                "arithmetic": None if p is None else p.arithmetic,
+                "cross_check": self.cross_check, "seconds": self.seconds, **self.extra}
+
+
+def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict | None = None,
+                           seconds: float = 0.0) -> Certificate:
+    req = proof.requested
+    if not proof.valid:
+        verdict = f"not certified: {proof.failure}"
+    elif proof.certified:
+        verdict = f"proven to {req} digits ({proof.summary()})"
+    else:
+        worst = proof.weakest()
+        q = proof.quantities[worst]
+        have = "no relative digits" if q.digits is None else f"{q.digits:.1f} proven digits"
+        verdict = f"not proven to {req} digits: {worst} has {have} ({proof.summary()})"
+    return Certificate(req, proof.certified, verdict, proof, point, None, dict(extra or {}), seconds)
+
+
+def _solution_arrays(problem: Problem, v, u, r):
+    if u is None and r is None and hasattr(v, "v"):
+        v, u, r = v.v, getattr(v, "u", None), getattr(v, "r", None)
+    if v is None or r is None:
+        raise InvalidProblemError("solution", "needs v and r", fix="pass (v, u, r) or a result object")
+    v = np.asarray(v, dtype=np.float64).ravel()
+    r = np.asarray(r, dtype=np.float64).ravel()
+    if v.size != problem.n_dofs:
+        raise InvalidProblemError("solution.v", f"has {v.size} entries, the problem needs {problem.n_dofs}",
+                                  fix="certify a solution of this problem")
+    if r.size != SPACEDIM * problem.n_contacts:
+        raise InvalidProblemError("solution.r", f"has {r.size} entries, the problem needs "
+                                                f"{SPACEDIM * problem.n_contacts}",
+                                  fix="certify a solution of this problem")
+    if u is None:
+        u = problem.H.T @ v + problem.w
+    u = np.asarray(u, dtype=np.float64).ravel()
+    if u.size != SPACEDIM * problem.n_contacts:
+        raise InvalidProblemError("solution.u", f"has {u.size} entries, the problem needs "
+                                                f"{SPACEDIM * problem.n_contacts}",
+                                  fix="certify a solution of this problem")
+    return v, u, r
+
+
+def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Point | None = None,
+            cross_check: bool = False, dps: int = 50, polish_max_iter: int = 60,
+            progress=None) -> Certificate:
+    """Prove how many significant digits of the float64 solution are correct.
+
+    Parameters
+    ----------
+    problem : Problem
+    v, u, r : arrays (m,), (5n,), (5n,), or one object with attributes ``v, u, r`` (a
+        :class:`SolveResult`, :class:`DigitsSolution`, :class:`StoredSolution`) passed as
+        ``v``.  A missing u is taken as Hᵀv + w.
+    digits : int
+        Requested digits, 1 … 15 (a float64 carries at most 15.95).
+    point : Point, optional
+        The extended-precision point to bound at (default: the object's ``point`` if it has
+        one, else a warm polish from the candidate).
+    cross_check : bool
+        Also run the independent reference at ``dps`` digits and report agreement.
+
+    Returns
+    -------
+    Certificate
+    """
+    t0 = time.perf_counter()
+    digits = validate_digits(digits)
+    if point is None and hasattr(v, "point") and u is None and r is None:
+        point = v.point
+    v, u, r = _solution_arrays(problem, v, u, r)
+    say = progress or (lambda msg: None)
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
+        return Certificate(digits, False, "not certified: the solution contains NaN or Inf",
+                           seconds=time.perf_counter() - t0)
+    ctx = ProofContext(problem)
+    extra = {}
+    if point is not None:
+        proof = ctx.prove(point, v, u, r, digits)
+        extra["point_source"] = "given"
+    else:
+        proof, point, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say)
+        extra.update(info)
+    cert = certificate_from_proof(proof, point, extra)
+    if cross_check:
+        say(f"cross-check: independent reference at {dps} digits")
+        cert.cross_check = reference_agreement(problem, v, u, r, dps=dps)
+    cert.seconds = time.perf_counter() - t0
+    return cert
+
+
+def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say):
+    """Warm polish in double-double from the candidate; the bound at each polished point is
+    carried to the candidate itself; the best proof is kept."""
+    from .digits import ProofDriver
+    from .extended import ipm as ext
+    from .extended.system import ExtendedData, choose_backend
+
+    data = ExtendedData(problem)
+    system = choose_backend(data)
+    start = ext.interior_start(data, v, r, u)
+    driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say)
+    say(f"polish: double-double from the candidate, {system.name}")
+    run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system)
+    if driver.best is None or not driver.best[1].certified:
+        for it in reversed(driver.recent):
+            driver(it, force=True)
+    _, proof, point, _ = driver.best
+    return proof, point, {"point_source": "polish", "polish_iterations": run.nit, "polish_status": run.status,
+                          "backend": run.backend, "proof_attempts": driver.attempts}
+
+
+def reference_agreement(problem: Problem, v, u, r, dps: int = 50) -> dict:
+    """Digits of agreement with the independent mpmath reference (information, not proof):
+    −log10(‖x − x_ref‖∞ / ‖x_ref‖∞) for v, u, Hr and r."""
+    import reference
+
+    ref = reference.solve(problem, dps=dps)
+    out = {"reference_status": ref.status, "reference_iterations": ref.nit, "dps": dps}
+    if not ref.success:
+        out["note"] = f"the reference did not converge ({ref.message})"
+        return out
+    with mpmath.workdps(2 * dps):
+        for name, x in (("v", v), ("u", u), ("r", r)):
+            xr = getattr(ref, name)
+            err = max((abs(mpmath.mpf(float(a)) - b) for a, b in zip(x, xr)), default=mpmath.mpf(0))
+            scale = max((abs(b) for b in xr), default=mpmath.mpf(0))
+            out[f"digits_{name}"] = _agreement(err, scale)
+    Hr = problem.H @ r
+    Hr_ref = problem.H @ ref.as_float("r")
+    out["digits_Hr"] = _agreement(float(np.max(np.abs(Hr - Hr_ref), initial=0.0)),
+                                  float(np.max(np.abs(Hr_ref), initial=0.0)))
+    return out
+
+
+def _agreement(err, scale):
+    err, scale = float(err), float(scale)
+    if scale == 0:
+        return None
+    if err == 0:
+        return FLOAT64_DIGITS
+    return min(FLOAT64_DIGITS, -math.log10(err / scale))
 
 
 def high_precision_residuals(problem: Problem, v, u, r, dps: int = 40) -> dict:
-    """Relative residuals of (v, u, r) computed with ``dps``-digit mpmath arithmetic from the
-    exact double data (inside ``mpmath.workdps``, so the global precision is restored)."""
+    """Relative residuals of (v, u, r) in ``dps``-digit arithmetic (information only; the
+    certificate is the proof).  Inside ``mpmath.workdps`` so the global precision is kept."""
     with mpmath.workdps(dps):
         mpf = mpmath.mpf
         V = [mpf(float(x)) for x in v]
@@ -88,95 +259,6 @@ def high_precision_residuals(problem: Problem, v, u, r, dps: int = 40) -> dict:
         vel = amax([a - b - c for a, b, c in zip(U, HTv, w)]) / u_scale
         r_scale = max(amax(R), tiny)
         comp = abs(mpmath.fsum(a * b for a, b in zip(U, R))) / (r_scale * u_scale * problem.n_contacts)
-        prim = dual = mpf(0)
-        for i in range(problem.n_contacts):
-            m_, mr = mpf(float(problem.mu[i])), mpf(float(problem.mu_r[i]))
-            Ri, Ui = R[5 * i:5 * i + 5], U[5 * i:5 * i + 5]
-            prim = max(prim, mpmath.hypot(Ri[1], Ri[2]) - m_ * Ri[0], mpmath.hypot(Ri[3], Ri[4]) - mr * Ri[0], -Ri[0])
-            dual = max(dual, m_ * mpmath.hypot(Ui[1], Ui[2]) + mr * mpmath.hypot(Ui[3], Ui[4]) - Ui[0], -Ui[0])
-        out = {"dynamics": float(dyn), "velocity": float(vel), "complementarity": float(comp),
-               "primal_cone": float(prim / r_scale), "dual_cone": float(dual / u_scale)}
+        out = {"dynamics": float(dyn), "velocity": float(vel), "complementarity": float(comp)}
     out["max"] = max(out.values())
     return out
-
-
-def _digits(x: np.ndarray, x_ref: np.ndarray, *terms) -> float:
-    scale = max([np.max(np.abs(x_ref), initial=0.0)] + [np.max(np.abs(t), initial=0.0) for t in terms])
-    if scale == 0:
-        return math.inf if not np.any(x) else 0.0
-    err = np.max(np.abs(x - x_ref)) / scale
-    return math.inf if err == 0 else float(-math.log10(err))
-
-
-def r_is_unique(problem: Problem, r_ref: np.ndarray) -> bool:
-    """Sufficient test for uniqueness of r: the columns of H of the contacts with r_N > 0
-    (active in the reference solution) are linearly independent (σ_min > 1e-10·σ_max)."""
-    rc = r_ref.reshape(-1, SPACEDIM)
-    active = np.flatnonzero(rc[:, 0] > 1e-14 * max(np.abs(rc[:, 0]).max(), 1e-300))
-    if active.size == 0:
-        return True
-    cols = (SPACEDIM * active[:, None] + np.arange(SPACEDIM)).ravel()
-    sub = problem.H[:, cols]
-    sub = sub[np.unique(sub.nonzero()[0])].toarray()
-    if sub.shape[0] < sub.shape[1]:
-        return False
-    s = np.linalg.svd(sub, compute_uv=False)
-    return bool(s[-1] > 1e-10 * s[0])
-
-
-def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, dps: int = 50,
-            always_reference: bool = False) -> Certificate:
-    """Certify the double-precision solution of ``problem`` to ``digits`` digits.
-
-    The solution is given either as arrays ``v`` (m,), ``u`` (5n,), ``r`` (5n,), or as one
-    object with attributes ``v, u, r`` (a :class:`rfverify.solver.SolveResult`, a
-    :class:`rfverify.StoredSolution`): ``certify(problem, result, digits=10)``.  A missing u
-    is taken as Hᵀv + w.
-
-    Returns a :class:`Certificate`; ``certified`` is True only if the comparison with the
-    reference solution shows at least ``digits`` correct digits in v, u, Hr (and r when it is
-    unique).  See the module docstring for the steps.
-    """
-    import reference
-
-    if u is None and r is None and hasattr(v, "v"):
-        v, u, r = v.v, getattr(v, "u", None), v.r
-    v = np.asarray(v, dtype=np.float64).ravel()
-    if u is None and v.size == problem.n_dofs:
-        u = problem.H.T @ v + problem.w
-    u = v if u is None else u  # wrong-sized v: reported below, before any arithmetic
-    v, u, r = (np.asarray(x, dtype=np.float64).ravel() for x in (v, u, r))
-    for name, arr, size in (("v", v, problem.n_dofs), ("u", u, SPACEDIM * problem.n_contacts),
-                            ("r", r, SPACEDIM * problem.n_contacts)):
-        if arr.size != size:
-            raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {size}",
-                                      fix="certify a solution of this problem")
-    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
-        return Certificate(digits, False, "not certified: the solution contains NaN or Inf", {})
-    res = high_precision_residuals(problem, v, u, r, dps=max(30, dps // 2 + 10))
-    # A solution right to `digits` digits has residuals of about 10^-digits times the data's
-    # scale factors; a margin of 100 keeps this shortcut from refusing a correct solution.
-    limit = 10.0 ** (-(digits - 2))
-    if res["max"] > limit and not always_reference:
-        worst = max((k for k in res if k != "max"), key=res.get)
-        return Certificate(digits, False, f"not certified: {worst} residual {res[worst]:.2e} > {limit:.0e}, "
-                                          f"too large for a solution with {digits} correct digits "
-                                          "(use always_reference / --always-reference for its actual digits)", res)
-    ref = reference.solve(problem, dps=dps)
-    if not ref.success:
-        return Certificate(digits, False, f"not certified: the reference did not converge ({ref.message})",
-                           res, reference=ref, reference_ran=True)
-    v_ref, u_ref, r_ref = ref.as_float("v"), ref.as_float("u"), ref.as_float("r")
-    d = {"v": _digits(v, v_ref),
-         "u": _digits(u, u_ref, problem.H.T @ v_ref, problem.w),
-         "Hr": _digits(problem.H @ r, problem.H @ r_ref, problem.M_sym @ v_ref, problem.f)}
-    unique = r_is_unique(problem, r_ref)
-    r_digits = _digits(r, r_ref)
-    if unique:
-        d["r"] = r_digits
-    worst = min(d, key=d.get)
-    ok = d[worst] >= digits
-    shown = ", ".join(f"{k} {val:.1f}" for k, val in d.items())
-    verdict = (f"certified to {digits} digits ({shown})" if ok else
-               f"not certified to {digits} digits: {worst} has {d[worst]:.1f} ({shown})")
-    return Certificate(digits, ok, verdict, res, d, unique, None if unique else r_digits, ref, True)

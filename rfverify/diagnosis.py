@@ -12,13 +12,10 @@ operation and cone where it stopped (the solver's own diagnosed message).
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
-
 import numpy as np
 
 from .lifting import lift
 from .problem import Problem
-from .refine import warm_start_from
 from .solver import solve
 
 
@@ -51,7 +48,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
         v_full = np.array(res.v, dtype=np.longdouble)
         v_full[active] = v_k
         # Same step-length fraction γ and σ rule as the double run at this iteration.
-        start = warm_start_from(problem, _with(res, v_full, r_k, z_k))
+        start = reference_warm_start(problem, v_full, r_k, z_k, res.settings.reduce_cones)
         step = reference.solve(problem, dps=dps, tol=0, max_iter=1, warm_start=start,
                                gamma0=float(res.trace["gamma"][k]), sigma_rule=res.settings.sigma_rule)
         v1, r1, z1 = iterates[k + 1]
@@ -59,7 +56,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
         ref_r = np.array([float(x) for x in step.r_t])
         ref_z_cones = step.z
         # z of the double iterate in the reference's cone order, flattened the same way.
-        z1_cones = warm_start_from(problem, _with(res, v_full, r1, z1))["z"]
+        z1_cones = reference_warm_start(problem, v_full, r1, z1, res.settings.reduce_cones)["z"]
         ref_z = np.concatenate([[float(x) for x in c] for c in ref_z_cones])
         dbl_z = np.concatenate([np.asarray(c, dtype=np.float64) for c in z1_cones])
         lam2_z_ref = min(float(RJ.spectral_values(c)[1]) for c in ref_z_cones)
@@ -91,9 +88,15 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
             "failure": None if res.success else res.message}
 
 
-def _with(res, v_full, r_t, z):
-    """A stand-in result holding one stored iterate, in the shape warm_start_from reads."""
-    return SimpleNamespace(v=v_full, settings=res.settings, extras={"r_t": r_t, "z": z})
+def reference_warm_start(problem: Problem, v, r_t, z, reduce_cones: bool = True) -> dict:
+    """A production iterate (v, r̃, z in the lifted layout of :func:`rfverify.lifting.lift`)
+    in the reference's warm-start layout: the same kept components, cones contact by contact
+    (friction, rolling, normal ray) instead of all L3 cones first."""
+    lp = lift(problem, reduce_cones=reduce_cones)
+    z = np.asarray(z)
+    cones = [z[3 * c:3 * c + 3] for c in range(lp.n3)] + [z[3 * lp.n3 + k:3 * lp.n3 + k + 1] for k in range(lp.n1)]
+    order = np.lexsort((lp.cone_part, lp.cone_contact))
+    return {"v": np.asarray(v), "r_t": np.asarray(r_t), "z": [cones[i] for i in order]}
 
 
 def _reference_cone_rows(step, lp, order):

@@ -8,7 +8,7 @@ Task kinds
                 iterate (mapped back to the original variables) is rechecked, giving the
                 verified error against elapsed time (work–precision data) and how far double
                 precision gets.
-``digits``      the mixed-precision path (:func:`rfverify.refine.solve_to_digits`, timed in
+``digits``      the mixed-precision path (:func:`rfverify.digits.solve_to_digits`, timed in
                 its parts) and its certificate; the certificate's independent reference
                 solution is saved and serves as the problem's reference for forward errors.
 
@@ -215,35 +215,28 @@ def _finite(x):
 
 
 def _digits(problem, task, npz_path) -> dict:
-    import reference
-
-    from ..certification import certify
-    from ..refine import warm_start_from
-    from ..solver import solve
+    from ..digits import solve_to_digits
 
     digits = int(task["digits"])
-    dps = 2 * digits + 16
     t0 = time.perf_counter()
-    double = solve(problem, method="jqinv", tol=1e-10)
-    t1 = time.perf_counter()
-    warm = reference.solve(problem, dps=dps, tol=10.0 ** (-(2 * digits + 6)),
-                           warm_start=warm_start_from(problem, double))
-    v, u, r = warm.as_float("v"), warm.as_float("u"), warm.as_float("r")
-    t2 = time.perf_counter()
-    cert = certify(problem, v, u, r, digits=digits, dps=dps, always_reference=True)
-    t3 = time.perf_counter()
-    ref = cert.reference
-    arrays = {"v": v, "u": u, "r": r}
-    if ref is not None:
-        arrays.update(ref_v=ref.as_float("v"), ref_u=ref.as_float("u"), ref_r=ref.as_float("r"))
+    out = solve_to_digits(problem, digits=digits)
+    elapsed = time.perf_counter() - t0
+    cert = out.certificate
+    arrays = {"v": out.v, "u": out.u, "r": out.r}
+    if out.point is not None and cert.proof is not None and cert.proof.valid:
+        # The proven extended point is the reference that grades every other saved solution.
+        arrays.update(ref_v=out.point.v_hi, ref_r=out.point.r_hi, ref_u=out.u,
+                      point_v_lo=out.point.v_lo, point_r_lo=out.point.r_lo)
     np.savez_compressed(npz_path, **arrays)
-    verified = HighPrecisionChecker(problem, max(30, dps)).criterion(v, u, r)
+    verified = HighPrecisionChecker(problem, 40).criterion(out.v, out.u, out.r)
+    t = out.timings
     return {
         "status": "Certified" if cert.certified else "NotCertified", "message": cert.verdict,
-        "time": t2 - t0, "time_double": t1 - t0, "time_warm": t2 - t1, "time_certify": t3 - t2,
-        "double_status": str(double.status), "warm_iterations": int(getattr(warm, "nit", 0) or 0),
+        "time": elapsed, "time_double": t["double"], "time_warm": t["setup"] + t["extended"],
+        "time_certify": t["proof"],
+        "double_status": str(out.double.status), "warm_iterations": int(out.extended.nit),
         "certified": bool(cert.certified), "certified_digits": cert.digits,
-        "r_unique": cert.r_unique, "has_reference": ref is not None,
-        "reference_status": None if ref is None else str(ref.status),
+        "r_unique": cert.r_unique, "has_reference": "ref_v" in arrays,
+        "reference_status": "proven extended point" if "ref_v" in arrays else None,
         "verified": verified, "solved": bool(cert.certified),
     }

@@ -1,0 +1,201 @@
+"""The k-digit path: a double solve, the extended-precision phase, and a proof (DESIGN §6).
+
+1. Algorithm 1 in double (mixed precision) to ``tol`` (default 1e-10).
+2. Algorithm 1 continued in double-double from the last double iterate
+   (:mod:`rfverify.extended`), until
+3. the rigorous error bound (:mod:`rfverify.proof`), evaluated at the current iterate and
+   carried to its float64 rounding, proves ``digits`` correct digits of v, u and Hr (and r
+   where r is unique) — or a stated limit is reached (``extended_max_iter`` iterations, or μ
+   no longer decreasing).
+
+The proof is tried only at iterates where a cheap necessary condition holds
+(:meth:`ProofContext.may_certify`), so it costs O(nnz) a few times per run.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .certification import Certificate, certificate_from_proof
+from .errors import InvalidArgumentError
+from .extended import ipm as ext
+from .extended.dd import vmul_d
+from .extended.system import ExtendedData, choose_backend
+from .problem import SPACEDIM, Problem
+from .proof import Point, Proof, ProofContext, validate_digits
+from .solver import SolveResult, solve
+
+
+@dataclass
+class DigitsSolution:
+    """Result of :func:`solve_to_digits`.
+
+    ``v`` (m,), ``u`` (5n,), ``r`` (5n,) are float64 (the extended point rounded to nearest);
+    ``point`` the double-double point the proof is about; ``certificate`` the proof's
+    verdict; ``double`` the double solve; ``extended`` the extended-phase run;
+    ``timings`` seconds per stage (``double``, ``setup``, ``extended``, ``proof``, ``total``).
+    """
+
+    v: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    point: Point | None
+    certificate: Certificate
+    double: SolveResult
+    extended: object
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.certificate.certified
+
+    @property
+    def proof(self) -> Proof | None:
+        return self.certificate.proof
+
+
+def point_from_iterate(data: ExtendedData, v, r_t) -> Point:
+    """(v, r = P r̃) of an extended iterate as double-double (r̃ scaled by μ or μr exactly
+    enough: one double-double rounding)."""
+    lp = data.lp
+    n5 = SPACEDIM * data.n
+    th, tl = np.zeros(lp.nk), np.zeros(lp.nk)
+    vmul_d(lp.scale, r_t.h, r_t.l, th, tl)
+    rh, rl = np.zeros(n5), np.zeros(n5)
+    rh[lp.keep], rl[lp.keep] = th, tl
+    return Point(v.h.copy(), v.l.copy(), rh, rl)
+
+
+class ProofDriver:
+    """The ``until`` callback of the extended phase: tries the proof where it may succeed,
+    keeps the best one, and stops the run once ``requested`` digits are proven, or when μ
+    has stalled for ``stall`` iterations."""
+
+    def __init__(self, ctx: ProofContext, data: ExtendedData, requested: int, target=None, stall: int = 4,
+                 progress=None):
+        self.ctx, self.data, self.requested = ctx, data, requested
+        self.target = target  # (v, u, r) to certify; None: the rounding of each point
+        self.best: tuple | None = None  # (score, proof, point, (v, u, r))
+        self.proof_seconds = 0.0
+        self.attempts = 0
+        self.stall = stall
+        self._mu_best = math.inf
+        self._since = 0
+        self.progress = progress
+        self.recent = []  # the last few iterates, proven when the run ends without a proof
+
+    @staticmethod
+    def score(proof: Proof) -> float:
+        if not proof.valid:
+            return -math.inf
+        vals = []
+        for q in proof.quantities.values():
+            if q.mode == "information":
+                continue
+            if q.certified and q.mode == "absolute":
+                vals.append(math.inf)
+            else:
+                vals.append(q.digits if q.digits is not None else -math.inf)
+        return min(vals) if vals else -math.inf
+
+    def __call__(self, it: ext.Iterate, force: bool = False) -> bool:
+        if it.mu < 0.5 * self._mu_best:
+            self._mu_best, self._since = it.mu, 0
+        else:
+            self._since += 1
+        stalled = self._since >= self.stall
+        data = self.data
+        if not force:
+            self.recent = (self.recent + [it])[-3:]
+        u_t = ext.V(*data.Ht.matvec(it.v.h, it.v.l)) + ext.V(*data.w_t)
+        gap = abs(it.r_t.dot(u_t))
+        eps_lower = math.sqrt(2 * gap)
+        point = point_from_iterate(data, it.v, it.r_t)
+        v_inf = float(np.max(np.abs(it.v.h), initial=0.0))
+        u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
+        if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested):
+            return False
+        t0 = time.perf_counter()
+        sol = self.target if self.target is not None else self.ctx.rounded(point)
+        proof = self.ctx.prove(point, *sol, requested=self.requested)
+        self.proof_seconds += time.perf_counter() - t0
+        self.attempts += 1
+        sc = self.score(proof)
+        if self.best is None or sc > self.best[0]:
+            self.best = (sc, proof, point, sol)
+        if self.progress:
+            self.progress(f"proof at extended iteration {it.k} (μ = {it.mu:.1e}): {proof.summary()}")
+        if proof.certified:
+            return True
+        if self.target is not None and self.best is not None and proof.valid:
+            # Certifying a given solution: once the point's own bound is far below the distance
+            # from the point to the solution, more iterations cannot improve the result.
+            if self.best[0] > -math.inf and proof.eps_M < 1e-3 * max(
+                    (q.abs_bound for q in proof.quantities.values() if q.mode != "information"), default=0):
+                return True
+        return stalled
+
+
+def solve_to_digits(problem: Problem, digits: int = 10, method: str = "jqinv", tol: float = 1e-10,
+                    max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
+                    progress=None, **options) -> DigitsSolution:
+    """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
+    significant digits (1 … 15; see :mod:`rfverify.proof.bound` for what "digits" means when a
+    quantity is zero).  ``progress(message)`` receives one line per stage."""
+    digits = validate_digits(digits)
+    if method == "clarabel":
+        raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
+                                   fix="use method='jqinv' (default) or another Algorithm 1 form")
+    say = progress or (lambda msg: None)
+    t0 = time.perf_counter()
+    double = solve(problem, method=method, tol=tol, max_iter=max_iter, **options)
+    t_double = time.perf_counter() - t0
+    say(f"double solve ({method}): {double.status} in {double.nit} iterations, {t_double:.2f} s")
+    t1 = time.perf_counter()
+    ctx = ProofContext(problem)
+    data = ExtendedData(problem)
+    system = choose_backend(data, backend)
+    t_setup = time.perf_counter() - t1
+    say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
+    start = _start_from(data, double)
+    driver = ProofDriver(ctx, data, digits, progress=say)
+    t2 = time.perf_counter()
+
+    def tick(k, mu, pinf, dinf):
+        say(f"  extended iteration {k}: μ = {mu:.2e}, pinfeas = {pinf:.1e}, dinfeas = {dinf:.1e}")
+
+    run = ext.run(data, start, until=driver, max_iter=extended_max_iter, backend=system,
+                  progress=tick if progress else None)
+    t_ext = time.perf_counter() - t2 - driver.proof_seconds
+    if driver.best is None or not driver.best[1].certified:
+        # No proof succeeded: prove the last iterates (the final one may have left a cone
+        # after a failed step) so that the verdict reports the best proven digits.
+        for it in reversed(driver.recent):
+            driver(it, force=True)
+    _, proof, point, (v, u, r) = driver.best
+    cert = certificate_from_proof(proof, extra={"extended_status": run.status, "extended_iterations": run.nit,
+                                                "backend": run.backend, "proof_attempts": driver.attempts})
+    timings = {"double": t_double, "setup": t_setup, "extended": t_ext,
+               "proof": driver.proof_seconds, "total": time.perf_counter() - t0}
+    return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=run,
+                          timings=timings)
+
+
+def _start_from(data: ExtendedData, double: SolveResult) -> dict:
+    """The double solver's last lifted iterate if it is interior, else a point pushed into the
+    interior from its (v, r)."""
+    z = double.extras.get("z")
+    r_t = double.extras.get("r_t")
+    if z is not None and r_t is not None and len(z) == data.nz and len(r_t) == data.nk:
+        from .extended import cones as C
+        from .extended.dd import from_longdouble
+
+        zh, zl = from_longdouble(z)
+        sh, sl = data.JT.matvec(*from_longdouble(r_t))
+        if C.min_lambda2(data.n3, zh, zl)[0] > 0 and C.min_lambda2(data.n3, sh, sl)[0] > 0:
+            return {"v": np.asarray(double.v, dtype=np.longdouble), "r_t": r_t, "z": z}
+    return ext.interior_start(data, double.v, double.r)
