@@ -164,18 +164,19 @@ def _alive(pid: int) -> bool:
 def test_killing_the_bench_leaves_no_worker(tmp_path, sig):
     coll = tmp_path / "c"
     coll.mkdir()
-    save(random_problem(20, 40, seed=3), coll / "big.hdf5")
+    # Its trajectory task (every iterate rechecked in 30 digits) runs for seconds.
+    save(random_problem(200, 600, seed=3), coll / "big.hdf5")
     cmd = [sys.executable, "-m", "rfverify", "bench", str(coll), "--out", str(tmp_path / "run"),
-           "--methods", "jqinv", "--tol", "1e-8", "--no-trajectories", "--digits", "10",
-           "--reference-max-contacts", "100", "--jobs", "2", "--quiet"]
+           "--methods", "jqinv", "--tol", "1e-8", "--digits", "0", "--jobs", "2", "--quiet"]
     parent = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     workers = []
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and not workers:
+    while time.monotonic() < deadline and len(workers) < 2:
         workers = [p for p in _children(parent.pid) if _alive(p)]
-        time.sleep(0.05)
-    assert workers, "no worker started"
-    time.sleep(0.5)
+        time.sleep(0.02)
+    time.sleep(0.3)
+    workers = [p for p in _children(parent.pid) if _alive(p)]
+    assert workers and parent.poll() is None, "no worker running to orphan"
     parent.send_signal(sig)
     parent.wait(timeout=30)
     deadline = time.monotonic() + 10
@@ -186,6 +187,8 @@ def test_killing_the_bench_leaves_no_worker(tmp_path, sig):
         os.kill(p, signal.SIGKILL)
     assert not left, f"orphaned worker(s) {left} after {signal.Signals(sig).name} to the bench"
     assert b"Traceback" not in parent.stderr.read()
+    if sig == signal.SIGTERM:
+        assert parent.returncode == 128 + signal.SIGTERM  # stopped its workers, then exited
 
 
 # ---------------------------------------------------------------------- damaged run directories
