@@ -2,7 +2,7 @@
 
 Exit codes: 0 success; 1 a solve that did not reach its tolerance; 2 bad input (unreadable or invalid problem, bad arguments) with a
 one-line message on stderr; 3 an internal error (a bug: please report it; set
-``RFVERIFY_DEBUG=1`` for the traceback).
+``RFVERIFY_DEBUG=1`` for the traceback); 141 stdout closed early (``| head``), silently.
 """
 
 from __future__ import annotations
@@ -45,8 +45,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="rfverify",
         description="Verification-focused toolkit for rolling-friction contact problems "
                     "(FCLIB conventions: M v = H r + f, u = Hᵀ v + w, K* ∋ u ⊥ r ∈ K).",
-        epilog="Exit codes: 0 success, 1 tolerance not reached (solve), 2 bad input or "
-               "arguments, 3 internal error.",
+        epilog="Exit codes: 0 success, 1 tolerance not reached (solve) or not certified, 2 bad "
+               "input or arguments, 3 internal error, 141 stdout closed early (e.g. | head). "
+               "--json output is strict JSON: non-finite numbers are null.",
     )
     parser.add_argument("--version", action="version", version=f"rfverify {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
