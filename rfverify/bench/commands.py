@@ -129,9 +129,10 @@ def cmd_report(args) -> int:
                       diagnose_max_contacts=args.diagnose_max_contacts, diagnose_dps=args.dps,
                       quiet=args.quiet)
     if out["issues"]:
+        first = out["issues"][0].split("; fix:")[0]
         print(f"rfverify report: warning: {args.run_dir}: {len(out['issues'])} record(s) or array "
-              f"file(s) missing or damaged, e.g. {out['issues'][0]} (all listed in summary.md under "
-              "'Missing or damaged records')", file=sys.stderr)
+              f"file(s) missing or damaged, e.g. {first} (all listed in summary.md under 'Missing or "
+              "damaged records'); fix: re-run the bench command, which redoes them", file=sys.stderr)
     if args.json:
         print(_dumps({"report": out["report"], "summary": out["summary"], "issues": out["issues"],
                       "bench_running": out["running"],

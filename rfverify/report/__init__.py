@@ -96,7 +96,8 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     if not any(not r.get("_placeholder") for r in data.solves):
         from ..bench.runner import BenchInputError
 
-        damage = f" ({len(data.issues)} records missing or damaged, e.g. {data.issues[0]})" if data.issues else ""
+        first = data.issues[0].split("; fix:")[0] if data.issues else ""
+        damage = f" ({len(data.issues)} records missing or damaged, e.g. {first})" if data.issues else ""
         raise BenchInputError(f"{out}: the run directory holds no usable finished solve runs yet"
                               f"{damage}; fix: run or re-run `rfverify bench ... --out {out}`")
     diags = _diagnostics(data, diagnose_count, diagnose_max_contacts, diagnose_dps, quiet)
