@@ -15,6 +15,11 @@ Python API::
 
 CLI: ``rfverify generate SCENE --count N --seed S --out DIR [--size K]``.
 
+One finite-element scene (:data:`FE_SCENES`: ElasticBlock, :mod:`.fem`) sits beside the
+rigid-body ones: a linear-elastic block on a rigid support, 3 dofs per node, M an assembled
+iteration matrix, every contact sticking with w = 0 and a solution known exactly (stored in
+the file's ``/solution``).  :data:`ALL_SCENES` holds both kinds.
+
 Conventions (FCLIB, DESIGN §1): 6 dofs per body (velocity and angular velocity in the world
 frame), M = diag(m·I3, R I_body Rᵀ) per body, u = Hᵀ v + w with u_i = (N, T1, T2, R1, R2),
 N from body B to body A, (u_N, u_T) = Fᵀ(v_A + ω_A×ρ_A − v_B − ω_B×ρ_B),
@@ -34,7 +39,7 @@ import numpy as np
 from .analysis import StateMix, contact_state_mix, contacts_per_body, free_velocity, h_structure
 from .assembly import contact_matrix, mass_matrix, relative_velocity
 from .geometry import Bodies, Contacts, Statics, detect_contacts
-from .library import ALIASES, SCENES, Scene, World, resolve_scene
+from .library import ALIASES, ALL_SCENES, FE_SCENES, SCENES, Scene, World, resolve_scene
 from .stepper import MoreauJean, SceneError, StepRecord
 from ..problem import Problem
 
@@ -44,7 +49,8 @@ GENERATOR_VERSION = "1"
 DEFAULT_STEPS = 3
 """Moreau–Jean steps taken from each stage configuration; the last one is dumped."""
 
-__all__ = ["SCENES", "Scene", "World", "generate", "save_collection", "fclib_name",
+__all__ = ["SCENES", "FE_SCENES", "ALL_SCENES", "Scene", "World", "generate", "save_collection",
+           "fclib_name",
            "contact_state_mix", "StateMix", "h_structure", "contacts_per_body", "free_velocity",
            "MoreauJean", "StepRecord", "SceneError", "Bodies", "Statics", "Contacts",
            "detect_contacts", "mass_matrix", "contact_matrix", "relative_velocity",
@@ -104,7 +110,10 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
     method, tol, max_iter
         Solver of the stepping (:func:`rfverify.solve`).  A step whose solve does not reach
         ``tol`` advances with the solver's best iterate; this is recorded in the problem's
-        description and ``provenance["solves"]``.
+        description and ``provenance["solves"]``.  Finite-element scenes (ElasticBlock) do
+        not use them: their steps are solved exactly by a clamped direct solve
+        (:class:`.fem.ElasticMoreauJean`), stage K dumps step (K+1)·steps of one run, and the
+        problems carry that solution as ``/solution``.
     progress : callable(fraction, text), optional
         Called as the work advances (for a progress bar).
     **params
@@ -126,6 +135,8 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
     count, steps = int(count), int(steps)
     children = np.random.SeedSequence(int(seed)).spawn(count + 1)
     say = progress or (lambda frac, text: None)
+    if getattr(sc, "finite_element", False):
+        return _generate_finite_element(sc, p, size, count, int(seed), steps, children, say)
     say(0.0, f"{sc.name}: base configuration")
     t0 = time.perf_counter()
     base = sc.prepare(p, size, np.random.default_rng(children[0]))
@@ -198,6 +209,93 @@ def _description(sc: Scene, prov: dict, problem) -> str:
         f"units: {p['units']}",
         "parameters: " + json.dumps(p["parameters"], sort_keys=True),
         "stage: " + json.dumps(p["notes"], sort_keys=True, default=float),
+    ]
+    return "\n".join(lines)
+
+
+def _generate_finite_element(sc: Scene, p: dict, size: int, count: int, seed: int, steps: int,
+                             children, say) -> list:
+    """:func:`generate` for a finite-element scene (ElasticBlock): one run of
+    :class:`.fem.ElasticMoreauJean` from rest; problem K is the problem of step (K+1)·steps
+    (1-based) of that run, written with its known solution (the clamped solve, every contact
+    checked strictly inside its cone) as ``/solution``.  No interior-point solve is made."""
+    from .. import __version__
+    from ..problem import StoredSolution
+    from .fem import entry_range
+
+    say(0.0, f"{sc.name}: mesh and matrices")
+    t0 = time.perf_counter()
+    base = sc.prepare(p, size, np.random.default_rng(children[0]))
+    mj = sc.stepper(base, p)
+    t_base = time.perf_counter() - t0
+    mesh, H = base["mesh"], base["H"]
+    n = mesh.bottom.size
+    w = np.zeros(5 * n)
+    mu = np.full(n, float(p["mu"]))
+    mu_r = np.zeros(n)
+    lo, hi = entry_range(mj.M)
+    out = []
+    records = []
+    for K in range(count):
+        phi = K / (count - 1) if count > 1 else 1.0
+        t1 = time.perf_counter()
+        while len(records) < (K + 1) * steps:
+            records.append(mj.step())
+            say(len(records) / (count * steps), f"{sc.name}: step {len(records)}")
+        rec = records[-1]
+        notes = {"cells": list(mesh.shape), "nodes": mesh.n_nodes,
+                 "tetrahedra": int(mesh.tets.shape[0]), "contacts": n,
+                 "max_tangential_ratio": rec.max_ratio, "min_normal_impulse": rec.min_rN,
+                 "max_speed": float(np.abs(rec.v).max()), "M_entry_min": lo, "M_entry_max": hi,
+                 "M_nnz": int(mj.M.nnz)}
+        solves = [{"step": r.step, "contacts": n, "status": "Clamped", "iterations": 0,
+                   "solves": 1, "max_tangential_ratio": round(r.max_ratio, 6)}
+                  for r in records[K * steps:]]
+        prov = {
+            "generator": "rfverify.scenes", "generator_version": GENERATOR_VERSION,
+            "rfverify_version": __version__, "scene": sc.name, "seed": seed,
+            "count": count, "trace_index": K, "stage": phi, "size": size,
+            "steps": steps, "dumped_step": rec.step, "time": rec.time,
+            "parameters": p, "units": sc.units, "notes": notes,
+            "solver": {"method": "clamped direct solve (sparse LU of M on the free dofs)"},
+            "solves": solves, "failed_solves": 0,
+            "timing": {"base_configuration": round(t_base, 3),
+                       "stage": round(time.perf_counter() - t1, 3)},
+        }
+        u = H.T @ rec.v + w  # exactly 0: the bottom nodes' velocity is exactly 0
+        problem = Problem.from_arrays(mj.M, H, rec.f, w, mu, mu_r, title=sc.name, provenance=prov,
+                                      solution=StoredSolution(v=rec.v, u=u, r=rec.r))
+        out.append(replace(problem, description=_fe_description(sc, prov, problem)))
+    say(1.0, f"{sc.name}: done")
+    return out
+
+
+def _fe_description(sc: Scene, prov: dict, problem) -> str:
+    p, nt = prov, prov["notes"]
+    par = p["parameters"]
+    lines = [
+        f"rfverify.scenes {sc.name} (generator version {p['generator_version']}, "
+        f"rfverify {p['rfverify_version']})",
+        f"scene: {sc.summary}",
+        f"configuration: {sc.configuration}",
+        f"seed {p['seed']}; problem K = {p['trace_index']} of {p['count']} in the trace "
+        f"(stage {p['stage']:.4f}); size {p['size']} {sc.size_unit} at the last stage",
+        f"mesh: {' x '.join(map(str, nt['cells']))} cells of edge {par['cell']:g} m, "
+        f"{nt['nodes']} nodes (m = {problem.n_dofs} dofs, 3 per node), {nt['tetrahedra']} linear "
+        f"tetrahedra; contacts {problem.n_contacts} (one per bottom node, support normal +z)",
+        f"time stepping: Moreau-Jean, theta = 1, h = {par['h']:g}, no damping, from rest in the "
+        f"stress-free configuration; M = M_mass + h^2 K (consistent mass, linear-tetrahedron "
+        f"stiffness), f = M_mass v_k + h (F_gravity - K q_k), w = 0 (zero gap), mu_r = 0 and "
+        f"empty R1, R2 columns of H (nodes have no rotation); dumped step {p['dumped_step'] + 1} "
+        f"of the run, t = {p['time']:.6g}",
+        f"M: nnz {nt['M_nnz']}, |M_ij| from {nt['M_entry_min']:.3g} to {nt['M_entry_max']:.3g}",
+        f"solution (stored in /solution): every contact sticks, u = 0; v solves the clamped "
+        f"system (bottom nodes fixed), max |v| = {nt['max_speed']:.3g}; r from the bottom rows, "
+        f"max |r_T|/r_N = {nt['max_tangential_ratio']:.4g} < mu = {par['mu']:g}, "
+        f"min r_N = {nt['min_normal_impulse']:.3g}",
+        f"units: {p['units']}",
+        "parameters: " + json.dumps(par, sort_keys=True),
+        "stage: " + json.dumps(nt, sort_keys=True, default=float),
     ]
     return "\n".join(lines)
 
