@@ -88,7 +88,11 @@ def discover_problems(inputs) -> list[ProblemEntry]:
             continue
         p = Path(text)
         if p.is_dir():
-            files = sorted(q for q in p.iterdir() if q.suffix.lower() in PROBLEM_SUFFIXES and q.is_file())
+            try:
+                files = sorted(q for q in p.iterdir() if q.suffix.lower() in PROBLEM_SUFFIXES and q.is_file())
+            except OSError as exc:
+                raise BenchInputError(f"{p}: directory cannot be listed ({exc.strerror or exc}); "
+                                      "fix: make it readable or name its files") from None
             if not files:
                 raise BenchInputError(f"{p}: directory holds no problem files ({', '.join(PROBLEM_SUFFIXES)}); "
                                       "fix: name a directory of .hdf5/.dat problems")
