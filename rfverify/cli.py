@@ -93,11 +93,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="print status, iterations, time and final residuals as JSON")
     sol.add_argument("--verbose", action="store_true",
                      help="print a settings header and the per-iteration table")
-    sol.add_argument("--digits", type=_positive_int, default=None, metavar="K",
-                     help="produce a solution right to K significant digits: the double solve, "
-                          "then warm iterations of the mpmath reference, rounded to double and "
-                          "certified by an independent reference run; exit code 0 only when "
-                          "certified")
+    sol.add_argument("--digits", type=_digits, default=None, metavar="K",
+                     help="produce a solution proven right to K significant digits (1-15): the "
+                          "double solve, then Algorithm 1 continued in double-double until the "
+                          "rigorous error bound of DESIGN section 6 proves K digits of v, u and Hr "
+                          "(and r where it is unique); exit code 0 only when proven. With --out the "
+                          "file also gets /certificate (the point and the bound, to recheck with "
+                          "'rfverify certify')")
     sol.add_argument("--no-presolve", action="store_true",
                      help="switch off the presolve reductions (cone reduction for mu = 0 / "
                           "mu_r = 0 requires them; such problems are refused)")
@@ -105,26 +107,31 @@ def build_parser() -> argparse.ArgumentParser:
     sol.set_defaults(func=cmd_solve)
 
     cert = sub.add_parser(
-        "certify", help="certify how many digits of a solution are right (mpmath reference)",
-        description="Check a double-precision solution: residuals in high precision first, then "
-                    "(when they do not already rule it out, or with --always-reference) the "
-                    "mpmath reference solution, and the digits of agreement in v, u and Hr (and "
-                    "r where it is unique). Exit code 0 only when --digits are certified.",
+        "certify", help="prove how many digits of a solution are right (a rigorous error bound)",
+        description="Prove a lower bound on the correct significant digits of a solution (v, u, r) "
+                    "of the convex relaxation (DESIGN section 6): an extended-precision point near "
+                    "the solution set (stored in the solution file by 'solve --digits --out', or "
+                    "computed by a double solve and double-double iterations) is evaluated in "
+                    "exact arithmetic, and the bound "
+                    "||v - v*||_M <= sqrt(g'M^-1 g + 2 r'u) is carried to the solution. Exit code 0 "
+                    "only when --digits are proven.",
     )
     cert.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     cert.add_argument("--solution", metavar="SOL.h5",
                       help="FCLIB file whose /solution/{v,u,r} is certified (default: the "
-                           "problem file's own /solution)")
-    cert.add_argument("--digits", type=_positive_int, default=10, metavar="K",
-                      help="digits to certify (default: %(default)s)")
+                           "problem file's own /solution); its /certificate/point is used when present")
+    cert.add_argument("--digits", type=_digits, default=10, metavar="K",
+                      help="digits to prove, 1-15 (default: %(default)s)")
+    cert.add_argument("--cross-check", action="store_true",
+                      help="also run the independent mpmath reference and report the digits of "
+                           "agreement (a second opinion; slow beyond a few hundred contacts)")
     cert.add_argument("--dps", type=_positive_int, default=50, metavar="D",
-                      help="accuracy of the reference solve in decimal digits (default: %(default)s)")
-    cert.add_argument("--always-reference", action="store_true",
-                      help="run the reference even when the cheap residual check already fails")
+                      help="accuracy of the --cross-check reference in decimal digits (default: %(default)s)")
     cert.add_argument("--json", action="store_true", help="print the certificate as JSON")
     cert.add_argument("--out", metavar="CERT.h5", type=_out_path,
-                      help="write the problem, the given solution and the reference solution at "
-                           "full precision (decimal strings under /reference) to this file")
+                      help="write the problem, the given solution and /certificate (the point, "
+                           "exactly and as decimal strings, the bound and every intermediate norm)")
+    cert.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     _add_load_options(cert)
     cert.set_defaults(func=cmd_certify)
 
@@ -154,19 +161,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_bench_parsers(sub)
 
-    from .scenes import DEFAULT_STEPS, SCENES
+    from .scenes import ALL_SCENES, DEFAULT_STEPS
 
     gen = sub.add_parser(
-        "generate", help="generate FCLIB problem collections from rigid-body scenes",
+        "generate", help="generate FCLIB problem collections from rigid-body and finite-element scenes",
         description="Build a rigid-body scene by a fast geometric method, take a few "
                     "Moreau-Jean steps (theta = 1, velocity level) from each stage of its run and "
                     "write the one-step problems as FCLIB HDF5 files SCENE-ndof-M-nc-N-K.hdf5 "
                     "(K = index in the trace). Deterministic for a given seed and options.\n\n"
-                    "scenes:\n" + "\n".join(f"  {k}: {v.summary}" for k, v in SCENES.items()),
+                    "scenes:\n" + "\n".join(f"  {k}: {v.summary}" for k, v in ALL_SCENES.items()),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     gen.add_argument("scene", metavar="SCENE", nargs="?", type=_scene_name,
-                     help="scene name (case-insensitive): " + ", ".join(SCENES))
+                     help="scene name (case-insensitive): " + ", ".join(ALL_SCENES))
     gen.add_argument("--list", action="store_true",
                      help="list the scenes with their default size and parameters, then exit")
     gen.add_argument("--count", type=_positive_int, default=1, metavar="N",
@@ -241,6 +248,18 @@ def _out_path(text: str) -> str:
         raise argparse.ArgumentTypeError("an empty path writes nothing; give a file name or "
                                          "leave the option out")
     return text
+
+
+def _digits(text: str) -> int:
+    from .errors import InvalidArgumentError
+    from .proof import validate_digits
+
+    try:
+        return validate_digits(int(text))
+    except ValueError as exc:
+        if isinstance(exc, InvalidArgumentError):
+            raise argparse.ArgumentTypeError(f"{text}: {exc.problem}; fix: {exc.fix}") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer; fix: give K in 1 … 15") from None
 
 
 def _positive_int(text: str) -> int:
@@ -513,34 +532,49 @@ def cmd_solve(args) -> int:
 def _solve_digits(args, problem, options) -> int:
     import time
 
-    from .io import save
-    from .problem import StoredSolution
-    from .refine import solve_to_digits
+    from .digits import solve_to_digits
 
-    if args.method == "clarabel":
-        from .errors import InvalidProblemError
-
-        raise InvalidProblemError("method", "--digits needs an Algorithm 1 method, not clarabel",
-                                  fix="use --method jqinv (default)")
+    say = _progress(args)
     t0 = time.perf_counter()
     out = solve_to_digits(problem, digits=args.digits, method=args.method, tol=args.tol,
-                          max_iter=args.max_iter, **options)
+                          max_iter=args.max_iter, progress=say, **options)
     wall = time.perf_counter() - t0
+    cert = out.certificate
     if args.out:
-        _write_solution_file(args, problem, out.v, out.u, out.r)
+        _write_solution_file(args, problem, out.v, out.u, out.r, certificate=cert)
     summary = {"status": "Certified" if out.success else "NotCertified",
                "success": out.success, "digits_requested": args.digits,
-               "certificate": out.certificate.as_dict(), "double_status": str(out.double.status),
-               "double_iterations": out.double.nit, "warm_iterations": out.warm.nit,
-               "warm_status": out.warm.status, "time": wall, "out": args.out}
+               "certificate": cert.as_dict(), "double_status": str(out.double.status),
+               "double_iterations": out.double.nit, "extended_iterations": out.extended.nit,
+               "extended_status": out.extended.status, "backend": out.extended.backend,
+               "timings": out.timings, "time": wall, "out": args.out}
     if args.json:
         print(_dumps(summary, indent=2))
     else:
-        print(f"double solve: {out.double.status} in {out.double.nit} iterations; "
-              f"warm high-precision iterations: {out.warm.nit} ({out.warm.status})")
-        print(out.certificate.verdict)
-        print(f"time {wall:.2f} s" + (f"; solution written to {args.out}" if args.out else ""))
+        print(f"double solve: {out.double.status} in {out.double.nit} iterations; extended "
+              f"(double-double) iterations: {out.extended.nit}")
+        print(cert.verdict)
+        _print_quantities(cert)
+        t = out.timings
+        print(f"time {wall:.2f} s (double {t['double']:.2f}, extended {t['setup'] + t['extended']:.2f}, "
+              f"proof {t['proof']:.2f})" + (f"; solution and certificate written to {args.out}" if args.out else ""))
     return EXIT_OK if out.success else EXIT_NOT_SOLVED
+
+
+def _progress(args):
+    """One line per stage on stderr, unless --json or --quiet."""
+    if getattr(args, "json", False) or getattr(args, "quiet", False):
+        return None
+
+    def say(message):
+        print(f"rfverify {args.command}: {message}", file=sys.stderr, flush=True)
+
+    return say
+
+
+def _print_quantities(cert) -> None:
+    for q in cert.quantities.values():
+        print("  " + q.describe())
 
 
 # ---------------------------------------------------------------------- diagnose
@@ -577,31 +611,51 @@ def cmd_certify(args) -> int:
     from .certification import certify
     from .errors import ProblemFileError
     from .io import load
+    from .io.certificate import read_point
 
     problem = _load(args)
+    point = None
     if args.solution:
         other = load(args.solution, max_asymmetry=np.inf)
         _require_same_problem(problem, other, args.solution)
         sol = other.solution
         where = args.solution
+        point = read_point(_resolve(args.solution))
     else:
         sol, where = problem.solution, args.problem
+        if _is_hdf5_input(args.problem):
+            point = read_point(_resolve(args.problem))
     if sol is None or sol.v is None or sol.r is None:
-        raise ProblemFileError(where, "has no /solution with v and r to certify (use --solution SOL.h5)")
+        raise ProblemFileError(where, "has no /solution with v and r to certify",
+                               fix="pass --solution SOL.h5 (written by rfverify solve --out)")
+    if point is not None and (point.v_hi.size != problem.n_dofs or point.r_hi.size != 5 * problem.n_contacts):
+        raise ProblemFileError(where, "/certificate/point does not match the problem's sizes",
+                               location="/certificate/point", fix="certify the solution file written for this problem")
     u = sol.u if sol.u is not None else problem.H.T @ sol.v + problem.w
-    cert = certify(problem, sol.v, u, sol.r, digits=args.digits, dps=args.dps,
-                   always_reference=args.always_reference)
+    cert = certify(problem, sol.v, u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
+                   dps=args.dps, progress=_progress(args))
     if args.out:
-        _write_certificate(problem, sol, u, cert, args.out)
+        _write_certificate(args, problem, sol, u, cert)
     if args.json:
         print(_dumps(cert.as_dict(), indent=2))
     else:
         print(cert.verdict)
-        print("residuals (high precision): " + ", ".join(f"{k} {v:.2e}" for k, v in cert.residuals.items()))
-        if cert.r_unique is False:
-            print(f"r is not unique (H is rank deficient on the active contacts): distance to the "
-                  f"reference's r is information only ({cert.r_info_digits:.1f} digits)")
+        _print_quantities(cert)
+        src = cert.extra.get("point_source")
+        print(f"point: {'stored in ' + where if src == 'given' else 'computed (double solve + double-double phase)'}; "
+              f"time {cert.seconds:.2f} s")
+        if cert.cross_check is not None:
+            cc = cert.cross_check
+            shown = ", ".join(f"{k[7:]} {v:.1f}" for k, v in cc.items() if k.startswith("digits_") and v is not None)
+            print(f"cross-check against the mpmath reference ({cc.get('reference_status')}): "
+                  f"agreement {shown or cc.get('note', '')}")
     return EXIT_OK if cert.certified else EXIT_NOT_SOLVED
+
+
+def _resolve(spec):
+    from .io import resolve_path
+
+    return resolve_path(spec)
 
 
 def _require_same_problem(problem, other, path):
@@ -618,38 +672,30 @@ def _require_same_problem(problem, other, path):
             fix="pass the solution file written for this problem (rfverify solve ... --out)")
 
 
-def _write_certificate(problem, sol, u, cert, path):
+def _write_certificate(args, problem, sol, u, cert):
+    """``certify --out``: the problem, the certified solution and /certificate."""
     import h5py
 
     from .io import save
+    from .io.certificate import write_certificate
+    from .io.output import check_output_file
     from .problem import StoredSolution
 
-    save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), path)
-    with h5py.File(path, "a") as fh:
-        grp = fh.create_group("certificate")
-        grp.attrs["verdict"] = cert.verdict
-        grp.attrs["certified"] = cert.certified
-        grp.attrs["requested_digits"] = cert.requested
-        if cert.reference is not None:
-            ref = cert.reference
-            rg = fh.create_group("reference")
-            rg.attrs["dps"] = ref.dps
-            rg.attrs["status"] = ref.status
-            for name in ("v", "u", "r"):
-                strings = [ref.ctx.nstr(x, ref.dps + 5, strip_zeros=False) for x in getattr(ref, name)]
-                rg.create_dataset(name, data=np.array(strings, dtype=h5py.string_dtype()))
+    target = getattr(args, "out_target", None) or check_output_file(args.out, inputs=[args.problem, args.solution])
+    save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), target)
+    with h5py.File(str(getattr(target, "path", target)), "a") as fh:
+        write_certificate(fh, cert)
 
 
-# ---------------------------------------------------------------------- generate
 def cmd_generate(args) -> int:
     import time
 
     from .progress import Progress
-    from .scenes import SCENES, generate, save_collection, scene_parameters
+    from .scenes import ALL_SCENES, generate, save_collection, scene_parameters
     from .scenes.stepper import SceneError
 
     if args.list:
-        for name, sc in SCENES.items():
+        for name, sc in ALL_SCENES.items():
             print(f"{name} (default size {sc.default_size} {sc.size_unit}): {sc.summary}")
             print("    parameters: " + ", ".join(f"{k}={v:g}" for k, v in sc.defaults.items()))
         return EXIT_OK
@@ -723,7 +769,7 @@ def _check_outputs(args) -> None:
         check_output_dir(out)
 
 
-def _write_solution_file(args, problem, v, u, r) -> None:
+def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
     """``solve --out``: the problem plus /solution, or only /solution written into the input
     .hdf5 file itself when --out names it (everything else in that file is kept)."""
     from .io import save, write_solution_in_place
@@ -737,6 +783,13 @@ def _write_solution_file(args, problem, v, u, r) -> None:
         write_solution_in_place(target, problem.with_solution(solution).solution)
     else:
         save(problem.with_solution(solution), target)
+    if certificate is not None:
+        import h5py
+
+        from .io.certificate import write_certificate
+
+        with h5py.File(str(getattr(target, "path", target)), "a") as fh:
+            write_certificate(fh, certificate)
 
 
 # ---------------------------------------------------------------------- entry point

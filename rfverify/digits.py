@@ -87,6 +87,7 @@ class ProofDriver:
         self._since = 0
         self.progress = progress
         self.recent = []  # the last few iterates, proven when the run ends without a proof
+        self.proven_at = set()
 
     @staticmethod
     def score(proof: Proof) -> float:
@@ -119,6 +120,9 @@ class ProofDriver:
         u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
         if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested):
             return False
+        if it.k in self.proven_at:
+            return False
+        self.proven_at.add(it.k)
         t0 = time.perf_counter()
         sol = self.target if self.target is not None else self.ctx.rounded(point)
         proof = self.ctx.prove(point, *sol, requested=self.requested)
@@ -177,8 +181,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "jqinv", t
         for it in reversed(driver.recent):
             driver(it, force=True)
     _, proof, point, (v, u, r) = driver.best
-    cert = certificate_from_proof(proof, extra={"extended_status": run.status, "extended_iterations": run.nit,
-                                                "backend": run.backend, "proof_attempts": driver.attempts})
+    cert = certificate_from_proof(proof, point, extra={"point_source": "extended phase", "extended_status": run.status,
+                                                       "extended_iterations": run.nit, "backend": run.backend,
+                                                       "proof_attempts": driver.attempts})
     timings = {"double": t_double, "setup": t_setup, "extended": t_ext,
                "proof": driver.proof_seconds, "total": time.perf_counter() - t0}
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=run,

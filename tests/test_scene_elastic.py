@@ -350,10 +350,6 @@ def test_registries():
     assert set(ALL_SCENES) == set(SCENES) | set(FE_SCENES)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "rfverify/cli.py builds `generate --help` and `--list` from SCENES (the rigid-body scenes, "
-    "which tests/test_scenes.py relies on being rigid); listing ElasticBlock needs cli.py to "
-    "iterate rfverify.scenes.ALL_SCENES instead"))
 def test_generate_help_and_list_show_the_scene(capsys):
     gen = build_parser()._subparsers._group_actions[0].choices["generate"]
     assert main(["generate", "--list"]) == 0

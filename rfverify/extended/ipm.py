@@ -112,10 +112,10 @@ class ExtendedResult:
     factor_seconds: float = 0.0
 
 
-def interior_start(data: ExtendedData, v, r, u=None, margin: float | None = None) -> dict:
+def interior_start(data: ExtendedData, v, r, u=None, margin_rel: float = 1e-8) -> dict:
     """A strictly interior lifted point near a candidate solution (v, r) in the original
     variables: r̃ = P⁻¹r and z splitting ũ = P(Hᵀv + w) between the two cones of a contact,
-    each pushed inside by ``margin`` (default: 1e-8 of the iterate's scale)."""
+    each pushed inside by ``margin_rel`` times the iterate's scale."""
     lp = data.lp
     problem = data.problem
     v = np.asarray(v, dtype=np.longdouble)
@@ -123,7 +123,7 @@ def interior_start(data: ExtendedData, v, r, u=None, margin: float | None = None
     r_t = np.asarray(r, dtype=np.longdouble)[lp.keep] / lp.scale
     u_t = u[lp.keep] * lp.scale
     scale = max(float(np.max(np.abs(r_t), initial=0.0)), float(np.max(np.abs(u_t), initial=0.0)), 1e-300)
-    margin = 1e-8 * scale if margin is None else margin
+    margin = margin_rel * scale
     z = np.zeros(lp.nz, dtype=np.longdouble)
     # kept-row positions of each cone's components: rows of J
     J = lp.J.tocsc()

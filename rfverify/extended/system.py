@@ -215,8 +215,9 @@ def contact_G(n, n3, kinds, fric, roll, normal, spec, Gh, Gl):
         Gh[c, :, :] = 0.0
         Gl[c, :, :] = 0.0
         k = kinds[c]
-        if k == 3:  # normal: p⁻²
+        if k == 3:  # normal: Q_{p⁻²} = p⁻⁴ on L1
             t, tl = dd.mul(spec[normal[c], 0], spec[normal[c], 1], spec[normal[c], 0], spec[normal[c], 1])
+            t, tl = dd.mul(t, tl, t, tl)
             Gh[c, 0, 0], Gl[c, 0, 0] = dd.div(1.0, 0.0, t, tl)
             continue
         if k == 0 or k == 1:
@@ -286,9 +287,10 @@ def contact_Ginv(n, n3, kinds, fric, roll, normal, ph, pl, Gh, Gl):
         Gh[c, :, :] = 0.0
         Gl[c, :, :] = 0.0
         k = kinds[c]
-        if k == 3:
+        if k == 3:  # G⁻¹ = p⁴ on L1
             i = 3 * n3 + (normal[c] - n3)
-            Gh[c, 0, 0], Gl[c, 0, 0] = dd.mul(ph[i], pl[i], ph[i], pl[i])
+            t, tl = dd.mul(ph[i], pl[i], ph[i], pl[i])
+            Gh[c, 0, 0], Gl[c, 0, 0] = dd.mul(t, tl, t, tl)
             continue
         if k == 1 or k == 2:
             i = 3 * (fric[c] if k == 1 else roll[c])
@@ -580,8 +582,9 @@ def contact_factor_inverse(n, kinds, fric, roll, normal, spec, Fh, Fl):
         Fh[c, :, :] = 0.0
         Fl[c, :, :] = 0.0
         k = kinds[c]
-        if k == 3:
-            Fh[c, 0, 0], Fl[c, 0, 0] = spec[normal[c], 0], spec[normal[c], 1]
+        if k == 3:  # L1: Q_{p⁻¹} = p⁻², so G = p⁻⁴ and F⁻¹ = Q_p = p²
+            Fh[c, 0, 0], Fl[c, 0, 0] = dd.mul(spec[normal[c], 0], spec[normal[c], 1], spec[normal[c], 0],
+                                              spec[normal[c], 1])
         elif k == 1 or k == 2:
             C.quad_pow_matrix(fric[c] if k == 1 else roll[c], 1, spec, Qh, Ql)
             Fh[c, :3, :3] = Qh

@@ -240,17 +240,9 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     Hr_p = exact.H.matvec(point_r)
     g = exact.M_sym_apply(point_v) - Hr_p - exact.f
     gap = point_r.dot(u_p)  # ≥ 0: a sum of products of cone-dual pairs
-    # gᵀM⁻¹g ≤ Σ_b ‖g_b‖² / λ_b
-    g_sq = g.square()
-    order = np.argsort(mass.labels, kind="stable")
-    nb = mass.lam_lower.size
-    counts = np.bincount(mass.labels, minlength=nb)
-    starts = np.concatenate(([0], np.cumsum(counts)))[:-1]
-    per_block = g_sq[order].segment_sums(starts, starts + counts).abs_upper()
-    q_g = float(_up(math.fsum(_up(per_block / mass.lam_lower).tolist())))
+    q_g = gMinvg_upper(g, mass)
     gap_up = fraction_upper_float(gap)
-    eps2 = float(_up(q_g + float(_up(2.0 * gap_up))))
-    eps = float(_up(math.sqrt(eps2)))
+    eps = eps_M_upper(q_g, gap_up)
 
     # ---- carry to the returned solution
     vd = Dyadic.from_float(v)
@@ -283,6 +275,23 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     else:
         q["r"] = _quantity("r", e_r, r, scales, requested, note=r_note)
     return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0)
+
+
+def gMinvg_upper(g: Dyadic, mass: MassBounds) -> float:
+    """Upper bound of gᵀM⁻¹g ≤ Σ_b ‖g_b‖² / λ_b (exact squares, rounded up)."""
+    g_sq = g.square()
+    order = np.argsort(mass.labels, kind="stable")
+    nb = mass.lam_lower.size
+    counts = np.bincount(mass.labels, minlength=nb)
+    starts = np.concatenate(([0], np.cumsum(counts)))[:-1]
+    per_block = g_sq[order].segment_sums(starts, starts + counts).abs_upper()
+    return float(_up(math.fsum(_up(per_block / mass.lam_lower).tolist())))
+
+
+def eps_M_upper(q_g: float, gap_up: float) -> float:
+    """ε ≥ √(gᵀM⁻¹g + 2rᵀu), from upper bounds of both terms."""
+    eps2 = float(_up(q_g + float(_up(2.0 * gap_up))))
+    return float(_up(math.sqrt(eps2)))
 
 
 def validate_digits(digits) -> int:

@@ -1,0 +1,121 @@
+"""The certificate group of a solution file: everything needed to recheck a proof.
+
+Written by ``rfverify solve --digits K --out SOL.h5`` and ``rfverify certify ... --out``
+beside the problem and its ``/solution``::
+
+    /certificate                 attrs: format, version, rfverify_version, requested_digits,
+                                        certified, verdict, arithmetic, theorem, point_source
+    /certificate/point/v_hi, v_lo, r_hi, r_lo
+                                 float64: the extended-precision point, exactly (v = v_hi + v_lo)
+    /certificate/point/v_decimal, r_decimal
+                                 the same numbers as decimal strings (34 significant digits)
+    /certificate/quantities/<v|u|Hr|r>
+                                 attrs: abs_bound, norm, own_scale, data_scale, data_scale_name,
+                                        digits (NaN: none), mode, certified, note
+    /certificate/terms           attrs: every intermediate norm of the proof (eps_M, gap_rTu,
+                                        gMinvg_upper, lam_min_M_lower, ...)
+
+To recheck: ``rfverify certify PROBLEM --solution SOL.h5`` evaluates the bound again from the
+stored point, in exact arithmetic, against the stored ``/solution``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ProblemFileError
+
+FORMAT = "rfverify-certificate"
+VERSION = 1
+THEOREM = ("For M = (M+M^T)/2 positive definite, any v with u(v) = H^T v + w in K* and any r in K, "
+           "with g = Mv - Hr - f: ||v - v*||_M^2 <= g^T M^-1 g + 2 r^T u(v) (strong convexity and weak "
+           "duality of the convex relaxation); per-component bounds by Cauchy-Schwarz in the M inner "
+           "product, carried to the stored solution by the triangle inequality (DESIGN section 6).")
+
+
+def write_certificate(fh, certificate) -> None:
+    """Write ``certificate`` (a :class:`rfverify.Certificate`) into the open h5py file ``fh``,
+    replacing any previous ``/certificate``."""
+    import h5py
+
+    from .. import __version__
+
+    if "certificate" in fh:
+        del fh["certificate"]
+    grp = fh.create_group("certificate")
+    proof = certificate.proof
+    grp.attrs["format"] = FORMAT
+    grp.attrs["version"] = VERSION
+    grp.attrs["rfverify_version"] = __version__
+    grp.attrs["requested_digits"] = certificate.requested
+    grp.attrs["certified"] = bool(certificate.certified)
+    grp.attrs["verdict"] = certificate.verdict
+    grp.attrs["theorem"] = THEOREM
+    grp.attrs["point_source"] = str(certificate.extra.get("point_source", ""))
+    if proof is not None:
+        grp.attrs["arithmetic"] = proof.arithmetic
+        terms = grp.create_group("terms")
+        for k, v in proof.terms.items():
+            terms.attrs[k] = np.nan if v is None else v
+        qg = grp.create_group("quantities")
+        for name, q in proof.quantities.items():
+            g = qg.create_group(name)
+            for k, v in q.as_dict().items():
+                g.attrs[k] = np.nan if v is None else v
+    point = certificate.point
+    if point is not None:
+        pg = grp.create_group("point")
+        for k in ("v_hi", "v_lo", "r_hi", "r_lo"):
+            pg.create_dataset(k, data=np.asarray(getattr(point, k), dtype=np.float64))
+        for name, hi, lo in (("v", point.v_hi, point.v_lo), ("r", point.r_hi, point.r_lo)):
+            pg.create_dataset(f"{name}_decimal", data=np.array(_decimal_strings(hi, lo), dtype=h5py.string_dtype()))
+
+
+def read_point(path):
+    """The extended-precision point stored in ``path`` (a :class:`rfverify.proof.Point`), or None
+    when the file has no ``/certificate/point``."""
+    import h5py
+
+    from ..proof import Point
+
+    try:
+        with h5py.File(path, "r") as fh:
+            if "certificate" not in fh or "point" not in fh["certificate"]:
+                return None
+            grp = fh["certificate"]
+            if grp.attrs.get("format") != FORMAT or int(grp.attrs.get("version", -1)) != VERSION:
+                raise ProblemFileError(path, f"/certificate is not an {FORMAT} version {VERSION} group",
+                                       location="/certificate",
+                                       fix="write the certificate again with this rfverify version")
+            pg = grp["point"]
+            arrays = {}
+            for k in ("v_hi", "v_lo", "r_hi", "r_lo"):
+                if k not in pg:
+                    raise ProblemFileError(path, f"missing dataset {k}", location=f"/certificate/point/{k}",
+                                           fix="write the certificate again")
+                a = pg[k]
+                if not isinstance(a, h5py.Dataset) or a.dtype.kind != "f" or a.ndim != 1:
+                    raise ProblemFileError(path, f"{k} must be a 1-D float dataset",
+                                           location=f"/certificate/point/{k}", fix="write the certificate again")
+                arrays[k] = np.asarray(a[()], dtype=np.float64)
+    except ProblemFileError:
+        raise
+    except OSError as exc:
+        raise ProblemFileError(path, f"cannot be read ({exc})", fix="check the file") from None
+    if arrays["v_hi"].shape != arrays["v_lo"].shape or arrays["r_hi"].shape != arrays["r_lo"].shape:
+        raise ProblemFileError(path, "hi and lo parts of the point differ in size", location="/certificate/point",
+                               fix="write the certificate again")
+    if not all(np.all(np.isfinite(a)) for a in arrays.values()):
+        raise ProblemFileError(path, "the point contains NaN or Inf", location="/certificate/point",
+                               fix="write the certificate again")
+    return Point(**arrays)
+
+
+def _decimal_strings(hi, lo, digits: int = 34) -> list:
+    import mpmath
+
+    out = []
+    with mpmath.workprec(240):
+        for h, l in zip(np.asarray(hi, dtype=np.float64), np.asarray(lo, dtype=np.float64)):
+            out.append(mpmath.nstr(mpmath.mpf(float(h)) + mpmath.mpf(float(l)), digits, strip_zeros=False))
+    return out

@@ -1,0 +1,178 @@
+"""The extended-precision engine (rfverify.extended): double-double arithmetic, the Jordan
+kernels against the independent mpmath reference, the sparse LDLᵀ, the two Newton back ends,
+and the run itself."""
+
+from __future__ import annotations
+
+import math
+
+import mpmath
+import numba
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
+
+import rfverify
+from reference import jordan as RJ
+from rfverify.extended import cones as C
+from rfverify.extended import dd
+from rfverify.extended.ldl import DDCholesky
+from rfverify.extended.system import ContactSpace, DofSpace, ExtendedData
+
+U_DD = 2.0 ** -104
+
+
+@numba.njit
+def _ops(ah, al, bh, bl):
+    return dd.add(ah, al, bh, bl), dd.mul(ah, al, bh, bl), dd.div(ah, al, bh, bl), dd.sqrt(abs(ah), al if ah > 0 else -al)
+
+
+def _mp(h, l):
+    """hi + lo exactly (callers compare inside mpmath.workdps(60))."""
+    return mpmath.mpf(float(h)) + mpmath.mpf(float(l))
+
+
+nonzero = st.floats(min_value=1e-30, max_value=1e30).flatmap(lambda x: st.sampled_from([x, -x]))
+
+
+@given(nonzero, nonzero, st.floats(-1, 1), st.floats(-1, 1))
+@example(1.0, 3.0, 0.0, 0.0)
+@example(1e30, -1e-30, 0.5, -0.5)
+def test_double_double_operations_have_dd_accuracy(a, b, ta, tb):
+    ah, al = dd.two_sum(a, a * 2.0 ** -60 * ta)
+    bh, bl = dd.two_sum(b, b * 2.0 ** -60 * tb)
+    s, p, q, r = _ops(ah, al, bh, bl)
+    with mpmath.workdps(60):
+        A, Bv = _mp(ah, al), _mp(bh, bl)
+        assert abs(_mp(*s) - (A + Bv)) <= 4 * U_DD * (abs(A) + abs(Bv))
+        assert abs(_mp(*p) - A * Bv) <= 4 * U_DD * abs(A * Bv)
+        assert abs(_mp(*q) - A / Bv) <= 8 * U_DD * abs(A / Bv)
+        assert abs(_mp(*r) - mpmath.sqrt(abs(A))) <= 8 * U_DD * mpmath.sqrt(abs(A))
+
+
+def _interior(rng, n3, n1, spread):
+    x = rng.normal(size=3 * n3 + n1)
+    for c in range(n3):
+        x[3 * c] = np.hypot(x[3 * c + 1], x[3 * c + 2]) * (1 + 10.0 ** rng.uniform(-spread, 0)) + 1e-300
+    x[3 * n3:] = np.abs(x[3 * n3:]) + 10.0 ** rng.uniform(-spread, 0, n1)
+    return x
+
+
+@settings(max_examples=30)
+@given(st.integers(0, 2**31), st.integers(0, 8))
+@example(0, 8)
+def test_jordan_kernels_agree_with_the_reference(seed, spread):
+    """NT scaling, Q_{p^k} (spectral form), ∘, Jordan division and step length against
+    reference.jordan at 60 digits, relative to the condition of each quantity."""
+    rng = np.random.default_rng(seed)
+    n3, n1 = 4, 2
+    z, s, y = _interior(rng, n3, n1, spread), _interior(rng, n3, n1, spread), rng.normal(size=3 * n3 + n1)
+    z[0:3] = [2.0, 0.0, 0.0]  # x̄ = 0: the spectral frame is arbitrary and must not matter
+    nz = z.size
+    zero = np.zeros(nz)
+    ph, pl, pih, pil, lh, ll = (np.zeros(nz) for _ in range(6))
+    spec = np.zeros((n3 + n1, 8))
+    assert C.nt_scaling(n3, z, zero, s, zero, ph, pl, pih, pil, lh, ll, spec) == -1
+    ctx = RJ.context(60)
+    with mpmath.workdps(60):
+        _compare_kernels(ctx, n3, n1, z, s, y, ph, pl, lh, ll, spec)
+    _check_division_and_step(ctx, n3, z, s, y, spread)
+
+
+def _compare_kernels(ctx, n3, n1, z, s, y, ph, pl, lh, ll, spec):
+    nz = z.size
+    zero = np.zeros(nz)
+    for c in range(n3 + n1):
+        sl = slice(3 * c, 3 * c + 3) if c < n3 else slice(3 * n3 + c - n3, 3 * n3 + c - n3 + 1)
+        zc, sc, yc = (RJ.to_ctx(ctx, list(a[sl])) for a in (z, s, y))
+        p_ref, _, lam_ref = RJ.nt_scaling(zc, sc)
+        # p and λ are determined to u·κ, κ = λ1/λ2 of z and s (their λ2 cancels)
+        kappa = max(float(RJ.cond_quad(zc)), float(RJ.cond_quad(sc))) ** 0.5
+        scale = float(max(abs(x) for x in lam_ref))
+        tol = 1e-27 * max(float(RJ.cond_quad(p_ref)), kappa)
+        assert max(abs(_mp(ph[sl][i], pl[sl][i]) - p_ref[i]) for i in range(len(zc))) <= tol * float(max(abs(x) for x in p_ref))
+        assert max(abs(_mp(lh[sl][i], ll[sl][i]) - lam_ref[i]) for i in range(len(zc))) <= tol * scale
+        for k in (1, -1, 2, -2):
+            oh, ol = np.zeros(nz), np.zeros(nz)
+            C.quad_pow(n3, k, spec, y, zero, oh, ol)
+            want = RJ.quad_apply(RJ.power(p_ref, k), yc)
+            big = float(max(abs(x) for x in want)) + float(RJ.cond_quad(RJ.power(p_ref, k))) ** 0.5 * 1e-300
+            ref_scale = max(big, float(max(abs(x) for x in yc)) * float(max(RJ.spectral_values(RJ.power(p_ref, k)))) ** 2)
+            assert max(abs(_mp(oh[sl][i], ol[sl][i]) - want[i]) for i in range(len(zc))) <= 1e-28 * kappa * ref_scale
+
+
+def _check_division_and_step(ctx, n3, z, s, y, spread):
+    nz = z.size
+    zero = np.zeros(nz)
+    oh, ol = np.zeros(nz), np.zeros(nz)
+    C.product(n3, z, zero, s, zero, oh, ol)
+    C.arrow_solve(n3, z, zero, oh, ol, oh2 := np.zeros(nz), ol2 := np.zeros(nz))
+    assert np.allclose(oh2, s, rtol=1e-12, atol=1e-12 * np.abs(s).max() * (10.0 ** spread))
+    alpha = C.max_step(n3, z, zero, y, zero)
+    want = min(float(RJ.step_to_boundary(RJ.to_ctx(ctx, list(z[3 * c:3 * c + 3])), RJ.to_ctx(ctx, list(y[3 * c:3 * c + 3]))))
+               for c in range(n3))
+    want = min([want] + [(-z[i] / y[i]) if y[i] < 0 else math.inf for i in range(3 * n3, nz)])
+    assert alpha == pytest.approx(want, rel=1e-10) or (alpha == math.inf and want == math.inf)
+
+
+def test_sparse_ldl_solves_spd_systems_in_double_double():
+    rng = np.random.default_rng(1)
+    A = sp.random(120, 120, density=0.05, random_state=2)
+    A = (A @ A.T + 1e-6 * sp.identity(120)).tocsc()  # condition ~1e8
+    ch = DDCholesky(A)
+    coo = sp.triu(A).tocoo()
+    vh = np.zeros(ch.nnz_upper)
+    np.add.at(vh, ch.positions(coo.row, coo.col), coo.data)
+    assert ch.factor(vh, np.zeros_like(vh)) == -1
+    b = rng.normal(size=120)
+    xh, xl = ch.solve(b, np.zeros(120))
+    with mpmath.workdps(50):
+        Ad = A.toarray()
+        x = [_mp(h, l) for h, l in zip(xh, xl)]
+        res = max(abs(sum(mpmath.mpf(float(Ad[i, j])) * x[j] for j in np.flatnonzero(Ad[i])) - b[i]) for i in range(120))
+    assert float(res) <= 1e-26 * np.abs(Ad).max() * float(max(abs(t) for t in x))
+    neg = (A - 2 * sp.identity(120)).tocsc()
+    coo = sp.triu(neg).tocoo()
+    vh = np.zeros(ch.nnz_upper)
+    np.add.at(vh, ch.positions(coo.row, coo.col), coo.data)
+    assert ch.factor(vh, np.zeros_like(vh)) >= 0  # indefinite: refused, never a wrong factor
+
+
+@pytest.mark.parametrize("name", ["chute", "cube"])
+def test_both_back_ends_solve_the_same_newton_system(name):
+    problem = rfverify.load(f"bundled:{name}")
+    res = rfverify.solve(problem, tol=1e-8)
+    data = ExtendedData(problem)
+    z = dd.from_longdouble(res.extras["z"])
+    s = data.JT.matvec(*dd.from_longdouble(res.extras["r_t"]))
+    nz = data.nz
+    ph, pl, pih, pil, lh, ll = (np.zeros(nz) for _ in range(6))
+    spec = np.zeros((data.n3 + data.n1, 8))
+    assert C.nt_scaling(data.n3, z[0], z[1], s[0], s[1], ph, pl, pih, pil, lh, ll, spec) == -1
+    rng = np.random.default_rng(0)
+    a = (rng.normal(size=data.m), np.zeros(data.m))
+    t = (rng.normal(size=data.nk), np.zeros(data.nk))
+    sols = []
+    for backend in (ContactSpace(data), DofSpace(data, max_local_dofs=10**6)):
+        assert backend.update(ph, pl, pih, pil, spec)
+        dv, dr = backend.solve(a, t)
+        sols.append(dd.to_longdouble(*dv))
+        # first block row in extended precision: M dv − H̃ᵀ dr̃ = a
+        r1 = data.M.matvec(*dv)[0] - data.HtT.matvec(*dr)[0] - a[0]
+        assert np.abs(r1).max() <= 1e-12 * np.abs(a[0]).max()
+    assert np.abs(sols[0] - sols[1]).max() <= 1e-8 * np.abs(sols[0]).max()
+
+
+def test_extended_run_reaches_the_double_double_floor():
+    from rfverify.digits import _start_from
+    from rfverify.extended import ipm as X
+
+    problem = rfverify.load("bundled:chute")
+    res = rfverify.solve(problem, tol=1e-10)
+    data = ExtendedData(problem)
+    out = X.run(data, _start_from(data, res), max_iter=14)
+    mu, pinf = out.trace["mu"], out.trace["pinfeas"]
+    assert mu[-1] < 1e-25 < mu[0] and pinf[-1] < 1e-29
+    assert all(np.diff(np.log10(mu)) < 0)  # μ falls at every iteration
