@@ -87,7 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="iteration limit (default: %(default)s)")
     sol.add_argument("--out", metavar="SOL.h5", type=_out_path,
                      help="write the problem data plus /solution/{v,u,r} (FCLIB layout) here; "
-                          "naming the input .hdf5 file itself replaces only its /solution and "
+                          "naming the input .hdf5 file itself replaces only its /solution (and "
+                          "/certificate with --digits) and "
                           "keeps everything else in it")
     sol.add_argument("--json", action="store_true",
                      help="print status, iterations, time and final residuals as JSON")
@@ -674,17 +675,14 @@ def _require_same_problem(problem, other, path):
 
 def _write_certificate(args, problem, sol, u, cert):
     """``certify --out``: the problem, the certified solution and /certificate."""
-    import h5py
-
     from .io import save
     from .io.certificate import write_certificate
     from .io.output import check_output_file
     from .problem import StoredSolution
 
     target = getattr(args, "out_target", None) or check_output_file(args.out, inputs=[args.problem, args.solution])
-    save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), target)
-    with h5py.File(str(getattr(target, "path", target)), "a") as fh:
-        write_certificate(fh, cert)
+    save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), target,
+         extra=lambda fh: write_certificate(fh, cert))
 
 
 def cmd_generate(args) -> int:
@@ -779,17 +777,16 @@ def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
     target = getattr(args, "out_target", None) or check_output_file(
         args.out, inputs=[args.problem], in_place_ok=_is_hdf5_input(args.problem))
     solution = StoredSolution(v=v, u=u, r=r)
-    if target.in_place:
-        write_solution_in_place(target, problem.with_solution(solution).solution)
-    else:
-        save(problem.with_solution(solution), target)
+    extra = None
     if certificate is not None:
-        import h5py
-
         from .io.certificate import write_certificate
 
-        with h5py.File(str(getattr(target, "path", target)), "a") as fh:
+        def extra(fh):
             write_certificate(fh, certificate)
+    if target.in_place:
+        write_solution_in_place(target, problem.with_solution(solution).solution, extra=extra)
+    else:
+        save(problem.with_solution(solution), target, extra=extra)
 
 
 # ---------------------------------------------------------------------- entry point

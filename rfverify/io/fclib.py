@@ -420,7 +420,7 @@ def _read_guesses(grp, path) -> tuple:
 
 # ---------------------------------------------------------------------- writing
 def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
-                overwrite: bool = True) -> Path:
+                overwrite: bool = True, extra=None) -> Path:
     """Write ``problem`` (its raw, unsymmetrised M) to ``path`` in FCLIB layout.
 
     Parameters
@@ -433,6 +433,9 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
         Matrix storage; a dict may give one per matrix (``{"M": "csc", "H": "triplet"}``).
         Defaults to the format the problem was read in (``"csc"`` for problems built in memory;
         ``"dense"`` sources are written as ``"csc"``).
+    extra : callable, optional
+        ``extra(h5py_file)`` writes more groups (a ``/certificate``) into the temporary file
+        before it is renamed into place, so the whole file appears at once.
     overwrite : bool
         Refuse to replace an existing file when False.
 
@@ -476,10 +479,12 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
                 gg.create_dataset("number_of_guesses", data=np.array([len(problem.guesses)], dtype=np.int32))
                 for k, guess in enumerate(problem.guesses, start=1):
                     _write_solution(gg.create_group(str(k)), guess)
+            if extra is not None:  # more groups (a certificate), written before the rename
+                extra(fh)
     return path
 
 
-def write_solution_in_place(target, solution: StoredSolution) -> Path:
+def write_solution_in_place(target, solution: StoredSolution, *, extra=None) -> Path:
     """Replace ``/solution/{v, u, r}`` of an existing FCLIB file and keep every other group,
     dataset and attribute (user data, ``info`` extras, ``/guesses``, attributes of
     ``/solution`` itself) exactly as they are.
@@ -507,6 +512,8 @@ def write_solution_in_place(target, solution: StoredSolution) -> Path:
                 arr = getattr(solution, key)
                 if arr is not None:
                     grp.create_dataset(key, data=np.asarray(arr, dtype=np.float64))
+            if extra is not None:  # e.g. /certificate beside the new /solution, in the same copy
+                extra(fh)
     return target.path
 
 
