@@ -33,7 +33,8 @@ def add_parsers(sub) -> None:
     bench = sub.add_parser(
         "bench", help="run every method on every problem at every tolerance, verified independently",
         description="Run each method on each problem at each tolerance, one process per run "
-                    "(--jobs at a time, each killed after --time-limit seconds), save every "
+                    "(--jobs at a time, each killed after --time-limit seconds; on a Dask "
+                    "cluster with --scheduler), save every "
                     "solution and trace under RUN_DIR/runs/, and count a run as solved only when "
                     "an independent 30-digit recomputation of the stopping criterion from the "
                     "saved solution meets the tolerance. Also, per problem: a trajectory of each "
@@ -56,9 +57,11 @@ def add_parsers(sub) -> None:
                        help=f"comma-separated methods (default: {DEFAULT_METHODS}; all: {','.join(METHODS)})")
     bench.add_argument("--tol", type=_tol_list, default=_tol_list(DEFAULT_TOLS), metavar="T,T,...",
                        help=f"comma-separated tolerances (default: {DEFAULT_TOLS})")
-    bench.add_argument("--jobs", type=_positive_int, default=1, metavar="K",
-                       help="runs in parallel (default: %(default)s; parallel runs share the "
-                            "machine, so times are comparable only within one bench run)")
+    bench.add_argument("--jobs", type=_positive_int, default=None, metavar="K",
+                       help="runs in parallel (default: 1; parallel runs share the machine, so "
+                            "times are comparable only within one bench run); with --scheduler, "
+                            "the most runs in flight on the cluster (default: twice its worker "
+                            "threads)")
     bench.add_argument("--time-limit", type=_positive_float, default=600.0, metavar="S",
                        help="wall-clock limit per run in seconds (default: %(default)g)")
     bench.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",
@@ -72,6 +75,13 @@ def add_parsers(sub) -> None:
                        help="largest problem (contacts) given the mixed-precision path and a "
                             "reference solution; the reference costs ~1 min at 100 contacts "
                             "(default: %(default)s)")
+    bench.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="run the tasks on a Dask distributed cluster whose scheduler listens "
+                            "at ADDRESS (tcp://HOST:8786; needs pip install 'rfverify[distributed]' "
+                            "here and on every worker). Each run executes in a subprocess on a "
+                            "worker, killed there at --time-limit; problem files are sent with the "
+                            "tasks (no shared filesystem needed); this process writes the records, "
+                            "the same as a local run's. See docs/DISTRIBUTED.md")
     bench.add_argument("--retry-failed", action="store_true",
                        help="also re-run runs recorded as Timeout, Crashed or Error (e.g. with a "
                             "longer --time-limit); other finished runs are reused as usual")
@@ -109,7 +119,8 @@ def cmd_bench(args) -> int:
                     time_limit=args.time_limit, trajectory_tol=args.trajectory_tol,
                     trajectories=not args.no_trajectories, digits=args.digits,
                     reference_max_contacts=args.reference_max_contacts, max_iter=args.max_iter,
-                    quiet=args.quiet, command=command, retry_failed=args.retry_failed)
+                    quiet=args.quiet, command=command, retry_failed=args.retry_failed,
+                    scheduler=args.scheduler)
     if args.json:
         out = dict(out, counts=[{"method": m, "tol": t, "solved": s, "total": n}
                                 for (m, t), (s, n) in out["counts"].items()])

@@ -1,5 +1,7 @@
 """Scheduling of benchmark tasks: one process per task, K at a time, a wall-time limit per
-task, and resume (a task whose valid record exists is not run again).
+task, and resume (a task whose valid record exists is not run again).  The processes are
+local (a pool of forked processes), or, with ``scheduler=``, subprocesses on the workers of
+a Dask distributed cluster (:mod:`rfverify.bench.distributed`); the records are the same.
 
 Layout of a run directory::
 
@@ -322,10 +324,11 @@ def _stop(procs) -> None:
 
 
 def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced", "clarabel"),
-              tols=(1e-8, 1e-9, 1e-10), jobs: int = 1, time_limit: float = 600.0,
+              tols=(1e-8, 1e-9, 1e-10), jobs: int | None = None, time_limit: float = 600.0,
               trajectory_tol: float = 1e-14, trajectories: bool = True, digits: int = 10,
               reference_max_contacts: int = 60, max_iter: int = 100, quiet: bool = False,
-              command: str | None = None, retry_failed: bool = False) -> dict:
+              command: str | None = None, retry_failed: bool = False,
+              scheduler: str | None = None) -> dict:
     """Run (or resume) a benchmark.  Returns ``{"ran", "skipped", "timeouts", "total",
     "run_dir", "counts"}`` with ``counts[(method, tol)] = (verified solved, runs)`` over the
     problems of this invocation.  ``command`` (the CLI line) is recorded in the manifest so the
@@ -335,6 +338,13 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
     and recorded with status ``Timeout``; one that dies is recorded as ``Crashed``.  Workers
     die with the bench.  ``retry_failed`` re-runs Timeout/Crashed/Error records (e.g. with a
     longer ``time_limit``).
+
+    ``scheduler`` (a Dask scheduler address, ``tcp://host:8786``) runs the tasks on a Dask
+    distributed cluster instead of local processes (:mod:`rfverify.bench.distributed`): the
+    same task entry point in a subprocess on the worker machine, killed there at
+    ``time_limit``; this process writes the records as a local run does.  ``jobs`` is the
+    number of local processes (default 1), or with ``scheduler`` the most tasks in flight at
+    once (default: twice the cluster's worker threads).
     """
     import math
 
@@ -352,8 +362,14 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
     if not math.isfinite(trajectory_tol) or not trajectory_tol > 0:
         raise BenchInputError(f"trajectory tolerance {trajectory_tol!r}: must be a finite number > 0; "
                               "fix: pass e.g. --trajectory-tol 1e-14")
-    if jobs < 1 or not time_limit > 0:
+    if (jobs is not None and jobs < 1) or not time_limit > 0:
         raise BenchInputError("--jobs must be ≥ 1 and --time-limit > 0; fix: pass e.g. --jobs 2 --time-limit 600")
+    if jobs is None and scheduler is None:
+        jobs = 1
+    if scheduler is not None:
+        from .distributed import check_available
+
+        check_available(scheduler)
     run_dir = Path(out_dir)
     if run_dir.exists() and not run_dir.is_dir():
         raise BenchInputError(f"{run_dir}: exists and is not a directory; fix: give a new or "
@@ -372,11 +388,11 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
     with RunLock(run_dir):
         return _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit,
                            trajectory_tol, digits, reference_max_contacts, quiet, command,
-                           retry_failed)
+                           retry_failed, scheduler)
 
 
 def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit, trajectory_tol,
-                digits, reference_max_contacts, quiet, command, retry_failed) -> dict:
+                digits, reference_max_contacts, quiet, command, retry_failed, scheduler) -> dict:
     from .. import __version__
     from ..solver.result import METHODS
 
@@ -400,7 +416,7 @@ def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit
         "tasks": sorted(planned.values(), key=lambda t: (t["problem"], t["stem"])),
         "trajectory_tol": trajectory_tol, "digits": digits,
         "reference_max_contacts": reference_max_contacts, "time_limit": time_limit, "jobs": jobs,
-        "machine": _machine(),
+        "machine": _machine(), "scheduler": scheduler,
         "command": command or old.get("command"),
     }
     write_json(run_dir / "manifest.json", manifest)
@@ -409,11 +425,37 @@ def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit
     # Largest problems first: the pool then ends on short tasks (less idle time at the end).
     todo.sort(key=lambda t: -sizes[t["problem"]][0])
     bar = Progress(len(todo), "bench", quiet=quiet)
+    previous = _terminate_on_sigterm()
+    try:
+        if scheduler:
+            from .distributed import run_on_cluster
+
+            timeouts = run_on_cluster(scheduler, run_dir, todo, time_limit, bar, jobs=jobs,
+                                      priority={k: v[0] for k, v in sizes.items()})
+        else:
+            timeouts = _run_local(run_dir, todo, jobs, time_limit, bar)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+        bar.close()
+    counts = {}
+    for t in tasks:
+        if t["kind"] != "solve":
+            continue
+        rec = read_record(record_path(run_dir, t)) or {}
+        solved, total = counts.get((t["method"], t["tol"]), (0, 0))
+        counts[(t["method"], t["tol"])] = (solved + (rec.get("solved") is True), total + 1)
+    return {"ran": len(todo), "skipped": len(tasks) - len(todo), "timeouts": timeouts, "total": len(tasks),
+            "run_dir": str(run_dir), "counts": counts}
+
+
+def _run_local(run_dir: Path, todo: list, jobs: int, time_limit: float, bar) -> int:
+    """The local process pool: each task in a fresh (forked) process, ``jobs`` at a time, killed
+    after ``time_limit`` seconds.  Returns the number of timeouts."""
     ctx = _context()
     running = {}
     timeouts = 0
     pending = list(todo)
-    previous = _terminate_on_sigterm()
     try:
         while pending or running:
             while pending and len(running) < jobs:
@@ -435,30 +477,25 @@ def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit
                     proc.kill()
                     proc.join()
                     timeouts += 1
-                    _record_failure(run_dir, task, "Timeout",
-                                    f"killed after the per-task time limit of {time_limit:g} s")
+                    _record_failure(run_dir, task, "Timeout", timeout_message(time_limit))
                 else:
                     proc.join()
                     rec = read_record(record_path(run_dir, task))
                     if rec is None or rec.get("attempt") != task["attempt"]:
-                        _record_failure(run_dir, task, "Crashed",
-                                        f"worker process exited with code {proc.exitcode} without a record")
+                        _record_failure(run_dir, task, "Crashed", crash_message(proc.exitcode))
                 del running[proc]
                 bar.advance(f"{task_label(task)}: {_outcome(run_dir, task)}")
     finally:
         _stop(list(running))  # interrupted or killed by SIGTERM: no worker outlives the bench
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
-        bar.close()
-    counts = {}
-    for t in tasks:
-        if t["kind"] != "solve":
-            continue
-        rec = read_record(record_path(run_dir, t)) or {}
-        solved, total = counts.get((t["method"], t["tol"]), (0, 0))
-        counts[(t["method"], t["tol"])] = (solved + (rec.get("solved") is True), total + 1)
-    return {"ran": len(todo), "skipped": len(tasks) - len(todo), "timeouts": timeouts, "total": len(tasks),
-            "run_dir": str(run_dir), "counts": counts}
+    return timeouts
+
+
+def timeout_message(time_limit: float) -> str:
+    return f"killed after the per-task time limit of {time_limit:g} s"
+
+
+def crash_message(exitcode) -> str:
+    return f"worker process exited with code {exitcode} without a record"
 
 
 def _terminate_on_sigterm():
