@@ -57,9 +57,12 @@ def build_parser() -> argparse.ArgumentParser:
         "info", help="describe a problem: sizes, coefficients, M asymmetry, stored solution",
         description="Load and validate a problem, then report its sizes (m dofs, n contacts, "
                     "nnz), the ranges of mu and mu_r and how many contacts have mu = 0 or "
-                    "mu_r = 0, the asymmetry of M (which is symmetrised for solving), the "
+                    "mu_r = 0, the asymmetry of M (entrywise, the measure --max-asymmetry limits, "
+                    "and normwise) and what was symmetrised for solving, the "
                     "block structure of M, the storage formats, and an independent check of "
-                    "the stored /solution (never trusted).",
+                    "the stored /solution (never trusted). For a 3-D FCLIB file (/fclib_global, "
+                    "/fclib_local) it also says how it was read: convex relaxation, mu_r = 0 in "
+                    "the rolling layout, a local problem lifted (rank, dropped eigenvalues).",
     )
     info.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     info.add_argument("--json", action="store_true", help="print one JSON object instead of text")
@@ -86,9 +89,10 @@ def build_parser() -> argparse.ArgumentParser:
     sol.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",
                      help="iteration limit (default: %(default)s)")
     sol.add_argument("--out", metavar="SOL.h5", type=_out_path,
-                     help="write the problem data plus /solution/{v,u,r} (FCLIB layout) here; "
-                          "naming the input .hdf5 file itself replaces only its /solution (and "
-                          "/certificate with --digits) and "
+                     help="write the problem data plus /solution/{v,u,r} (FCLIB layout) here, in "
+                          "the input's own layout (3-D /fclib_global: 3 per contact; /fclib_local: "
+                          "u and r only); naming the input .hdf5 file itself replaces only its "
+                          "/solution (and /certificate with --digits) and "
                           "keeps everything else in it")
     sol.add_argument("--json", action="store_true",
                      help="print status, iterations, time and final residuals as JSON")
@@ -223,9 +227,10 @@ def _nonneg_int(text: str) -> int:
 
 def _add_load_options(p: argparse.ArgumentParser):
     p.add_argument("--max-asymmetry", type=_nonneg_float, default=None, metavar="X",
-                   help="largest accepted scaled asymmetry max|M_ij - M_ji|/sqrt(M_ii M_jj) "
-                        "before M is refused (default: 1e-2; 'inf' accepts any). An accepted "
-                        "M is symmetrised as (M + Mᵀ)/2.")
+                   help="largest accepted entrywise asymmetry max|M_ij - M_ji|/sqrt(M_ii M_jj) "
+                        "before M (W of a local problem) is refused (default: 1e-2; 'inf' accepts "
+                        "any); the refusal and 'info' also show the normwise "
+                        "||M - Mᵀ||_F/||M||_F. An accepted M is symmetrised as (M + Mᵀ)/2.")
 
 
 def _positive_float(text: str) -> float:
@@ -299,9 +304,11 @@ def _load(args):
 
 
 # ---------------------------------------------------------------------- info
-def problem_summary(problem, *, solution_tol: float = 1e-6) -> dict:
+def problem_summary(problem, *, solution_tol: float = 1e-6, max_asymmetry: float | None = None) -> dict:
     """JSON-able description of a problem (what ``rfverify info --json`` prints)."""
     from .check import check_solution
+    from .io.fclib3d import ROLLING, SOLUTION_LAYOUT, describe_symmetrised, file_layout, symmetrised
+    from .problem import DEFAULT_MAX_ASYMMETRY
 
     mu, mu_r = problem.mu, problem.mu_r
     blocks = problem.blocks
@@ -327,6 +334,8 @@ def problem_summary(problem, *, solution_tol: float = 1e-6) -> dict:
         "M_asymmetry": {
             "scaled": problem.symmetry.scaled,
             "frobenius": problem.symmetry.frobenius,
+            "entrywise": problem.symmetry.scaled,
+            "normwise": problem.symmetry.frobenius,
             "at": None if problem.symmetry.row is None else [problem.symmetry.row, problem.symmetry.col],
             "symmetrised": problem.symmetry.scaled > 0,
         },
@@ -338,6 +347,21 @@ def problem_summary(problem, *, solution_tol: float = 1e-6) -> dict:
             "min_eigenvalue": float(eig[finite].min()) if finite.any() else None,
         },
     }
+    sym = symmetrised(problem)
+    summary["symmetrised"] = {**sym, "text": describe_symmetrised(sym),
+                              "limit": DEFAULT_MAX_ASYMMETRY if max_asymmetry is None else max_asymmetry,
+                              "limit_measure": "entrywise"}
+    layout = file_layout(problem)
+    if layout != ROLLING:  # a 3-D FCLIB file read into the rolling layout: say what was done
+        pv = problem.provenance
+        summary["spacedim"] = pv["spacedim"]
+        summary["internal_spacedim"] = problem.spacedim
+        summary["file"] = {k: pv[k] for k in ("format", "spacedim", "relaxation", "mu_r", "embedding")}
+        summary["file"]["solution_layout"] = SOLUTION_LAYOUT[layout]
+        if "lifted" in pv:
+            summary["file"]["lifted"] = pv["lifted"]
+    if problem.provenance.get("ignored_groups"):
+        summary["ignored_groups"] = list(problem.provenance["ignored_groups"])
     if "significant_digits" in problem.provenance:
         summary["significant_digits"] = problem.provenance["significant_digits"]
     if "lift" in problem.provenance:
@@ -360,14 +384,33 @@ def _format_info(s: dict) -> str:
     if s["description"]:
         for k, text in enumerate(s["description"].splitlines()):
             add(f"{'' if k else 'about':<11}{text}")
-    add(f"source     {s['source']} ({s['format']}; M {s['storage'].get('M')}, H {s['storage'].get('H')})")
+    add(f"source     {s['source']} ({s['format']}; "
+        + ", ".join(f"{k} {v}" for k, v in s["storage"].items()) + ")")
+    fl = s.get("file")
+    if fl:
+        add(f"file       3-D Coulomb friction (/{fl['format']}, spacedim {fl['spacedim']}, 3 per contact): "
+            f"solved as its convex relaxation (De Saxcé term dropped), embedded in the rolling "
+            f"layout with mu_r = 0 and zero rolling rows")
+        add(f"           solutions are written back as {fl['solution_layout'].split(': ', 1)[1]}")
+        lf = fl.get("lifted")
+        if lf:
+            add(f"lifted     local problem W ({lf['W_size']}×{lf['W_size']}) lifted to global form: "
+                f"M = I, f = 0, w = q, W = HᵀH; rank {lf['rank']}, {lf['dropped']} eigenvalue(s) "
+                f"≤ {lf['rank_tol']:.1e}·‖W‖ dropped (smallest {lf['min_eigenvalue']:.2e})")
+            add("           v of the lifted problem is not a quantity of the file (a stored "
+                "solution's v is recovered as v = H r)")
+    if s.get("ignored_groups"):
+        add(f"ignored    {', '.join(s['ignored_groups'])}: the file holds several problem groups; "
+            f"read the first of /fclib_global_rolling, /fclib_global, /fclib_local")
     if s.get("significant_digits"):
         add(f"precision  matrices printed with {s['significant_digits']} significant digits")
     if s.get("lifted_from_local"):
         lf = s["lifted_from_local"]
         add(f"lifted     local problem W = HᵀH: rank {lf['rank']}, {lf['dropped']} eigenvalue(s) "
             f"≤ {lf['rank_tol']:.1e}·‖W‖ dropped (smallest {lf['min_eigenvalue']:.2e})")
-    add(f"sizes      m = {s['m']} dofs, n = {s['n']} contacts (5n = {5 * s['n']}), "
+    per = (f"3n = {3 * s['n']} in the file, 5n = {5 * s['n']} in the rolling layout" if fl
+           else f"5n = {5 * s['n']}")
+    add(f"sizes      m = {s['m']} dofs, n = {s['n']} contacts ({per}), "
         f"nnz(M) = {s['nnz']['M']}, nnz(H) = {s['nnz']['H']}")
     b = s["M_blocks"]
     add(f"M blocks   {b['count']} diagonal block(s): "
@@ -375,12 +418,20 @@ def _format_info(s: dict) -> str:
         + f"; {b['contact_free_blocks']} contact-free ({b['contact_free_dofs']} dofs)")
     if b["min_eigenvalue"] is not None:
         add(f"           positive definite: smallest block eigenvalue {b['min_eigenvalue']:.3e}")
-    a = s["M_asymmetry"]
-    if a["symmetrised"]:
-        add(f"M asym.    scaled {a['scaled']:.3e} at {tuple(a['at'])}, Frobenius {a['frobenius']:.3e}"
-            " — symmetrised (M + Mᵀ)/2 for solving")
-    else:
-        add("M asym.    0 (exactly symmetric)")
+    a, sym = s["M_asymmetry"], s["symmetrised"]
+    limit = f"limit {sym['limit']:g}, --max-asymmetry"
+    rows = [("M", a)] if sym["matrix"] == "M" else [("M", a), ("W", sym)]
+    for X, d in rows:
+        if d["symmetrised"]:
+            at = "" if d["at"] is None else f" at {tuple(d['at'])}"
+            add(f"{X} asym.    entrywise max|{X}_ij - {X}_ji|/sqrt({X}_ii {X}_jj) = {d['entrywise']:.3e}{at} "
+                f"({limit}); normwise ||{X} - {X}ᵀ||_F/||{X}||_F = {d['normwise']:.3e}")
+            use = "solving" if X == "M" else "the lifting (W = HᵀH)"
+            add(f"           symmetrised: ({X} + {X}ᵀ)/2 is used for {use}")
+        elif X == "M" and sym["matrix"] == "W":
+            add("M asym.    0 (M = I of the lifted local problem)")
+        else:
+            add(f"{X} asym.    0 (exactly symmetric): nothing symmetrised ({limit})")
     for key in ("mu", "mu_r"):
         c = s[key]
         add(f"{key:<11}in [{c['min']:g}, {c['max']:g}]; {c['zero_count']} contact(s) with {key} = 0")
@@ -394,7 +445,8 @@ def _format_info(s: dict) -> str:
 def cmd_info(args) -> int:
     problem = _load(args)
     with _recorded_warnings() as caught:
-        summary = problem_summary(problem, solution_tol=args.solution_tol)
+        summary = problem_summary(problem, solution_tol=args.solution_tol,
+                                  max_asymmetry=args.max_asymmetry)
     if caught:
         summary["numerical_warnings"] = _warning_summary(caught)
     if args.json:
@@ -626,8 +678,11 @@ def cmd_certify(args) -> int:
         sol, where = problem.solution, args.problem
         if _is_hdf5_input(args.problem):
             point = read_point(_resolve(args.problem))
+    # A 3-D file's /solution (3 per contact; local: u and r, v = H r) is read into the rolling
+    # layout by load(), so it is certified like any other.
     if sol is None or sol.v is None or sol.r is None:
-        raise ProblemFileError(where, "has no /solution with v and r to certify",
+        need = "r" if problem.provenance.get("format") == "fclib_local" else "v and r"
+        raise ProblemFileError(where, f"has no /solution with {need} to certify",
                                fix="pass --solution SOL.h5 (written by rfverify solve --out)")
     if point is not None and (point.v_hi.size != problem.n_dofs or point.r_hi.size != 5 * problem.n_contacts):
         raise ProblemFileError(where, "/certificate/point does not match the problem's sizes",
@@ -783,8 +838,9 @@ def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
 
         def extra(fh):
             write_certificate(fh, certificate)
-    if target.in_place:
-        write_solution_in_place(target, problem.with_solution(solution).solution, extra=extra)
+    if target.in_place:  # the file's own layout (3 per contact for 3-D files), see io/fclib3d.py
+        write_solution_in_place(target, problem.with_solution(solution).solution, extra=extra,
+                                problem=problem)
     else:
         save(problem.with_solution(solution), target, extra=extra)
 

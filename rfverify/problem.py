@@ -32,11 +32,16 @@ SPACEDIM = 5
 """Number of components of a rolling-friction contact: (N, T1, T2, R1, R2)."""
 
 DEFAULT_MAX_ASYMMETRY = 1e-2
-"""Default limit on the scaled asymmetry max |M_ij − M_ji| / sqrt(M_ii M_jj).
+"""Default limit on the entrywise (scaled) asymmetry max |M_ij − M_ji| / sqrt(M_ii M_jj).
 
 The Siconos Chute file has 2.0e-3 (its inertia blocks are stored with ~1e-6 absolute
 rounding); 1e-2 leaves a margin of five while still refusing a matrix that is not meant to be
-symmetric.  The measure is invariant under a change of units of the dofs (diagonal scaling).
+symmetric.  The measure is invariant under a change of units of the dofs (diagonal scaling)
+and local: one wrong entry of a light body counts as much as one of a heavy body.  The
+normwise asymmetry ‖M − Mᵀ‖_F/‖M‖_F is reported beside it (in ``rfverify info`` and in the
+refusal message) but not thresholded: on matrices whose entries span many decades (assembled
+finite-element matrices) it hides every entry of the small-magnitude dofs.  Some real FE files
+have entrywise 0.22 but normwise 4e-7; the user judges and passes ``--max-asymmetry``.
 """
 
 DENSE_BLOCK_LIMIT = 400
@@ -58,14 +63,69 @@ class StoredSolution:
 class SymmetryReport:
     """How far the given M is from symmetric.
 
-    ``scaled`` = max |M_ij − M_ji| / sqrt(M_ii M_jj) (unit-invariant, the thresholded measure),
-    attained at ``(row, col)``; ``frobenius`` = ‖M − Mᵀ‖_F / ‖M‖_F (information).
+    ``scaled`` = max |M_ij − M_ji| / sqrt(M_ii M_jj) (entrywise: unit-invariant, the thresholded
+    measure), attained at ``(row, col)``; ``frobenius`` = ‖M − Mᵀ‖_F / ‖M‖_F (normwise,
+    information).
     """
 
     scaled: float
     frobenius: float
     row: int | None
     col: int | None
+
+    @property
+    def entrywise(self) -> float:
+        """Alias of ``scaled``: max |M_ij − M_ji| / sqrt(M_ii M_jj)."""
+        return self.scaled
+
+    @property
+    def normwise(self) -> float:
+        """Alias of ``frobenius``: ‖M − Mᵀ‖_F / ‖M‖_F."""
+        return self.frobenius
+
+    def as_dict(self, matrix: str = "M") -> dict:
+        """JSON-able: both measures, where the entrywise one is attained, and whether the
+        matrix was symmetrised ((A + Aᵀ)/2 differs from A)."""
+        return {"matrix": matrix, "entrywise": self.scaled, "normwise": self.frobenius,
+                "at": None if self.row is None else [self.row, self.col],
+                "symmetrised": bool(self.scaled > 0)}
+
+    def describe(self, matrix: str = "M") -> str:
+        """One line: what was symmetrised and both measures (``info``, solution files)."""
+        if not self.scaled > 0:
+            return f"{matrix} is exactly symmetric: nothing symmetrised"
+        at = "" if self.row is None else f" at ({self.row}, {self.col})"
+        return (f"{matrix} symmetrised as ({matrix} + {matrix}^T)/2; entrywise asymmetry "
+                f"max|{matrix}_ij - {matrix}_ji|/sqrt({matrix}_ii {matrix}_jj) = {self.scaled:.3g}{at}, "
+                f"normwise ||{matrix} - {matrix}^T||_F/||{matrix}||_F = {self.frobenius:.3g}")
+
+
+def asymmetry_error(matrix: str, report: SymmetryReport, max_asymmetry: float) -> InvalidProblemError:
+    """The refusal of a matrix whose entrywise asymmetry exceeds ``max_asymmetry``: both
+    measures, so the user can judge, and the option value that would accept it."""
+    suggest = _round_up_2(report.scaled)
+    return InvalidProblemError(
+        matrix,
+        f"is not symmetric: entrywise asymmetry max|{matrix}_ij - {matrix}_ji|/sqrt({matrix}_ii "
+        f"{matrix}_jj) = {report.scaled:.3g} > max_asymmetry = {max_asymmetry:.3g} (the thresholded "
+        f"measure); normwise ||{matrix} - {matrix}^T||_F/||{matrix}||_F = {report.frobenius:.3g}",
+        index=None if report.row is None else (report.row, report.col),
+        fix=f"if the difference is rounding in the source data (a small normwise figure suggests "
+            f"so), accept it and solve with ({matrix} + {matrix}^T)/2: --max-asymmetry {suggest} "
+            f"(Python: max_asymmetry={suggest}); otherwise check the matrix")
+
+
+def _round_up_2(x: float) -> str:
+    """``x`` rounded up to two significant digits, as text (a limit that accepts ``x``)."""
+    if not np.isfinite(x):
+        return "inf"
+    if x <= 0:
+        return "0"
+    text = f"{x:.2g}"
+    step = 10.0 ** (np.floor(np.log10(float(text))) - 1)
+    while float(text) < x:
+        text = f"{float(text) + step:.2g}"
+    return text
 
 
 @dataclass(frozen=True)
@@ -123,7 +183,14 @@ class Problem:
         Path the problem was read from ("" when built in memory).
     provenance : dict
         JSON-able notes on how the data were obtained (file format, print precision,
-        lifting of a local problem, ...).
+        lifting of a local problem, ...).  A problem read from a 3-D FCLIB file has
+        ``{"format": "fclib_global" | "fclib_local", "spacedim": 3, "relaxation": ...,
+        "mu_r": ..., "symmetrised": ...}`` (and ``"lifted"`` for a local one), see
+        :mod:`rfverify.io.fclib3d`.
+    native : object or None
+        Data of the source file that the internal rolling layout cannot give back exactly
+        (the raw W and q of an ``/fclib_local`` problem), so that the problem is written back
+        as it was read; None for problems in the rolling layout.
     """
 
     M: sp.csc_matrix
@@ -142,6 +209,7 @@ class Problem:
     blocks: BlockStructure | None = None
     source: str = ""
     provenance: dict = field(default_factory=dict)
+    native: object = field(default=None, repr=False)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -240,13 +308,7 @@ class Problem:
         _check_positive_diagonal(M)  # before symmetry: a zero diagonal is not an asymmetry
         symmetry = symmetry_report(M)
         if not symmetry.scaled <= max_asymmetry:
-            raise InvalidProblemError(
-                "M",
-                f"is not symmetric: scaled asymmetry |M_ij - M_ji|/sqrt(M_ii M_jj) = "
-                f"{symmetry.scaled:.3g} > max_asymmetry = {max_asymmetry:.3g}",
-                index=(symmetry.row, symmetry.col),
-                fix="check the matrix, or raise the limit (max_asymmetry=..., "
-                    "CLI --max-asymmetry) to accept and symmetrise it")
+            raise asymmetry_error("M", symmetry, max_asymmetry)
 
         M_sym = _symmetrise(M)
         M_sym.sort_indices()

@@ -143,8 +143,15 @@ def test_solve_into_its_own_hdf5_keeps_everything_else(capsys, problem_file):
     after = snapshot(problem_file)
     replaced = {"/solution/v", "/solution/u", "/solution/r"}
     assert set(after) == set(before)
-    for name in set(before) - replaced:
+    for name in set(before) - replaced - {"/solution"}:
         assert after[name] == before[name], name
+    # /solution keeps its own attributes and gains the documented ones (layout, what was
+    # symmetrised, both asymmetry measures); nothing else changes.
+    added = {"layout", "symmetrised", "symmetrised_matrix", "asymmetry_entrywise", "asymmetry_normwise"}
+    kind, attrs_after = after["/solution"]
+    assert kind == before["/solution"][0]
+    assert {k: v for k, v in attrs_after.items() if k not in added} == before["/solution"][1]
+    assert set(attrs_after) == set(before["/solution"][1]) | added
     assert stat.S_IMODE(problem_file.stat().st_mode) == 0o640
     res = rfverify.solve(rfverify.load(problem_file), tol=1e-8)
     with h5py.File(problem_file, "r") as fh:

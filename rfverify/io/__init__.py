@@ -1,7 +1,8 @@
 """Problem files: FCLIB HDF5 and Siconos ``.dat`` text; bundled example problems.
 
 :func:`load` picks the reader from the file's content (HDF5 signature) and suffix;
-:func:`save` writes FCLIB HDF5.
+:func:`save` writes FCLIB HDF5 in the problem's own layout (``/fclib_global_rolling``, or
+``/fclib_global`` / ``/fclib_local`` with 3 per contact for problems read from 3-D files).
 """
 
 from __future__ import annotations
@@ -64,6 +65,14 @@ def load(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem:
     :class:`~rfverify.problem.Problem`.  ``path`` may be ``"bundled:NAME"`` (see
     :func:`bundled_problems`).  A local ``.dat`` problem is lifted to global form.
 
+    FCLIB files: ``/fclib_global_rolling`` (rolling friction) is read as it is; the 3-D Coulomb
+    friction groups ``/fclib_global`` and ``/fclib_local`` are read as their convex relaxation,
+    embedded in the rolling layout with μr = 0 and zero rolling rows (a local problem is then
+    lifted: W = HᵀH, M = I, f = 0, w = q); ``problem.provenance`` says what was done (see
+    :mod:`rfverify.io.fclib3d`).  A file holding several of these groups is read from the first
+    of /fclib_global_rolling, /fclib_global, /fclib_local.  ``max_asymmetry`` limits the
+    entrywise asymmetry of M (of W for local problems).
+
     Raises
     ------
     ProblemFileError
@@ -88,5 +97,7 @@ def load(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem:
 
 
 def save(problem: Problem, path, **kwargs) -> Path:
-    """Write ``problem`` as an FCLIB HDF5 file (see :func:`write_fclib`)."""
+    """Write ``problem`` as an FCLIB HDF5 file in its own layout (see :func:`write_fclib`): a
+    problem read from ``/fclib_global`` or ``/fclib_local`` is written back there, with
+    ``/solution`` and ``/guesses`` 3 per contact (local: u and r only)."""
     return write_fclib(problem, path, **kwargs)

@@ -5,6 +5,9 @@ beside the problem and its ``/solution``::
 
     /certificate                 attrs: format, version, rfverify_version, requested_digits,
                                         certified, verdict, arithmetic, theorem, point_source
+    /certificate/point           attrs: layout = "rolling5" (r 5 per contact, (N, T1, T2, R1, R2),
+                                        also for a 3-D file: its problem embedded with R = 0, and
+                                        the v of a lifted local problem)
     /certificate/point/v_hi, v_lo, r_hi, r_lo
                                  float64: the extended-precision point, exactly (v = v_hi + v_lo)
     /certificate/point/v_decimal, r_decimal
@@ -27,6 +30,8 @@ from ..errors import ProblemFileError
 
 FORMAT = "rfverify-certificate"
 VERSION = 1
+POINT_LAYOUT = "rolling5"
+"""The point is stored in rfverify's internal layout, 5 per contact, whatever the file's layout."""
 THEOREM = ("For M = (M+M^T)/2 positive definite, any v with u(v) = H^T v + w in K* and any r in K, "
            "with g = Mv - Hr - f: ||v - v*||_M^2 <= g^T M^-1 g + 2 r^T u(v) (strong convexity and weak "
            "duality of the convex relaxation); per-component bounds by Cauchy-Schwarz in the M inner "
@@ -65,6 +70,7 @@ def write_certificate(fh, certificate) -> None:
     point = certificate.point
     if point is not None:
         pg = grp.create_group("point")
+        pg.attrs["layout"] = POINT_LAYOUT
         for k in ("v_hi", "v_lo", "r_hi", "r_lo"):
             pg.create_dataset(k, data=np.asarray(getattr(point, k), dtype=np.float64))
         for name, hi, lo in (("v", point.v_hi, point.v_lo), ("r", point.r_hi, point.r_lo)):
@@ -88,6 +94,13 @@ def read_point(path):
                                        location="/certificate",
                                        fix="write the certificate again with this rfverify version")
             pg = grp["point"]
+            layout = pg.attrs.get("layout", POINT_LAYOUT)  # certificates before the attribute: rolling5
+            if isinstance(layout, bytes):
+                layout = layout.decode("utf-8", "replace")
+            if layout != POINT_LAYOUT:
+                raise ProblemFileError(path, f"point layout {layout!r} is not {POINT_LAYOUT!r}",
+                                       location="/certificate/point",
+                                       fix="write the certificate again with this rfverify version")
             arrays = {}
             for k in ("v_hi", "v_lo", "r_hi", "r_lo"):
                 if k not in pg:

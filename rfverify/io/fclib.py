@@ -1,4 +1,10 @@
-"""FCLIB ``/fclib_global_rolling`` HDF5 files: read and write (DESIGN §7).
+"""FCLIB HDF5 files: read and write (DESIGN §7).
+
+``/fclib_global_rolling`` (rolling friction, 5 per contact) is read here; the 3-D Coulomb
+friction groups ``/fclib_global`` and ``/fclib_local`` (3 per contact) are read into the same
+rolling layout by :mod:`rfverify.io.fclib3d`, and written back in their own layout.  A file
+holding several groups is read from the first of /fclib_global_rolling, /fclib_global,
+/fclib_local.
 
 Layout::
 
@@ -52,7 +58,7 @@ _EXACT_INT = 2**53
 """Integers up to this magnitude convert to float64 exactly."""
 
 _FIX_LAYOUT = ("write the file with rfverify.save or fclib's fclib_write_global_rolling "
-               "(layout: DESIGN §7)")
+               "(layout: DESIGN §7; 3-D files: fclib_write_global/fclib_write_local)")
 _FIX_INT = "store sizes and indices as integers (int32, as fclib.c writes them)"
 _FIX_REAL = "store the data as float64 (real numbers)"
 
@@ -95,13 +101,19 @@ def read_fclib(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem
 
 
 def _read_open_file(fh, path, max_asymmetry):
+    from .fclib3d import GLOBAL, LOCAL, read_group
+
     h5py = _h5py()
-    if fh.get(ROOT, getlink=True) is None:
+    present = [k for k in (ROOT, GLOBAL, LOCAL) if fh.get(k, getlink=True) is not None]
+    if not present:
         other = [k for k in fh.keys() if k.startswith("fclib_")]
-        hint = f" (it holds /{other[0]}: not a rolling-friction problem)" if other else ""
-        raise ProblemFileError(path, f"missing group /{ROOT}{hint}", location=f"/{ROOT}",
-                               fix="pass an fclib_global_rolling problem (FCLIB rolling-friction "
-                                   "collections)")
+        hint = f" (it holds /{other[0]}: not a problem group rfverify reads)" if other else ""
+        raise ProblemFileError(path, f"missing group /{ROOT} (nor /{GLOBAL} or /{LOCAL}){hint}",
+                               location=f"/{ROOT}",
+                               fix="pass an FCLIB problem file: /fclib_global_rolling (rolling "
+                                   "friction), /fclib_global or /fclib_local (3-D friction)")
+    if present[0] != ROOT:
+        return read_group(fh, present[0], path, max_asymmetry, present[1:])
     g = _member(fh, ROOT, path, h5py.Group)
     vectors = _member(g, "vectors", path, h5py.Group)
     if g.get("G", getlink=True) is not None or vectors.get("b", getlink=True) is not None:
@@ -119,23 +131,27 @@ def _read_open_file(fh, path, max_asymmetry):
     _check_declared_sizes(M_meta, H_meta, f.size, mu.size, spacedim)
     M, M_fmt = _read_matrix(M_meta, path)
     H, H_fmt = _read_matrix(H_meta, path)
-    title = description = math_info = ""
-    if g.get("info", getlink=True) is not None:
-        info = _member(g, "info", path, h5py.Group)
-        title = _read_string(info, "title", path)
-        description = _read_string(info, "description", path)
-        math_info = _read_string(info, "math_info", path)
+    title, description, math_info = _read_info(g, path)
     solution = None
     if fh.get("solution", getlink=True) is not None:
         solution = _read_solution(_member(fh, "solution", path, h5py.Group), path)
     guesses = ()
     if fh.get("guesses", getlink=True) is not None:
         guesses = _read_guesses(_member(fh, "guesses", path, h5py.Group), path)
+    ignored = {"ignored_groups": [f"/{k}" for k in present[1:]]} if present[1:] else None
     return Problem.from_arrays(
         M, H, f, w, mu, mu_r, title=title, description=description, math_info=math_info,
         solution=solution, guesses=guesses, storage={"M": M_fmt, "H": H_fmt},
-        max_asymmetry=max_asymmetry, spacedim=spacedim, source=str(path),
+        max_asymmetry=max_asymmetry, spacedim=spacedim, source=str(path), provenance=ignored,
     )
+
+
+def _read_info(g, path) -> tuple:
+    """(title, description, math_info) of a problem group ("" when absent)."""
+    if g.get("info", getlink=True) is None:
+        return "", "", ""
+    info = _member(g, "info", path, _h5py().Group)
+    return tuple(_read_string(info, name, path) for name in ("title", "description", "math_info"))
 
 
 # ---------------------------------------------------------------------- typed access
@@ -421,7 +437,9 @@ def _read_guesses(grp, path) -> tuple:
 # ---------------------------------------------------------------------- writing
 def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
                 overwrite: bool = True, extra=None) -> Path:
-    """Write ``problem`` (its raw, unsymmetrised M) to ``path`` in FCLIB layout.
+    """Write ``problem`` (its raw, unsymmetrised M) to ``path`` in FCLIB layout: the layout
+    it was read in (a problem read from ``/fclib_global`` or ``/fclib_local`` is written back
+    there, 3 per contact, a local one from its raw W and q), else ``/fclib_global_rolling``.
 
     Parameters
     ----------
@@ -430,7 +448,8 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
         is written through.  Directories, FIFOs, devices and sockets are refused
         (:class:`~rfverify.errors.OutputPathError`).
     storage : "triplet" | "csc" | "csr" | dict, optional
-        Matrix storage; a dict may give one per matrix (``{"M": "csc", "H": "triplet"}``).
+        Matrix storage; a dict may give one per matrix (``{"M": "csc", "H": "triplet"}``;
+        ``{"W": ...}`` for a local problem).
         Defaults to the format the problem was read in (``"csc"`` for problems built in memory;
         ``"dense"`` sources are written as ``"csc"``).
     extra : callable, optional
@@ -441,16 +460,23 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
 
     The file is written to a temporary file beside the target and renamed over it when
     complete.  Reading it back gives bit-identical arrays (M, H, f, w, mu, mu_r, solution,
-    guesses).
+    guesses; for a local problem W, q, u and r, and v = H r).  ``/solution`` gets the
+    attributes ``layout`` and ``symmetrised`` (what was symmetrised for solving, with the
+    entrywise and normwise asymmetry: ``asymmetry_entrywise``, ``asymmetry_normwise``).
     """
+    from .fclib3d import LOCAL, ROLLING, check_embedded, file_layout, solution_attributes, write_group
+
     h5py = _h5py()
+    layout = file_layout(problem)
+    if layout != ROLLING:
+        check_embedded(problem)
     target = path if isinstance(path, OutputTarget) else None
     path = target.path if target is not None else Path(path)
     if path.exists() and not overwrite:
         raise ProblemFileError(path, "exists already (pass overwrite=True to replace it)",
                                fix="choose another path or pass overwrite=True")
     fmts = {}
-    for name in ("M", "H"):
+    for name in (("W",) if layout == LOCAL else ("M", "H")):
         fmt = storage.get(name) if isinstance(storage, dict) else storage
         fmt = fmt or problem.storage.get(name, "csc")
         if fmt == "dense":
@@ -462,37 +488,57 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
     target = target or check_output_file(path, option="path")
     with atomic_output(target) as tmp:
         with h5py.File(tmp, "w") as fh:
-            g = fh.create_group(ROOT)
-            _write_matrix(g, "M", problem.M, fmts["M"])
-            _write_matrix(g, "H", problem.H, fmts["H"])
-            vec = g.create_group("vectors")
-            for name in ("f", "w", "mu", "mu_r"):
-                vec.create_dataset(name, data=np.asarray(getattr(problem, name), dtype=np.float64))
-            g.create_dataset("spacedim", data=np.array([problem.spacedim], dtype=np.int32))
-            info = g.create_group("info")
-            for name in ("title", "description", "math_info"):
-                info.create_dataset(name, data=np.bytes_(getattr(problem, name).encode("utf-8")))
-            if problem.solution is not None:
-                _write_solution(fh.create_group("solution"), problem.solution)
-            if problem.guesses:
-                gg = fh.create_group("guesses")
-                gg.create_dataset("number_of_guesses", data=np.array([len(problem.guesses)], dtype=np.int32))
-                for k, guess in enumerate(problem.guesses, start=1):
-                    _write_solution(gg.create_group(str(k)), guess)
+            if layout != ROLLING:
+                write_group(fh, problem, fmts)  # /fclib_global or /fclib_local, 3 per contact
+            else:
+                _write_rolling(fh, problem, fmts, solution_attributes)
             if extra is not None:  # more groups (a certificate), written before the rename
                 extra(fh)
     return path
 
 
-def write_solution_in_place(target, solution: StoredSolution, *, extra=None) -> Path:
+def _write_rolling(fh, problem, fmts, solution_attributes):
+    g = fh.create_group(ROOT)
+    _write_matrix(g, "M", problem.M, fmts["M"])
+    _write_matrix(g, "H", problem.H, fmts["H"])
+    vec = g.create_group("vectors")
+    for name in ("f", "w", "mu", "mu_r"):
+        vec.create_dataset(name, data=np.asarray(getattr(problem, name), dtype=np.float64))
+    g.create_dataset("spacedim", data=np.array([problem.spacedim], dtype=np.int32))
+    info = g.create_group("info")
+    for name in ("title", "description", "math_info"):
+        info.create_dataset(name, data=np.bytes_(getattr(problem, name).encode("utf-8")))
+    if problem.solution is not None:
+        sg = fh.create_group("solution")
+        _write_solution(sg, problem.solution)
+        for key, val in solution_attributes(problem).items():
+            sg.attrs[key] = val
+    if problem.guesses:
+        gg = fh.create_group("guesses")
+        gg.create_dataset("number_of_guesses", data=np.array([len(problem.guesses)], dtype=np.int32))
+        for k, guess in enumerate(problem.guesses, start=1):
+            _write_solution(gg.create_group(str(k)), guess)
+
+
+def write_solution_in_place(target, solution: StoredSolution, *, extra=None, problem=None) -> Path:
     """Replace ``/solution/{v, u, r}`` of an existing FCLIB file and keep every other group,
-    dataset and attribute (user data, ``info`` extras, ``/guesses``, attributes of
+    dataset and attribute (user data, ``info`` extras, ``/guesses``, other attributes of
     ``/solution`` itself) exactly as they are.
+
+    ``solution`` is in rfverify's rolling layout (5 per contact).  It is written in the layout
+    of the file's problem group (the one :func:`read_fclib` reads): 5 per contact for
+    ``/fclib_global_rolling``, 3 per contact for ``/fclib_global``, and only u and r for
+    ``/fclib_local`` (a ``/solution/v`` there is removed: it is not a quantity of the file).
+    With ``problem`` (the problem read from this file), ``/solution`` also gets the attributes
+    ``layout``, ``symmetrised``, ``symmetrised_matrix``, ``asymmetry_entrywise`` and
+    ``asymmetry_normwise`` (what was symmetrised for solving).
 
     FCLIB keeps ``/solution`` beside the problem, so ``solve in.hdf5 --out in.hdf5`` is a
     reasonable request; the file is copied, the copy updated and renamed over the original,
     so an interrupted write leaves the original untouched.
     """
+    from .fclib3d import convert_for_file, detect_layout, file_layout, solution_attributes
+
     h5py = _h5py()
     target = target if isinstance(target, OutputTarget) else check_output_file(target, option="path")
     if not target.real.exists():
@@ -506,12 +552,21 @@ def write_solution_in_place(target, solution: StoredSolution, *, extra=None) -> 
                                          and isinstance(fh["solution"], h5py.Group)):
                 del fh["solution"]  # a link or a dataset: only the name /solution is replaced
             grp = fh.require_group("solution")
+            layout = detect_layout(fh)
+            if problem is not None and file_layout(problem) != layout:
+                raise ProblemFileError(target.path, f"holds /{layout}, but the problem was read as "
+                                                    f"/{file_layout(problem)}", location="/solution",
+                                       fix="write the solution into the file the problem was read from")
+            datasets = convert_for_file(layout, solution)
             for key in ("v", "u", "r"):
                 if grp.get(key, getlink=True) is not None:
                     del grp[key]
-                arr = getattr(solution, key)
+                arr = datasets[key]
                 if arr is not None:
                     grp.create_dataset(key, data=np.asarray(arr, dtype=np.float64))
+            if problem is not None:
+                for key, val in solution_attributes(problem).items():
+                    grp.attrs[key] = val
             if extra is not None:  # e.g. /certificate beside the new /solution, in the same copy
                 extra(fh)
     return target.path
@@ -539,8 +594,12 @@ def _write_matrix(g, name, A: sp.spmatrix, fmt: str):
 
 
 def _write_solution(grp, s: StoredSolution):
+    _write_solution_arrays(grp, {key: getattr(s, key) for key in ("v", "u", "r")})
+
+
+def _write_solution_arrays(grp, arrays: dict):
     for key in ("v", "u", "r"):
-        arr = getattr(s, key)
+        arr = arrays.get(key)
         if arr is not None:
             grp.create_dataset(key, data=np.asarray(arr, dtype=np.float64))
 

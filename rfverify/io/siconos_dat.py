@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidProblemError, ProblemFileError
-from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem
+from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, SymmetryReport, asymmetry_error
 from ._paths import read_head
 
 STORAGE_DENSE = 0
@@ -86,6 +86,11 @@ class LiftReport:
     max_eigenvalue: float
     rank_tol: float
     asymmetry: float
+    """Entrywise max |W_ij − W_ji|/sqrt(W_ii W_jj) (thresholded by ``max_asymmetry``)."""
+    asymmetry_normwise: float = 0.0
+    """‖W − Wᵀ‖_F/‖W‖_F (information)."""
+    asymmetry_at: list | None = None
+    """(row, col) where the entrywise asymmetry is attained (None: W exactly symmetric)."""
 
 
 class _Lines:
@@ -380,7 +385,7 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
     perturbs each entry by |E_ij| ≤ ½·10^(1−d)·|W_ij|; the spectral norm is monotone on
     non-negative matrices, so every eigenvalue moves by at most ½·10^(1−d)·‖|W|‖₂, and
     eigenvalues below that bound are indistinguishable from 0.  Full-precision data use
-    100·eps·5n (rounding of the eigensolver).
+    100·eps·5n (rounding of the eigensolver).  See :func:`factor_delassus`.
 
     Raises
     ------
@@ -388,16 +393,44 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
         field ``"W"``: asymmetric beyond ``max_asymmetry``, non-finite, or with an eigenvalue
         below −rank_tol·‖W‖ (not positive semidefinite).
     """
-    W = np.asarray(local.W, dtype=np.float64)
-    dim = W.shape[0]
     # q, mu, mu_r become w, mu, mu_r of the lifted problem: check them under their own names.
     for name, vec in (("q", local.q), ("mu", local.mu), ("mu_r", local.mu_r)):
-        vec = np.asarray(vec, dtype=np.float64)
-        bad = np.flatnonzero(~np.isfinite(vec))
-        if bad.size:
-            raise InvalidProblemError(name, f"contains a non-finite value ({vec[bad[0]]!r}) at index "
-                                            f"{bad[0]} ({bad.size} in all)", index=int(bad[0]),
-                                      fix="remove NaN/Inf from the data")
+        check_finite(name, vec)
+    dim = np.asarray(local.W).shape[0]
+    H, report = factor_delassus(local.W, significant_digits=local.significant_digits,
+                                rank_tol=rank_tol, max_asymmetry=max_asymmetry)
+    m = H.shape[0]
+    problem = Problem.from_arrays(
+        sp.identity(m, format="csc"), sp.csc_matrix(H), np.zeros(m), local.q, local.mu, local.mu_r,
+        title="lifted local rolling problem",
+        description=(f"local problem (W {dim}×{dim}, rank {m}) lifted to global form: M = I, "
+                     f"H = Λ^1/2 Vᵀ from W = V Λ Vᵀ, f = 0, w = q"),
+        storage={"M": "csc", "H": "csc"},
+    )
+    return problem, report
+
+
+def check_finite(name: str, vec) -> None:
+    """InvalidProblemError naming ``name`` and the first index when ``vec`` holds NaN/Inf."""
+    vec = np.asarray(vec, dtype=np.float64)
+    bad = np.flatnonzero(~np.isfinite(vec))
+    if bad.size:
+        raise InvalidProblemError(name, f"contains a non-finite value ({vec[bad[0]]!r}) at index "
+                                        f"{bad[0]} ({bad.size} in all)", index=int(bad[0]),
+                                  fix="remove NaN/Inf from the data")
+
+
+def factor_delassus(W, *, significant_digits: int | None = None, rank_tol: float | None = None,
+                    max_asymmetry: float = DEFAULT_MAX_ASYMMETRY):
+    """The factor H (m × dim, m = numerical rank) with HᵀH = (W + Wᵀ)/2 up to ``rank_tol``, and
+    its :class:`LiftReport`: the lifting of :func:`lift_local`, on any square W (the 5n×5n W of a
+    rolling problem or the 3n×3n W of an FCLIB ``/fclib_local`` problem).
+
+    The asymmetry of W is measured entrywise (max |W_ij − W_ji|/sqrt(W_ii W_jj), thresholded by
+    ``max_asymmetry``) and normwise (‖W − Wᵀ‖_F/‖W‖_F, reported).
+    """
+    W = np.asarray(W, dtype=np.float64)
+    dim = W.shape[0]
     if not np.all(np.isfinite(W)):
         i, j = np.argwhere(~np.isfinite(W))[0]
         raise InvalidProblemError("W", f"contains a non-finite value ({float(W[i, j])!r})", index=(int(i), int(j)),
@@ -408,13 +441,18 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
         scaled = np.where(asym > 0, asym / np.outer(d, d), 0.0)
     scaled[np.isnan(scaled)] = np.inf
     asymmetry = float(scaled.max()) if scaled.size else 0.0
-    if not asymmetry <= max_asymmetry:
-        i, j = np.unravel_index(np.argmax(scaled), scaled.shape)
-        raise InvalidProblemError("W", f"is not symmetric: scaled asymmetry {asymmetry:.3g} > "
-                                       f"max_asymmetry = {max_asymmetry:.3g}",
-                                  index=(int(i), int(j)),
-                                  fix="check the data or raise max_asymmetry")
     big = float(np.abs(W).max()) if W.size else 0.0
+    normwise = 0.0
+    if big > 0:  # Frobenius norms of W / max|W|: squares of entries near 1e154 would overflow
+        with np.errstate(over="ignore", invalid="ignore"):
+            normwise = float(np.linalg.norm(W / big - W.T / big) / np.linalg.norm(W / big))
+    at = None
+    if asymmetry > 0:
+        i, j = np.unravel_index(np.argmax(scaled), scaled.shape)
+        at = (int(i), int(j))
+    if not asymmetry <= max_asymmetry:
+        raise asymmetry_error("W", SymmetryReport(asymmetry, normwise, *(at or (None, None))),
+                              max_asymmetry)
     if big == 0.0:
         raise InvalidProblemError("W", "is zero", fix="a local problem needs a non-zero Delassus matrix")
     # Work on W / 2^k ≤ 1 (exact scaling): entries near 1e308 would overflow W + Wᵀ and the
@@ -425,9 +463,9 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
     norm_s = float(max(abs(lam[0]), abs(lam[-1])))
     norm = float(np.ldexp(norm_s, exp))
     if rank_tol is None:
-        if local.significant_digits:
+        if significant_digits:
             abs_norm_s = float(np.linalg.norm(np.abs(Ws), 2))
-            rank_tol = 0.5 * 10.0 ** (1 - local.significant_digits) * abs_norm_s / max(norm_s, _TINY)
+            rank_tol = 0.5 * 10.0 ** (1 - significant_digits) * abs_norm_s / max(norm_s, _TINY)
         else:
             rank_tol = 100 * np.finfo(float).eps * dim
     if norm_s == 0.0:
@@ -440,16 +478,10 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
             fix="a Delassus matrix W = H M⁻¹ Hᵀ is PSD; check the data or pass a larger rank_tol")
     keep = lam > rank_tol * norm_s
     lam = np.ldexp(lam, exp)
-    H = (V[:, keep] * np.sqrt(lam[keep])).T  # m × 5n
+    H = (V[:, keep] * np.sqrt(lam[keep])).T  # m × dim
     m = H.shape[0]
     report = LiftReport(rank=int(m), dropped=int(dim - m), min_eigenvalue=float(lam[0]),
                         max_eigenvalue=float(lam[-1]), rank_tol=float(rank_tol),
-                        asymmetry=asymmetry)
-    problem = Problem.from_arrays(
-        sp.identity(m, format="csc"), sp.csc_matrix(H), np.zeros(m), local.q, local.mu, local.mu_r,
-        title="lifted local rolling problem",
-        description=(f"local problem (W {dim}×{dim}, rank {m}) lifted to global form: M = I, "
-                     f"H = Λ^1/2 Vᵀ from W = V Λ Vᵀ, f = 0, w = q"),
-        storage={"M": "csc", "H": "csc"},
-    )
-    return problem, report
+                        asymmetry=asymmetry, asymmetry_normwise=normwise,
+                        asymmetry_at=None if at is None else list(at))
+    return H, report
