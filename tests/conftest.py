@@ -36,18 +36,18 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", _default))
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
+"""Where the project's original copies of the real problems live (beside the repository, not
+shipped); the tests read the byte-identical copies bundled in ``rfverify/data/`` instead, so a
+fresh clone runs every test (``tests/test_files.py`` pins their checksums)."""
 
 
 @pytest.fixture(scope="session")
-def shared_data() -> Path:
-    """Directory with the real problems shipped beside the repository (``../shared/data``)."""
-    if not SHARED_DATA.is_dir():
-        # CI always has shared/ beside the clone: there a missing directory is a failure,
-        # elsewhere (a user's clone) the tests that need the real files are skipped.
-        if _default == "ci":
-            pytest.fail(f"shared data directory {SHARED_DATA} not present in CI")
-        pytest.skip(f"shared data directory {SHARED_DATA} not present")
-    return SHARED_DATA
+def real_data() -> Path:
+    """Directory of the real problem files: the copies bundled with rfverify (``rfverify/data/``:
+    the Siconos Chute FCLIB file and the Siconos ``.dat`` problems)."""
+    from rfverify import data
+
+    return Path(data.__file__).resolve().parent
 
 
 @pytest.fixture(autouse=True)

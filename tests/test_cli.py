@@ -20,8 +20,8 @@ def run(capsys, *argv):
     return code, out, err
 
 
-def test_info_json_chute(capsys, shared_data):
-    code, out, err = run(capsys, "info", str(shared_data / "Chute-ndof-768-nc-4-3.hdf5"), "--json")
+def test_info_json_chute(capsys, real_data):
+    code, out, err = run(capsys, "info", str(real_data / "Chute-ndof-768-nc-4-3.hdf5"), "--json")
     assert code == 0, err
     s = json.loads(out)
     assert s["n"] == 4 and s["m"] == 768
@@ -72,9 +72,9 @@ def test_errors_missing_file(capsys, tmp_path):
     _one_line_error(capsys, "info", str(tmp_path / "none.hdf5"), expect="no such file")
 
 
-def test_errors_truncated(capsys, shared_data, tmp_path):
+def test_errors_truncated(capsys, real_data, tmp_path):
     p = tmp_path / "t.hdf5"
-    p.write_bytes((shared_data / "Chute-ndof-768-nc-4-3.hdf5").read_bytes()[:5000])
+    p.write_bytes((real_data / "Chute-ndof-768-nc-4-3.hdf5").read_bytes()[:5000])
     _one_line_error(capsys, "info", str(p), expect="t.hdf5")
 
 
@@ -84,27 +84,27 @@ def test_errors_not_hdf5(capsys, tmp_path):
     _one_line_error(capsys, "info", str(p), expect="not an HDF5 file")
 
 
-def test_errors_missing_group(capsys, shared_data, tmp_path):
+def test_errors_missing_group(capsys, real_data, tmp_path):
     p = tmp_path / "g.hdf5"
-    shutil.copy(shared_data / "Chute-ndof-768-nc-4-3.hdf5", p)
+    shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", p)
     p.chmod(0o644)
     with h5py.File(p, "r+") as fh:
         del fh["fclib_global_rolling/vectors"]
     _one_line_error(capsys, "info", str(p), expect="/fclib_global_rolling/vectors")
 
 
-def test_errors_nan(capsys, shared_data, tmp_path):
+def test_errors_nan(capsys, real_data, tmp_path):
     p = tmp_path / "n.hdf5"
-    shutil.copy(shared_data / "Chute-ndof-768-nc-4-3.hdf5", p)
+    shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", p)
     p.chmod(0o644)
     with h5py.File(p, "r+") as fh:
         fh["fclib_global_rolling/M/x"][3] = np.nan
     _one_line_error(capsys, "info", str(p), expect="M[")
 
 
-def test_errors_wrong_sizes(capsys, shared_data, tmp_path):
+def test_errors_wrong_sizes(capsys, real_data, tmp_path):
     p = tmp_path / "s.hdf5"
-    shutil.copy(shared_data / "Chute-ndof-768-nc-4-3.hdf5", p)
+    shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", p)
     p.chmod(0o644)
     with h5py.File(p, "r+") as fh:
         del fh["fclib_global_rolling/vectors/mu_r"]

@@ -1,9 +1,11 @@
-"""The real problem files of ../shared/data and the bundled copies: every one loads, the two
-Chute versions agree, lifted local problems reproduce W, broken files are refused precisely."""
+"""The real problem files (the copies bundled in rfverify/data/, byte-identical to the project's
+originals in ../shared/data): every one loads, the two Chute versions agree, lifted local
+problems reproduce W, broken files are refused precisely."""
 
 from __future__ import annotations
 
 import filecmp
+import hashlib
 import shutil
 
 import h5py
@@ -15,6 +17,14 @@ from rfverify import InvalidProblemError, ProblemFileError
 from rfverify.check import check_solution
 from rfverify.io import bundled_problems, parse_siconos_dat
 
+SHA256 = {  # the originals' checksums: the bundled copies are these files, byte for byte
+    "Chute-ndof-768-nc-4-3.hdf5": "9992f758a22b72c1413780628fa270a09003ae0750417d51b0b22df6d7226687",
+    "GRFC3D_Chute-ndof-768-nc-4-3.dat": "1331a6c3af7fd06ddb00dae580ac9e90b2f7ce5066036cbc51b7ca06c31d3bbe",
+    "RFC3D_cube_1.dat": "14f08075db2b69c592e1923236ab1eb5938bfefe8aefe3c4f24fae5d60852ead",
+    "RFC3D_sphere_1.dat": "67f2bad3ed59cab5caa8e6d87d1098290917691a8fbffbf717a5dcf6c8d7e46f",
+    "rfc3d_sphere_from_grfc3d.dat": "1f83f1409043fb91c23501178aeb9dd8ea73a9ee22ff90ac0bc9ccee22e03d56",
+}
+
 SHARED_FILES = {
     "Chute-ndof-768-nc-4-3.hdf5": (768, 4),
     "GRFC3D_Chute-ndof-768-nc-4-3.dat": (768, 4),
@@ -25,8 +35,8 @@ SHARED_FILES = {
 
 
 @pytest.mark.parametrize("name", sorted(SHARED_FILES))
-def test_every_shared_file_loads(shared_data, name):
-    problem = rfverify.load(shared_data / name)
+def test_every_real_file_loads(real_data, name):
+    problem = rfverify.load(real_data / name)
     m, n = SHARED_FILES[name]
     assert problem.n_contacts == n
     if m is not None:
@@ -35,13 +45,22 @@ def test_every_shared_file_loads(shared_data, name):
     assert problem.blocks.min_eigenvalues[np.isfinite(problem.blocks.min_eigenvalues)].min() > 0
 
 
-def test_bundled_files_are_the_shared_files(shared_data):
-    for path in bundled_problems().values():
-        assert filecmp.cmp(path, shared_data / path.name, shallow=False), path.name
+def test_bundled_files_are_the_original_files(real_data):
+    """Every bundled problem is one of the originals, unchanged (checksums pinned here); where
+    the originals are beside the repository (../shared/data), they are compared directly too."""
+    from conftest import SHARED_DATA
+
+    bundled = {p.name: p for p in bundled_problems().values()}
+    assert set(bundled) == set(SHA256) == set(SHARED_FILES)
+    for name, path in bundled.items():
+        assert path.parent == real_data
+        assert hashlib.sha256(path.read_bytes()).hexdigest() == SHA256[name], name
+        if SHARED_DATA.is_dir():
+            assert filecmp.cmp(path, SHARED_DATA / name, shallow=False), name
 
 
-def test_chute_hdf5_facts(shared_data):
-    p = rfverify.load(shared_data / "Chute-ndof-768-nc-4-3.hdf5")
+def test_chute_hdf5_facts(real_data):
+    p = rfverify.load(real_data / "Chute-ndof-768-nc-4-3.hdf5")
     assert (p.n_dofs, p.n_contacts) == (768, 4)
     assert p.storage == {"M": "triplet", "H": "triplet"}
     assert p.symmetry.scaled > 1e-3  # the real file is measurably unsymmetric
@@ -55,9 +74,9 @@ def test_chute_hdf5_facts(shared_data):
     assert not chk.ok(1e-3)
 
 
-def test_chute_dat_and_hdf5_agree_to_print_precision(shared_data):
-    h5 = rfverify.load(shared_data / "Chute-ndof-768-nc-4-3.hdf5")
-    dat = rfverify.load(shared_data / "GRFC3D_Chute-ndof-768-nc-4-3.dat")
+def test_chute_dat_and_hdf5_agree_to_print_precision(real_data):
+    h5 = rfverify.load(real_data / "Chute-ndof-768-nc-4-3.hdf5")
+    dat = rfverify.load(real_data / "GRFC3D_Chute-ndof-768-nc-4-3.dat")
     assert dat.provenance["significant_digits"] == 6
     # Vectors are printed with %.24e: exact.  Matrices by CSparse's %g: 6 significant digits,
     # so each entry is within half a unit of the 6th digit, ≤ 5e-6 relative.
@@ -74,10 +93,10 @@ def test_chute_dat_and_hdf5_agree_to_print_precision(shared_data):
 
 @pytest.mark.parametrize("name", ["RFC3D_sphere_1.dat", "RFC3D_cube_1.dat",
                                   "rfc3d_sphere_from_grfc3d.dat"])
-def test_lifted_local_problem_reproduces_W_and_q(shared_data, name):
-    kind, local, digits = parse_siconos_dat(shared_data / name)
+def test_lifted_local_problem_reproduces_W_and_q(real_data, name):
+    kind, local, digits = parse_siconos_dat(real_data / name)
     assert kind == "local"
-    p = rfverify.load(shared_data / name)
+    p = rfverify.load(real_data / name)
     lift = p.provenance["lift"]
     H = p.H.toarray()
     W = 0.5 * (local.W + local.W.T)
@@ -114,8 +133,8 @@ def test_missing_file(tmp_path):
         rfverify.load(tmp_path / "nope.hdf5")
 
 
-def test_truncated_hdf5(shared_data, tmp_path):
-    src = (shared_data / "Chute-ndof-768-nc-4-3.hdf5").read_bytes()
+def test_truncated_hdf5(real_data, tmp_path):
+    src = (real_data / "Chute-ndof-768-nc-4-3.hdf5").read_bytes()
     path = tmp_path / "trunc.hdf5"
     path.write_bytes(src[: len(src) // 2])
     with pytest.raises(ProblemFileError) as err:
@@ -133,9 +152,9 @@ def test_not_hdf5(tmp_path):
 @pytest.mark.parametrize("victim", ["fclib_global_rolling", "fclib_global_rolling/M",
                                     "fclib_global_rolling/H/p", "fclib_global_rolling/vectors/mu_r",
                                     "fclib_global_rolling/vectors", "fclib_global_rolling/spacedim"])
-def test_missing_group_is_named(shared_data, tmp_path, victim):
+def test_missing_group_is_named(real_data, tmp_path, victim):
     path = tmp_path / "cut.hdf5"
-    shutil.copy(shared_data / "Chute-ndof-768-nc-4-3.hdf5", path)
+    shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", path)
     path.chmod(0o644)
     with h5py.File(path, "r+") as fh:
         del fh[victim]
@@ -145,9 +164,9 @@ def test_missing_group_is_named(shared_data, tmp_path, victim):
     assert err.value.location is not None and victim.split("/")[-1] in err.value.location
 
 
-def test_nan_in_hdf5_data_names_field(shared_data, tmp_path):
+def test_nan_in_hdf5_data_names_field(real_data, tmp_path):
     path = tmp_path / "nan.hdf5"
-    shutil.copy(shared_data / "Chute-ndof-768-nc-4-3.hdf5", path)
+    shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", path)
     path.chmod(0o644)
     with h5py.File(path, "r+") as fh:
         fh["fclib_global_rolling/vectors/f"][7] = np.nan
@@ -156,9 +175,9 @@ def test_nan_in_hdf5_data_names_field(shared_data, tmp_path):
     assert err.value.field == "f" and err.value.index == 7
 
 
-def test_wrong_size_in_hdf5_names_field(shared_data, tmp_path):
+def test_wrong_size_in_hdf5_names_field(real_data, tmp_path):
     path = tmp_path / "size.hdf5"
-    shutil.copy(shared_data / "Chute-ndof-768-nc-4-3.hdf5", path)
+    shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", path)
     path.chmod(0o644)
     with h5py.File(path, "r+") as fh:
         w = fh["fclib_global_rolling/vectors/w"][()]
@@ -185,8 +204,8 @@ def test_other_fclib_kind_is_refused(tmp_path):
     (lambda t: t.replace("1.000000000000000000000000e+00", "1.0x", 1), "not a number"),
     (lambda t: t.replace("5\n1\n0", "5\n1\n1", 1), "sparse-block"),
 ])
-def test_broken_dat_files(shared_data, tmp_path, mutate, expect):
-    text = (shared_data / "RFC3D_sphere_1.dat").read_text()
+def test_broken_dat_files(real_data, tmp_path, mutate, expect):
+    text = (real_data / "RFC3D_sphere_1.dat").read_text()
     path = tmp_path / "broken.dat"
     path.write_text(mutate(text))
     with pytest.raises(ProblemFileError, match=expect) as err:
@@ -194,8 +213,8 @@ def test_broken_dat_files(shared_data, tmp_path, mutate, expect):
     assert err.value.location is not None
 
 
-def test_broken_csparse_listing(shared_data, tmp_path):
-    lines = (shared_data / "rfc3d_sphere_from_grfc3d.dat").read_text().splitlines()
+def test_broken_csparse_listing(real_data, tmp_path):
+    lines = (real_data / "rfc3d_sphere_from_grfc3d.dat").read_text().splitlines()
     del lines[12]  # an entry of column 0 disappears
     path = tmp_path / "broken.dat"
     path.write_text("\n".join(lines))
