@@ -173,7 +173,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="Build a rigid-body scene by a fast geometric method, take a few "
                     "Moreau-Jean steps (theta = 1, velocity level) from each stage of its run and "
                     "write the one-step problems as FCLIB HDF5 files SCENE-ndof-M-nc-N-K.hdf5 "
-                    "(K = index in the trace). Deterministic for a given seed and options.\n\n"
+                    "(K = index in the trace).\n\n"
+                    "Reproducibility: the files are bit-for-bit the same for the same scene, seed\n"
+                    "and options, run with the same rfverify and the same numpy, scipy and QDLDL\n"
+                    "builds on one platform (thread counts and PYTHONHASHSEED do not matter). What\n"
+                    "varies and why: the scene's motion is simulated with rfverify's own solver\n"
+                    "(each step's contact problem is solved by rfverify.solve), and granular motion\n"
+                    "amplifies small differences, so a change to the solver or to numpy/scipy/QDLDL\n"
+                    "that changes any result, even in its last bit, changes the later positions and\n"
+                    "contacts: the values, and which contacts (hence the nonzeros of H) a problem has.\n\n"
                     "scenes:\n" + "\n".join(f"  {k}: {v.summary}" for k, v in ALL_SCENES.items()),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
