@@ -228,10 +228,12 @@ def test_file_with_both_groups_reads_global_and_says_so(tmp_path, capsys):
     assert "ignored    /fclib_local" in out
 
 
-def test_rolling_files_are_read_as_before():
+def test_rolling_files_are_read_as_before(tmp_path):
     p = rfverify.load(SCENES / GLOBAL_SCENES[0])
-    assert p.provenance == {} and p.native is None
-    assert p.storage == {"M": "csc", "H": "csc"} or set(p.storage) == {"M", "H"}
+    assert p.provenance == {} and p.native is None and p.mu_r.any()
+    copy = rfverify.save(p, tmp_path / "copy.hdf5")
+    with h5py.File(copy, "r") as fh:
+        assert set(fh) == {"fclib_global_rolling"} and int(fh["fclib_global_rolling/spacedim"][0]) == 5
 
 
 # ---------------------------------------------------------------------- info
@@ -376,6 +378,14 @@ def test_digits_10_certified_and_rechecked_from_the_file(which, global_file, loc
     code, text, err = run(capsys, "certify", path, "--solution", out)
     assert code == 0, err
     assert "proven to 10 digits" in text and f"stored in {out}" in text
+    # certify --out writes the problem in its own layout too, with /certificate beside it.
+    cert = tmp_path / "cert.h5"
+    code, _, err = run(capsys, "certify", path, "--solution", out, "--out", cert)
+    assert code == 0, err
+    with h5py.File(cert, "r") as fh:
+        root = "fclib_global" if which == "global" else "fclib_local"
+        assert set(fh) == {root, "solution", "certificate"}
+        assert fh["solution/u"].shape == (3 * p.n_contacts,) and ("v" in fh["solution"]) == (which == "global")
 
 
 def test_diagnose_runs_on_a_3d_file(local_file, capsys):
@@ -573,8 +583,7 @@ CASES = {
                      ["W: is declared 18×15", "must be square"]),
     "W 5n x 5n": ("local", lambda t: dict(mutate=_matrix_mutation("fclib_local/W", np.eye(30))),
                   ["W: is declared 30×30, expected 3n×3n = 18×18", "5 per contact"]),
-    "G present": ("global", lambda t: dict(mutate=_matrix_mutation("fclib_global/G", np.eye(36)[:, :2])
-                                           if False else (lambda fh: write_matrix(fh["fclib_global"], "G", np.eye(36)[:, :2]))),
+    "G present": ("global", lambda t: dict(mutate=lambda fh: write_matrix(fh["fclib_global"], "G", np.eye(36)[:, :2])),
                   ["/fclib_global/G", "equality constraints (G, b) are not supported"]),
     "b present": ("global", lambda t: dict(mutate=_set("fclib_global/vectors/b", np.ones(2))),
                   ["/fclib_global/vectors/b", "equality constraints"]),

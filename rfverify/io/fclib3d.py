@@ -61,9 +61,6 @@ SOLUTION_LAYOUT = {
     LOCAL: "fclib_local: u and r 3 per contact (N, T1, T2); no v (not a quantity of a local problem)",
 }
 
-_FIX_3D = ("write the file with rfverify.save or fclib's fclib_write_global/fclib_write_local "
-           "(layout: README, 'File formats')")
-
 
 @dataclass(frozen=True, eq=False)
 class LocalData:
