@@ -573,6 +573,8 @@ def cmd_solve(args) -> int:
     summary = {
         "status": str(result.status), "success": result.success, "message": result.message,
         "method": result.method, "iterations": result.nit, "time": wall, "tol": args.tol,
+        "criterion": result.criterion,
+        "measures": result.measures.as_dict() if result.measures is not None else None,
         "pinfeas": result.pinfeas, "dinfeas": result.dinfeas, "mu": result.mu,
         "presolve": result.presolve, "out": args.out,
         "numerical_warnings": _warning_summary(caught),
@@ -581,7 +583,11 @@ def cmd_solve(args) -> int:
         print(_dumps(summary, indent=2))
     else:
         print(f"status {result.status}: {result.message}")
-        print(f"iterations {result.nit}, time {wall:.3f} s; pinfeas {result.pinfeas:.2e}, "
+        m = result.measures
+        if m is not None:
+            print(f"criterion {m.max:.2e} (dynamics {m.dynamics:.1e}, velocity {m.velocity:.1e}, cone "
+                  f"{m.cone:.1e}, complementarity {m.complementarity:.1e}; rfverify.measures)")
+        print(f"iterations {result.nit}, time {wall:.3f} s; the paper's measures: pinfeas {result.pinfeas:.2e}, "
               f"dinfeas {result.dinfeas:.2e}, mu {result.mu:.2e}")
         if args.out:
             print(f"solution written to {args.out}")

@@ -147,15 +147,34 @@ def _solve(problem, task, npz_path) -> dict:
     trace = {k: np.asarray(v, dtype=np.float64) for k, v in res.trace.items()}
     np.savez_compressed(npz_path, v=res.v, u=res.u, r=res.r, **{f"trace_{k}": v for k, v in trace.items()})
     verified = HighPrecisionChecker(problem, task.get("dps", 30)).criterion(res.v, res.u, res.r)
+    own, claim, claim_tol = solver_claim(res, task["tol"])
     return {
         "status": str(res.status), "message": res.message, "nit": int(res.nit), "time": elapsed,
-        "solver_claims_solved": bool(res.success),
-        "solver_measures": {"pinfeas": res.pinfeas, "dinfeas": res.dinfeas, "mu": res.mu},
+        "solver_status_own": own, "claim": claim, "claim_tol": claim_tol,
+        "solver_claims_solved": claim == "Solved",
+        "refuted": bool(claim is not None and not verified["max"] <= claim_tol),
+        "solver_measures": {"criterion": res.criterion, "pinfeas": res.pinfeas, "dinfeas": res.dinfeas,
+                            "mu": res.mu},
         "verified": verified, "solved": bool(verified["max"] <= task["tol"]),
         "max_cond_Qp": _nan_extreme(trace.get("max_cond_Qp"), np.nanmax),
         "min_lam2": _min_lam2(trace),
         "presolve": res.presolve,
     }
+
+
+def solver_claim(res, tol: float):
+    """What the solver itself claims, in its own words: (own status verbatim, claim, the
+    tolerance the claim asserts).  Algorithm 1 claims Solved at ``tol`` and AlmostSolved at
+    ``almost_factor·tol``; Clarabel claims its own status, AlmostSolved meaning its reduced
+    tolerances (kept in ``extras["clarabel_almost_tol"]``).  A claim is refuted when the
+    independent recheck's criterion exceeds the claimed tolerance."""
+    own = str(res.extras.get("clarabel_status", res.status))
+    if own == "Solved":
+        return own, "Solved", float(tol)
+    if own == "AlmostSolved":
+        almost = res.extras.get("clarabel_almost_tol", res.settings.almost_factor * tol)
+        return own, "AlmostSolved", float(almost)
+    return own, None, None
 
 
 def _nan_extreme(values, reducer) -> float | None:

@@ -246,8 +246,9 @@ def _directed(ints: np.ndarray, exp: int, up: bool = True) -> np.ndarray:
     e = shift + exp
     with np.errstate(over="ignore", under="ignore"):
         val = np.ldexp(mant, np.clip(e, -2000, 2000).astype(np.int64))
-    # ldexp rounds to nearest in the subnormal range and flushes to 0: make it directed.
-    small = (np.abs(val) < _TINY_NORMAL) & (mag != 0)
+    # ldexp rounds to nearest in the subnormal range (possibly up to the smallest normal) and
+    # flushes to 0: make it directed.
+    small = (np.abs(val) <= _TINY_NORMAL) & (mag != 0)
     small = np.asarray(small, dtype=bool)
     if np.any(small & ~neg):
         val[small & ~neg] = np.nextafter(val[small & ~neg], np.inf)

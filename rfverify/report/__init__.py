@@ -141,7 +141,8 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     doc.h(2, "Success per collection, method and tolerance")
     doc.p(f"solved = verified runs / runs. Times are shifted geometric means (shift {SGM_SHIFT} s) over "
           "the problems every method solved at that tolerance (n common), so methods are compared "
-          "on the same problems. 'false claims' = runs whose solver said Solved but the recheck refuted.")
+          "on the same problems. 'false claims' = runs whose solver itself said Solved (or AlmostSolved, by its "
+          "own definition) and the independent recheck refuted it.")
     doc.table(["collection", "method", "tol", "solved", "SGM time (s)", "n common", "SGM iterations",
                "median digits of v", "false claims"],
               [[r["collection"], r["method"], f"{r['tol']:g}", f"{r['solved']}/{r['total']}",
@@ -268,7 +269,7 @@ def _glance(data: RunData, table) -> list[str]:
             msg += f"; it costs a median {per[len(per) // 2]:.3f} s per extra digit of v over the double run"
         lines.append(msg)
     claims = sum(r["false_claims"] for r in rows)
-    lines.append(f"Solver 'Solved' claims refuted by the recheck: {claims}")
+    lines.append(f"Solver claims (Solved, or AlmostSolved by the solver's own definition) refuted by the recheck: {claims}")
     return lines
 
 

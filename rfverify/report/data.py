@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bench.verify import forward_digits
+from ..measures import CRITERION
 
 SGM_SHIFT = 0.01
 """Shift (seconds) of the shifted geometric mean of times: keeps runs of a few milliseconds
@@ -145,7 +146,7 @@ def _normalise(rec: dict) -> None:
     if isinstance(ver, dict):
         if ver.get("max") is None:
             ver["max"] = math.inf
-        for k in ("dinfeas", "velocity", "mu", "cone"):
+        for k in CRITERION + ("primal_cone", "dual_cone", "paper_dinfeas", "paper_mu"):
             if k in ver and ver[k] is None:
                 ver[k] = math.nan
     if rec.get("kind") == "trajectory":
@@ -318,6 +319,14 @@ def sgm(values, shift: float = SGM_SHIFT) -> float:
     return float(np.exp(np.mean(np.log(values + shift))) - shift)
 
 
+def _refuted(rec: dict) -> bool:
+    """The solver's own claim (Solved, or AlmostSolved by its own definition) was refuted by
+    the recheck; records written before claims were recorded fall back to Solved claims."""
+    if "refuted" in rec:
+        return bool(rec["refuted"])
+    return bool(rec.get("solver_claims_solved")) and not rec.get("solved")
+
+
 def success_table(data: RunData) -> list[dict]:
     """Rows (collection incl. "all", method, tol): solved/total, SGM time over the problems
     every method solved at that tolerance, SGM iterations, solver's false claims."""
@@ -331,7 +340,7 @@ def success_table(data: RunData) -> list[dict]:
                 recs = [data.solve_record(k, m, tol) for k in keys]
                 recs = [r for r in recs if r is not None]
                 solved = [r for r in recs if r.get("solved")]
-                false_claims = [r for r in recs if r.get("solver_claims_solved") and not r.get("solved")]
+                false_claims = [r for r in recs if _refuted(r)]
                 rows.append({
                     "collection": coll, "method": m, "tol": tol, "solved": len(solved), "total": len(recs),
                     "sgm_time_common": sgm([data.solve_record(k, m, tol)["time"] for k in common]),
@@ -392,7 +401,7 @@ def failure_cause(rec: dict) -> str:
         return f"{status}: {msg}"
     if not ver.get("finite", True):
         return f"non-finite iterate returned ({status}: {msg})"
-    measures = [k for k in ("dinfeas", "velocity", "mu", "cone") if _is_num(ver.get(k)) and not math.isnan(ver[k])]
+    measures = [k for k in CRITERION if _is_num(ver.get(k)) and not math.isnan(ver[k])]
     worst = max(measures, key=lambda k: ver[k]) if measures else None
     recheck = (f"recheck: {worst} = {ver[worst]:.2e} > tol {rec['tol']:g}" if worst else "no recheck")
     if status == "Solved":

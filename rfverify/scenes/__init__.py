@@ -43,7 +43,7 @@ from .library import ALIASES, ALL_SCENES, FE_SCENES, SCENES, Scene, World, resol
 from .stepper import MoreauJean, SceneError, StepRecord
 from ..problem import Problem
 
-GENERATOR_VERSION = "1"
+GENERATOR_VERSION = "2"
 """Bumped whenever the same (scene, seed, options) would give different arrays."""
 
 DEFAULT_STEPS = 3

@@ -6,8 +6,9 @@ Clarabel solves  min ½xᵀPx + qᵀx  s.t.  Ax + s = b, s ∈ K.  With x = (v, 
     [H̃, −J] x + s = −w̃,  s ∈ {0}           (H̃ v + w̃ = J z)
     [0, −I] x + s = 0,    s ∈ L3^{n3} × R₊^{n1}   (z in the lifted cones)
 
-Stationarity in v gives M v − f + H̃ᵀ y_eq = 0, so r̃ = −y_eq.  The measures reported are
-recomputed from (v, r̃, z) exactly as for Algorithm 1, not taken from Clarabel.
+Stationarity in v gives M v − f + H̃ᵀ y_eq = 0, so r̃ = −y_eq.  The status is rfverify's
+criterion (:mod:`rfverify.measures`) recomputed from the returned (v, u, r), exactly as for
+Algorithm 1; Clarabel's own status is kept verbatim in ``extras["clarabel_status"]``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..lifting import lift
+from ..measures import measures
 from ..problem import Problem
 from .result import Settings, SolveResult, Status
 
@@ -70,20 +72,30 @@ def solve_clarabel(problem: Problem, settings: Settings) -> SolveResult:
     v, z = x[:m], x[m:]
     r_t = -np.asarray(sol.z)[:nk]
     pinf, dinf, mu = lifted_measures(M, problem.f, lp.H_t, lp.w_t, lp.J, v, r_t, z, problem.n_contacts)
-    status = _STATUS.get(status_name, Status.NUMERICAL_ERROR)
-    merit = max(pinf, dinf, mu)
-    message = f"Clarabel status {status_name}; recomputed max(pinfeas, dinfeas, mu) = {merit:.2e}"
-    # Clarabel's own stopping test is not ours: "Solved" counts only if our criterion holds.
-    if status is Status.SOLVED and not merit <= settings.tol:
-        status = Status.ALMOST_SOLVED if merit <= settings.almost_factor * settings.tol else Status.INSUFFICIENT_PROGRESS
-        message += f" > tol = {settings.tol:g}"
     r = lp.r_from_lifted(r_t)
     u = lp.u_from_v(v)
+    # Clarabel's own stopping test is not ours: its answer is judged by rfverify's criterion
+    # (rfverify.measures), exactly like Algorithm 1's; its own status is kept verbatim in
+    # extras["clarabel_status"].
+    judged = measures(problem, v, u, r, "longdouble")
+    merit = judged.max
+    if merit <= settings.tol:
+        status = Status.SOLVED
+    elif merit <= settings.almost_factor * settings.tol:
+        status = Status.ALMOST_SOLVED
+    else:
+        status = _STATUS.get(status_name, Status.NUMERICAL_ERROR)
+        if status in (Status.SOLVED, Status.ALMOST_SOLVED):
+            status = Status.INSUFFICIENT_PROGRESS
+    message = (f"Clarabel status {status_name}; rfverify criterion {merit:.2e} "
+               f"({'≤' if merit <= settings.tol else '>'} tol = {settings.tol:g}, worst: {judged.worst()})")
     total = time.perf_counter() - t0
     return SolveResult(
-        v=v, u=u, r=r, status=status, message=message, nit=int(sol.iterations),
+        v=v, u=u, r=r, status=status, message=message, nit=int(sol.iterations), measures=judged,
         pinfeas=pinf, dinfeas=dinf, mu=mu, trace={}, timings={"total": total, "setup": t_setup,
                                                                 "clarabel_solve": float(sol.solve_time)},
         method="clarabel", settings=settings, presolve={"cone_kinds": lp.reduction_counts()},
-        extras={"clarabel_status": status_name, "r_t": r_t, "z": z},
+        extras={"clarabel_status": status_name, "r_t": r_t, "z": z,
+                "clarabel_almost_tol": float(max(opts.reduced_tol_feas, opts.reduced_tol_gap_abs,
+                                                 opts.reduced_tol_gap_rel))},
     )

@@ -6,8 +6,9 @@ one step length for primal and dual, on the lifted Lorentz-cone form
 The linear-system form is pluggable (:mod:`rfverify.solver.kkt`).  Centring: the central path
 is z ∘ s = τ e cone by cone, which sums to zᵀs = τ·(number of cones) because eᵀe = 1 per
 cone; the corrector therefore targets σ·μ_c·e with μ_c = zᵀs / n_cones.  The stopping test
-uses DESIGN's μ = zᵀs / n (n contacts) and, in addition, the gap |ũᵀr̃|/n of the velocities
-that are returned (ũ = H̃v + w̃), which is what an independent check recomputes.
+is the criterion of :mod:`rfverify.measures` on the (v, u, r) that would be returned — the
+same function every recheck uses; DESIGN's pinfeas, dinfeas and μ = zᵀs / n are computed and
+traced beside it.
 """
 
 from __future__ import annotations
@@ -36,11 +37,14 @@ def _norm(x) -> float:
 
 
 def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, settings: Settings,
-        describe_cone=lambda k: f"cone {k}", keep_iterates: bool = False):
+        judge, describe_cone=lambda k: f"cone {k}", keep_iterates: bool = False):
     """Run Algorithm 1.  Returns a dict with v, r_t, z, status, message, nit, trace, measures.
 
-    ``describe_cone(k)`` turns a global cone index into words (contact and part) for messages.
-    ``keep_iterates`` stores every iterate (v, r̃, z) in ``iterates`` (for lockstep diagnosis).
+    ``judge(v, r̃)`` returns the :class:`rfverify.measures.Measures` of the iterate in the
+    original variables (the one definition of "solved"); the run stops when its ``max`` is at
+    most ``settings.tol``.  ``describe_cone(k)`` turns a global cone index into words (contact
+    and part) for messages.  ``keep_iterates`` stores every iterate (v, r̃, z) in
+    ``iterates`` (for lockstep diagnosis).
     """
     t0 = time.perf_counter()
     ext = np.longdouble if settings.extended_residuals else np.float64
@@ -89,18 +93,18 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             dinf = _norm(r_d) / max(_norm(Mv), _norm(f_x), _norm(HTr), _TINY)
             gap = float(z @ s)
             mu = gap / n_contacts
-            # The user checks the gap of what is returned, |ũᵀr̃| with ũ = H̃v + w̃, not zᵀJᵀr̃;
-            # they differ by r_pᵀr̃, which in large units (Millimetre scene: r ~ 1e6) exceeded
-            # tol while μ did not.  The merit (stop, best iterate) takes both.
-            mu_u = abs(float((Hv + w_x) @ r_t)) / n_contacts
-            merit = max(pinf, dinf, mu, mu_u)
-            if not np.isfinite(merit):
+            judged = judge(v, r_t)
+            merit = judged.max
+            # merit is +inf while a scale is still 0 (v = 0 at the start of a problem with f = 0)
+            if np.isnan(merit) or not np.isfinite(pinf + dinf + mu):
                 raise _Stop(Status.NUMERICAL_ERROR, f"iteration {k}: residuals are not finite")
             # Progress = some measure not yet at tol fell 10% below its own best.  Judging
             # the merit alone stopped badly scaled problems at iteration 0: there μ rises
             # 1e6-fold while the infeasibilities fall (measured on the Millimetre scene).
             improved = False
-            for i, val in enumerate((pinf, dinf, mu)):
+            progress_measures = (max(judged.velocity, judged.dual_cone), judged.dynamics,
+                                 max(judged.complementarity, judged.primal_cone))
+            for i, val in enumerate(progress_measures):
                 if val > settings.tol and val < 0.9 * best_each[i]:
                     improved = True
                 best_each[i] = min(best_each[i], val)
@@ -109,21 +113,22 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             # iterations before the first long step.  Stall counting starts after that step.
             since_best = 0 if improved or not engaged else since_best + 1
             if best is None or merit < best[0]:
-                best = (merit, k, v.copy(), r_t.copy(), z.copy(), pinf, dinf, mu)
+                best = (merit, k, v.copy(), r_t.copy(), z.copy(), pinf, dinf, mu, judged)
             lam2_z, cz = cones.min_lambda2(z)
             lam2_s, cs = cones.min_lambda2(s)
-            record = dict(iter=k, pinfeas=pinf, dinfeas=dinf, mu=mu, sigma=np.nan, alpha_aff=np.nan,
+            record = dict(iter=k, criterion=merit, pinfeas=pinf, dinfeas=dinf, mu=mu, sigma=np.nan, alpha_aff=np.nan,
                           alpha=np.nan, gamma=np.nan, min_lam2_z=lam2_z, min_lam2_z_cone=cz,
                           min_lam2_s=lam2_s, min_lam2_s_cone=cs, max_cond_Qp=np.nan,
                           solve_residual=np.nan, refine_steps=0, time=time.perf_counter() - t0)
             if merit <= settings.tol:
-                status, message = Status.SOLVED, f"max(pinfeas, dinfeas, mu, |ũᵀr̃|/n) = {merit:.2e} ≤ tol"
+                status, message = Status.SOLVED, (f"criterion {merit:.2e} ≤ tol (worst: {judged.worst()}); "
+                                                  f"paper's max(pinfeas, dinfeas, mu) = {max(pinf, dinf, mu):.2e}")
                 break
             if k == settings.max_iter:
                 break
             if since_best >= settings.stall_iterations:
                 raise _Stop(Status.INSUFFICIENT_PROGRESS,
-                            f"iteration {k}: none of pinfeas, dinfeas, mu above tol improved by 10% in "
+                            f"iteration {k}: none of the primal, dual and gap measures above tol improved by 10% in "
                             f"{since_best} iterations (best max {best[0]:.2e} at iteration {best[1]})")
             if lam2_z <= 0 or lam2_s <= 0:
                 which, c, val = ("z", cz, lam2_z) if lam2_z <= 0 else ("Jᵀr̃", cs, lam2_s)
@@ -222,9 +227,9 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
         _append(trace, record)
 
     if status is Status.SOLVED:
-        out_v, out_r, out_z, pinf_o, dinf_o, mu_o = v, r_t, z, pinf, dinf, mu
+        out_v, out_r, out_z, pinf_o, dinf_o, mu_o, judged_o = v, r_t, z, pinf, dinf, mu, judged
     else:
-        _, kb, out_v, out_r, out_z, pinf_o, dinf_o, mu_o = best
+        _, kb, out_v, out_r, out_z, pinf_o, dinf_o, mu_o, judged_o = best
         if best[0] <= settings.almost_factor * settings.tol:
             message = (f"{status}: {message}; best iterate (iteration {kb}) reached "
                        f"{best[0]:.2e} ≤ {settings.almost_factor:g}·tol")
@@ -234,7 +239,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     timings["total"] = time.perf_counter() - t0
     return dict(v=out_v, r_t=out_r, z=out_z, status=status, message=message,
                 nit=len(trace["iter"]) - 1 if trace["iter"] else 0,
-                pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o),
+                pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o), measures=judged_o,
                 trace={key: np.asarray(val) for key, val in trace.items()}, timings=timings,
                 factorisations=system.factor_count,
                 unregularised_factorisations=system.unregularised_count, tol=settings.tol, iterates=iterates)

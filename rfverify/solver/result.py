@@ -32,8 +32,10 @@ class Settings:
     Attributes
     ----------
     tol : float
-        Stop when max(pinfeas, dinfeas, μ, |ũᵀr̃|/n) ≤ tol (DESIGN §4; μ = zᵀJᵀr̃ / n; the
-        last term is the gap of the returned ũ = H̃v + w̃, which differs from μ by r_pᵀr̃/n).
+        Stop when the criterion of :mod:`rfverify.measures` — residuals of the returned
+        (v, u, r) relative to their terms and to scales from the data, which do not vanish at
+        a correct solution — is at most ``tol``.  The paper's max(pinfeas, dinfeas, μ)
+        (DESIGN §4) is reported beside it.
     almost_factor : float
         A run that ends otherwise but whose best iterate reached ``almost_factor·tol`` is
         ``AlmostSolved``.
@@ -123,10 +125,13 @@ class Settings:
         return [f.name for f in fields(cls)]
 
 
-TRACE_FIELDS = ("iter", "pinfeas", "dinfeas", "mu", "sigma", "alpha_aff", "alpha", "gamma",
+TRACE_FIELDS = ("iter", "criterion", "pinfeas", "dinfeas", "mu", "sigma", "alpha_aff", "alpha", "gamma",
                 "min_lam2_z", "min_lam2_z_cone", "min_lam2_s", "min_lam2_s_cone", "max_cond_Qp",
                 "solve_residual", "refine_steps", "time")
-"""Per-iteration trace columns.  ``min_lam2_*_cone`` is the index of the cone (see
+"""Per-iteration trace columns.  ``criterion`` is rfverify's stopping measure
+(:func:`rfverify.measures.measures`, the ``max`` of the returned (v, u, r) of that iterate);
+``pinfeas``, ``dinfeas``, ``mu`` are the paper's (DESIGN §4), reported beside it.
+``min_lam2_*_cone`` is the index of the cone (see
 ``LiftedProblem.cone_contact``/``cone_part`` for its contact); ``solve_residual`` is the
 largest relative residual of the linear solves of that iteration after refinement; ``time``
 is seconds since the start of the solve."""
@@ -145,7 +150,9 @@ class SolveResult:
     success : bool            status is Solved
     message : str             human-readable reason (names iteration/operation/cone on errors)
     nit : int                 iterations performed
-    pinfeas, dinfeas, mu : float   final measures of the returned iterate (DESIGN §4)
+    measures : Measures       rfverify's criterion of the returned (v, u, r) (:mod:`rfverify.measures`):
+                              Solved means ``measures.max ≤ tol``
+    pinfeas, dinfeas, mu : float   the paper's measures of the returned iterate (DESIGN §4)
     trace : dict of ndarray   per-iteration columns, see TRACE_FIELDS
     timings : dict            seconds: total, factor, solve, presolve, ...
     method : str
@@ -169,14 +176,21 @@ class SolveResult:
     settings: Settings
     presolve: dict = field(default_factory=dict)
     extras: dict = field(default_factory=dict)
+    measures: object = None
 
     @property
     def success(self) -> bool:
         return self.status is Status.SOLVED
+
+    @property
+    def criterion(self) -> float:
+        """``measures.max`` (NaN when not computed)."""
+        return float("nan") if self.measures is None else self.measures.max
 
     def __getitem__(self, key):  # OptimizeResult-style access
         return getattr(self, key)
 
     def __repr__(self) -> str:
         return (f"SolveResult(method={self.method!r}, status={self.status}, nit={self.nit}, "
-                f"pinfeas={self.pinfeas:.2e}, dinfeas={self.dinfeas:.2e}, mu={self.mu:.2e})")
+                f"criterion={self.criterion:.2e}, pinfeas={self.pinfeas:.2e}, dinfeas={self.dinfeas:.2e}, "
+                f"mu={self.mu:.2e})")
