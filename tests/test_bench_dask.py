@@ -84,12 +84,13 @@ def _executed_per_worker(address) -> list[int]:
 
 
 def _task_processes() -> list[int]:
-    """Pids of task subprocesses started by Dask workers (`python -m rfverify.bench.distributed`)."""
+    """Pids of the task subprocesses Dask workers start (their program imports
+    rfverify.bench.distributed), zombies excluded."""
     pids = []
     for entry in os.listdir("/proc"):
         if entry.isdigit():
             try:
-                cmd = Path(f"/proc/{entry}/cmdline").read_bytes().split(b"\0")
+                cmd = Path(f"/proc/{entry}/cmdline").read_bytes()
                 state = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[0]
             except OSError:
                 continue
@@ -188,6 +189,36 @@ def test_killing_the_bench_stops_its_tasks_on_the_workers(cluster, tmp_path):
         os.kill(pid, signal.SIGKILL)
     assert not left, f"task process(es) {left} still running after the bench was killed"
     assert not list((tmp_path / "run" / "runs").rglob("*.json")), "a record for a killed task"
+
+
+def test_a_dead_worker_takes_its_task_process_along_and_the_task_is_retried(cluster, tmp_path):
+    coll = tmp_path / "c"
+    coll.mkdir()
+    save(random_problem(200, 600, seed=3), coll / "big.hdf5")
+    cmd = [sys.executable, "-m", "rfverify", "bench", str(coll), "--out", str(tmp_path / "run"),
+           "--methods", "jqinv", "--tol", "1e-8", "--digits", "0", "--quiet", "--json",
+           "--scheduler", cluster]
+    bench = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not _task_processes():
+        time.sleep(0.02)
+    time.sleep(1.0)  # past the subprocess's imports: the solve is running
+    running = _task_processes()
+    assert running and bench.poll() is None, "no task running"
+    task = running[0]
+    worker = int(Path(f"/proc/{task}/stat").read_text().rsplit(")", 1)[1].split()[1])
+    os.kill(worker, signal.SIGKILL)  # the Dask worker process dies (its nanny starts a new one)
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and task in _task_processes():
+        time.sleep(0.02)
+    assert task not in _task_processes(), "the task process outlived its worker"
+    out, err = bench.communicate(timeout=120)
+    assert bench.returncode == 0, err.decode()
+    assert json.loads(out)["ran"] == 2  # the solve and the trajectory, one of them run twice
+    for path in (tmp_path / "run" / "runs").rglob("*.json"):
+        assert json.loads(path.read_text())["status"] not in ("Crashed", "Error", "Timeout"), path.name
+    with distributed.Client(cluster, timeout=30) as client:
+        client.wait_for_workers(2, timeout=60)  # the nanny's new worker joined: cluster intact
 
 
 def test_unreachable_scheduler_is_one_line_exit_2(tmp_path, capsys, monkeypatch):

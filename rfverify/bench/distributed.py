@@ -7,8 +7,10 @@ the same rfverify.  See ``docs/DISTRIBUTED.md`` for starting a scheduler and wor
 How a task runs (the guarantees of a local bench carry over):
 
 * **Problem files travel with the task.**  The bench reads each problem file, checks it
-  against the sha256 it planned with, and sends its bytes to the cluster (once per problem,
-  ``Client.scatter``).  The worker writes them into a private scratch directory, checks the
+  against the sha256 it planned with, and puts its bytes into the task's arguments (not
+  ``Client.scatter``: scattered data lives on one worker, and when that worker dies every task
+  that needs it is lost; task arguments are kept by the scheduler, so a task whose worker died
+  is retried elsewhere).  The worker writes them into a private scratch directory, checks the
   sha256 again, and solves that copy.  No shared filesystem is needed, and a worker can never
   solve a file that differs from the one the task key names.
 * **Time limits are enforced on the worker.**  The Dask task starts the same entry point a
@@ -16,9 +18,11 @@ How a task runs (the guarantees of a local bench carry over):
   (``python -m rfverify.bench.distributed``, its own process group), and kills the group when
   it runs longer than ``time_limit`` seconds — a hung solve is killed on the machine where it
   hangs, and the worker thread is free for the next task.  The subprocess dies with its
-  worker (``PR_SET_PDEATHSIG`` and a parent watch), and is killed when the bench cancels the
-  task or disappears (the scheduler then releases the bench's tasks, which the watch loop
-  sees).
+  worker (``PR_SET_PDEATHSIG``, set before anything is imported, and a parent watch); Dask
+  then runs the task again on another worker (``distributed.scheduler.allowed-failures``,
+  3 by default, after which it is recorded as ``Crashed``).  It is killed when the bench
+  cancels the task or disappears (the scheduler then releases the bench's tasks, which the
+  watch loop sees).
 * **The bench writes the records.**  The subprocess writes ``<stem>.json``/``<stem>.npz``
   into the scratch directory exactly as a local worker writes them into the run directory;
   the Dask task returns their bytes, and the bench, after checking that the record is this
@@ -158,10 +162,6 @@ def _run(client, run_dir: Path, todo: list, time_limit: float, bar, jobs, priori
 
     pending = list(todo)
     running = {}            # future -> task
-    left = {}               # problem key -> tasks not finished yet
-    for t in todo:
-        left[t["problem"]] = left.get(t["problem"], 0) + 1
-    scattered = {}          # problem key -> future of the file's bytes
     timeouts = 0
     cap_checked, cap = 0.0, 1
     try:
@@ -173,10 +173,7 @@ def _run(client, run_dir: Path, todo: list, time_limit: float, bar, jobs, priori
             while pending and len(running) < limit:
                 task = {**pending.pop(0), "attempt": os.urandom(8).hex()}
                 problem_dir(run_dir, task["problem"]).mkdir(parents=True, exist_ok=True)
-                data = scattered.get(task["problem"])
-                if data is None:
-                    data = scattered[task["problem"]] = client.scatter(_problem_bytes(task), hash=False)
-                fut = client.submit(run_remote, task, data, time_limit, pure=False,
+                fut = client.submit(run_remote, task, _problem_bytes(task), time_limit, pure=False,
                                     key=f"rfverify-bench-{task['attempt']}",
                                     priority=int(priority.get(task["problem"], 0)))
                 running[fut] = task
@@ -198,9 +195,6 @@ def _run(client, run_dir: Path, todo: list, time_limit: float, bar, jobs, priori
                                        f"{task_label(task)}: {fut.status}); fix: check the "
                                        "scheduler and re-run the same command (finished runs are "
                                        "reused)")
-                left[task["problem"]] -= 1
-                if left[task["problem"]] == 0 and task["problem"] in scattered:
-                    del scattered[task["problem"]]  # releases the file's bytes on the cluster
                 bar.advance(f"{task_label(task)}: {_outcome(run_dir, task)}")
     finally:
         if running:  # interrupted, SIGTERM or an error: the workers kill the subprocesses
@@ -244,7 +238,9 @@ def _store(run_dir: Path, task: dict, result: dict, time_limit: float) -> int:
     except ValueError:
         rec = None
     if not isinstance(rec, dict) or rec.get("attempt") != task["attempt"]:
-        _record_failure(run_dir, task, "Crashed", crash_message(result.get("exitcode")) + where)
+        last = [line for line in str(result.get("stderr") or "").splitlines() if line.strip()]
+        said = f"; its last words: {last[-1].strip()[:300]}" if last else ""
+        _record_failure(run_dir, task, "Crashed", crash_message(result.get("exitcode")) + where + said)
         return 0
     if rec.get("task_key") != task_key(task):
         _record_failure(run_dir, task, "Error",
@@ -292,7 +288,7 @@ def run_remote(task: dict, problem: bytes, time_limit: float) -> dict:
         out.mkdir()
         spec = work / "task.json"
         spec.write_text(json.dumps({**task, "path": str(path)}), encoding="utf-8")
-        cmd = [sys.executable, "-m", "rfverify.bench.distributed", str(spec), str(out), str(os.getpid())]
+        cmd = [sys.executable, "-c", _BOOTSTRAP, str(spec), str(out), str(os.getpid())]
         with open(work / "stderr.txt", "wb") as err:
             proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                     stderr=err, start_new_session=True, cwd=work)
@@ -315,7 +311,9 @@ def run_remote(task: dict, problem: bytes, time_limit: float) -> dict:
         stem = task_stem(task)
         files = {ext: (out / f"{stem}.{ext}").read_bytes() if (out / f"{stem}.{ext}").is_file() else None
                  for ext in ("json", "npz")}
-        return {"outcome": "exited", "host": host, "exitcode": proc.returncode, "files": files}
+        err_tail = (work / "stderr.txt").read_bytes()[-2000:].decode("utf-8", "replace")
+        return {"outcome": "exited", "host": host, "exitcode": proc.returncode, "files": files,
+                "stderr": err_tail}
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -349,9 +347,25 @@ def _kill_group(proc) -> None:
     proc.wait()
 
 
+_BOOTSTRAP = """\
+import os, sys
+try:  # die with the Dask worker from the first instant (imports take a second)
+    import ctypes, signal
+    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+except (OSError, AttributeError):
+    pass
+if os.getppid() != int(sys.argv[3]):
+    os._exit(1)
+from rfverify.bench.distributed import _child_main
+sys.exit(_child_main(sys.argv[1:]))
+"""
+"""The subprocess's program (``python -c``): PR_SET_PDEATHSIG before the imports, then
+:func:`_child_main`."""
+
+
 def _child_main(argv) -> int:
-    """``python -m rfverify.bench.distributed TASK_JSON OUT_DIR PARENT_PID``: the subprocess a
-    Dask task starts; dies with its parent, then runs the task exactly as a local worker."""
+    """``TASK_JSON OUT_DIR PARENT_PID``: the subprocess a Dask task starts; dies with its
+    parent, then runs the task exactly as a local worker."""
     spec, out_dir, parent = argv
     from .runner import _die_with_parent
     from .tasks import run_task
@@ -361,6 +375,3 @@ def _child_main(argv) -> int:
     run_task(task, out_dir)
     return 0
 
-
-if __name__ == "__main__":  # pragma: no cover - exercised through the Dask tests
-    sys.exit(_child_main(sys.argv[1:]))
