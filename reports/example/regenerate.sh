@@ -14,6 +14,10 @@
 # commit as that solver change (with a regenerated report, whose records are keyed on them).
 set -euo pipefail
 cd "$(dirname "$0")"
+if ! command -v rfverify >/dev/null; then
+    echo "regenerate.sh: rfverify is not on PATH (nothing changed); fix: PATH=\$PWD/.venv/bin:\$PATH bash $0" >&2
+    exit 2
+fi
 rm -rf problems
 for spec in SpheresPile:16 Chute:30 PrimitiveSoup:24 MassRatio:12 RollingExtremes:12 Frictionless:12 \
             Lattice:12 AllOpen:12 AllSticking:12 Millimetre:12; do
