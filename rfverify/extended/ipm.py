@@ -216,6 +216,8 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
             C.quad_pow(n3, k, spec, y.h, y.l, out.h, out.l)
             return out
 
+        if hasattr(backend, "observe"):
+            backend.observe(k, mu, trace["solve_residual"][-1] if trace["solve_residual"] else None)
         tf = time.perf_counter()
         ok = backend.update(ph, pl, pih, pil, spec)
         factor_time += time.perf_counter() - tf

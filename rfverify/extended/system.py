@@ -164,111 +164,32 @@ class ExtendedData:
 
 # ---------------------------------------------------------------------- per-contact blocks
 @njit
-def _jordan_square(ah, al, i):
-    """(x0, x1, x2) = a∘a for the L3 cone at offset i."""
-    s, sl = dd.mul(ah[i], al[i], ah[i], al[i])
-    s, sl = dd.fma_acc(s, sl, ah[i + 1], al[i + 1], ah[i + 1], al[i + 1])
-    s, sl = dd.fma_acc(s, sl, ah[i + 2], al[i + 2], ah[i + 2], al[i + 2])
-    t1, t1l = dd.mul(ah[i], al[i], ah[i + 1], al[i + 1])
-    t2, t2l = dd.mul(ah[i], al[i], ah[i + 2], al[i + 2])
-    return s, sl, 2.0 * t1, 2.0 * t1l, 2.0 * t2, 2.0 * t2l
-
-
-@njit
-def _det_of(x0, x0l, x1, x1l, x2, x2l):
-    sh, sl = dd.mul(x1, x1l, x1, x1l)
-    sh, sl = dd.fma_acc(sh, sl, x2, x2l, x2, x2l)
-    nh, nl = dd.sqrt(sh, sl)
-    l1, l1l = dd.add(x0, x0l, nh, nl)
-    l2, l2l = dd.sub(x0, x0l, nh, nl)
-    d, dl = dd.mul(l1, l1l, l2, l2l)
-    return d, dl, nh, nl
-
-
-@njit
-def _quad_matrix(x0, x0l, x1, x1l, x2, x2l, Qh, Ql):
-    """Q_x = 2xxᵀ − det(x) R as a 3×3 double-double matrix."""
-    d, dl, _, _ = _det_of(x0, x0l, x1, x1l, x2, x2l)
-    xs = ((x0, x0l), (x1, x1l), (x2, x2l))
-    for a in range(3):
-        for b in range(3):
-            t, tl = dd.mul(xs[a][0], xs[a][1], xs[b][0], xs[b][1])
-            t, tl = 2.0 * t, 2.0 * tl
-            if a == b:
-                if a == 0:
-                    t, tl = dd.sub(t, tl, d, dl)
-                else:
-                    t, tl = dd.add(t, tl, d, dl)
-            Qh[a, b] = t
-            Ql[a, b] = tl
-
-
-@njit
-def contact_G(n, n3, kinds, fric, roll, normal, spec, Gh, Gl):
-    """G_c = J_c Q_{p⁻²} J_cᵀ per contact (rows N, T.., R.. of the kept components), with
-    Q_{p⁻²} from its spectral decomposition (positive semidefinite terms only)."""
-    Qh = np.zeros((3, 3))
-    Ql = np.zeros((3, 3))
-    Q2h = np.zeros((3, 3))
-    Q2l = np.zeros((3, 3))
-    for c in range(n):
-        Gh[c, :, :] = 0.0
-        Gl[c, :, :] = 0.0
-        k = kinds[c]
-        if k == 3:  # normal: Q_{p⁻²} = p⁻⁴ on L1
-            t, tl = dd.mul(spec[normal[c], 0], spec[normal[c], 1], spec[normal[c], 0], spec[normal[c], 1])
-            t, tl = dd.mul(t, tl, t, tl)
-            Gh[c, 0, 0], Gl[c, 0, 0] = dd.div(1.0, 0.0, t, tl)
-            continue
-        if k == 0 or k == 1:
-            C.quad_pow_matrix(fric[c], -2, spec, Qh, Ql)
-        if k == 0 or k == 2:
-            C.quad_pow_matrix(roll[c], -2, spec, Q2h, Q2l)
-        if k == 1:
-            Gh[c, :3, :3] = Qh
-            Gl[c, :3, :3] = Ql
-        elif k == 2:
-            Gh[c, :3, :3] = Q2h
-            Gl[c, :3, :3] = Q2l
-        else:
-            # rows (N, T1, T2, R1, R2): heads add up; T and R blocks do not couple
-            Gh[c, 0, 0], Gl[c, 0, 0] = dd.add(Qh[0, 0], Ql[0, 0], Q2h[0, 0], Q2l[0, 0])
-            for a in range(1, 3):
-                Gh[c, 0, a], Gl[c, 0, a] = Qh[0, a], Ql[0, a]
-                Gh[c, a, 0], Gl[c, a, 0] = Qh[a, 0], Ql[a, 0]
-                Gh[c, 0, a + 2], Gl[c, 0, a + 2] = Q2h[0, a], Q2l[0, a]
-                Gh[c, a + 2, 0], Gl[c, a + 2, 0] = Q2h[a, 0], Q2l[a, 0]
-                for b in range(1, 3):
-                    Gh[c, a, b], Gl[c, a, b] = Qh[a, b], Ql[a, b]
-                    Gh[c, a + 2, b + 2], Gl[c, a + 2, b + 2] = Q2h[a, b], Q2l[a, b]
-
-
-@njit
-def _schur_parts(x0, x0l, x1, x1l, x2, x2l):
-    """For x = p² of one cone: P00 = (Q_x)_00 = x0² + ‖x̄‖², c = −2 x0 x̄ / P00, and the 2×2
-    block A⁻¹ = det(x) ŷŷᵀ + det(x)²/P00 x̂x̂ᵀ (x̂ = x̄/‖x̄‖, ŷ ⊥ x̂): two positive terms."""
-    d, dl, nh, nl = _det_of(x0, x0l, x1, x1l, x2, x2l)
-    P, Pl = dd.mul(x0, x0l, x0, x0l)
-    P, Pl = dd.fma_acc(P, Pl, nh, nl, nh, nl)
-    t, tl = dd.mul(-2.0 * x0, -2.0 * x0l, x1, x1l)
-    c1, c1l = dd.div(t, tl, P, Pl)
-    t, tl = dd.mul(-2.0 * x0, -2.0 * x0l, x2, x2l)
-    c2, c2l = dd.div(t, tl, P, Pl)
-    if nh > 0.0:
-        xh1, xh1l = dd.div(x1, x1l, nh, nl)
-        xh2, xh2l = dd.div(x2, x2l, nh, nl)
-    else:
-        xh1, xh1l, xh2, xh2l = 1.0, 0.0, 0.0, 0.0
-    yh1, yh1l, yh2, yh2l = -xh2, -xh2l, xh1, xh1l
-    e, el = dd.mul(d, dl, d, dl)
-    e, el = dd.div(e, el, P, Pl)
+def _schur_parts_spectral(spec, c):
+    """For x = p² of L3 cone c, from the spectral data of p (λ1(x) = a², λ2(x) = b², frame
+    direction v̂): P00 = (Q_x)_00 = (λ1² + λ2²)/2, the vector −2x0x̄/P00 =
+    −(λ1² − λ2²)/(λ1² + λ2²)·v̂, and A⁻¹ = λ1λ2 ŷŷᵀ + 2λ1²λ2²/(λ1² + λ2²) v̂v̂ᵀ (ŷ ⊥ v̂):
+    only sums of positive terms, so no eigenvalue is lost to cancellation."""
+    l1, l1l = dd.mul(spec[c, 0], spec[c, 1], spec[c, 0], spec[c, 1])
+    l2, l2l = dd.mul(spec[c, 2], spec[c, 3], spec[c, 2], spec[c, 3])
+    s1, s1l = dd.mul(l1, l1l, l1, l1l)
+    s2, s2l = dd.mul(l2, l2l, l2, l2l)
+    ss, ssl = dd.add(s1, s1l, s2, s2l)
+    P, Pl = 0.5 * ss, 0.5 * ssl
+    df, dfl = dd.sub(s1, s1l, s2, s2l)  # λ1² − λ2² ≥ 0 (λ1 ≥ λ2): no cancellation in the result's use
+    k, kl = dd.div(df, dfl, ss, ssl)
+    d1h, d1l, d2h, d2l = spec[c, 4], spec[c, 5], spec[c, 6], spec[c, 7]
+    c1, c1l = dd.mul(-k, -kl, d1h, d1l)
+    c2, c2l = dd.mul(-k, -kl, d2h, d2l)
+    det, detl = dd.mul(l1, l1l, l2, l2l)
+    e, el = dd.mul(det, detl, det, detl)
+    e, el = dd.div(2.0 * e, 2.0 * el, ss, ssl)
+    xs = ((d1h, d1l), (d2h, d2l))
+    ys = ((-d2h, -d2l), (d1h, d1l))
     A = np.zeros((2, 2, 2))
-    xs = ((xh1, xh1l), (xh2, xh2l))
-    ys = ((yh1, yh1l), (yh2, yh2l))
     for a in range(2):
         for b in range(2):
             t, tl = dd.mul(ys[a][0], ys[a][1], ys[b][0], ys[b][1])
-            t, tl = dd.mul(t, tl, d, dl)
+            t, tl = dd.mul(t, tl, det, detl)
             u, ul = dd.mul(xs[a][0], xs[a][1], xs[b][0], xs[b][1])
             t, tl = dd.fma_acc(t, tl, u, ul, e, el)
             A[0, a, b] = t
@@ -277,10 +198,10 @@ def _schur_parts(x0, x0l, x1, x1l, x2, x2l):
 
 
 @njit
-def contact_Ginv(n, n3, kinds, fric, roll, normal, ph, pl, Gh, Gl):
-    """G_c⁻¹ per contact in closed form from p (see module docstring of this file's
-    :func:`_schur_parts`): single cone G⁻¹ = Q_{p²}; full contact by the Schur complement on
-    the shared head, s = 1/P_f,00 + 1/P_r,00."""
+def contact_Ginv(n, kinds, fric, roll, normal, spec, Gh, Gl):
+    """G_c⁻¹ per contact in closed form from the spectral data of p: one cone G⁻¹ = Q_{p²};
+    a full contact by the Schur complement on the shared head, s = 1/P_f,00 + 1/P_r,00
+    (see :func:`_schur_parts_spectral`); a normal ray p⁴."""
     Qh = np.zeros((3, 3))
     Ql = np.zeros((3, 3))
     for c in range(n):
@@ -288,21 +209,16 @@ def contact_Ginv(n, n3, kinds, fric, roll, normal, ph, pl, Gh, Gl):
         Gl[c, :, :] = 0.0
         k = kinds[c]
         if k == 3:  # G⁻¹ = p⁴ on L1
-            i = 3 * n3 + (normal[c] - n3)
-            t, tl = dd.mul(ph[i], pl[i], ph[i], pl[i])
+            t, tl = dd.mul(spec[normal[c], 0], spec[normal[c], 1], spec[normal[c], 0], spec[normal[c], 1])
             Gh[c, 0, 0], Gl[c, 0, 0] = dd.mul(t, tl, t, tl)
             continue
         if k == 1 or k == 2:
-            i = 3 * (fric[c] if k == 1 else roll[c])
-            x0, x0l, x1, x1l, x2, x2l = _jordan_square(ph, pl, i)
-            _quad_matrix(x0, x0l, x1, x1l, x2, x2l, Qh, Ql)
+            C.quad_pow_matrix(fric[c] if k == 1 else roll[c], 2, spec, Qh, Ql)
             Gh[c, :3, :3] = Qh
             Gl[c, :3, :3] = Ql
             continue
-        x0, x0l, x1, x1l, x2, x2l = _jordan_square(ph, pl, 3 * fric[c])
-        Pa, Pal, ca1, ca1l, ca2, ca2l, Aa = _schur_parts(x0, x0l, x1, x1l, x2, x2l)
-        x0, x0l, x1, x1l, x2, x2l = _jordan_square(ph, pl, 3 * roll[c])
-        Pb, Pbl, cb1, cb1l, cb2, cb2l, Ab = _schur_parts(x0, x0l, x1, x1l, x2, x2l)
+        Pa, Pal, ca1, ca1l, ca2, ca2l, Aa = _schur_parts_spectral(spec, fric[c])
+        Pb, Pbl, cb1, cb1l, cb2, cb2l, Ab = _schur_parts_spectral(spec, roll[c])
         # 1/s = Pa·Pb / (Pa + Pb)
         num, numl = dd.mul(Pa, Pal, Pb, Pbl)
         den, denl = dd.add(Pa, Pal, Pb, Pbl)
@@ -492,7 +408,7 @@ class DofSpace(_Backend):
 
     def update(self, ph, pl, pih, pil, spec) -> bool:
         d = self.data
-        contact_Ginv(d.n, d.n3, d.kinds, d.fric_cone, d.roll_cone, d.normal_cone, ph, pl, self.Gih, self.Gil)
+        contact_Ginv(d.n, d.kinds, d.fric_cone, d.roll_cone, d.normal_cone, spec, self.Gih, self.Gil)
         Sh = np.zeros(self.chol.nnz_upper)
         Sl = np.zeros(self.chol.nnz_upper)
         _scatter_add(self.M_pos, self.M_vals[0], self.M_vals[1], Sh, Sl)
@@ -827,14 +743,67 @@ class ContactSpace(_Backend):
         return (dvh, dvl), (drh, drl)
 
 
+class Hybrid(_Backend):
+    """The dof-space form while it is accurate, then the contact-space form.
+
+    The dof-space Schur complement M + H̃ᵀG⁻¹H̃ is 7–12× cheaper to factor on rigid-body
+    problems (1.5e7 against 1.1e8 flops on a 769-contact SpheresPile, 2.0e8 against 2.6e9 on a
+    2269-contact random problem), but its ill-conditioning is not diagonal: H̃ᵀG⁻¹H̃ carries
+    1/μ along sticking contacts, and on that pile its primal residual blew up once μ fell below
+    about 1e-9 of its starting value (μ ≈ 2e-21), while the scaled contact-space form reached
+    μ = 1e-33.  So the run switches for good when μ falls below ``switch`` × its first value,
+    or as soon as a dof-space solve refines badly (relative residual above ``bad_solve``).
+    """
+
+    def __init__(self, data: ExtendedData, switch: float = 1e-6, bad_solve: float = 1e-22,
+                 dof: DofSpace | None = None, contact: ContactSpace | None = None):
+        self.dof = dof or DofSpace(data)
+        self.contact = contact or ContactSpace(data)
+        self.current = self.dof
+        self.switch = switch
+        self.bad_solve = bad_solve
+        self._mu0 = None
+        self.switched_at = None
+        self.name = "hybrid: dof-space, then contact-space"
+
+    @property
+    def factorisations(self):
+        return self.dof.factorisations + self.contact.factorisations
+
+    def observe(self, k: int, mu: float, solve_residual: float | None):
+        """Called by the driver once per iteration (before the factorisation)."""
+        if self._mu0 is None:
+            self._mu0 = mu
+        if self.current is self.dof and (mu < self.switch * self._mu0
+                                          or (solve_residual is not None and solve_residual > self.bad_solve)):
+            self.current = self.contact
+            self.switched_at = k
+
+    def update(self, ph, pl, pih, pil, spec) -> bool:
+        ok = self.current.update(ph, pl, pih, pil, spec)
+        if not ok and self.current is self.dof:  # lost definiteness: switch now
+            self.current = self.contact
+            ok = self.current.update(ph, pl, pih, pil, spec)
+        return ok
+
+    def solve(self, a, t):
+        return self.current.solve(a, t)
+
+
 def choose_backend(data: ExtendedData, backend: str = "auto"):
-    """The back end asked for.  ``auto`` is the contact-space form: the dof-space form factors
-    cheaper on rigid-body piles (1.5e7 against 1.3e8 flops on a 769-contact SpheresPile) but
-    its ill-conditioning is not diagonal — H̃ᵀG⁻¹H̃ carries 1/μ along sticking contacts — and on
-    that pile its primal residual blew up at μ ≈ 1e-20, while the contact-space form reached
-    μ = 1e-33 with residuals at 1e-32."""
+    """The back end asked for; ``auto`` is :class:`Hybrid` when the dof-space form factors at
+    least twice as cheap as the contact-space form and its contacts touch few dofs (rigid
+    bodies), else the contact-space form alone (dense lifted local problems, finite elements)."""
     if backend == "dof":
         return DofSpace(data, max_local_dofs=10**9)
-    if backend in ("contact", "auto"):
+    if backend == "contact":
         return ContactSpace(data)
-    raise ValueError(f"backend {backend!r} is not one of auto, contact, dof")
+    if backend == "hybrid":
+        return Hybrid(data)
+    if backend != "auto":
+        raise ValueError(f"backend {backend!r} is not one of auto, hybrid, contact, dof")
+    contact = ContactSpace(data)
+    dof = DofSpace(data)
+    if not dof.too_dense and dof.flops() <= 0.5 * contact.flops():
+        return Hybrid(data, dof=dof, contact=contact)
+    return contact

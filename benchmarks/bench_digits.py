@@ -1,0 +1,156 @@
+"""Cost and outcome of the proven k-digit path (``solve --digits``) at FCLIB sizes.
+
+For each problem: the double solve alone (timed separately), then the whole k-digit path
+(double solve, double-double phase, proof), the solution and certificate written to an FCLIB
+file, and the certificate rechecked from that file alone in exact arithmetic (as
+``rfverify certify PROBLEM --solution FILE`` does).  Prints one row per problem:
+
+    contacts, dofs, double s, extended s, proof s, total s, total/double,
+    recheck s (recheck/total), proven digits of v / u / Hr / r (r: "–" where not unique)
+
+Not a test: timings on a shared 2-core machine are noisy; compare ratios from one run.
+
+    python benchmarks/bench_digits.py                       # the issue's problem set (generated once into --cache)
+    python benchmarks/bench_digits.py --files A.hdf5 B.hdf5 # your own files
+    python benchmarks/bench_digits.py --quick               # small problems only
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import rfverify
+from rfverify.io import save
+from rfverify.io.certificate import read_point, write_certificate
+from rfverify.problem import StoredSolution
+
+# (label, scene, size, count, which problem of the trace): published-size scenes as the issue lists them
+SCENES = [
+    ("SpheresPile", "SpheresPile", None, 1, 0),
+    ("Chute", "Chute", 700, 1, 0),
+    ("PrimitiveSoup", "PrimitiveSoup", None, 1, 0),
+    ("Lattice (hyperstatic)", "Lattice", 100, 1, 0),
+    ("MassRatio 1e6", "MassRatio", None, 1, 0),
+]
+
+
+def scene_file(cache: Path, scene: str, size, count: int, index: int) -> Path:
+    from rfverify.scenes import generate, save_collection
+
+    tag = f"{scene}-{size or 'default'}-{count}"
+    folder = cache / tag
+    files = sorted(folder.glob("*.hdf5")) if folder.is_dir() else []
+    if not files:
+        folder.mkdir(parents=True, exist_ok=True)
+        kwargs = {} if size is None else {"size": size}
+        problems = generate(scene, count=count, seed=0, **kwargs)
+        save_collection(problems, folder)
+        files = sorted(folder.glob("*.hdf5"))
+    return files[min(index, len(files) - 1)]
+
+
+def dense_local_problem(n_target: int = 260, seed: int = 0):
+    """A lifted local problem with a dense W: the Delassus operator W = Hᵀ M⁻¹ H of a random
+    rigid-body problem with ``n_target`` contacts, q = Hᵀ M⁻¹ f + w, lifted back with
+    W = GᵀG (M = I, H = G dense), as Siconos local files are."""
+    from rfverify.io.siconos_dat import LocalProblem, lift_local
+    from rfverify.random_problems import random_problem
+
+    base = random_problem(n_target // 2, n_target, seed=seed)
+    Minv_H = np.linalg.solve(base.M_sym.toarray(), base.H.toarray())
+    W = base.H.toarray().T @ Minv_H
+    W = (W + W.T) / 2
+    q = base.H.T @ np.linalg.solve(base.M_sym.toarray(), base.f) + base.w
+    problem, _report = lift_local(LocalProblem(W=W, q=q, mu=base.mu, mu_r=base.mu_r))
+    return problem
+
+
+def problem_set(args):
+    if args.files:
+        for f in args.files:
+            yield Path(f).stem, rfverify.load(f)
+        return
+    from rfverify.random_problems import random_problem
+
+    cache = Path(args.cache)
+    if args.quick:
+        yield "bundled:chute", rfverify.load("bundled:chute")
+        yield "random 200", random_problem(100, 200, seed=1)
+        yield "local dense 60", dense_local_problem(60)
+        return
+    for label, scene, size, count, index in SCENES:
+        yield label, rfverify.load(scene_file(cache, scene, size, count, index))
+    yield "random 2269", random_problem(1100, 2269, seed=1)
+    yield "local dense W", dense_local_problem(260)
+
+
+def run_one(label, problem, digits: int, workdir: Path):
+    t0 = time.perf_counter()
+    double = rfverify.solve(problem, tol=1e-10)
+    t_double = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    out = rfverify.solve_to_digits(problem, digits=digits)
+    t_path = time.perf_counter() - t1
+    path = workdir / f"{abs(hash(label))}.h5"
+    save(problem.with_solution(StoredSolution(v=out.v, u=out.u, r=out.r)), path,
+         extra=lambda fh: write_certificate(fh, out.certificate))
+    t2 = time.perf_counter()
+    stored = rfverify.load(path).solution
+    recheck = rfverify.certify(problem, stored, digits=digits, point=read_point(path))
+    t_recheck = time.perf_counter() - t2
+    q = out.certificate.quantities
+
+    def dig(name):
+        x = q.get(name)
+        if x is None or x.mode == "information":
+            return "–"
+        if x.mode == "absolute":
+            return f"0±{x.abs_bound:.0e}"
+        return "–" if x.digits is None else f"{x.digits:.1f}"
+
+    t = out.timings
+    return {"label": label, "n": problem.n_contacts, "m": problem.n_dofs, "double": t_double,
+            "extended": t["setup"] + t["extended"], "proof": t["proof"], "total": t_path,
+            "ratio": t_path / t_double, "recheck": t_recheck, "recheck_frac": t_recheck / t_path,
+            "certified": out.success, "recheck_certified": recheck.certified,
+            "digits": "/".join(dig(k) for k in ("v", "u", "Hr", "r")), "double_status": str(double.status),
+            "ext_iters": out.extended.nit, "verdict": out.certificate.verdict}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--files", nargs="*", default=[])
+    ap.add_argument("--digits", type=int, default=10)
+    ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "rfverify-bench-digits"))
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+    rows = []
+    head = (f"{'problem':<22} {'n':>5} {'m':>5} {'double':>7} {'ext':>7} {'proof':>6} {'total':>7} "
+            f"{'×dbl':>6} {'recheck':>7} {'rc/tot':>6} {'proven':>5}  digits v/u/Hr/r")
+    print(head)
+    print("-" * len(head))
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, problem in problem_set(args):
+            r = run_one(label, problem, args.digits, Path(tmp))
+            rows.append(r)
+            print(f"{r['label']:<22} {r['n']:>5} {r['m']:>5} {r['double']:>7.2f} {r['extended']:>7.2f} "
+                  f"{r['proof']:>6.2f} {r['total']:>7.2f} {r['ratio']:>6.1f} {r['recheck']:>7.2f} "
+                  f"{r['recheck_frac']:>6.1%} {'yes' if r['certified'] and r['recheck_certified'] else 'NO':>5}  "
+                  f"{r['digits']}", flush=True)
+            if not r["certified"]:
+                print(f"    {r['verdict']}", flush=True)
+    big = [r for r in rows if r["n"] >= 500]
+    if big:
+        print(f"\n≥ 500 contacts: median total/double = {np.median([r['ratio'] for r in big]):.1f}×, "
+              f"max recheck/total = {max(r['recheck_frac'] for r in big):.1%}")
+    return 0 if all(r["certified"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
