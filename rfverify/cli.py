@@ -44,9 +44,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="rfverify",
         description="Verification-focused toolkit for rolling-friction contact problems "
-                    "(FCLIB conventions: M v = H r + f, u = Hᵀ v + w, K* ∋ u ⊥ r ∈ K).",
-        epilog="Exit codes: 0 success, 1 tolerance not reached (solve) or not certified, 2 bad "
-               "input or arguments, 3 internal error, 141 stdout closed early (e.g. | head). "
+                    "(FCLIB conventions: M v = H r + f, u = Hᵀ v + w, K* ∋ u ⊥ r ∈ K). "
+                    "Conventions, cones, the algorithm, the stopping criterion and what a "
+                    "certificate proves: docs/DESIGN.md in the source repository; a walk-through "
+                    "with your own file: docs/TUTORIAL.md.",
+        epilog="Exit codes: 0 success, 1 tolerance not reached (solve) or not certified "
+               "(solve --digits, certify), 2 bad input or arguments, 3 internal error, 130 "
+               "interrupted, 141 stdout closed early (e.g. | head), 143 bench stopped by SIGTERM "
+               "(per command: README, 'Guarantees'). "
                "--json output is strict JSON: non-finite numbers are null.",
     )
     parser.add_argument("--version", action="version", version=f"rfverify {__version__}")
@@ -75,9 +80,11 @@ def build_parser() -> argparse.ArgumentParser:
     sol = sub.add_parser(
         "solve", help="solve a problem with Algorithm 1 (or the Clarabel peer)",
         description="Solve the convex relaxation of a rolling-friction problem with the "
-                    "mixed-precision interior-point method (Algorithm 1, DESIGN §4). Exit code "
-                    "0 only when max(pinfeas, dinfeas, mu) <= --tol was reached; 1 when the "
-                    "solver stopped without reaching it (the status says why).",
+                    "mixed-precision interior-point method (Algorithm 1, docs/DESIGN.md §4). "
+                    "Exit code 0 only when the criterion (docs/DESIGN.md §4.5: residuals of the "
+                    "returned v, u, r scaled by their terms and by the data) is <= --tol; 1 when "
+                    "the solver stopped without reaching it (the status says why). The paper's "
+                    "pinfeas, dinfeas and mu are printed beside it.",
     )
     sol.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     sol.add_argument("--method", choices=METHODS, default="jqinv",
@@ -85,7 +92,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "reduced_factored (16), noscaling (6), or clarabel, the same problem "
                           "handed to Clarabel (default: %(default)s)")
     sol.add_argument("--tol", type=_tolerance, default=1e-10, metavar="T",
-                     help="stop when max(pinfeas, dinfeas, mu) <= T (default: %(default)g)")
+                     help="stop when the criterion of docs/DESIGN.md §4.5 is <= T (default: "
+                          "%(default)g)")
     sol.add_argument("--max-iter", type=_positive_int, default=100, metavar="K",
                      help="iteration limit (default: %(default)s)")
     sol.add_argument("--out", metavar="SOL.h5", type=_out_path,
@@ -101,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     sol.add_argument("--digits", type=_digits, default=None, metavar="K",
                      help="produce a solution proven right to K significant digits (1-15): the "
                           "double solve, then Algorithm 1 continued in double-double until the "
-                          "rigorous error bound of DESIGN section 6 proves K digits of v, u and Hr "
+                          "rigorous error bound of docs/DESIGN.md §6 proves K digits of v, u and Hr "
                           "(and r where it is unique); exit code 0 only when proven. With --out the "
                           "file also gets /certificate (the point and the bound, to recheck with "
                           "'rfverify certify')")
@@ -114,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     cert = sub.add_parser(
         "certify", help="prove how many digits of a solution are right (a rigorous error bound)",
         description="Prove a lower bound on the correct significant digits of a solution (v, u, r) "
-                    "of the convex relaxation (DESIGN section 6): an extended-precision point near "
+                    "of the convex relaxation (docs/DESIGN.md §6): an extended-precision point near "
                     "the solution set (stored in the solution file by 'solve --digits --out', or "
                     "computed by a double solve and double-double iterations) is evaluated in "
                     "exact arithmetic, and the bound "
