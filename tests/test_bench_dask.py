@@ -42,39 +42,54 @@ def _dask(*args, cwd, log):
                             stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
 
 
-@pytest.fixture(scope="module")
-def cluster(tmp_path_factory):
-    """A scheduler and one `dask worker` with two worker processes (one thread each), all on
-    127.0.0.1, started as a user would start them."""
-    where = tmp_path_factory.mktemp("dask")
-    log = open(where / "cluster.log", "wb")
-    procs = [_dask("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-                   "--scheduler-file", str(where / "scheduler.json"), cwd=where, log=log)]
-    try:
-        deadline = time.monotonic() + 60
-        while not (where / "scheduler.json").exists():
-            assert time.monotonic() < deadline and procs[0].poll() is None, (where / "cluster.log").read_text()
-            time.sleep(0.1)
-        time.sleep(0.2)  # the file is written in one go, but let it land
-        address = json.loads((where / "scheduler.json").read_text())["address"]
-        procs.append(_dask("worker", address, "--nworkers", "2", "--nthreads", "1", "--no-dashboard",
-                           "--host", "127.0.0.1", "--local-directory", str(where / "scratch"),
-                           cwd=where, log=log))
-        with distributed.Client(address, timeout=30) as client:
-            client.wait_for_workers(2, timeout=60)
-            assert len(client.scheduler_info()["workers"]) == 2
-        yield address
-    finally:
-        for proc in reversed(procs):
+class Cluster:
+    """`dask scheduler` and `dask worker ADDRESS --nworkers K --nthreads 1` on 127.0.0.1, started
+    as a user would start them; ``stop()`` ends exactly these processes (and their children)."""
+
+    def __init__(self, where: Path, workers: int):
+        where.mkdir(parents=True, exist_ok=True)
+        self.log = open(where / "cluster.log", "wb")
+        self.procs = [_dask("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                            "--scheduler-file", str(where / "scheduler.json"), cwd=where, log=self.log)]
+        try:
+            deadline = time.monotonic() + 60
+            while not (where / "scheduler.json").exists():
+                assert time.monotonic() < deadline and self.procs[0].poll() is None, \
+                    (where / "cluster.log").read_text()
+                time.sleep(0.1)
+            time.sleep(0.2)  # the file is written in one go, but let it land
+            self.address = json.loads((where / "scheduler.json").read_text())["address"]
+            self.procs.append(_dask("worker", self.address, "--nworkers", str(workers), "--nthreads", "1",
+                                    "--no-dashboard", "--host", "127.0.0.1", "--local-directory",
+                                    str(where / "scratch"), cwd=where, log=self.log))
+            with distributed.Client(self.address, timeout=30) as client:
+                client.wait_for_workers(workers, timeout=60)
+                assert len(client.scheduler_info()["workers"]) == workers
+        except BaseException:
+            self.stop()
+            raise
+
+    def stop(self):
+        for proc in reversed(self.procs):
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGTERM)
-        for proc in procs:
+        for proc in self.procs:
             try:
                 proc.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait()
-        log.close()
+        self.log.close()
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    """A scheduler and two worker processes (one thread each) on 127.0.0.1."""
+    c = Cluster(tmp_path_factory.mktemp("dask"), workers=2)
+    try:
+        yield c.address
+    finally:
+        c.stop()
 
 
 def _executed_per_worker(address) -> list[int]:
@@ -194,10 +209,10 @@ def test_killing_the_bench_stops_its_tasks_on_the_workers(cluster, tmp_path):
 def test_a_dead_worker_takes_its_task_process_along_and_the_task_is_retried(cluster, tmp_path):
     coll = tmp_path / "c"
     coll.mkdir()
-    save(random_problem(200, 600, seed=3), coll / "big.hdf5")
+    save(random_problem(600, 1800, seed=3), coll / "big.hdf5")  # its solve takes seconds
     cmd = [sys.executable, "-m", "rfverify", "bench", str(coll), "--out", str(tmp_path / "run"),
-           "--methods", "jqinv", "--tol", "1e-8", "--digits", "0", "--quiet", "--json",
-           "--scheduler", cluster]
+           "--methods", "jqinv", "--tol", "1e-8", "--digits", "0", "--no-trajectories", "--quiet",
+           "--json", "--scheduler", cluster]
     bench = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and not _task_processes():
@@ -214,11 +229,52 @@ def test_a_dead_worker_takes_its_task_process_along_and_the_task_is_retried(clus
     assert task not in _task_processes(), "the task process outlived its worker"
     out, err = bench.communicate(timeout=120)
     assert bench.returncode == 0, err.decode()
-    assert json.loads(out)["ran"] == 2  # the solve and the trajectory, one of them run twice
+    assert json.loads(out)["ran"] == 1  # its one task, run twice
     for path in (tmp_path / "run" / "runs").rglob("*.json"):
         assert json.loads(path.read_text())["status"] not in ("Crashed", "Error", "Timeout"), path.name
     with distributed.Client(cluster, timeout=30) as client:
         client.wait_for_workers(2, timeout=60)  # the nanny's new worker joined: cluster intact
+
+
+def _bench_two_big_problems(tmp_path, address):
+    coll = tmp_path / "c"
+    coll.mkdir()
+    save(random_problem(200, 600, seed=3), coll / "big.hdf5")
+    save(random_problem(200, 600, seed=4), coll / "big2.hdf5")
+    cmd = [sys.executable, "-m", "rfverify", "bench", str(coll), "--out", str(tmp_path / "run"),
+           "--methods", "jqinv", "--tol", "1e-8", "--digits", "0", "--quiet", "--scheduler", address]
+    bench = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not _task_processes():
+        time.sleep(0.02)
+    assert _task_processes() and bench.poll() is None, "no task running"
+    return bench
+
+
+def test_sigterm_stops_the_bench_with_143_and_its_tasks(cluster, tmp_path):
+    bench = _bench_two_big_problems(tmp_path, cluster)
+    bench.send_signal(signal.SIGTERM)
+    bench.wait(timeout=30)
+    assert bench.returncode == 128 + signal.SIGTERM
+    assert bench.stderr.read() == b""
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and _task_processes():
+        time.sleep(0.05)
+    assert not _task_processes()
+
+
+def test_losing_the_scheduler_is_one_line_exit_2(tmp_path):
+    private = Cluster(tmp_path / "cluster", workers=1)
+    try:
+        bench = _bench_two_big_problems(tmp_path, private.address)
+        os.killpg(private.procs[0].pid, signal.SIGKILL)  # the scheduler dies
+        bench.wait(timeout=60)
+        err = bench.stderr.read().decode()
+    finally:
+        private.stop()
+    assert bench.returncode == 2
+    assert err.count("\n") == 1 and "lost the connection to the Dask scheduler" in err, err
+    assert "re-run the same command" in err
 
 
 def test_unreachable_scheduler_is_one_line_exit_2(tmp_path, capsys, monkeypatch):

@@ -87,15 +87,9 @@ def run_on_cluster(scheduler: str, run_dir: Path, todo: list, time_limit: float,
     once per finished task.  At most ``jobs`` tasks are in flight (default: twice the
     cluster's worker threads, so the queue stays short and the order is kept).  Returns the
     number of timeouts."""
-    import logging
-
     from distributed import Client
 
-    # The cluster's own log lines (reconnects, closing comms) are not for the bench's stderr.
-    loggers = [logging.getLogger(n) for n in ("distributed", "tornado")]
-    levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.CRITICAL)
+    quiet = _QuietLogs()  # the cluster's own log lines (reconnects, tracebacks) are not for stderr
     client = None
     try:
         try:
@@ -114,8 +108,31 @@ def run_on_cluster(scheduler: str, run_dir: Path, todo: list, time_limit: float,
                 client.close(timeout=10)
             except Exception:  # noqa: BLE001 - closing a dead connection is not an error
                 pass
-        for lg, level in zip(loggers, levels):
-            lg.setLevel(level)
+        quiet.restore()
+
+
+class _QuietLogs:
+    """Silence the ``distributed``/``tornado`` loggers (and the handlers Dask attaches) for the
+    life of the bench; the bench reports what matters in its own one-line errors and records."""
+
+    def __init__(self):
+        import logging
+
+        manager = logging.Logger.manager
+        names = ["distributed", "tornado"] + [n for n in list(manager.loggerDict)
+                                             if n.startswith(("distributed.", "tornado."))]
+        self.saved = []
+        for name in names:
+            lg = logging.getLogger(name)
+            self.saved.append((lg, lg.level))
+            lg.setLevel(logging.CRITICAL + 1)
+            for h in lg.handlers:
+                self.saved.append((h, h.level))
+                h.setLevel(logging.CRITICAL + 1)
+
+    def restore(self):
+        for obj, level in reversed(self.saved):
+            obj.setLevel(level)
 
 
 def _check_workers(client, scheduler: str, sample: dict) -> None:
@@ -134,14 +151,15 @@ def _check_workers(client, scheduler: str, sample: dict) -> None:
         if isinstance(got, BaseException):
             bad.append(f"{addr} cannot run rfverify ({type(got).__name__}: {' '.join(str(got).split())[:120]})")
         elif got.get("task_key") != want:
-            bad.append(f"{addr} ({got.get('host')}) runs rfverify {got.get('rfverify')} with other "
-                       "solver defaults or version")
+            bad.append(f"{addr} on {got.get('host')} computes other task keys (its rfverify "
+                       f"{got.get('rfverify')} differs in version or solver defaults)")
     if bad:
         from .. import __version__
 
         raise ClusterError(f"--scheduler {scheduler}: worker(s) {'; '.join(bad)}; this bench runs "
                            f"rfverify {__version__}; fix: install the same rfverify (with the "
-                           f"distributed extra) on every worker, or stop those workers")
+                           "distributed extra) on every worker and restart the workers (a running "
+                           "worker keeps the code it imported), or stop those workers")
 
 
 def worker_facts(sample: dict) -> dict:
