@@ -105,7 +105,10 @@ def build_parser() -> argparse.ArgumentParser:
     sol.add_argument("--json", action="store_true",
                      help="print status, iterations, time and final residuals as JSON")
     sol.add_argument("--verbose", action="store_true",
-                     help="print a settings header and the per-iteration table")
+                     help="print a settings header and each iteration as it happens (every independent "
+                          "component, labelled); with --method clarabel, Clarabel's own log")
+    sol.add_argument("--time-limit", type=_positive_float, default=None, metavar="S",
+                     help="stop after S seconds with the best iterate (status MaxTime, exit 1)")
     sol.add_argument("--digits", type=_digits, default=None, metavar="K",
                      help="produce a solution proven right to K significant digits (1-15): the "
                           "double solve, then Algorithm 1 continued in double-double until the "
@@ -512,47 +515,9 @@ def _dumps(obj, **kwargs) -> str:
 
 
 # ---------------------------------------------------------------------- solve
-def _header(problem, result_settings, method, lp_counts) -> str:
-    st = result_settings
-    lines = [
-        "-" * 78,
-        f"rfverify {__version__}: Algorithm 1 (Mehrotra predictor-corrector, NT scaling)"
-        if method != "clarabel" else f"rfverify {__version__}: Clarabel peer",
-        "-" * 78,
-        f"problem:  {problem.title or problem.source}",
-        f"          m = {problem.n_dofs} dofs, n = {problem.n_contacts} contacts, "
-        f"nnz(M) = {problem.M.nnz}, nnz(H) = {problem.H.nnz}",
-        "cones:    " + ", ".join(f"{v} {k}" for k, v in lp_counts.items() if v)
-        + " (full: L3×L3, coulomb/rolling: L3, normal: L1)",
-        f"settings: method = {method}, tol = {st.tol:g}, max_iter = {st.max_iter}, "
-        f"sigma_rule = {st.sigma_rule}, gamma0 = {st.gamma0}",
-        f"          extended: jordan = {st.extended_jordan}, residuals = {st.extended_residuals}, "
-        f"refinement = {st.refine_extended} (max {st.refine_max} steps)",
-        f"          static_reg = {st.static_reg:g}, adaptive_reg = {st.adaptive_reg}, "
-        f"stall_iterations = {st.stall_iterations}",
-        f"presolve: reduce_cones = {st.reduce_cones}, drop_free_bodies = {st.drop_free_bodies}",
-    ]
-    return "\n".join(lines)
-
-
-def _table(trace) -> str:
-    cols = ("iter", "pinfeas", "dinfeas", "mu", "sigma", "alpha_aff", "alpha", "min_lam2_z",
-            "min_lam2_s", "max_cond_Qp", "solve_residual", "time")
-    head = " ".join(f"{c[:10]:>10}" for c in cols)
-    rows = [head, "-" * len(head)]
-    for k in range(len(trace.get("iter", []))):
-        cells = []
-        for c in cols:
-            val = trace[c][k]
-            cells.append(f"{int(val):>10d}" if c == "iter" else f"{float(val):>10.2e}")
-        rows.append(" ".join(cells))
-    return "\n".join(rows)
-
-
 def cmd_solve(args) -> int:
     import time
 
-    from .lifting import lift
     from .solver import solve
 
     problem = _load(args)
@@ -567,15 +532,13 @@ def cmd_solve(args) -> int:
     if args.digits is not None:
         return _solve_digits(args, problem, options)
     t0 = time.perf_counter()
+    # --verbose: the solver prints its header and each iteration as it happens (Clarabel its own log).
+    options["verbose"] = bool(args.verbose and not args.json)
+    if args.time_limit is not None:
+        options["time_limit"] = args.time_limit
     with _recorded_warnings() as caught:
         result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, **options)
     wall = time.perf_counter() - t0
-    if args.verbose and not args.json:
-        print(_header(problem, result.settings, args.method,
-                      lift(problem, reduce_cones=result.settings.reduce_cones).reduction_counts()))
-        if result.trace:
-            print(_table(result.trace))
-        print("-" * 78)
     if args.out:
         _write_solution_file(args, problem, result.v, result.u, result.r)
     summary = {
@@ -586,6 +549,11 @@ def cmd_solve(args) -> int:
         "pinfeas": result.pinfeas, "dinfeas": result.dinfeas, "mu": result.mu,
         "presolve": result.presolve, "out": args.out,
         "numerical_warnings": _warning_summary(caught),
+        "timings": result.timings,
+        "trace": {k: np.asarray(v).tolist() for k, v in result.trace.items()},
+        "component_traces": [{"status": str(c["status"]), "message": c["message"], "nit": c["nit"],
+                              "trace": {k: np.asarray(v).tolist() for k, v in c["trace"].items()}}
+                             for c in result.extras.get("component_runs", [])],
     }
     if args.json:
         print(_dumps(summary, indent=2))

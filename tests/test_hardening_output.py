@@ -42,12 +42,13 @@ def test_dumps_turns_non_finite_numbers_into_null():
 
 @pytest.fixture(scope="module")
 def overflowing(tmp_path_factory):
-    """A valid problem whose 1e308 mass overflows the solver's arithmetic."""
+    """A valid problem whose 1e308 mass and 1e200-scaled H overflow the solver's arithmetic
+    (squares of H̃ entries exceed the float64 range)."""
     p = random_problem(2, 3, seed=2)
     M = p.M.toarray()
     M[0, 0] = 1e308
     path = tmp_path_factory.mktemp("big") / "big.hdf5"
-    write_fclib(rfverify.Problem.from_arrays(M, p.H, p.f, p.w, p.mu, p.mu_r), path)
+    write_fclib(rfverify.Problem.from_arrays(M, p.H * 1e200, p.f, p.w, p.mu, p.mu_r), path)
     return path
 
 

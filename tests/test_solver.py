@@ -29,7 +29,7 @@ def recheck_file(path, problem, dps=40):
 
     dynamics ‖Mv − Hr − f‖∞/max(‖Mv‖, ‖Hr‖, ‖f‖, ‖M‖‖v‖); velocity ‖u − Hᵀv − w‖∞/U;
     cone violations of r ∈ K over R and of u ∈ K* over U; complementarity |rᵀu|/E,
-    E = max(fᵀM⁻¹f, vᵀMv);
+    E = max(fᵀM⁻¹f, ‖w‖²/max_k Σ_j H_jk²/M_jj);
     U = max(‖u‖, ‖Hᵀv‖, ‖w‖, ‖Hᵀ‖‖v‖, ‖HᵀM⁻¹f + w‖), R = max(‖r‖, ‖f‖/max_k‖h_k‖₂).
     """
     from scipy.sparse.linalg import splu
@@ -69,7 +69,9 @@ def recheck_file(path, problem, dps=40):
         u_scale = max(amax(U), amax(HTv), amax(w), nHT * amax(V), mpf(u0))
         r_scale = max(amax(R), mpf(r0))
         vel = amax([a - b - c for a, b, c in zip(U, HTv, w)]) / u_scale
-        energy = max(abs(float(problem.f @ v_free)), abs(mpmath.fsum(a * b for a, b in zip(V, Mv))))
+        d = problem.M_sym.diagonal()
+        W_diag = np.asarray(problem.H.power(2).multiply(1.0 / d[:, None]).sum(axis=0)).ravel()
+        energy = max(abs(float(problem.f @ v_free)), float(np.max(np.abs(problem.w))) ** 2 / float(W_diag.max()))
         comp = abs(mpmath.fsum(a * b for a, b in zip(U, R))) / energy
         primal, dual = mpf(0), mpf(0)
         for i in range(problem.n_contacts):
@@ -322,3 +324,68 @@ def test_always_regularising_stalls_on_redundant_contacts():
     adaptive = solve(problem, method="jqinv")
     assert fixed.status is Status.INSUFFICIENT_PROGRESS and fixed.pinfeas > 1e-3 and fixed.criterion > 1e-9
     assert adaptive.success and adaptive.extras["unregularised_factorisations"] > 0
+
+class _ProtocolOnly:
+    """A form seen through the KKTSolver protocol only: any other attribute access fails."""
+
+    ALLOWED = {"name", "symmetric", "update", "solve", "factor_count", "unregularised_count", "failure"}
+
+    def __init__(self, inner):
+        object.__setattr__(self, "_inner", inner)
+
+    def __getattr__(self, name):
+        if name not in self.ALLOWED:
+            raise AssertionError(f"the driver used {name!r}, which is not part of the KKTSolver protocol")
+        return getattr(self._inner, name)
+
+
+@pytest.mark.parametrize("method", FORMS)
+def test_driver_uses_the_kkt_back_end_only_through_its_protocol(method, monkeypatch):
+    from rfverify.solver import ipm, kkt
+
+    wrapped = {name: (lambda cls: (lambda *a, **k: _ProtocolOnly(cls(*a, **k))))(cls) for name, cls in kkt.FORMS.items()}
+    monkeypatch.setattr(ipm, "FORMS", wrapped)
+    res = solve(rfverify.load("bundled:chute"), method=method)
+    assert res.success, res.message
+
+
+@pytest.mark.parametrize("method", ["jqinv", "qp2", "noscaling"])
+def test_backward_error_basis_is_the_unreduced_operator(method):
+    """Every form reports its refinement backward error against the block-row norms of the
+    same unreduced operator A = [[M, −H̃ᵀ, 0], [−H̃, 0, J], [0, Q_{p⁻¹}Jᵀ, Q_p]] (noscaling:
+    [0, Arw(z)Jᵀ, Arw(s)]); here A is formed densely and its norms computed directly."""
+    from rfverify import jordan
+    from rfverify.lifting import lift
+    from rfverify.solver.cones import ProductCone
+    from rfverify.solver.kkt import FORMS as KFORMS, ScalingPoint
+
+    problem = rfverify.load("bundled:cube")
+    res = solve(problem, tol=1e-6)
+    lp = lift(problem)
+    cones = ProductCone(lp.n3, lp.n1)
+    z = np.asarray(res.extras["z"], dtype=np.float64)
+    s = lp.J.T @ np.asarray(res.extras["r_t"], dtype=np.float64)
+    system = KFORMS[method](problem.M_sym, lp.H_t, lp.J, cones)
+    if method == "noscaling":
+        point = ScalingPoint(z=z, s=s)
+        blk = lambda x: [jordan.arrow(x[3 * c:3 * c + 3]) for c in range(lp.n3)]  # noqa: E731
+        Q1, Q2 = blk(z), blk(s)  # third row: [0, Arw(z) Jᵀ, Arw(s)]
+    else:
+        p, p_inv, _, _ = cones.nt_scaling(z, s)
+        point = ScalingPoint(p=p, p_inv=p_inv)
+        Q1 = [jordan.quad_matrix(p_inv[3 * c:3 * c + 3]) for c in range(lp.n3)]
+        Q2 = [jordan.quad_matrix(p[3 * c:3 * c + 3]) for c in range(lp.n3)]
+    assert lp.n1 == 0 and system.update(point)
+    m, nk, nz = problem.n_dofs, lp.nk, lp.nz
+    A = np.zeros((m + nk + nz, m + nk + nz))
+    A[:m, :m] = problem.M_sym.toarray()
+    A[:m, m:m + nk] = -lp.H_t.T.toarray()
+    A[m:m + nk, :m] = -lp.H_t.toarray()
+    A[m:m + nk, m + nk:] = lp.J.toarray()
+    from scipy.linalg import block_diag
+
+    A[m + nk:, m:m + nk] = block_diag(*Q1) @ lp.J.T.toarray()
+    A[m + nk:, m + nk:] = block_diag(*Q2)
+    rows = np.abs(A).sum(axis=1)
+    direct = [rows[:m].max(), rows[m:m + nk].max(), rows[m + nk:].max()]
+    assert np.allclose(system.block_norms, direct, rtol=1e-12), (system.block_norms, direct)

@@ -12,13 +12,13 @@ from ..lifting import KIND_NAMES, lift
 from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
 from ..problem import SPACEDIM, Problem
 from .cones import ProductCone
-from .result import METHODS, Settings, SolveResult, Status
+from .result import METHODS, IterationInfo, Settings, SolveResult, Status
 
-__all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS"]
+__all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo"]
 
 
 def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter: int = 100,
-          keep_iterates: bool = False, **options) -> SolveResult:
+          keep_iterates: bool = False, callback=None, **options) -> SolveResult:
     """Solve a rolling-friction problem with Algorithm 1 (or the Clarabel peer).
 
     Parameters
@@ -34,9 +34,15 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     keep_iterates : bool
         Store every iterate in ``extras["iterates"]`` as (v, r̃, z) with v on
         ``extras["active_dofs"]`` (for lockstep diagnosis; implies no component splitting).
+    callback : callable, optional
+        ``callback(info)`` with an :class:`IterationInfo` once per iteration (of every
+        independent component); returning True stops the run with status ``Stopped`` and
+        its best iterate.  Not available for ``clarabel``.
     **options
-        Any other :class:`Settings` field (``sigma_rule``, ``extended_jordan``, ``refine_max``,
-        ``reduce_cones``, ``drop_free_bodies``, ...).
+        Any other :class:`Settings` field (``verbose``, ``time_limit``, ``sigma_rule``,
+        ``extended_jordan``, ``refine_max``, ``reduce_cones``, ``drop_free_bodies``, ...).
+        ``verbose=True`` prints a settings header and one row per iteration as it happens
+        (Clarabel's own log for ``clarabel``).
 
     Returns
     -------
@@ -55,6 +61,11 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     settings = Settings(tol=tol, max_iter=max_iter, **options)
     t0 = time.perf_counter()
     if method == "clarabel":
+        if callback is not None:
+            from ..errors import InvalidArgumentError
+
+            raise InvalidArgumentError("callback", "is not available for the Clarabel peer",
+                                       fix="use an Algorithm 1 method (jqinv, qp2, ...)")
         from .clarabel_peer import solve_clarabel
 
         return solve_clarabel(problem, settings)
@@ -84,11 +95,13 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     t_pre = time.perf_counter() - t0
 
     from . import ipm
+    from .log import IterationPrinter
 
+    printer = IterationPrinter(problem, method, settings, lp, components=len(groups)) if settings.verbose else None
     r_t = np.zeros(lp.nk, dtype=np.longdouble)
     z = np.zeros(lp.nz, dtype=np.longdouble)
     runs = []
-    for dofs, rows, zidx, cone_ids, n_c in groups:
+    for index, (dofs, rows, zidx, cone_ids, n_c) in enumerate(groups):
         n3_c = int(np.sum(cone_ids < lp.n3))
         cones = ProductCone(n3_c, cone_ids.size - n3_c)
 
@@ -101,43 +114,72 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
         out = ipm.run(M[dofs][:, dofs].tocsc(), problem.f[dofs], lp.H_t[rows][:, dofs].tocsr(),
                       lp.w_t[rows], lp.J[rows][:, zidx].tocsr(), cones, n_c, method, settings,
                       judge=_judge(problem, lp, dofs, rows, settings), describe_cone=describe,
-                      keep_iterates=keep_iterates)
-        v[dofs] = out["v"]
-        r_t[rows] = out["r_t"]
-        z[zidx] = out["z"]
+                      keep_iterates=keep_iterates, callback=callback, component=index, t0=t0,
+                      printer=printer)
+        v[dofs] = out.v
+        r_t[rows] = out.r_t
+        z[zidx] = out.z
         runs.append(out)
+        if out.status in (Status.STOPPED, Status.MAX_TIME):
+            break  # the user's stop and the time limit hold for the whole solve
 
-    out = runs[0] if len(runs) == 1 else _merge(runs, lp, M, problem, v, r_t, z)
+    status, message = _combined_status(runs, len(groups))
     v = np.asarray(v, dtype=np.float64)
     r = lp.r_from_lifted(np.asarray(r_t, dtype=np.float64))
     u = lp.u_from_v(v)
     # The verdict is about what is returned: the whole problem, rounded to float64.
     final = measures(problem, v, u, r, "longdouble")
-    status, message = out["status"], out["message"]
     if status is Status.SOLVED and not final.max <= settings.tol:
         status = Status.ALMOST_SOLVED if final.max <= settings.almost_factor * settings.tol \
             else Status.INSUFFICIENT_PROGRESS
         message += f"; but the returned (v, u, r) has criterion {final.max:.2e} > tol ({final.worst()})"
-    timings = dict(out["timings"])
+    elif status not in (Status.SOLVED, Status.STOPPED) and final.max <= settings.tol:
+        # A component that ended short of tol in its own scales can still leave the whole
+        # problem within tol (its denominators are larger): the returned answer decides.
+        message = f"criterion of the returned (v, u, r) {final.max:.2e} ≤ tol (a component ended {status}: {message})"
+        status = Status.SOLVED
+    if len(runs) == 1:
+        pinf, dinf, mu = runs[0].pinfeas, runs[0].dinfeas, runs[0].mu
+    else:
+        from .clarabel_peer import lifted_measures
+
+        pinf, dinf, mu = lifted_measures(M, problem.f, lp.H_t, lp.w_t, lp.J, v, np.asarray(r_t, dtype=np.float64),
+                                         np.asarray(z, dtype=np.float64), problem.n_contacts)
+    timings = {k: sum(o.timings.get(k, 0.0) for o in runs) for k in ("factor", "solve")}
     timings["presolve"] = t_pre
     timings["total"] = time.perf_counter() - t0
-    return SolveResult(
-        v=v, u=u, r=r, status=status, message=message, nit=out["nit"], measures=final,
-        pinfeas=out["pinfeas"], dinfeas=out["dinfeas"], mu=out["mu"], trace=out["trace"],
+    result = SolveResult(
+        v=v, u=u, r=r, status=status, message=message, nit=max(o.nit for o in runs), measures=final,
+        pinfeas=pinf, dinfeas=dinf, mu=mu, trace=max(runs, key=lambda o: o.nit).trace,
         timings=timings, method=method, settings=settings, presolve=presolve,
-        extras={"factorisations": out["factorisations"],
-                "unregularised_factorisations": out["unregularised_factorisations"],
+        extras={"factorisations": sum(o.factorisations for o in runs),
+                "unregularised_factorisations": sum(o.unregularised_factorisations for o in runs),
                 "r_t": r_t, "z": z,
                 "n_cones": {"L3": lp.n3, "L1": lp.n1},
-                "component_runs": [{k: o[k] for k in ("status", "message", "nit", "trace")} for o in runs]
-                if len(runs) > 1 else [],
-                "iterates": runs[0]["iterates"] if keep_iterates else [],
+                "component_runs": [{"status": o.status, "message": o.message, "nit": o.nit, "trace": o.trace}
+                                   for o in runs] if len(groups) > 1 else [],
+                "iterates": runs[0].iterates if keep_iterates else [],
                 "active_dofs": groups[0][0] if keep_iterates else None},
     )
+    if printer is not None:
+        printer.summary(result)
+    return result
 
 
-_SEVERITY = [Status.SOLVED, Status.ALMOST_SOLVED, Status.MAX_ITERATIONS, Status.INSUFFICIENT_PROGRESS,
-             Status.NUMERICAL_ERROR]
+def _combined_status(runs, n_groups):
+    """Worst status over the components (a run cut short leaves the rest unsolved)."""
+    if len(runs) == 1 and n_groups == 1:
+        return runs[0].status, runs[0].message
+    worst = max(runs, key=lambda o: _SEVERITY.index(o.status))
+    bad = [o.message for o in runs if o.status is not Status.SOLVED]
+    if len(runs) < n_groups:
+        return worst.status, f"stopped after {len(runs)} of {n_groups} components: {worst.message}"
+    return worst.status, (f"all {n_groups} components solved" if not bad
+                          else f"{len(bad)} of {n_groups} components not solved; first: {bad[0]}")
+
+
+_SEVERITY = [Status.SOLVED, Status.ALMOST_SOLVED, Status.MAX_ITERATIONS, Status.MAX_TIME, Status.STOPPED,
+             Status.INSUFFICIENT_PROGRESS, Status.NUMERICAL_ERROR]
 
 
 def _components(problem, lp, free):
@@ -210,22 +252,3 @@ def _judge(problem, lp, dofs, rows, settings):
         return data.measures(v64, HT64 @ v64 + w_c, r)
 
     return judge
-
-
-def _merge(runs, lp, M, problem, v, r_t, z):
-    """Combine per-component runs: worst status, max iterations, global measures."""
-    from .clarabel_peer import lifted_measures
-
-    worst = max(runs, key=lambda o: _SEVERITY.index(o["status"]))
-    pinf, dinf, mu = lifted_measures(M, problem.f, lp.H_t, lp.w_t, lp.J, np.asarray(v, dtype=np.float64),
-                                     np.asarray(r_t, dtype=np.float64), np.asarray(z, dtype=np.float64),
-                                     problem.n_contacts)
-    bad = [o["message"] for o in runs if o["status"] is not Status.SOLVED]
-    status = worst["status"]
-    message = (f"all {len(runs)} components solved" if not bad
-               else f"{len(bad)} of {len(runs)} components not solved; first: {bad[0]}")
-    timings = {k: sum(o["timings"].get(k, 0.0) for o in runs) for k in ("factor", "solve", "total")}
-    return dict(status=status, message=message, nit=max(o["nit"] for o in runs),
-                pinfeas=pinf, dinfeas=dinf, mu=mu, trace=max(runs, key=lambda o: o["nit"])["trace"],
-                timings=timings, factorisations=sum(o["factorisations"] for o in runs),
-                unregularised_factorisations=sum(o["unregularised_factorisations"] for o in runs))

@@ -60,7 +60,7 @@ def solve_clarabel(problem: Problem, settings: Settings) -> SolveResult:
     if lp.n1:
         cones.append(clarabel.NonnegativeConeT(lp.n1))
     opts = clarabel.DefaultSettings()
-    opts.verbose = False
+    opts.verbose = bool(settings.verbose)  # Clarabel's own log, not Algorithm 1's columns
     opts.max_iter = settings.max_iter
     opts.tol_gap_abs = opts.tol_gap_rel = opts.tol_feas = settings.tol
     opts.tol_ktratio = min(opts.tol_ktratio, settings.tol)

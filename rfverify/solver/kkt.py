@@ -22,8 +22,15 @@ unsymmetric form is factored by SuperLU with partial pivoting.
 
 Iterative refinement runs on the *unreduced, unregularised* three-block system above, with
 its residual evaluated by the exact operator (Q applied by Q_x y = 2(xᵀy)x − det(x)Ry, never
-formed) in longdouble when asked.  So every form is refined against the same equations and
-the reported solve residual means the same thing for all of them.
+formed) in longdouble when asked, and the backward error is judged on one basis for every
+form: blockwise over the three block rows, ‖rhs_i − (A x)_i‖∞ / (‖A_i‖∞ ‖x‖∞ + ‖rhs_i‖∞)
+with ‖A_i‖∞ the exact row-sum norms of that unreduced operator
+(:attr:`KKTSystem.block_norms`), not of the matrix a form factors.
+
+The interior-point driver sees a form only through two calls (the ``KKTSolver`` protocol):
+``update(point) -> bool`` (scale and factor; False when the factorisation fails) and
+``solve(a, b, c, adapt=...) -> SolveInfo``.  Static and adaptive regularisation and
+iterative refinement are the form's own business.
 """
 
 from __future__ import annotations
@@ -31,7 +38,49 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from dataclasses import dataclass
+from typing import Protocol
+
 from .cones import ProductCone
+
+
+@dataclass
+class ScalingPoint:
+    """What a form needs to build this iteration's matrix: the NT point p and p⁻¹ (symmetric
+    forms) or the iterate's cone variables z and s = Jᵀr̃ (noscaling), in the working
+    precision."""
+
+    p: object = None
+    p_inv: object = None
+    z: object = None
+    s: object = None
+
+
+@dataclass
+class SolveInfo:
+    """A refined solve: the direction, its backward error on the stated basis, the number of
+    refinement steps, and whether the adaptive regularisation refactored the matrix."""
+
+    dv: np.ndarray
+    dr: np.ndarray
+    dz: np.ndarray
+    backward_error: float
+    steps: int
+    refactored: bool = False
+
+
+class KKTSolver(Protocol):
+    """The two calls the interior-point driver makes (see the module docstring)."""
+
+    name: str
+    symmetric: bool
+    factor_count: int
+    unregularised_count: int
+    failure: str
+
+    def update(self, point: ScalingPoint) -> bool: ...
+
+    def solve(self, a, b, c, *, adapt: bool = False) -> SolveInfo: ...
 
 
 def _amax(x) -> float:
@@ -57,21 +106,10 @@ class SparseAssembler:
         col_of = uniq // shape[0]
         self.indptr = np.searchsorted(col_of, np.arange(shape[1] + 1)).astype(np.int32)
         self.nnz = uniq.size
-        self._col_of = col_of
-        self._diag = self.indices == col_of
 
     def matrix(self, values) -> sp.csc_matrix:
         data = np.bincount(self.slot, weights=np.asarray(values, dtype=np.float64), minlength=self.nnz)
         return sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
-
-    def symmetric_inf_norm(self, K: sp.csc_matrix) -> float:
-        """‖S‖∞ of the symmetric S whose upper triangle is K (assembled by :meth:`matrix`):
-        row sums of |K| plus column sums minus the diagonal, which both count."""
-        n = self.shape[0]
-        a = np.abs(K.data)
-        rows = (np.bincount(self.indices, weights=a, minlength=n) + np.bincount(self._col_of, weights=a, minlength=n)
-                - np.bincount(self.indices[self._diag], weights=a[self._diag], minlength=n))
-        return float(rows.max(initial=0.0))
 
 
 class KKTSystem:
@@ -84,7 +122,7 @@ class KKTSystem:
     regularisable = False
 
     def __init__(self, M, H_t, J, cones: ProductCone, *, dtype_ref=np.longdouble, static_reg=1e-12,
-                 adaptive_reg=True):
+                 adaptive_reg=True, refine_max=10, refine_tol=None):
         self.M = sp.csc_matrix(M)
         self.H_t = sp.csr_matrix(H_t)
         self.J = sp.csr_matrix(J)
@@ -115,8 +153,16 @@ class KKTSystem:
         self._Hcoo = self.H_t.tocoo()
         self.factor_count = 0
         self._solver = None
-        self._K = None
-        self._knorm = None
+        self.refine_max = refine_max
+        eps_ref = float(np.finfo(dtype_ref).eps)
+        self.refine_target = 4 * eps_ref if refine_tol is None else refine_tol
+        # A refined backward error this far above the target means δ is in the way.
+        self.reg_fallback_above = max(1e3 * eps_ref, 10 * (refine_tol or 0.0))
+        self.failure = ""
+        # Row sums of |A| of the first two block rows (dual, primal) are fixed; the third
+        # (complementarity) block row's change with the point (see _set_point).
+        rows = np.asarray(abs(self.A_ref[: self.m + self.nk]).sum(axis=1)).ravel()
+        self.block_norms = [float(rows[: self.m].max(initial=0.0)), float(rows[self.m:].max(initial=0.0)), 0.0]
 
     def _set_pattern(self, rows, cols, size):
         self.N = size
@@ -156,17 +202,8 @@ class KKTSystem:
 
     def refactor_unregularised(self) -> bool:
         """Factor this iteration's matrix again without δ and keep that factorisation if it is
-        trustworthy (see :meth:`_try_unregularised`).  Returns whether it was kept; if not,
-        the regularised factorisation is restored.
-
-        Why it is needed: on sticking contacts J Q_{p⁻²} Jᵀ goes to zero, and where H̃ has
-        dependent rows (redundant contacts) δ then dominates the dr̃ block in the directions
-        H̃ᵀ cannot see.  Refinement against the true matrix converges at the rate
-        δ / (δ + λ_min) there, i.e. not at all, and the primal residual stalls (measured on
-        the Lattice scene: pinfeas stuck at 0.3–0.5 with δ = 1e-12).  Why δ stays the first
-        choice: it damps the drift of r̃ along null(H̃ᵀ), which without it grew until the
-        dual residual stalled near 1e-10 (measured on a small PrimitiveSoup problem).
-        """
+        trustworthy (see :meth:`_try_unregularised`); otherwise restore the regularised one.
+        Returns whether the factorisation without δ was kept (see :meth:`solve` for why)."""
         if not self.regularised:
             return False
         if self._try_unregularised():
@@ -179,26 +216,46 @@ class KKTSystem:
         import qdldl
 
         K = self.asm.matrix(vals)
-        self._K = None
-        self._knorm = self.asm.symmetric_inf_norm(K)
         if self._solver is None:
             self._solver = qdldl.Solver(K, upper=True)
         else:
             self._solver.update(K, upper=True)
         self.factor_count += 1
 
-    # ------------------------------------------------------------------ exact operator
-    def set_point(self, p=None, p_inv=None, z=None, s=None):
-        """Store the scaling for this iteration (p, p⁻¹ for NT forms; z, s for noscaling),
-        with Q_p, Q_{p⁻¹} as operators in the working precision and in float64."""
-        self.p = p
-        self.p_inv = p_inv
-        self.z = z
-        self.s = s
+    # ------------------------------------------------------------------ the protocol
+    def update(self, point: ScalingPoint) -> bool:
+        """Store this iteration's scaling and factor; False (with :attr:`failure` saying why)
+        when the factorisation fails — a zero pivot (QDLDL), a singular matrix (SuperLU) or a
+        rank-deficient contact block — never for other errors (MemoryError propagates)."""
+        self._set_point(point)
+        try:
+            self.factor()
+        except (RuntimeError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            self.failure = f"factorisation of the {self.name} matrix failed ({exc})"
+            return False
+        self.failure = ""
+        return True
+
+    def _set_point(self, point: ScalingPoint):
+        """Q_p, Q_{p⁻¹} (or z, s) as operators in the working precision, and ‖A‖∞ for
+        this point (see :meth:`operator_norm`)."""
+        self.p, self.p_inv, self.z, self.s = point.p, point.p_inv, point.z, point.s
         self._Qp64 = self._Qp_inv64 = None
-        if p is not None:
-            self.Qp = self.cones.quad_operator(p)
-            self.Qp_inv = self.cones.quad_operator(p_inv)
+        if self.symmetric:
+            self.Qp = self.cones.quad_operator(self.p)
+            self.Qp_inv = self.cones.quad_operator(self.p_inv)
+            blocks = (self.cones.quad_blocks(self.p), self.cones.quad_blocks(self.p_inv))
+        else:
+            blocks = (self.cones.arrow_blocks(self.s), self.cones.arrow_blocks(self.z))
+        rows3 = np.zeros(self.nz)
+        for b in blocks:
+            np.add.at(rows3, self.cones.bd_rows, np.abs(b))
+        self.block_norms[2] = float(rows3.max(initial=0.0))
+
+    @property
+    def operator_norm(self) -> float:
+        """‖A‖∞ of the unreduced three-block operator at this point (exact row sums)."""
+        return max(self.block_norms)
 
     # float64 copies for the factorised solves, built on first use (each form needs one).
     @property
@@ -225,12 +282,6 @@ class KKTSystem:
             y[mk:] = self.cones.product(self.s, dz) + self.cones.product(self.z, JTdr)
         return y
 
-    def norm_estimate(self) -> float:
-        """‖K‖∞ of the factored matrix, computed once per factorisation."""
-        if self._knorm is None:
-            self._knorm = float(abs(self._K).sum(axis=1).max())
-        return self._knorm
-
     # ------------------------------------------------------------------ to be provided
     def factor(self):
         raise NotImplementedError
@@ -240,40 +291,74 @@ class KKTSystem:
         raise NotImplementedError
 
     # ------------------------------------------------------------------ refinement
-    def solve(self, a, b, c, *, refine_max=10, refine_extended=True, refine_tol=None):
-        """Solve with iterative refinement; returns (dv, dr, dz, relative residual, steps).
+    def solve(self, a, b, c, *, adapt: bool = False) -> SolveInfo:
+        """Solve with iterative refinement (:meth:`refined`); with ``adapt`` (the predictor
+        solve of an iteration) also run the adaptive regularisation: when refinement ends
+        far above its target, factor the same matrix without δ (or, if this iteration already
+        went without δ, with it) and keep whichever solves better.
 
-        The relative residual is the normwise backward error
-        ‖rhs − K x‖∞ / (‖K‖∞ ‖x‖∞ + ‖rhs‖∞) of the unreduced system.
+        Why it is needed: on sticking contacts J Q_{p⁻²} Jᵀ goes to zero, and where H̃ has
+        dependent rows (redundant contacts) δ then dominates the dr̃ block in the directions
+        H̃ᵀ cannot see, so refinement converges at the rate δ/(δ + λ_min), i.e. not at all.
+        δ stays the first choice because it damps the drift of r̃ along null(H̃ᵀ).  After an
+        iteration that needed the factorisation without δ, the next tries it first.
         """
-        work = self.dtype_ref if refine_extended else np.float64
-        target = 4 * float(np.finfo(work).eps) if refine_tol is None else refine_tol
+        info = self.refined(a, b, c)
+        if adapt and self.adaptive_reg and self.regularisable:
+            if info.backward_error > self.reg_fallback_above:
+                if self.regularised:
+                    if self.refactor_unregularised():
+                        retry = self.refined(a, b, c)
+                        if retry.backward_error < info.backward_error:
+                            info = retry
+                            info.refactored = True
+                        else:
+                            self.refactor_regularised()
+                else:
+                    self.refactor_regularised()
+                    retry = self.refined(a, b, c)
+                    if retry.backward_error < info.backward_error:
+                        info = retry
+                        info.refactored = True
+                    else:
+                        self.refactor_unregularised()
+            self.prefer_unregularised = not self.regularised
+        return info
+
+    def refined(self, a, b, c) -> SolveInfo:
+        """One solve with iterative refinement against the unreduced operator in the
+        refinement precision.  The backward error is blockwise: the largest over the three
+        block rows i (dual, primal, complementarity) of ‖rhs_i − (A x)_i‖∞ / (‖A_i‖∞ ‖x‖∞ +
+        ‖rhs_i‖∞), with ‖A_i‖∞ the exact row-sum norms of :attr:`block_norms` — the same
+        basis for every form.  Blockwise, because the complementarity rows carry Q_p and
+        Q_{p⁻¹} (norms up to 1/μ): one normwise ratio hides an unresolved primal block behind
+        them (on a hyperstatic lattice, refinement then stopped early and pinfeas diverged)."""
+        work = self.dtype_ref
         rhs = np.concatenate([np.asarray(t, dtype=work) for t in (a, b, c)])
         x = self.solve_once(rhs).astype(work)
-        rhs_norm = _amax(rhs)
-        knorm = self.norm_estimate()
+        m, mk = self.m, self.m + self.nk
+        cuts = ((0, m), (m, mk), (mk, rhs.size))
+        rhs_norms = [_amax(rhs[i:j]) for i, j in cuts]
         best_rel, best_x, prev = np.inf, x, np.inf
         steps = 0
-        for steps in range(refine_max + 1):
+        tiny = np.finfo(float).tiny
+        for steps in range(self.refine_max + 1):
             r = rhs - self.apply(x)
-            rel = _amax(r) / max(knorm * _amax(x) + rhs_norm, np.finfo(float).tiny)
+            xn = _amax(x)
+            rel = max(_amax(r[i:j]) / max(nrm * xn + rn, tiny)
+                      for (i, j), nrm, rn in zip(cuts, self.block_norms, rhs_norms))
             if not np.isfinite(rel):
                 best_rel, best_x = float("nan"), x
                 break
-            # Stop once a step gains less than 20%: past that point refinement only creeps
-            # (measured on a 1380-contact Chute: 7.0e-16 → 6.9e-16 over eight more solves),
-            # and each step costs a solve plus a longdouble operator application.  LAPACK's
-            # extra-precise refinement stops at 0.5; that lost the last digits of pinfeas on
-            # a 274-contact Lattice (AlmostSolved instead of Solved), where the normwise
-            # backward error is tiny long before the small primal block is resolved.
+            # A step that gains less than 20% ends refinement (LAPACK's 0.5 lost the last
+            # digits on a hyperstatic lattice; see docs/DECISIONS.md, "Speed").
             if rel < best_rel:
                 best_rel, best_x = rel, x
-            if rel <= target or steps == refine_max or rel > 0.8 * prev:
+            if rel <= self.refine_target or steps == self.refine_max or rel > 0.8 * prev:
                 break
             prev = rel
             x = x + self.solve_once(r)
-        m, mk = self.m, self.m + self.nk
-        return best_x[:m], best_x[m:mk], best_x[mk:], best_rel, steps
+        return SolveInfo(best_x[:m], best_x[m:mk], best_x[mk:], float(best_rel), steps)
 
 
 class JQinvSystem(KKTSystem):
@@ -389,9 +474,7 @@ class NoScalingSystem(KKTSystem):
         arw_z = self.cones.arrow_blocks(self.z)
         arw_s = self.cones.arrow_blocks(self.s)
         vals = np.concatenate((*self._fixed, arw_z, arw_s))
-        self._K = self.asm.matrix(vals)
-        self._knorm = None
-        self._lu = splu(self._K)
+        self._lu = splu(self.asm.matrix(vals))
         self.factor_count += 1
 
     def solve_once(self, rhs):

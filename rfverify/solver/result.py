@@ -20,6 +20,8 @@ class Status(enum.Enum):
     NUMERICAL_ERROR = "NumericalError"
     INSUFFICIENT_PROGRESS = "InsufficientProgress"
     INVALID_INPUT = "InvalidInput"
+    MAX_TIME = "MaxTime"
+    STOPPED = "Stopped"  # by the user's callback
 
     def __str__(self) -> str:
         return self.value
@@ -78,6 +80,11 @@ class Settings:
         counted from the first step with α ≥ 0.5, with the bests reset there (before it, a
         badly scaled start may take several tiny but growing steps while μ grows 1e6-fold;
         ``max_iter`` bounds that phase).
+    time_limit : float or None
+        Seconds; the run stops with status ``MaxTime`` (returning its best iterate) at the
+        first iteration that starts after it.
+    verbose : bool
+        Print a settings header and one row per iteration as it happens (stdout).
     reduce_cones, drop_free_bodies, split_components : bool
         Presolve reductions (DESIGN §4).  Splitting solves each connected component of the
         body–contact graph by its own run of Algorithm 1 (own step lengths); it implies that
@@ -100,6 +107,8 @@ class Settings:
     static_reg: float = 1e-12
     adaptive_reg: bool = True
     stall_iterations: int = 8
+    time_limit: float | None = None
+    verbose: bool = False
     reduce_cones: bool = True
     drop_free_bodies: bool = True
     split_components: bool = True
@@ -116,6 +125,8 @@ class Settings:
             raise ValueError(f"gamma0 = {self.gamma0!r} must be in (0, 1)")
         if self.refine_max < 0:
             raise ValueError("refine_max must be ≥ 0")
+        if self.time_limit is not None and not (self.time_limit > 0):
+            raise ValueError(f"time_limit = {self.time_limit!r} must be a positive number of seconds")
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -135,6 +146,37 @@ TRACE_FIELDS = ("iter", "criterion", "pinfeas", "dinfeas", "mu", "sigma", "alpha
 ``LiftedProblem.cone_contact``/``cone_part`` for its contact); ``solve_residual`` is the
 largest relative residual of the linear solves of that iteration after refinement; ``time``
 is seconds since the start of the solve."""
+
+TRACE_HEADERS = {"iter": "iter", "criterion": "criterion", "pinfeas": "pinfeas", "dinfeas": "dinfeas",
+                 "mu": "mu", "sigma": "sigma", "alpha_aff": "alpha_aff", "alpha": "alpha", "gamma": "gamma",
+                 "min_lam2_z": "min λ2(z)", "min_lam2_s": "min λ2(s)", "max_cond_Qp": "max cond(Qp)",
+                 "solve_residual": "solve resid", "refine_steps": "refine", "time": "time [s]"}
+
+
+@dataclass(frozen=True)
+class IterationInfo:
+    """What a ``callback`` receives once per iteration (after the step is computed):
+    ``component`` (index of the independent component, 0 when solved as one), ``iteration``,
+    rfverify's ``criterion`` and the paper's ``pinfeas``, ``dinfeas``, ``mu``, the centring
+    ``sigma``, step lengths ``alpha_aff``, ``alpha``, ``min_lam2_z``/``min_lam2_s`` (smallest
+    λ2 of z and Jᵀr̃), ``max_cond_Qp``, the linear ``solve_residual`` (backward error) and
+    ``elapsed`` seconds since the solve started."""
+
+    component: int
+    iteration: int
+    criterion: float
+    pinfeas: float
+    dinfeas: float
+    mu: float
+    sigma: float
+    alpha_aff: float
+    alpha: float
+    min_lam2_z: float
+    min_lam2_s: float
+    max_cond_Qp: float
+    solve_residual: float
+    elapsed: float
+
 
 
 @dataclass

@@ -1,0 +1,77 @@
+"""The live solver log (``verbose=True``): a settings header, then one row per iteration as it
+happens, labelled by component when the problem is solved as several independent components,
+and a closing line.  Rows are printed from :class:`~rfverify.solver.result.IterationInfo`, the
+same record a ``callback`` receives."""
+
+from __future__ import annotations
+
+import sys
+
+COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e}"),
+           ("pinfeas", "pinfeas", "{:>9.2e}"), ("dinfeas", "dinfeas", "{:>9.2e}"), ("mu", "mu", "{:>9.2e}"),
+           ("sigma", "sigma", "{:>9.2e}"), ("alpha_aff", "alpha_aff", "{:>9.2e}"), ("alpha", "alpha", "{:>9.2e}"),
+           ("min_lam2_z", "min λ2(z)", "{:>10.2e}"), ("min_lam2_s", "min λ2(s)", "{:>10.2e}"),
+           ("max_cond_Qp", "cond(Qp)", "{:>9.2e}"), ("solve_residual", "solve res", "{:>9.2e}"),
+           ("elapsed", "time [s]", "{:>8.3f}"))
+
+
+def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
+    """The settings block printed before the iterations (also used by the CLI)."""
+    from .. import __version__
+
+    st = settings
+    lines = [
+        "-" * 78,
+        f"rfverify {__version__}: Algorithm 1 (Mehrotra predictor-corrector, NT scaling), form {method}",
+        "-" * 78,
+        f"problem:  {problem.title or problem.source}",
+        f"          m = {problem.n_dofs} dofs, n = {problem.n_contacts} contacts, "
+        f"nnz(M) = {problem.M.nnz}, nnz(H) = {problem.H.nnz}",
+        "cones:    " + ", ".join(f"{v} {k}" for k, v in cone_counts.items() if v)
+        + " (full: L3×L3, coulomb/rolling: L3, normal: L1)",
+        f"settings: tol = {st.tol:g} (rfverify.measures criterion), max_iter = {st.max_iter}, "
+        f"sigma_rule = {st.sigma_rule}, gamma0 = {st.gamma0}"
+        + (f", time_limit = {st.time_limit:g} s" if st.time_limit else ""),
+        f"          extended: jordan = {st.extended_jordan}, residuals = {st.extended_residuals}, "
+        f"refinement = {st.refine_extended} (max {st.refine_max} steps)",
+        f"          static_reg = {st.static_reg:g}, adaptive_reg = {st.adaptive_reg}, "
+        f"stall_iterations = {st.stall_iterations}",
+        f"presolve: reduce_cones = {st.reduce_cones}, drop_free_bodies = {st.drop_free_bodies}, "
+        f"split_components = {st.split_components}",
+    ]
+    return "\n".join(lines)
+
+
+def column_header(labelled: bool) -> str:
+    head = " ".join(f"{label:>{len(fmt.format(0 if 'd' in fmt else 0.0))}}" for _, label, fmt in COLUMNS)
+    return ("comp " if labelled else "") + head
+
+
+def row(info, labelled: bool) -> str:
+    cells = []
+    for name, _, fmt in COLUMNS:
+        val = getattr(info, name)
+        cells.append(fmt.format(int(val)) if "d" in fmt else fmt.format(float(val)))
+    return (f"{info.component:>4d} " if labelled else "") + " ".join(cells)
+
+
+class IterationPrinter:
+    """Prints the header at construction and a row per call (``printer(info)``)."""
+
+    def __init__(self, problem, method, settings, lp, components: int = 1, stream=None):
+        self.stream = stream or sys.stdout
+        self.labelled = components > 1
+        print(settings_header(problem, method, settings, lp.reduction_counts()), file=self.stream)
+        if self.labelled:
+            print(f"solved as {components} independent components (column 'comp')", file=self.stream)
+        print(column_header(self.labelled), file=self.stream)
+        print("-" * len(column_header(self.labelled)), file=self.stream, flush=True)
+
+    def __call__(self, info):
+        print(row(info, self.labelled), file=self.stream, flush=True)
+
+    def summary(self, result):
+        print("-" * len(column_header(self.labelled)), file=self.stream)
+        print(f"status {result.status}: {result.message}", file=self.stream)
+        print(f"criterion of the returned (v, u, r): {result.criterion:.2e}; "
+              f"time {result.timings.get('total', float('nan')):.3f} s", file=self.stream, flush=True)

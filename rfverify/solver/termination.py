@@ -1,0 +1,100 @@
+"""When Algorithm 1 stops, and with which iterate: the criterion, the stall rule, the best
+iterate, the iteration and time limits, and a user's callback.
+
+The criterion is :mod:`rfverify.measures`' (judged on what would be returned).  A stall is
+``stall_iterations`` consecutive iterations in which none of the primal (velocity, dual cone),
+dual (dynamics) and gap (complementarity, primal cone) measures that is still above tol fell
+below 0.9 × its own best, counted from the first step with α ≥ 0.5 — before it, a badly
+scaled start can take several tiny but growing steps while μ grows 1e6-fold (see
+docs/DECISIONS.md, "Solver robustness").  A run that stops otherwise returns its best iterate
+and is AlmostSolved when that reached ``almost_factor·tol``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .result import Status
+
+
+@dataclass
+class Verdict:
+    """A decision to stop: the status and why."""
+
+    status: Status
+    message: str
+
+
+class Termination:
+    """The stopping rules of one run (see the module docstring)."""
+
+    def __init__(self, settings, callback=None, t0: float | None = None):
+        self.settings = settings
+        self.callback = callback
+        self.t0 = time.perf_counter() if t0 is None else t0
+        self.best = None  # (merit, k, state, measures, paper)
+        self._best_each = [np.inf, np.inf, np.inf]
+        self._since = 0
+        self._engaged = False
+        self._last_k = -1
+
+    def observe(self, k: int, judged, paper: tuple, state) -> Verdict | None:
+        """Record iterate k (its measures, the paper's (pinfeas, dinfeas, μ), and ``state``,
+        whatever the driver needs to return it); a Verdict when the run must stop here."""
+        tol = self.settings.tol
+        merit = judged.max
+        self._last_k = k
+        if np.isnan(merit) or not np.all(np.isfinite(paper)):
+            return Verdict(Status.NUMERICAL_ERROR, f"iteration {k}: residuals are not finite")
+        if self.best is None or merit < self.best[0]:
+            self.best = (merit, k, (state, judged, paper))
+        if merit <= tol:
+            return Verdict(Status.SOLVED, f"criterion {merit:.2e} ≤ tol (worst: {judged.worst()}); "
+                                          f"paper's max(pinfeas, dinfeas, mu) = {max(paper):.2e}")
+        improved = False
+        for i, val in enumerate((max(judged.velocity, judged.dual_cone), judged.dynamics,
+                                 max(judged.complementarity, judged.primal_cone))):
+            if val > tol and val < 0.9 * self._best_each[i]:
+                improved = True
+            self._best_each[i] = min(self._best_each[i], val)
+        self._since = 0 if improved or not self._engaged else self._since + 1
+        if k == self.settings.max_iter:
+            return Verdict(Status.MAX_ITERATIONS, f"reached max_iter = {self.settings.max_iter}")
+        if self._since >= self.settings.stall_iterations:
+            return Verdict(Status.INSUFFICIENT_PROGRESS,
+                           f"iteration {k}: none of the primal, dual and gap measures above tol improved by 10% "
+                           f"in {self._since} iterations (best criterion {self.best[0]:.2e} at iteration "
+                           f"{self.best[1]})")
+        limit = self.settings.time_limit
+        if limit is not None and time.perf_counter() - self.t0 > limit:
+            return Verdict(Status.MAX_TIME, f"iteration {k}: time limit of {limit:g} s reached")
+        return None
+
+    def after_step(self, alpha: float):
+        """Stall counting starts at the first step with α ≥ 0.5, with the bests reset there."""
+        if not self._engaged and alpha >= 0.5:
+            self._engaged = True
+            self._best_each = [np.inf, np.inf, np.inf]
+
+    def ask_callback(self, info) -> Verdict | None:
+        if self.callback is not None and self.callback(info):
+            return Verdict(Status.STOPPED, f"iteration {info.iteration}: stopped by the callback")
+        return None
+
+    def final(self, verdict: Verdict, current):
+        """(status, message, bundle) to return, bundle = (state, measures, paper) as given to
+        :meth:`observe`: the current iterate when Solved or stopped by the callback, else the
+        best one (AlmostSolved when it reached ``almost_factor·tol``)."""
+        status, message = verdict.status, verdict.message
+        if status in (Status.SOLVED, Status.STOPPED) and current is not None:
+            return status, message, current
+        merit, kb, bundle = self.best
+        if merit <= self.settings.almost_factor * self.settings.tol:
+            return (Status.ALMOST_SOLVED, f"{status}: {message}; best iterate (iteration {kb}) reached "
+                                          f"{merit:.2e} ≤ {self.settings.almost_factor:g}·tol", bundle)
+        if kb != self._last_k:
+            message += f"; returning the best iterate (iteration {kb}, criterion {merit:.2e})"
+        return status, message, bundle
