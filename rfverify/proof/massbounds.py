@@ -87,8 +87,8 @@ class MassBounds:
     m_diag_upper: np.ndarray
     lam_max_upper: float
     failures: list = field(default_factory=list)
-    # per block: (Z (s×s) or None, rho, position of each dof inside its block)
-    _inverse: dict = field(default_factory=dict, repr=False)
+    # size → (blocks with an approximate inverse, Z stacked (nb, s, s), ρ ≥ ‖I − M_b Z_b‖₂)
+    _groups: dict = field(default_factory=dict, repr=False)
     _local: np.ndarray | None = field(default=None, repr=False)
     dense_blocks: int = 0
     sparse_blocks: int = 0
@@ -116,27 +116,27 @@ class MassBounds:
         crude = inflate(sq / self.lam_lower[pair_blk], 1)  # ‖h‖²/λ
         best = crude.copy()
         # Tighter: hᵀZh + ‖h‖²ρ/λ for blocks with an approximate inverse, batched by size.
-        sizes = {b: z[0].shape[0] for b, z in self._inverse.items() if z[0] is not None}
-        if sizes:
-            has_z = np.array([b in sizes for b in pair_blk])
-            for s in sorted(set(sizes.values())):
-                sel = np.flatnonzero(has_z & (np.array([sizes.get(b, -1) for b in pair_blk]) == s))
-                if sel.size == 0:
-                    continue
-                dense = np.zeros((sel.size, s))
-                absd = np.zeros((sel.size, s))
-                where = np.full(pairs.size, -1, dtype=np.int64)
-                where[sel] = np.arange(sel.size)
-                nzsel = where[inv] >= 0
-                dense[where[inv[nzsel]], self._local[Hc.row[nzsel]]] += Hc.data[nzsel]
-                absd[:] = np.abs(dense)
-                Z = np.stack([self._inverse[b][0] for b in pair_blk[sel]])
-                rho = np.array([self._inverse[b][1] for b in pair_blk[sel]])
-                hz = np.einsum("pi,pij,pj->p", dense, Z, dense)
-                ahz = np.einsum("pi,pij,pj->p", absd, np.abs(Z), absd)
-                up = upper_sum(hz, inflate(gamma(2 * s + 2) * ahz + s * 4 * ETA, 3),
-                               inflate(sq[sel] * rho / self.lam_lower[pair_blk[sel]], 2))
-                best[sel] = np.minimum(best[sel], up)
+        for s, (blocks_s, Zs, rhos) in self._groups.items():
+            if blocks_s.size == 0:
+                continue
+            slot = np.full(self.lam_lower.size, -1, dtype=np.int64)
+            slot[blocks_s] = np.arange(blocks_s.size)
+            sel = np.flatnonzero(slot[pair_blk] >= 0)
+            if sel.size == 0:
+                continue
+            dense = np.zeros((sel.size, s))
+            where = np.full(pairs.size, -1, dtype=np.int64)
+            where[sel] = np.arange(sel.size)
+            nzsel = where[inv] >= 0
+            np.add.at(dense, (where[inv[nzsel]], self._local[Hc.row[nzsel]]), Hc.data[nzsel])
+            absd = np.abs(dense)
+            Z = Zs[slot[pair_blk[sel]]]
+            rho = rhos[slot[pair_blk[sel]]]
+            hz = np.einsum("pi,pij,pj->p", dense, Z, dense)
+            ahz = np.einsum("pi,pij,pj->p", absd, np.abs(Z), absd)
+            up = upper_sum(hz, inflate(gamma(2 * s + 2) * ahz + s * 4 * ETA, 3),
+                           inflate(sq[sel] * rho / self.lam_lower[pair_blk[sel]], 2))
+            best[sel] = np.minimum(best[sel], up)
         np.add.at(out, pair_col, best)
         counts = np.bincount(pair_col, minlength=K)
         return inflate(out, 2 + int(counts.max(initial=1)))
@@ -162,7 +162,7 @@ def verify_mass_matrix(M_raw: sp.spmatrix, M_sym: sp.spmatrix | None = None) -> 
     local[order] = np.arange(m) - starts[labels[order]]
     lam_lower = np.full(n_blocks, np.nan)
     minv_diag = np.full(m, np.inf)
-    inverse = {}
+    dense_groups = {}  # size → (blocks with a usable approximate inverse, their Z, their ρ)
     failures = []
     csr = M_sym.tocsr()
     diag = M_sym.diagonal()
@@ -178,15 +178,18 @@ def verify_mass_matrix(M_raw: sp.spmatrix, M_sym: sp.spmatrix | None = None) -> 
             A = np.stack([csr[d][:, d].toarray() for d in dofs]) if blocks_s.size < 64 or s > 8 \
                 else _gather_dense(csr, dofs)
             lam, Z, rho, bad = _dense_blocks(A)
-            for k, b in enumerate(blocks_s):
-                if bad[k]:
-                    failures.append(BlockFailure(int(b), dofs[k], bad[k]))
-                    continue
-                lam_lower[b] = lam[k]
-                inverse[int(b)] = (Z[k] if Z is not None and rho[k] < 1 else None, float(rho[k]))
-                zd = np.diagonal(Z[k]) if Z is not None and rho[k] < 1 else np.full(s, np.inf)
-                via_z = upper_sum(zd, inflate(rho[k] / lam[k], 1))
-                minv_diag[dofs[k]] = np.minimum(via_z, inflate(1.0 / lam[k], 1))
+            ok = np.array([not msg for msg in bad], dtype=bool)
+            for k in np.flatnonzero(~ok):
+                failures.append(BlockFailure(int(blocks_s[k]), dofs[k], bad[k]))
+            good = np.flatnonzero(ok)
+            lam_lower[blocks_s[good]] = lam[good]
+            usable = ok & (rho < 1) if Z is not None else np.zeros_like(ok)
+            zd = np.where(usable[:, None], np.diagonal(Z, axis1=1, axis2=2) if Z is not None else np.inf, np.inf)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                via_z = upper_sum(zd, inflate(rho / lam, 1)[:, None])
+                crude = inflate(1.0 / lam, 1)[:, None]
+            minv_diag[dofs[good]] = np.minimum(via_z, crude)[good]
+            dense_groups[int(s)] = (blocks_s[usable], Z[usable] if Z is not None else None, rho[usable])
         else:
             for b in blocks_s:
                 n_sparse += 1
@@ -197,12 +200,11 @@ def verify_mass_matrix(M_raw: sp.spmatrix, M_sym: sp.spmatrix | None = None) -> 
                     failures.append(BlockFailure(int(b), d, why))
                     continue
                 lam_lower[b] = lam_b
-                inverse[int(b)] = (None, 1.0)
                 minv_diag[d] = inflate(1.0 / lam_b, 1)
     lam_max = float(inflate(np.max(row_abs, initial=0.0) * (1 + 4 * U), 2 + int(np.max(np.diff(csr.indptr), initial=1))))
     return MassBounds(labels=labels, lam_lower=lam_lower, minv_diag_upper=minv_diag,
                       m_diag_upper=inflate(np.abs(diag), 1), lam_max_upper=lam_max, failures=failures,
-                      _inverse=inverse, _local=local, dense_blocks=n_dense, sparse_blocks=n_sparse)
+                      _groups=dense_groups, _local=local, dense_blocks=n_dense, sparse_blocks=n_sparse)
 
 
 def _gather_dense(csr: sp.csr_matrix, dofs: np.ndarray) -> np.ndarray:
