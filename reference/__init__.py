@@ -1,8 +1,11 @@
 """Independent arbitrary-precision (mpmath) reference implementation of Algorithm 1.
 
 - :mod:`reference.jordan` — Jordan algebra of Lorentz cones on mpmath numbers.
-- :func:`reference.solve` — Algorithm 1 at a chosen precision (default 50 digits), independent
-  mode (standard infeasible start), reduced SPD system with a sparse Cholesky factorisation.
+- :class:`reference.Solver` — Algorithm 1 at a chosen precision (default 50 digits) on one
+  problem: the build (exact data, lifting, block inverses of M, W̃ = H̃M⁻¹H̃ᵀ, Cholesky
+  ordering) once, then ``step`` (one iteration from a given iterate: lockstep) and ``run``
+  (independent mode from the standard infeasible start, warm mode from a given iterate).
+- :func:`reference.solve` — ``Solver(problem, dps).run(...)`` in one call.
 
 By design this package does not import rfverify's numerics: it reads the problem container
 (``M_sym``, ``H``, ``f``, ``w``, ``mu``, ``mu_r`` of an :class:`rfverify.Problem`) and does
@@ -10,6 +13,6 @@ everything else itself, so that agreement between the two is evidence, not an ec
 precision lives in a private ``mpmath.MPContext``; the global ``mpmath.mp`` is never changed.
 """
 
-from .ipm import ReferenceResult, solve
+from .ipm import Iterate, ReferenceResult, Residuals, Solver, Step, solve
 
-__all__ = ["solve", "ReferenceResult"]
+__all__ = ["solve", "Solver", "Iterate", "Residuals", "Step", "ReferenceResult"]

@@ -14,8 +14,9 @@ system in contact space
     dv = M⁻¹ (a + H̃ᵀ dr̃),   dz = Q_{p⁻¹} c − Q_{p⁻²} Jᵀ dr̃,
 
 with M⁻¹ applied block by block (M is block diagonal by bodies) and a sparse Cholesky
-factorisation whose ordering is computed once.  Its iterates are the exact-arithmetic
-iterates of every double-precision form, up to 10^(−dps).
+factorisation.  What does not change between iterations — W̃ = H̃ M⁻¹ H̃ᵀ, the block
+inverses, the ordering — is built once by :class:`Solver`.  Its iterates are the
+exact-arithmetic iterates of every double-precision form, up to 10^(−dps).
 
 Precision is private: the solver works in its own ``mpmath.MPContext``; the global ``mp``
 context is never modified.
@@ -37,13 +38,14 @@ SPACEDIM = 5
 
 @dataclass
 class ReferenceResult:
-    """Result of :func:`solve`.
+    """Result of :meth:`Solver.run` and :func:`solve`.
 
     ``v`` (m), ``u`` (5n), ``r`` (5n) are lists of mpf numbers of the solver's private context
-    ``ctx`` (arithmetic at 2·``dps`` digits); ``v_float`` etc. are float64 roundings.  ``status``
-    is ``"Solved"``, ``"MaxIterations"`` or ``"NumericalError"``; ``trace`` holds per-iteration
-    floats (pinfeas, dinfeas, mu, alpha, sigma).  ``r_t`` (nk) and ``z`` (cone by cone) are the
-    final lifted iterate, in the layout of ``warm_start``.
+    ``ctx`` (arithmetic at 2·``dps`` digits); :meth:`as_float` gives float64 roundings.
+    ``status`` is ``"Solved"``, ``"MaxIterations"`` or ``"NumericalError"``; ``trace`` holds
+    per-iteration floats (pinfeas, dinfeas, mu, alpha, sigma).  ``r_t`` (nk) and ``z`` (cone by
+    cone) are the final lifted iterate (:attr:`iterate`).  ``time`` is in seconds: the run's,
+    and for :func:`solve` the build's as well.
     """
 
     v: list
@@ -68,6 +70,10 @@ class ReferenceResult:
 
     def as_float(self, name: str) -> np.ndarray:
         return np.array([float(x) for x in getattr(self, name)])
+
+    @property
+    def iterate(self) -> "Iterate":
+        return Iterate(v=self.v, r_t=self.r_t, z=self.z)
 
 
 # ---------------------------------------------------------------------- lifting (own code)
@@ -200,11 +206,56 @@ class _Cholesky:
         return x
 
 
+# ---------------------------------------------------------------------- iterates
+@dataclass
+class Iterate:
+    """A lifted iterate of Algorithm 1 in mpf numbers of one :class:`Solver`'s context: ``v``
+    (m), ``r_t`` (nk, kept components in contact order) and ``z`` (one list per cone, contact
+    by contact: friction, rolling, or the normal-only ray)."""
+
+    v: list
+    r_t: list
+    z: list
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """What Algorithm 1 measures at an iterate: the residual vectors ``r_d = Mv − H̃ᵀr̃ − f``
+    and ``r_p = H̃v + w̃ − Jz``, the paper's ``pinfeas``, ``dinfeas``, the gap zᵀJᵀr̃ and
+    ``mu`` = gap / (number of contacts)."""
+
+    r_d: list
+    r_p: list
+    pinfeas: object
+    dinfeas: object
+    gap: object
+    mu: object
+
+    @property
+    def worst(self):
+        return max(self.pinfeas, self.dinfeas, self.mu)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One iteration of Algorithm 1: the next ``iterate`` and the centring ``sigma`` and step
+    length ``alpha`` that produced it."""
+
+    iterate: Iterate
+    sigma: object
+    alpha: object
+
+
 # ---------------------------------------------------------------------- the solver
-def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str = "paper",
-          gamma0: float = 0.9, warm_start=None) -> ReferenceResult:
-    """Algorithm 1 at ``dps`` significant digits: independent mode (the standard infeasible
-    start) by default, warm mode when ``warm_start`` is given.
+class Solver:
+    """Algorithm 1 at ``dps`` significant digits on one problem.
+
+    The constructor does everything that does not depend on the iterate, once: the exact data
+    in the working precision, the lifting, the inverses of the diagonal blocks of M, the
+    contact-space matrix W̃ = H̃ M⁻¹ H̃ᵀ and the fill-reducing ordering of the Cholesky
+    factorisation.  :meth:`step` takes one iteration from a given iterate (lockstep diagnosis),
+    :meth:`run` iterates to the tolerance from the standard start (independent mode) or from a
+    given iterate (warm mode).
 
     Parameters
     ----------
@@ -213,203 +264,190 @@ def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str
         vectors ``f, w, mu, mu_r`` (an :class:`rfverify.Problem`); its data are converted
         exactly to the working precision.
     dps : int
-        Requested accuracy in decimal digits (default 50); the arithmetic runs at 2·dps
-        digits (see the comment in the code for the measurement behind this).
-    tol : number, optional
-        Stop when max(pinfeas, dinfeas, μ) ≤ tol; default 10^(−dps+10).
-    warm_start : dict, optional
-        Continue from an iterate of another implementation (the mixed-precision path):
-        ``{"v": (m,), "r_t": (nk,), "z": list of cone vectors}`` in this module's lifted layout
-        (kept components in contact order; cones contact by contact: friction, rolling, or
-        the normal-only ray).  Numbers (float64, longdouble) are converted exactly.  The point
-        must be strictly interior (z and Jᵀr̃ in the cone interiors); otherwise the run
-        falls back to the standard start and says so in ``message``.
+        Requested accuracy in decimal digits (default 50); the arithmetic runs at 2·dps digits
+        in the private context ``ctx``.
     """
-    t0 = time.perf_counter()
-    # The arithmetic runs at twice the requested digits: the reduced system's condition number
-    # grows like 1/μ², and errors in its solution accumulate in the primal residual.  Measured
-    # on the bundled cube problem with 50-digit arithmetic: pinfeas climbed from 1e-50 to 3e-27
-    # while μ went to 1e-50, so the run could not meet 1e-40.  With 2·dps digits the growth
-    # (about μ^-0.45 here) stays far below the target.
-    ctx = J.context(2 * dps)
-    mpf = ctx.mpf
-    tol = mpf(10) ** (-(dps - 10)) if tol is None else mpf(tol)
-    lifted = _Lifted(ctx, problem)
-    n, nk = lifted.n, lifted.nk
-    m = problem.M_sym.shape[0]
 
-    # Exact data.
-    Mc = sp.coo_matrix(problem.M_sym)
-    Hc = sp.csc_matrix(problem.H).tocoo()
-    f = [mpf(float(x)) for x in problem.f]
-    w = [mpf(float(x)) for x in problem.w]
-    # H̃ = P Hᵀ on kept components: row k of H̃ ↔ column keep[k] of H.
-    col_to_kept = {c: k for k, c in enumerate(lifted.keep)}
-    Ht_rows = [dict() for _ in range(nk)]  # H̃[k] = {dof: value}
-    for i, j, x in zip(Hc.row, Hc.col, Hc.data):
-        k = col_to_kept.get(int(j))
-        if k is not None and x != 0:
-            Ht_rows[k][int(i)] = Ht_rows[k].get(int(i), 0) + lifted.scale[k] * mpf(float(x))
-    w_t = [lifted.scale[k] * w[c] for k, c in enumerate(lifted.keep)]
+    def __init__(self, problem, dps: int = 50):
+        t0 = time.perf_counter()
+        self.dps = dps
+        # Twice the requested digits: the reduced system's condition number grows like 1/μ²
+        # and its solution errors accumulate in the primal residual (docs/DECISIONS.md).
+        ctx = self.ctx = J.context(2 * dps)
+        mpf = ctx.mpf
+        lifted = self.lifted = _Lifted(ctx, problem)
+        self.n, self.nk = lifted.n, lifted.nk
+        m = self.m = problem.M_sym.shape[0]
+        self.n_cones = len(lifted.cones)
+        self._tiny = mpf(2) ** (-ctx.prec * 4)
 
-    # Blocks of M (bodies): exact inverse of each block in mpmath.
-    pattern = sp.coo_matrix((np.ones(Mc.nnz), (Mc.row, Mc.col)), shape=(m, m))
-    n_blocks, labels = connected_components(pattern, directed=False)
-    blocks = [[] for _ in range(n_blocks)]
-    for dof in range(m):
-        blocks[labels[dof]].append(dof)
-    Mentries = {}
-    for i, j, x in zip(Mc.row, Mc.col, Mc.data):
-        Mentries[(int(i), int(j))] = mpf(float(x))
-    Minv_blocks = []
-    for dofs in blocks:
-        B = ctx.matrix(len(dofs), len(dofs))
-        for a, da in enumerate(dofs):
-            for b, db in enumerate(dofs):
-                B[a, b] = Mentries.get((da, db), mpf(0))
-        Minv_blocks.append((dofs, ctx.inverse(B)))
+        Mc = sp.coo_matrix(problem.M_sym)
+        Hc = sp.csc_matrix(problem.H).tocoo()
+        self._H_entries = [(int(i), int(j), mpf(float(x))) for i, j, x in zip(Hc.row, Hc.col, Hc.data)]
+        self._f = [mpf(float(x)) for x in problem.f]
+        self._w = [mpf(float(x)) for x in problem.w]
+        # H̃ = P Hᵀ on kept components: row k of H̃ ↔ column keep[k] of H.
+        col_to_kept = {c: k for k, c in enumerate(lifted.keep)}
+        Ht_rows = self._Ht_rows = [dict() for _ in range(self.nk)]  # H̃[k] = {dof: value}
+        for i, j, x in zip(Hc.row, Hc.col, Hc.data):
+            k = col_to_kept.get(int(j))
+            if k is not None and x != 0:
+                Ht_rows[k][int(i)] = Ht_rows[k].get(int(i), 0) + lifted.scale[k] * mpf(float(x))
+        self._w_t = [lifted.scale[k] * self._w[c] for k, c in enumerate(lifted.keep)]
 
-    def M_apply(v):
-        out = [mpf(0)] * m
-        for (i, j), x in Mentries.items():
+        # Blocks of M (bodies): exact inverse of each block in mpmath.
+        pattern = sp.coo_matrix((np.ones(Mc.nnz), (Mc.row, Mc.col)), shape=(m, m))
+        n_blocks, labels = connected_components(pattern, directed=False)
+        blocks = [[] for _ in range(n_blocks)]
+        for dof in range(m):
+            blocks[labels[dof]].append(dof)
+        self._M_entries = {}
+        for i, j, x in zip(Mc.row, Mc.col, Mc.data):
+            self._M_entries[(int(i), int(j))] = mpf(float(x))
+        self._Minv_blocks = []  # (dofs, rows of the block's inverse as lists of mpf)
+        for dofs in blocks:
+            B = ctx.matrix(len(dofs), len(dofs))
+            for a, da in enumerate(dofs):
+                for b, db in enumerate(dofs):
+                    B[a, b] = self._M_entries.get((da, db), mpf(0))
+            Binv = ctx.inverse(B)
+            self._Minv_blocks.append((dofs, [[Binv[a, b] for b in range(len(dofs))] for a in range(len(dofs))]))
+
+        # W̃ = H̃ M⁻¹ H̃ᵀ, block by block of M.
+        W = self._W = _SymSparse(self.nk)
+        rows_of_block = [dict() for _ in range(n_blocks)]  # block → {kept row: {dof: val}}
+        for k, row in enumerate(Ht_rows):
+            for d, val in row.items():
+                rows_of_block[labels[d]].setdefault(k, {})[d] = val
+        for b, (dofs, Binv) in enumerate(self._Minv_blocks):
+            touching = rows_of_block[b]
+            if not touching:
+                continue
+            pos = {d: a for a, d in enumerate(dofs)}
+            # y_k = M_B⁻¹ h_k for each touching row, then W[k, l] += h_lᵀ y_k.
+            ys = {}
+            for k, h in touching.items():
+                ys[k] = [ctx.fsum(Binv[a][pos[d]] * val for d, val in h.items()) for a in range(len(dofs))]
+            keys = sorted(touching)
+            for ia, k in enumerate(keys):
+                for l in keys[: ia + 1]:
+                    W.add(k, l, ctx.fsum(val * ys[k][pos[d]] for d, val in touching[l].items()))
+        G_pairs = set()
+        for rows in lifted.cones:
+            for a in rows:
+                for b in rows:
+                    G_pairs.add((max(a, b), min(a, b)))
+        self._chol = _Cholesky(sorted(set(W.entries) | G_pairs), self.nk)
+        self.build_time = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ operators
+    def _M_apply(self, v):
+        out = [self.ctx.mpf(0)] * self.m
+        for (i, j), x in self._M_entries.items():
             out[i] += x * v[j]
         return out
 
-    def Minv_apply(x):
-        out = [mpf(0)] * m
-        for dofs, Binv in Minv_blocks:
+    def _Minv_apply(self, x):
+        ctx = self.ctx
+        out = [ctx.mpf(0)] * self.m
+        for dofs, Binv in self._Minv_blocks:
             for a, da in enumerate(dofs):
-                out[da] = ctx.fsum(Binv[a, b] * x[db] for b, db in enumerate(dofs))
+                row = Binv[a]
+                out[da] = ctx.fsum(row[b] * x[db] for b, db in enumerate(dofs))
         return out
 
-    def Ht_apply(v):
-        return [ctx.fsum(val * v[d] for d, val in row.items()) for row in Ht_rows]
+    def _Ht_apply(self, v):
+        fsum = self.ctx.fsum
+        return [fsum(val * v[d] for d, val in row.items()) for row in self._Ht_rows]
 
-    def HtT_apply(r_t):
-        out = [mpf(0)] * m
-        for k, row in enumerate(Ht_rows):
+    def _HtT_apply(self, r_t):
+        out = [self.ctx.mpf(0)] * self.m
+        for k, row in enumerate(self._Ht_rows):
             rk = r_t[k]
             for d, val in row.items():
                 out[d] += val * rk
         return out
 
-    # W̃ = H̃ M⁻¹ H̃ᵀ, block by block of M (fixed for the whole run).
-    W = _SymSparse(nk)
-    rows_of_block = [dict() for _ in range(n_blocks)]  # block → {kept row: {dof: val}}
-    for k, row in enumerate(Ht_rows):
-        for d, val in row.items():
-            rows_of_block[labels[d]].setdefault(k, {})[d] = val
-    for b, (dofs, Binv) in enumerate(Minv_blocks):
-        touching = rows_of_block[b]
-        if not touching:
-            continue
-        pos = {d: a for a, d in enumerate(dofs)}
-        # y_k = M_B⁻¹ h_k for each touching row, then W[k, l] += h_lᵀ y_k.
-        ys = {}
-        for k, h in touching.items():
-            ys[k] = [ctx.fsum(Binv[a, pos[d]] * val for d, val in h.items()) for a in range(len(dofs))]
-        keys = sorted(touching)
-        for ia, k in enumerate(keys):
-            for l in keys[: ia + 1]:
-                W.add(k, l, ctx.fsum(val * ys[k][pos[d]] for d, val in touching[l].items()))
-    G_pairs = set()
-    for rows in lifted.cones:
-        for a in rows:
-            for b in rows:
-                G_pairs.add((max(a, b), min(a, b)))
-    chol = _Cholesky(sorted(set(W.entries) | G_pairs), nk)
-
-    # Standard infeasible start: v = 0, r̃_N = 1 (so Jᵀr̃ = e), z = e.
-    v = [mpf(0)] * m
-    r_t = [mpf(0)] * nk
-    for rows in lifted.cones:
-        r_t[rows[0]] = mpf(1)
-    z = [J.identity(ctx, len(rows)) for rows in lifted.cones]
-    n_cones = len(lifted.cones)
-    warm_note = ""
-    if warm_start is not None:
-        wv, wr, wz = warm_start["v"], warm_start["r_t"], warm_start["z"]
-        if len(wv) != m or len(wr) != nk or len(wz) != n_cones or \
-                any(len(zc) != len(rows) for zc, rows in zip(wz, lifted.cones)):
-            raise ValueError("warm_start does not match the lifted layout of this problem")
-        v_w = J.to_ctx(ctx, list(wv))
-        r_w = J.to_ctx(ctx, list(wr))
-        z_w = [J.to_ctx(ctx, list(zc)) for zc in wz]
-        s_w = [[r_w[row] for row in rows] for rows in lifted.cones]
-        interior = all(J.spectral_values(c)[1] > 0 for c in z_w + s_w)
-        if interior:
-            v, r_t, z = v_w, r_w, z_w
-            warm_note = " (warm start)"
-        else:
-            warm_note = " (warm start not interior: standard start used)"
-    gamma = mpf(gamma0)
-    trace = {k: [] for k in ("pinfeas", "dinfeas", "mu", "sigma", "alpha")}
-
-    def norm(x):
+    def _norm(self, x):
+        ctx = self.ctx
         return ctx.sqrt(ctx.fsum(t * t for t in x))
 
-    status, message = "MaxIterations", f"reached max_iter = {max_iter}"
-    k = 0
-    for k in range(max_iter + 1):
-        s = lifted.JT(r_t)
-        Mv, HTr, Hv, Jz = M_apply(v), HtT_apply(r_t), Ht_apply(v), lifted.J(z)
-        r_d = [a - b - c for a, b, c in zip(Mv, HTr, f)]
-        r_p = [a + b - c for a, b, c in zip(Hv, w_t, Jz)]
-        tiny = mpf(2) ** (-ctx.prec * 4)
-        pinf = norm(r_p) / max(norm(Jz), norm(Hv), norm(w_t), tiny)
-        dinf = norm(r_d) / max(norm(Mv), norm(f), norm(HTr), tiny)
-        gap = ctx.fsum(J.dot(zc, sc) for zc, sc in zip(z, s))
-        mu = gap / n
-        trace["pinfeas"].append(float(pinf))
-        trace["dinfeas"].append(float(dinf))
-        trace["mu"].append(float(mu))
-        if max(pinf, dinf, mu) <= tol:
-            status, message = "Solved", f"max(pinfeas, dinfeas, mu) = {ctx.nstr(max(pinf, dinf, mu), 3)} <= tol"
-            break
-        if k == max_iter:
-            break
-        try:
-            nt = [J.nt_scaling(zc, sc) for zc, sc in zip(z, s)]
-        except J.ReferenceDomainError as exc:
-            status, message = "NumericalError", f"iteration {k}: {exc}"
-            break
+    # ------------------------------------------------------------------ iterates
+    def start(self) -> Iterate:
+        """The standard infeasible start: v = 0, r̃_N = 1 (so Jᵀr̃ = e), z = e."""
+        mpf = self.ctx.mpf
+        r_t = [mpf(0)] * self.nk
+        for rows in self.lifted.cones:
+            r_t[rows[0]] = mpf(1)
+        return Iterate(v=[mpf(0)] * self.m, r_t=r_t,
+                       z=[J.identity(self.ctx, len(rows)) for rows in self.lifted.cones])
+
+    def iterate(self, v, r_t, z) -> Iterate:
+        """An iterate of another implementation in this solver's context (numbers converted
+        exactly: float64, longdouble, mpf): ``v`` (m), ``r_t`` (nk) and ``z`` cone by cone in
+        the layout of :class:`Iterate`.  Raises ValueError when the sizes do not match."""
+        if len(v) != self.m or len(r_t) != self.nk or len(z) != self.n_cones or \
+                any(len(zc) != len(rows) for zc, rows in zip(z, self.lifted.cones)):
+            raise ValueError("warm_start does not match the lifted layout of this problem")
+        ctx = self.ctx
+        return Iterate(v=J.to_ctx(ctx, list(v)), r_t=J.to_ctx(ctx, list(r_t)),
+                       z=[J.to_ctx(ctx, list(zc)) for zc in z])
+
+    def s_cones(self, it: Iterate) -> list:
+        """Jᵀr̃ cone by cone, in the order of ``it.z``."""
+        return self.lifted.JT(it.r_t)
+
+    def is_interior(self, it: Iterate) -> bool:
+        """z and Jᵀr̃ strictly inside their cones (where Algorithm 1 can take a step)."""
+        return all(J.spectral_values(c)[1] > 0 for c in it.z + self.s_cones(it))
+
+    def residuals(self, it: Iterate) -> Residuals:
+        lifted = self.lifted
+        s = lifted.JT(it.r_t)
+        Mv, HTr, Hv, Jz = self._M_apply(it.v), self._HtT_apply(it.r_t), self._Ht_apply(it.v), lifted.J(it.z)
+        r_d = [a - b - c for a, b, c in zip(Mv, HTr, self._f)]
+        r_p = [a + b - c for a, b, c in zip(Hv, self._w_t, Jz)]
+        norm, tiny = self._norm, self._tiny
+        pinf = norm(r_p) / max(norm(Jz), norm(Hv), norm(self._w_t), tiny)
+        dinf = norm(r_d) / max(norm(Mv), norm(self._f), norm(HTr), tiny)
+        gap = self.ctx.fsum(J.dot(zc, sc) for zc, sc in zip(it.z, s))
+        return Residuals(r_d=r_d, r_p=r_p, pinfeas=pinf, dinfeas=dinf, gap=gap, mu=gap / self.n)
+
+    # ------------------------------------------------------------------ one iteration
+    def step(self, it: Iterate, gamma, sigma_rule: str = "paper", residuals: Residuals | None = None) -> Step:
+        """One iteration of Algorithm 1 from the interior iterate ``it`` with step-length
+        fraction ``gamma`` (α = min(1, γ·α_max)) and σ rule ``"paper"`` or ``"siconos"``.
+        Raises :class:`reference.jordan.ReferenceDomainError` when z or Jᵀr̃ is not interior."""
+        ctx, lifted = self.ctx, self.lifted
+        mpf = ctx.mpf
+        res = self.residuals(it) if residuals is None else residuals
+        gamma = mpf(gamma)
+        z, s = it.z, lifted.JT(it.r_t)
+        nt = [J.nt_scaling(zc, sc) for zc, sc in zip(z, s)]
         p = [t[0] for t in nt]
         p_inv = [t[1] for t in nt]
         lam = [t[2] for t in nt]
         p_inv2 = [J.power(pc, -2) for pc in p]
         # S = W̃ + J Q_{p⁻²} Jᵀ
-        S = W.copy()
+        S = self._W.copy()
         for rows, q in zip(lifted.cones, p_inv2):
             Q = J.quad_matrix(q)
             for a, ra in enumerate(rows):
                 for b, rb in enumerate(rows):
                     if ra >= rb:
                         S.add(ra, rb, Q[a][b])
-        chol.factor(ctx, S)
+        self._chol.factor(ctx, S)
 
-        def newton(a_vec, b_vec, c_cones):
-            qc = [J.quad_apply(pi, cc) for pi, cc in zip(p_inv, c_cones)]
-            bp = [bb - jq for bb, jq in zip(b_vec, lifted.J(qc))]
-            Minv_a = Minv_apply(a_vec)
-            HMa = Ht_apply(Minv_a)
-            rhs = [-x - y for x, y in zip(bp, HMa)]
-            dr = chol.solve(ctx, rhs)
-            dv = Minv_apply([x + y for x, y in zip(a_vec, HtT_apply(dr))])
-            JTdr = lifted.JT(dr)
-            dz = [[x - y for x, y in zip(qcc, J.quad_apply(q2, jt))]
-                  for qcc, q2, jt in zip(qc, p_inv2, JTdr)]
-            return dv, dr, dz
-
-        a_vec = [-x for x in r_d]
-        b_vec = r_p
-        dv_a, dr_a, dz_a = newton(a_vec, b_vec, [[-x for x in lc] for lc in lam])
+        a_vec = [-x for x in res.r_d]
+        b_vec = res.r_p
+        dv_a, dr_a, dz_a = self._newton(a_vec, b_vec, [[-x for x in lc] for lc in lam], p_inv, p_inv2)
         ds_a = lifted.JT(dr_a)
         alpha_a = min([mpf(1)] + [J.step_to_boundary(zc, dc) for zc, dc in zip(z, dz_a)]
                       + [J.step_to_boundary(sc, dc) for sc, dc in zip(s, ds_a)])
         gap_a = ctx.fsum(J.dot([x + alpha_a * y for x, y in zip(zc, dzc)],
                                [x + alpha_a * y for x, y in zip(sc, dsc)])
                          for zc, dzc, sc, dsc in zip(z, dz_a, s, ds_a))
-        mu_a = gap_a / n
+        mu, mu_a = res.mu, gap_a / self.n
         ratio = max(mu_a, mpf(0)) / mu
         if sigma_rule == "paper":
             expo = max(mpf(1), 3 * alpha_a) if mu < mpf("1e-5") else mpf(1)
@@ -417,7 +455,7 @@ def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str
         else:
             expo = max(mpf(1), 3 * alpha_a ** 2) if mu > mpf("1e-5") else max(mpf(1), 3 * alpha_a)
             sigma = min(mpf(1), ratio ** expo) / 5
-        mu_c = gap / n_cones
+        mu_c = res.gap / self.n_cones
         c_cones = []
         for lc, pc, pic, dzc, dsc in zip(lam, p, p_inv, dz_a, ds_a):
             e = J.identity(ctx, len(lc))
@@ -425,26 +463,101 @@ def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str
             ll = J.product(lc, lc)
             xi = [sigma * mu_c * ei - li - ci for ei, li, ci in zip(e, ll, corr)]
             c_cones.append(J.arrow_solve(lc, xi))
-        dv, dr, dz = newton(a_vec, b_vec, c_cones)
+        dv, dr, dz = self._newton(a_vec, b_vec, c_cones, p_inv, p_inv2)
         ds = lifted.JT(dr)
         alpha_max = min([J.step_to_boundary(zc, dc) for zc, dc in zip(z, dz)]
                         + [J.step_to_boundary(sc, dc) for sc, dc in zip(s, ds)])
         alpha = min(mpf(1), gamma * alpha_max)
-        trace["sigma"].append(float(sigma))
-        trace["alpha"].append(float(alpha))
-        v = [x + alpha * y for x, y in zip(v, dv)]
-        r_t = [x + alpha * y for x, y in zip(r_t, dr)]
-        z = [[x + alpha * y for x, y in zip(zc, dzc)] for zc, dzc in zip(z, dz)]
-        gamma = mpf("0.9") + mpf("0.09") * alpha
+        nxt = Iterate(v=[x + alpha * y for x, y in zip(it.v, dv)],
+                      r_t=[x + alpha * y for x, y in zip(it.r_t, dr)],
+                      z=[[x + alpha * y for x, y in zip(zc, dzc)] for zc, dzc in zip(z, dz)])
+        return Step(iterate=nxt, sigma=sigma, alpha=alpha)
 
-    # Back to the original variables: r = P r̃, u = Hᵀ v + w (exact in the context).
-    r = [mpf(0)] * (SPACEDIM * n)
-    for k_, c in enumerate(lifted.keep):
-        r[c] = lifted.scale[k_] * r_t[k_]
-    u = list(w)
-    for i, j, x in zip(Hc.row, Hc.col, Hc.data):
-        u[int(j)] += mpf(float(x)) * v[int(i)]
-    return ReferenceResult(v=v, u=u, r=r, status=status, message=message + warm_note,
-                           nit=len(trace["pinfeas"]) - 1, pinfeas=pinf, dinfeas=dinf, mu=mu,
-                           dps=dps, ctx=ctx, trace=trace, time=time.perf_counter() - t0,
-                           r_t=r_t, z=z)
+    def _newton(self, a_vec, b_vec, c_cones, p_inv, p_inv2):
+        """Newton direction from the factored reduced system (see the module docstring)."""
+        lifted = self.lifted
+        qc = [J.quad_apply(pi, cc) for pi, cc in zip(p_inv, c_cones)]
+        bp = [bb - jq for bb, jq in zip(b_vec, lifted.J(qc))]
+        HMa = self._Ht_apply(self._Minv_apply(a_vec))
+        rhs = [-x - y for x, y in zip(bp, HMa)]
+        dr = self._chol.solve(self.ctx, rhs)
+        dv = self._Minv_apply([x + y for x, y in zip(a_vec, self._HtT_apply(dr))])
+        dz = [[x - y for x, y in zip(qcc, J.quad_apply(q2, jt))]
+              for qcc, q2, jt in zip(qc, p_inv2, lifted.JT(dr))]
+        return dv, dr, dz
+
+    # ------------------------------------------------------------------ iterate to the end
+    def run(self, start=None, tol=None, max_iter: int = 200, sigma_rule: str = "paper",
+            gamma0: float = 0.9) -> ReferenceResult:
+        """Iterate until max(pinfeas, dinfeas, μ) ≤ ``tol`` (default 10^(−dps+10)).
+
+        ``start`` None: independent mode, from :meth:`start`.  Otherwise warm mode from an
+        :class:`Iterate` or a mapping with ``v``, ``r_t``, ``z`` (see :meth:`iterate`); a
+        start that is not strictly interior is replaced by the standard start, and
+        ``message`` says so.  γ starts at ``gamma0`` and then is 0.9 + 0.09·α."""
+        t0 = time.perf_counter()
+        ctx = self.ctx
+        mpf = ctx.mpf
+        tol = mpf(10) ** (-(self.dps - 10)) if tol is None else mpf(tol)
+        it, note = self.start(), ""
+        if start is not None:
+            get = start.get if isinstance(start, dict) else lambda name: getattr(start, name)
+            warm = self.iterate(get("v"), get("r_t"), get("z"))
+            if self.is_interior(warm):
+                it, note = warm, " (warm start)"
+            else:
+                note = " (warm start not interior: standard start used)"
+        gamma = mpf(gamma0)
+        trace = {k: [] for k in ("pinfeas", "dinfeas", "mu", "sigma", "alpha")}
+        status, message = "MaxIterations", f"reached max_iter = {max_iter}"
+        for k in range(max_iter + 1):
+            res = self.residuals(it)
+            trace["pinfeas"].append(float(res.pinfeas))
+            trace["dinfeas"].append(float(res.dinfeas))
+            trace["mu"].append(float(res.mu))
+            if res.worst <= tol:
+                status, message = "Solved", f"max(pinfeas, dinfeas, mu) = {ctx.nstr(res.worst, 3)} <= tol"
+                break
+            if k == max_iter:
+                break
+            try:
+                step = self.step(it, gamma, sigma_rule, res)
+            except J.ReferenceDomainError as exc:
+                status, message = "NumericalError", f"iteration {k}: {exc}"
+                break
+            trace["sigma"].append(float(step.sigma))
+            trace["alpha"].append(float(step.alpha))
+            it = step.iterate
+            gamma = mpf("0.9") + mpf("0.09") * step.alpha
+        return self._result(it, res, status, message + note, trace, time.perf_counter() - t0)
+
+    def _result(self, it, res, status, message, trace, seconds) -> ReferenceResult:
+        """Back to the original variables: r = P r̃, u = Hᵀ v + w (exact in the context)."""
+        lifted = self.lifted
+        r = [self.ctx.mpf(0)] * (SPACEDIM * self.n)
+        for k, c in enumerate(lifted.keep):
+            r[c] = lifted.scale[k] * it.r_t[k]
+        u = list(self._w)
+        for i, j, x in self._H_entries:
+            u[j] += x * it.v[i]
+        return ReferenceResult(v=it.v, u=u, r=r, status=status, message=message,
+                               nit=len(trace["pinfeas"]) - 1, pinfeas=res.pinfeas, dinfeas=res.dinfeas,
+                               mu=res.mu, dps=self.dps, ctx=self.ctx, trace=trace, time=seconds,
+                               r_t=it.r_t, z=it.z)
+
+
+def solve(problem, dps: int = 50, tol=None, max_iter: int = 200, sigma_rule: str = "paper",
+          gamma0: float = 0.9, warm_start=None) -> ReferenceResult:
+    """Algorithm 1 at ``dps`` significant digits: ``Solver(problem, dps).run(...)``.
+
+    Independent mode (the standard infeasible start) by default, warm mode when
+    ``warm_start`` is given: ``{"v": (m,), "r_t": (nk,), "z": list of cone vectors}`` in the
+    lifted layout of :class:`Iterate`, numbers (float64, longdouble) converted exactly; a
+    point that is not strictly interior falls back to the standard start and ``message`` says
+    so.  ``time`` of the result includes the build.  See :class:`Solver` for the parameters.
+    """
+    t0 = time.perf_counter()
+    res = Solver(problem, dps).run(start=warm_start, tol=tol, max_iter=max_iter,
+                                   sigma_rule=sigma_rule, gamma0=gamma0)
+    res.time = time.perf_counter() - t0
+    return res

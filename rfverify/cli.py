@@ -158,6 +158,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "of the next iterate, max cond(Q_p), min λ2 of z and Jᵀr̃ in double and in "
                     "the reference (flagging double λ2 that underflowed or went non-positive "
                     "while the exact one is positive), and where and why a failed run stopped.",
+        epilog="Exit codes: 0 the double run was Solved; 1 it was not (MaxIterations, "
+               "NumericalError, ...) — the diagnosis is printed either way; 2 bad input or "
+               "option; 3 internal error.",
     )
     diag.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     diag.add_argument("--method", choices=[m for m in METHODS if m != "clarabel"], default="jqinv",
@@ -628,9 +631,11 @@ def cmd_diagnose(args) -> int:
     with _recorded_warnings() as caught:
         d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps)
     d["numerical_warnings"] = _warning_summary(caught)
+    # The exit code is the double run's outcome, so scripts can tell a failing run apart.
+    code = EXIT_OK if d["status"] == "Solved" else EXIT_NOT_SOLVED
     if args.json:
         print(_dumps(d, indent=2))
-        return EXIT_OK
+        return code
     print(f"double run ({d['method']}): {d['status']} after {d['nit']} iterations: {d['message']}")
     head = (f"{'iter':>4} {'mu':>9} {'digits v':>8} {'r~':>5} {'z':>5} {'cond(Qp)':>9} "
             f"{'λ2(z) dbl':>10} {'λ2(z) ref':>10} {'λ2(s) dbl':>10} {'λ2(s) ref':>10}  flags")
@@ -646,7 +651,7 @@ def cmd_diagnose(args) -> int:
         first = f"; first flagged iteration {flagged[0]['iter']}: {flagged[0]['flags'][0]}" if flagged else ""
         print(f"failure: {d['failure']}{first}")
     _print_warnings(d["numerical_warnings"], "in the double run")
-    return EXIT_OK
+    return code
 
 
 # ---------------------------------------------------------------------- certify

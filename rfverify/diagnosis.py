@@ -1,12 +1,14 @@
 """Lockstep diagnosis of the double-precision solver against the mpmath reference (DESIGN §5).
 
 For every iteration k of a double run, the reference takes the *exact* step from the double
-iterate k (one iteration of its Algorithm 1, warm-started there); the difference between that
-exact next iterate and the double iterate k+1 is the rounding error of iteration k.  Reported
-per iteration: digits of agreement of (v, r̃, z), max cond(Q_p), and min λ2 of z and Jᵀr̃ in
-double and in the reference — flagging where the double λ2 has underflowed or gone
-non-positive while the exact one is positive — and, for a failed run, the iteration,
-operation and cone where it stopped (the solver's own diagnosed message).
+iterate k (one iteration of its Algorithm 1 from there, :meth:`reference.Solver.step`); the
+difference between that exact next iterate and the double iterate k+1 is the rounding error of
+iteration k.  Reported per iteration: digits of agreement of (v, r̃, z), max cond(Q_p), and min
+λ2 of z and Jᵀr̃ in double and in the reference — flagging where the double λ2 has underflowed
+or gone non-positive while the exact one is positive — and, for a failed run, the iteration,
+operation and cone where it stopped (the solver's own diagnosed message).  A double iterate that
+is not interior in exact arithmetic has no exact step: its digits and reference λ2 are NaN and
+a flag says why.
 """
 
 from __future__ import annotations
@@ -39,32 +41,41 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
 
     res = solve(problem, method=method, tol=tol, max_iter=max_iter, keep_iterates=True, **options)
     lp = lift(problem, reduce_cones=res.settings.reduce_cones)
+    order = np.lexsort((lp.cone_part, lp.cone_contact))
     active = res.extras["active_dofs"]
     iterates = res.extras["iterates"]
-    order = np.lexsort((lp.cone_part, lp.cone_contact))
+    tr = res.trace
+    exact = reference.Solver(problem, dps=dps)  # one build for every step of the run
     records = []
     for k in range(len(iterates) - 1):
         v_k, r_k, z_k = iterates[k]
         v_full = np.array(res.v, dtype=np.longdouble)
         v_full[active] = v_k
-        # Same step-length fraction γ and σ rule as the double run at this iteration.
-        start = reference_warm_start(problem, v_full, r_k, z_k, res.settings.reduce_cones)
-        step = reference.solve(problem, dps=dps, tol=0, max_iter=1, warm_start=start,
-                               gamma0=float(res.trace["gamma"][k]), sigma_rule=res.settings.sigma_rule)
         v1, r1, z1 = iterates[k + 1]
-        ref_v = np.array([float(x) for x in step.v])[active]
-        ref_r = np.array([float(x) for x in step.r_t])
-        ref_z_cones = step.z
-        # z of the double iterate in the reference's cone order, flattened the same way.
-        z1_cones = reference_warm_start(problem, v_full, r1, z1, res.settings.reduce_cones)["z"]
-        ref_z = np.concatenate([[float(x) for x in c] for c in ref_z_cones])
-        dbl_z = np.concatenate([np.asarray(c, dtype=np.float64) for c in z1_cones])
-        lam2_z_ref = min(float(RJ.spectral_values(c)[1]) for c in ref_z_cones)
-        s_cones = [[step.r_t[row] for row in rows] for rows in _reference_cone_rows(step, lp, order)]
-        lam2_s_ref = min(float(RJ.spectral_values(c)[1]) for c in s_cones) if s_cones else math.inf
-        tr = res.trace
         lam2_z_dbl = float(tr["min_lam2_z"][k + 1]) if k + 1 < len(tr["iter"]) else float("nan")
         lam2_s_dbl = float(tr["min_lam2_s"][k + 1]) if k + 1 < len(tr["iter"]) else float("nan")
+        record = {"iter": k, "max_cond_Qp": float(tr["max_cond_Qp"][k]), "mu": float(tr["mu"][k])}
+        try:
+            # Same step-length fraction γ and σ rule as the double run at this iteration.
+            step = exact.step(exact.iterate(*_reference_layout(lp, order, v_full, r_k, z_k)),
+                              gamma=float(tr["gamma"][k]), sigma_rule=res.settings.sigma_rule)
+        except RJ.ReferenceDomainError as exc:
+            nan = float("nan")
+            records.append({**record, "digits_v": nan, "digits_r_t": nan, "digits_z": nan,
+                            "min_lam2_z": {"double": lam2_z_dbl, "reference": nan},
+                            "min_lam2_s": {"double": lam2_s_dbl, "reference": nan},
+                            "flags": [f"no exact step from the double iterate: {exc}"],
+                            "reference_step": f"no exact step: {exc}"})
+            continue
+        nxt = step.iterate
+        ref_v = np.array([float(x) for x in nxt.v])[active]
+        ref_r = np.array([float(x) for x in nxt.r_t])
+        # z of the double iterate in the reference's cone order, flattened the same way.
+        z1_cones = _reference_layout(lp, order, v_full, r1, z1)[2]
+        ref_z = np.concatenate([[float(x) for x in c] for c in nxt.z])
+        dbl_z = np.concatenate([np.asarray(c, dtype=np.float64) for c in z1_cones])
+        lam2_z_ref = min(float(RJ.spectral_values(c)[1]) for c in nxt.z)
+        lam2_s_ref = min((float(RJ.spectral_values(c)[1]) for c in exact.s_cones(nxt)), default=math.inf)
         flags = []
         for name, d, e in (("z", lam2_z_dbl, lam2_z_ref), ("Jᵀr̃", lam2_s_dbl, lam2_s_ref)):
             if e > 0 and not d > 0:
@@ -76,37 +87,22 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
             "digits_v": _digits(np.asarray(v1, dtype=np.float64), ref_v),
             "digits_r_t": _digits(np.asarray(r1, dtype=np.float64), ref_r),
             "digits_z": _digits(dbl_z, ref_z),
-            "max_cond_Qp": float(tr["max_cond_Qp"][k]),
+            "max_cond_Qp": record["max_cond_Qp"],
             "min_lam2_z": {"double": lam2_z_dbl, "reference": lam2_z_ref},
             "min_lam2_s": {"double": lam2_s_dbl, "reference": lam2_s_ref},
-            "mu": float(tr["mu"][k]),
+            "mu": record["mu"],
             "flags": flags,
-            "reference_step": step.message,
+            "reference_step": "exact step from the double iterate",
         })
     return {"method": method, "status": str(res.status), "message": res.message, "nit": res.nit,
             "iterations": records,
             "failure": None if res.success else res.message}
 
 
-def reference_warm_start(problem: Problem, v, r_t, z, reduce_cones: bool = True) -> dict:
+def _reference_layout(lp, order, v, r_t, z) -> tuple:
     """A production iterate (v, r̃, z in the lifted layout of :func:`rfverify.lifting.lift`)
-    in the reference's warm-start layout: the same kept components, cones contact by contact
-    (friction, rolling, normal ray) instead of all L3 cones first."""
-    lp = lift(problem, reduce_cones=reduce_cones)
+    as (v, r̃, z cones) in the reference's layout: the same kept components, cones contact by
+    contact (friction, rolling, normal ray) instead of all L3 cones first."""
     z = np.asarray(z)
     cones = [z[3 * c:3 * c + 3] for c in range(lp.n3)] + [z[3 * lp.n3 + k:3 * lp.n3 + k + 1] for k in range(lp.n1)]
-    order = np.lexsort((lp.cone_part, lp.cone_contact))
-    return {"v": np.asarray(v), "r_t": np.asarray(r_t), "z": [cones[i] for i in order]}
-
-
-def _reference_cone_rows(step, lp, order):
-    """Kept-row indices of each cone in the reference's cone order (friction, rolling, ray)."""
-    rows_by_cone = []
-    J = lp.J.tocsc()
-    for c in order:
-        if c < lp.n3:
-            cols = range(3 * c, 3 * c + 3)
-        else:
-            cols = [3 * lp.n3 + (c - lp.n3)]
-        rows_by_cone.append([int(J.indices[J.indptr[j]]) for j in cols])
-    return rows_by_cone
+    return np.asarray(v), np.asarray(r_t), [cones[i] for i in order]

@@ -4,6 +4,7 @@ problem is well conditioned, and a forced failure is located and explained."""
 from __future__ import annotations
 
 import json
+import math
 
 import rfverify
 from rfverify.cli import main
@@ -33,10 +34,61 @@ def test_forced_failure_names_iteration_and_cause():
     assert min(early["digits_v"], early["digits_z"]) > 12
 
 
-def test_cli_diagnose(capsys):
-    assert main(["diagnose", "bundled:chute", "--tol", "1e-25", "--max-iter", "40"]) == 0
+def test_cli_diagnose_exit_code_is_the_double_runs_outcome(capsys):
+    """Exit 1 when the double run did not reach --tol (the diagnosis is printed all the same),
+    0 when it was Solved; --json does not change that."""
+    assert main(["diagnose", "bundled:chute", "--tol", "1e-25", "--max-iter", "40"]) == 1
     out = capsys.readouterr().out
     assert "failure: iteration" in out and "first flagged iteration" in out
+    assert main(["diagnose", "bundled:sphere", "--json", "--max-iter", "3"]) == 1
+    s = json.loads(capsys.readouterr().out)
+    assert s["status"] == "MaxIterations" and len(s["iterations"]) == 3
     assert main(["diagnose", "bundled:sphere", "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["status"] == "Solved" and s["iterations"]
+
+
+def test_lockstep_builds_the_reference_once(monkeypatch):
+    """One reference.Solver (one build of W̃, the block inverses and the ordering) serves every
+    lockstep step."""
+    import reference
+
+    built, steps = [], []
+
+    class Counting(reference.Solver):
+        def __init__(self, *a, **k):
+            built.append(1)
+            super().__init__(*a, **k)
+
+        def step(self, *a, **k):
+            steps.append(1)
+            return super().step(*a, **k)
+
+    monkeypatch.setattr(reference, "Solver", Counting)
+    d = diagnose(rfverify.load("bundled:sphere"), tol=1e-10)
+    assert len(built) == 1 and len(steps) == len(d["iterations"]) > 3
+
+
+def test_iterate_without_an_exact_step_is_reported(monkeypatch):
+    """Where the reference cannot step from the double iterate (not interior in exact
+    arithmetic), that iteration has no digits (NaN, null in JSON) and a flag says why; the
+    other iterations are diagnosed as usual."""
+    import reference
+    from reference import jordan as RJ
+
+    real_step = reference.Solver.step
+    calls = []
+
+    def step(self, it, gamma, sigma_rule="paper", residuals=None):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RJ.ReferenceDomainError("nt_scaling", "'z' not interior")
+        return real_step(self, it, gamma, sigma_rule, residuals)
+
+    monkeypatch.setattr(reference.Solver, "step", step)
+    d = diagnose(rfverify.load("bundled:sphere"), tol=1e-10)
+    bad, good = d["iterations"][1], d["iterations"][2]
+    assert all(math.isnan(bad[k]) for k in ("digits_v", "digits_r_t", "digits_z"))
+    assert math.isnan(bad["min_lam2_z"]["reference"]) and bad["min_lam2_z"]["double"] > 0
+    assert bad["flags"] == ["no exact step from the double iterate: nt_scaling: 'z' not interior"]
+    assert min(good["digits_v"], good["digits_z"]) > 12 and not good["flags"]
