@@ -84,32 +84,32 @@ def test_errors_not_hdf5(capsys, tmp_path):
     _one_line_error(capsys, "info", str(p), expect="not an HDF5 file")
 
 
-def test_errors_missing_group(capsys, real_data, tmp_path):
-    p = tmp_path / "g.hdf5"
+def _replace(fh, name, value):
+    del fh[name]
+    fh[name] = value
+
+
+def _set_entry(fh, name, index, value):
+    fh[name][index] = value
+
+
+DAMAGED_CHUTE = [  # (what is done to a copy of the Chute file, what the error line must name)
+    pytest.param(lambda fh: fh.__delitem__("fclib_global_rolling/vectors"),
+                 "/fclib_global_rolling/vectors", id="missing-group"),
+    pytest.param(lambda fh: _set_entry(fh, "fclib_global_rolling/M/x", 3, np.nan), "M[", id="nan"),
+    pytest.param(lambda fh: _replace(fh, "fclib_global_rolling/vectors/mu_r", np.array([0.1, 0.1, 0.1])),
+                 "mu_r", id="wrong-sizes"),
+]
+
+
+@pytest.mark.parametrize("damage, expect", DAMAGED_CHUTE)
+def test_errors_damaged_file(capsys, real_data, tmp_path, damage, expect):
+    p = tmp_path / "damaged.hdf5"
     shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", p)
     p.chmod(0o644)
     with h5py.File(p, "r+") as fh:
-        del fh["fclib_global_rolling/vectors"]
-    _one_line_error(capsys, "info", str(p), expect="/fclib_global_rolling/vectors")
-
-
-def test_errors_nan(capsys, real_data, tmp_path):
-    p = tmp_path / "n.hdf5"
-    shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", p)
-    p.chmod(0o644)
-    with h5py.File(p, "r+") as fh:
-        fh["fclib_global_rolling/M/x"][3] = np.nan
-    _one_line_error(capsys, "info", str(p), expect="M[")
-
-
-def test_errors_wrong_sizes(capsys, real_data, tmp_path):
-    p = tmp_path / "s.hdf5"
-    shutil.copy(real_data / "Chute-ndof-768-nc-4-3.hdf5", p)
-    p.chmod(0o644)
-    with h5py.File(p, "r+") as fh:
-        del fh["fclib_global_rolling/vectors/mu_r"]
-        fh["fclib_global_rolling/vectors/mu_r"] = np.array([0.1, 0.1, 0.1])
-    _one_line_error(capsys, "info", str(p), expect="mu_r")
+        damage(fh)
+    _one_line_error(capsys, "info", str(p), expect=expect)
 
 
 def test_errors_bad_option(capsys):
