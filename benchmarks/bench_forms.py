@@ -2,8 +2,8 @@
 
 Runs every method on the same problems in one process, one after the other, several
 repetitions each (median kept), and prints a table plus the time ratios to Clarabel.
-Accuracy is the stopping criterion recomputed in longdouble from the returned (v, u, r)
-(:func:`rfverify.check.criterion`), never the solver's own numbers; a run counts as solved at
+Accuracy is rfverify's criterion recomputed in longdouble from the returned (v, u, r)
+(:func:`rfverify.measures.measures`), never the solver's own numbers; a run counts as solved at
 a tolerance only when that recomputation meets it.  Not a test: timings on a shared 2-core
 machine are noisy, so compare the ratios measured within one run.
 
@@ -23,7 +23,7 @@ import numpy as np
 
 import rfverify
 from rfverify.bench.runner import BenchInputError, discover_problems
-from rfverify.check import criterion
+from rfverify.measures import measures
 from rfverify.random_problems import random_problem
 from rfverify.solver import solve
 
@@ -68,7 +68,7 @@ def main():
                 t0 = time.perf_counter()
                 res = solve(prob, method=method, tol=min(TOLS))
                 times.append(time.perf_counter() - t0)
-            err = criterion(prob, res.v, res.u, res.r)["max"]
+            err = measures(prob, res.v, res.u, res.r, "longdouble").max
             t = statistics.median(times)
             rows.append((name, prob.n_contacts, method, t, err))
             print(f"{name[:40]:40s} {prob.n_contacts:5d} {method:10s} {str(res.status):22s} {res.nit:4d} "
