@@ -1,19 +1,21 @@
-"""The solver's column-wise cone kernels (:mod:`rfverify.solver.columns`) against the validated
-:mod:`rfverify.jordan`, through :class:`~rfverify.solver.cones.ProductCone`, in float64 and
-longdouble.
+"""The solver's flat-vector cone operations (:class:`~rfverify.solver.cones.ProductCone`, the
+L3^{n3} × L1^{n1} layout the interior-point method works on) against the validated public
+functions of :mod:`rfverify.jordan`, in float64 and longdouble.
 
-Both evaluate the same formulas; they differ only in the order of a few sums (einsum against
-explicit column sums), so they agree to rounding amplified by the conditioning of the point:
-``κ = λ1/λ2`` for anything that goes through λ2 (step lengths go through Q_{x^{-1/2}}, whose
-condition number is κ).  Bounds below are ``C·u·κ^j`` relative to the largest entry, with C
-calibrated on the observed ratios (worst seen ≈ 0.1 of the bound).  Points are drawn with
-λ2/λ1 ≥ 1e-8 and overall scale 2^±40; the declines — extreme magnitudes, points outside
-the cone, NaN — are pinned and must give exactly what :mod:`rfverify.jordan` gives, errors
-included, with the global cone index.
+Both run the same row operations of :mod:`rfverify.jordan` (one copy of each formula), so on
+every input — ordinary, near the boundary (λ2/λ1 down to 1e-8), or of extreme magnitude that
+needs power-of-two rescaling — ProductCone must give, family by family, exactly the bits of
+the public function: any difference means the flat layer (views, joins, dtypes) or a second
+copy of a formula has crept in.  The accuracy of those shared formulas is what
+``tests/test_jordan.py`` and ``tests/test_reference_jordan.py`` establish; the closed forms
+p^±2, new on the solver's path, are checked here against mpmath.  Also pinned: the hot path
+never rescales or re-validates ordinary data (the solver calls it a dozen times per
+iteration), and errors name the operation and the *global* cone index.
 """
 
 from __future__ import annotations
 
+import mpmath
 import numpy as np
 import pytest
 from hypothesis import example, given
@@ -21,10 +23,10 @@ from hypothesis import strategies as st
 
 from rfverify import jordan
 from rfverify.errors import ConeDomainError
-from rfverify.solver import columns
 from rfverify.solver.cones import ProductCone
 
-DTYPES = [np.float64, np.longdouble]
+LD = np.longdouble
+DTYPES = [np.float64, LD]
 dtypes = pytest.mark.parametrize("dtype", DTYPES, ids=["float64", "longdouble"])
 
 
@@ -37,7 +39,7 @@ def _point(rng, cones, dtype, log_kappa, scale):
     x3[:, 0] = nb * (1 + 10.0 ** rng.uniform(-log_kappa, 0.5, cones.n3))
     x[3 * cones.n3:] = 10.0 ** rng.uniform(-2, 2, cones.n1)
     x = x.astype(dtype)
-    if dtype == np.longdouble:  # bits below float64 precision, so longdouble must keep them
+    if dtype == LD:  # bits below float64 precision, so longdouble must keep them
         x = x * (1 + dtype(2.0) ** -60 * rng.uniform(-1, 1, x.size).astype(dtype))
     return np.ldexp(x, scale)
 
@@ -48,23 +50,39 @@ def _direction(rng, cones, dtype, scale):
     return np.ldexp(d, scale)
 
 
-def _kappa(cones, x):
-    x3, x1 = cones.split(np.asarray(x, dtype=np.longdouble))
-    nb = np.hypot(x3[:, 1], x3[:, 2])
-    k = (x3[:, 0] + nb) / (x3[:, 0] - nb)
-    return float(k.max(initial=1.0))
+def _by_family(cones, fn, *args):
+    """The public jordan function on each family, joined like ProductCone joins."""
+    parts = [fn(*(cones.split(a)[i] for a in args)) for i, n in ((0, cones.n3), (1, cones.n1)) if n]
+    return np.concatenate([np.ravel(p) for p in parts]) if parts else np.empty(0, np.result_type(*args))
 
 
-def _generic(cones, fn, *args):
-    """The operation by rfverify.jordan, family by family (the pre-kernel route)."""
-    return cones._flat(fn, *args, op=fn.__name__)
+def _same(a, b):
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.dtype == b.dtype and a.shape == b.shape, (a.dtype, b.dtype, a.shape, b.shape)
+    assert np.array_equal(a, b), f"max difference {float(np.max(np.abs(a - b))):.3e}"
 
 
-def _close(fast, ref, bound):
-    ref = np.asarray(ref, dtype=np.longdouble)
-    err = np.abs(np.asarray(fast, dtype=np.longdouble) - ref).max(initial=0)
-    scale = np.abs(ref).max(initial=0)
-    assert err <= bound * scale, f"error {float(err):.3e} > {bound:.3e} · {float(scale):.3e}"
+def _assert_flat_equals_jordan(cones, z, s, dz, ds):
+    """Every ProductCone operation the solver uses equals jordan's, bit for bit."""
+    _same(cones.product(z, dz), _by_family(cones, jordan.jordan_product, z, dz))
+    _same(cones.quad_operator(z)(dz), _by_family(cones, jordan.quad_apply, z, dz))
+    _same(cones.quad_apply(s, ds), _by_family(cones, jordan.quad_apply, s, ds))
+    _same(cones.arrow_solve(z, dz), _by_family(cones, jordan.arrow_solve, z, dz))
+    _same(cones.inverse(z), _by_family(cones, jordan.inverse, z))
+    for t in (2, -2, -1, 0.5, -0.7):
+        _same(cones.power(z, t), _by_family(cones, lambda a: jordan.power(a, t), z))
+    _same(cones.lambda2(z), _by_family(cones, lambda a: jordan.spectral_values(a)[1], z))
+    _same(cones.quad_blocks(z), _by_family(cones, jordan.quad_matrix, z).astype(np.float64))
+    _same(cones.arrow_blocks(dz), _by_family(cones, jordan.arrow, dz).astype(np.float64))
+    p, p_inv, lam, cond = cones.nt_scaling(z, s)
+    for got, name in ((p, "p"), (p_inv, "p_inv"), (lam, "lam")):
+        _same(got, _by_family(cones, lambda a, b: getattr(jordan.nt_scaling(a, b), name), z, s))
+    _same(cond, _by_family(cones, lambda a, b: jordan.nt_scaling(a, b).cond, z, s).astype(np.float64))
+    alphas = np.concatenate([_by_family(cones, jordan.step_to_boundary, z, dz),
+                             _by_family(cones, jordan.step_to_boundary, s, ds)])
+    assert cones.stepper(z, s)(dz, ds) == float(np.min(alphas, initial=np.inf))
+    assert cones.max_step(z, dz) == float(np.min(_by_family(cones, jordan.step_to_boundary, z, dz),
+                                                 initial=np.inf))
 
 
 cases = st.tuples(st.integers(0, 2**32 - 1), st.integers(0, 6), st.integers(0, 4),
@@ -77,108 +95,178 @@ cases = st.tuples(st.integers(0, 2**32 - 1), st.integers(0, 6), st.integers(0, 4
 @example(case=(1, 0, 4, 0.0, 0))     # L1 only
 @example(case=(2, 3, 2, 4.0, 40))    # large scale
 @example(case=(3, 3, 2, 4.0, -40))   # small scale
-def test_kernels_agree_with_jordan(dtype, case):
+@example(case=(4, 0, 0, 0.0, 0))     # no cones at all
+def test_flat_operations_equal_jordan(dtype, case):
     seed, n3, n1, log_kappa, scale = case
-    if n3 + n1 == 0:
-        return
     rng = np.random.default_rng(seed)
     cones = ProductCone(n3, n1)
-    u = float(np.finfo(dtype).eps)
     z = _point(rng, cones, dtype, log_kappa, scale)
     s = _point(rng, cones, dtype, log_kappa, -scale)
     dz = _direction(rng, cones, dtype, scale)
     ds = _direction(rng, cones, dtype, -scale)
-    kz, ks = _kappa(cones, z), _kappa(cones, s)
-    kappa = max(kz, ks)
-
-    # Products and the quadratic representation: sums of three products, no λ2.
-    _close(cones.product(z, dz), _generic(cones, jordan.jordan_product, z, dz), 8 * u)
-    _close(cones.quad_operator(z)(dz), _generic(cones, jordan.quad_apply, z, dz), 16 * u * kz)
-    # Arw(x)⁻¹ y divides by λ1 λ2 and x0.
-    _close(cones.arrow_solve(z, dz), _generic(cones, jordan.arrow_solve, z, dz), 16 * u * kz ** 2)
-    # λ2 itself: absolute error O(u·S), the same expression in both.
-    _close(cones.lambda2(z), np.concatenate([jordan.spectral_values(cones.split(z)[0])[1] if n3 else [],
-                                             cones.split(z)[1][:, 0]]), 8 * u)
-    q3, q1 = cones._map(jordan.quad_matrix, z, op="quad_matrix")
-    _close(cones.quad_blocks(z), np.concatenate([np.ravel(q) for q in (q3, q1) if q is not None]).astype(np.float64),
-           8 * max(u, float(np.finfo(np.float64).eps)))
-
-    # NT scaling: every output goes through √det of z and s.
-    p, p_inv, lam, cond = cones.nt_scaling(z, s)
-    fams = [jordan.nt_scaling(*(cones.split(a)[i] for a in (z, s))) for i, n in ((0, n3), (1, n1)) if n]
-    for fast, name in ((p, "p"), (p_inv, "p_inv"), (lam, "lam")):
-        _close(fast, np.concatenate([np.ravel(getattr(r, name)) for r in fams]), 32 * u * kappa)
-    # cond(Q_p) is a float64 diagnostic in both.
-    _close(cond, np.concatenate([np.ravel(r.cond) for r in fams]), 32 * float(np.finfo(np.float64).eps) * kappa)
-
-    # Step lengths: y = Q_{x^{-1/2}} dx has condition κ; compare what the solver uses, min(α, 1),
-    # with an absolute floor for a step that lands within rounding of the boundary.
-    step = cones.stepper(z, s)(dz, ds)
-    ref = cones._max_step_pair_checked(z, dz, s, ds)
-    assert abs(min(step, 1.0) - min(ref, 1.0)) <= 64 * u * kappa ** 2 * max(min(ref, 1.0), 1e-3)
+    _assert_flat_equals_jordan(cones, z, s, dz, ds)
 
 
-@pytest.mark.parametrize("dtype, scale, declined", [
-    (np.float64, 300, True), (np.float64, -300, True),            # beyond 2^±128
-    (np.longdouble, 300, False), (np.longdouble, -300, False),    # moderate for longdouble
-    (np.longdouble, -1100, False),  # below float64's range: flushed to 0 in the float64 image
-    (np.longdouble, 3000, True),    # beyond 2^2048 (and beyond float64's range)
+def _spy_on_rescaling(monkeypatch):
+    calls = []
+    real = jordan._scale_exponents
+
+    def spy(x):
+        calls.append(x.shape)
+        return real(x)
+
+    monkeypatch.setattr(jordan, "_scale_exponents", spy)
+    return calls
+
+
+@dtypes
+def test_hot_path_neither_rescales_nor_revalidates_ordinary_data(dtype, monkeypatch):
+    # The solver calls these a dozen times per iteration: ordinary data must pass the one cheap
+    # magnitude test, never reach the row-by-row exponents, and never go through the public
+    # functions' argument parsing (power, inverse, quad_apply and arrow_blocks used to).
+    rng = np.random.default_rng(3)
+    cones = ProductCone(4, 2)
+    z, s = (_point(rng, cones, dtype, 6.0, 0) for _ in range(2))
+    dz, ds = (_direction(rng, cones, dtype, 0) for _ in range(2))
+    calls = _spy_on_rescaling(monkeypatch)
+
+    def refuse(*args, **kw):
+        raise AssertionError("the hot path went through the public façade")
+
+    for name in jordan.__all__:
+        if name not in ("NTScaling", "identity"):
+            monkeypatch.setattr(jordan, name, refuse)
+    cones.product(z, dz)
+    cones.arrow_solve(z, dz)
+    cones.quad_operator(z)(dz)
+    cones.quad_apply(z, dz)
+    cones.inverse(z)
+    cones.power(z, 2)
+    cones.power(z, -2)
+    cones.quad_blocks(z)
+    cones.arrow_blocks(z)
+    cones.nt_scaling(z, s)
+    cones.stepper(z, s)(dz, ds)
+    cones.max_step(z, dz)
+    cones.min_lambda2(z)
+    assert calls == []
+
+
+@pytest.mark.parametrize("dtype, scale, cheap_test_suffices", [
+    (np.float64, 300, False), (np.float64, -300, False),  # beyond 2^±128: rescaled
+    (LD, 300, True), (LD, -300, True),                    # ordinary for longdouble
+    (LD, -1100, False),  # below float64's range: the float64 image cannot vouch, rows can
+    (LD, 3000, False),   # beyond 2^2048 (and beyond float64's range): rescaled
 ], ids=["f64-big", "f64-small", "ld-big", "ld-small", "ld-sub-f64", "ld-huge"])
-def test_extreme_magnitudes_take_the_rescaling_route(dtype, scale, declined):
-    # Entries beyond [2^-T, 2^T] (T = maxexp/8): the kernels decline and ProductCone returns
-    # exactly rfverify.jordan's rescaled result.  Longdouble entries below float64's range
-    # pass the float64-image check; their fourth powers are still normal longdouble numbers.
+def test_extreme_magnitudes_are_rescaled_exactly_like_jordan(dtype, scale, cheap_test_suffices,
+                                                               monkeypatch):
     rng = np.random.default_rng(7)
     cones = ProductCone(3, 2)
     z = _point(rng, cones, dtype, 3.0, 0) * dtype(2.0) ** scale
     s = _point(rng, cones, dtype, 3.0, 0) * dtype(2.0) ** scale
     dz = _direction(rng, cones, dtype, 0) * dtype(2.0) ** scale
-    assert (columns.product(z, dz, cones.n3) is None) == declined
-    assert (columns.nt_scaling(z, s, cones.n3) is None) == declined
-    assert (columns.step_point(z, cones.n3) is None) == declined
-    if declined:
-        np.testing.assert_array_equal(cones.product(z, dz), _generic(cones, jordan.jordan_product, z, dz))
-        np.testing.assert_array_equal(cones.arrow_solve(z, dz), _generic(cones, jordan.arrow_solve, z, dz))
-        np.testing.assert_array_equal(cones.quad_operator(z)(dz), _generic(cones, jordan.quad_apply, z, dz))
-        assert cones.stepper(z, s)(dz, dz) == cones._max_step_pair_checked(z, dz, s, dz)
-        p_fast = cones.nt_scaling(z, s)[0]
-        r3 = jordan.nt_scaling(cones.split(z)[0], cones.split(s)[0])
-        np.testing.assert_array_equal(p_fast[:9], np.ravel(r3.p))
+    ds = _direction(rng, cones, dtype, 0) * dtype(2.0) ** scale
+    calls = _spy_on_rescaling(monkeypatch)
+    cones.product(z, dz)
+    assert (calls == []) == cheap_test_suffices
+    _assert_flat_equals_jordan(cones, z, s, dz, ds)
+    if dtype == np.float64:  # the plain formulas would overflow or flush to zero here
+        big = cones.quad_operator(z)(dz)
+        assert np.all(np.isfinite(big)) and np.all(big[np.asarray(dz) != 0] != 0)
+
+
+def _boundary_at(z, cones, cone):
+    """z with cone `cone` moved onto the boundary (λ2 = 0) exactly."""
+    z = z.copy()
+    if cone < cones.n3:
+        z[3 * cone:3 * cone + 3] = [5.0, 3.0, 4.0]
     else:
-        u = float(np.finfo(dtype).eps)
-        _close(cones.product(z, dz), _generic(cones, jordan.jordan_product, z, dz), 8 * u)
-        _close(cones.nt_scaling(z, s)[0], _generic(cones, lambda a, b: jordan.nt_scaling(a, b).p, z, s),
-               32 * u * max(_kappa(cones, z), _kappa(cones, s)))
+        z[3 * cones.n3 + cone - cones.n3] = 0.0
+    return z
 
 
 @dtypes
 @pytest.mark.parametrize("bad_cone", [0, 2, 4])  # L3 cones 0..2, L1 cones 3..4
-def test_points_outside_the_cone_raise_jordans_error_with_the_global_cone(dtype, bad_cone):
+def test_domain_errors_name_the_operation_and_the_global_cone(dtype, bad_cone):
     rng = np.random.default_rng(11)
     cones = ProductCone(3, 2)
     z = _point(rng, cones, dtype, 2.0, 0)
     s = _point(rng, cones, dtype, 2.0, 0)
+    outside = z.copy()
     if bad_cone < 3:
-        z[3 * bad_cone] = -abs(z[3 * bad_cone])  # λ2 < 0
+        outside[3 * bad_cone] = -abs(outside[3 * bad_cone])  # λ2 < 0
     else:
-        z[9 + bad_cone - 3] = -1.0
-    with pytest.raises(ConeDomainError) as info:
-        cones.nt_scaling(z, s)
-    assert info.value.cone == bad_cone and info.value.operation == "nt_scaling"
-    with pytest.raises(ConeDomainError) as info:
-        cones.stepper(z, s)(s, s)
-    assert info.value.cone == bad_cone and info.value.operation == "step_to_boundary"
+        outside[9 + bad_cone - 3] = -1.0
+    on_boundary = _boundary_at(z, cones, bad_cone)
+    calls = [("nt_scaling", lambda: cones.nt_scaling(outside, s)),
+             ("step_to_boundary", lambda: cones.stepper(outside, s)(s, s)),
+             ("step_to_boundary", lambda: cones.max_step(on_boundary, s)),
+             ("inverse", lambda: cones.inverse(on_boundary)),
+             ("power(-2)", lambda: cones.power(on_boundary, -2)),
+             ("power(-0.5)", lambda: cones.power(outside, -0.5)),
+             ("arrow_solve", lambda: cones.arrow_solve(on_boundary, s))]
+    for op, call in calls:
+        with pytest.raises(ConeDomainError) as info:
+            call()
+        assert (info.value.operation, info.value.cone) == (op, bad_cone), str(info.value)
 
 
 @dtypes
-def test_nan_is_reported_by_jordan_not_propagated(dtype):
+def test_nan_is_reported_with_its_cone_not_propagated(dtype):
     rng = np.random.default_rng(5)
-    cones = ProductCone(2, 1)
+    cones = ProductCone(2, 2)
     z = _point(rng, cones, dtype, 2.0, 0)
-    d = _direction(rng, cones, dtype, 0)
-    d[4] = np.nan  # cone 1
-    for call in (lambda: cones.product(z, d), lambda: cones.arrow_solve(z, d),
-                 lambda: cones.stepper(z, z)(d, z)):
-        with pytest.raises(ConeDomainError) as info:
-            call()
-        assert info.value.cone == 1
+    for bad, cone in ((4, 1), (7, 3)):  # an L3 and an L1 entry
+        d = _direction(rng, cones, dtype, 0)
+        d[bad] = np.nan
+        for call in (lambda: cones.product(z, d), lambda: cones.arrow_solve(z, d),
+                     lambda: cones.quad_operator(z)(d), lambda: cones.arrow_blocks(d),
+                     lambda: cones.power(d, 2), lambda: cones.stepper(z, z)(d, z)):
+            with pytest.raises(ConeDomainError) as info:
+                call()
+            assert info.value.cone == cone and "non-finite" in str(info.value)
+
+
+# ---- the closed forms p^±2 against mpmath ----------------------------------------------------
+
+
+def _mp(v):
+    num, den = (LD(v) if isinstance(v, LD) else float(v)).as_integer_ratio()
+    return mpmath.mpf(num) / den
+
+
+@dtypes
+@given(case=st.tuples(st.integers(0, 2**32 - 1), st.floats(0, 12), st.integers(-60, 60)))
+@example(case=(0, 12.0, 0))    # λ2/λ1 ~ 1e-12
+@example(case=(1, 0.0, 60))
+@example(case=(2, 6.0, -60))
+def test_closed_form_squares_against_mpmath(dtype, case):
+    """x² = (‖x‖²; 2 x0 x̄) and x⁻² = R x²/det(x)² per cone, from ProductCone.power.
+
+    x²: each entry is a sum of k products rounded once each, error ≤ (k+1)·u·|x|² per entry
+    against max |x²_i| = ‖x‖² (k = 3).  x⁻² = x² r² with r = 1/det x = (1/λ1)/λ2, which carries
+    the relative error of λ2, ≤ 4·u·κ with κ = λ1/λ2, doubled by the square; bound
+    16·u·κ·max|x⁻²_i| per cone.  (The spectral formula agrees only to O(u·κ²) in the c2 part of x⁻²; these are
+    cancellation-free.)
+    """
+    seed, log_kappa, scale = case
+    rng = np.random.default_rng(seed)
+    cones = ProductCone(4, 2)
+    x = _point(rng, cones, dtype, log_kappa, scale)
+    u = float(np.finfo(dtype).eps)
+    sq, inv_sq = cones.power(x, 2), cones.power(x, -2)
+    with mpmath.workprec(400):
+        for c in range(cones.n_cones):
+            sl = slice(3 * c, 3 * c + 3) if c < cones.n3 else slice(3 * cones.n3 + c - cones.n3,
+                                                                     3 * cones.n3 + c - cones.n3 + 1)
+            xm = [_mp(v) for v in x[sl]]
+            nrm2 = mpmath.fsum(v * v for v in xm)
+            x2 = [nrm2] + [2 * xm[0] * v for v in xm[1:]]
+            nb = mpmath.sqrt(mpmath.fsum(v * v for v in xm[1:]))
+            det = (xm[0] + nb) * (xm[0] - nb)
+            xi2 = [x2[0] / det**2] + [-v / det**2 for v in x2[1:]]
+            kappa = (xm[0] + nb) / (xm[0] - nb)
+            for got, want, bound in ((sq[sl], x2, 4 * u), (inv_sq[sl], xi2, 16 * u * kappa)):
+                scale_ = max(abs(w) for w in want)
+                err = max(abs(_mp(g) - w) for g, w in zip(got, want))
+                assert err <= bound * scale_, (c, float(err / scale_), float(bound))

@@ -54,11 +54,15 @@ class ProductCone:
         return [a if isinstance(a, tuple) else np.asarray(a, dtype=dtype) for a in args]
 
     def _map(self, fn, *args, op: str):
-        """``fn`` on each non-empty family: (result for L3 or None, result for L1 or None).
+        """``fn(*parts, scale=...)`` on each non-empty family: (result for L3 or None, result
+        for L1 or None).
 
-        An argument is a flat vector (split here) or a pair already per family.  Domain errors
-        are re-raised as ``op`` with the global cone index.
+        An argument is a flat vector (split here) or a pair already per family.  One test of
+        the flat vectors (:func:`rfverify.jordan.moderate`) spares the row operations their
+        per-row magnitude test for ordinary data.  Domain errors are re-raised as ``op`` with
+        the global cone index.
         """
+        scale = not jordan.moderate(*(a for a in args if not isinstance(a, tuple)))
         out = []
         for fam, (size, offset) in enumerate(((self.n3, 0), (self.n1, self.n3))):
             if not size:
@@ -67,7 +71,7 @@ class ProductCone:
             parts = [a[fam] if isinstance(a, tuple) else self.split(a)[fam] for a in args]
             try:
                 with np.errstate(all="ignore"):
-                    out.append(fn(*parts))
+                    out.append(fn(*parts, scale=scale))
             except ConeDomainError as exc:
                 cone = None if exc.cone is None else offset + exc.cone
                 raise ConeDomainError(op, _strip(exc), cone=cone, value=exc.value) from exc
@@ -102,7 +106,7 @@ class ProductCone:
 
     def power(self, x, t):
         """x^t cone by cone; t = ±2 in the closed forms x∘x and x⁻¹∘x⁻¹."""
-        return self._flat(lambda a: jordan.power_rows(a, t), x, op=f"power({t})")
+        return self._flat(lambda a, scale: jordan.power_rows(a, t, scale=scale), x, op=f"power({t})")
 
     def _blocks(self, fn, x, op):
         b3, b1 = self._map(fn, *self._same_dtype(x), op=op)
@@ -168,7 +172,7 @@ class ProductCone:
         return float(lam[k]), k
 
     def lambda2(self, x) -> np.ndarray:
-        return self._flat(lambda a: jordan.spectral_rows(a)[1], x, op="spectral_values")
+        return self._flat(lambda a, scale: jordan.spectral_rows(a, scale=scale)[1], x, op="spectral_values")
 
 
 class QuadOperator:
