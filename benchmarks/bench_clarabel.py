@@ -26,7 +26,7 @@ import rfverify
 from rfverify.measures import measures
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_digits import scene_file  # noqa: E402  (the same cached scene files)
+from bench_digits import scene_file, user_files  # noqa: E402  (the same cached scene files)
 
 SETS = [("SpheresPile", "SpheresPile", None), ("Chute", "Chute", None), ("PrimitiveSoup", "PrimitiveSoup", None),
         ("Chute 888", "Chute", 700), ("Lattice 779", "Lattice", 160)]
@@ -34,14 +34,12 @@ SETS = [("SpheresPile", "SpheresPile", None), ("Chute", "Chute", None), ("Primit
 
 def problem_set(args):
     if args.files:
-        for f in args.files:
-            yield Path(f).stem, rfverify.load(f)
+        yield from user_files(args.files)
         return
+    for label, scene, size in SETS:
+        yield label, rfverify.load(scene_file(Path(args.cache), scene, size, 1, 0))
     from rfverify.random_problems import random_problem
 
-    cache = Path(args.cache)
-    for label, scene, size in SETS:
-        yield label, rfverify.load(scene_file(cache, scene, size, 1, 0))
     yield "random 1000", random_problem(600, 1000, seed=3)
 
 

@@ -71,10 +71,15 @@ def dense_local_problem(n_target: int = 260, seed: int = 0):
     return problem
 
 
+def user_files(paths):
+    """(label, Problem) for each file named on the command line."""
+    for f in paths:
+        yield Path(f).stem, rfverify.load(f)
+
+
 def problem_set(args):
     if args.files:
-        for f in args.files:
-            yield Path(f).stem, rfverify.load(f)
+        yield from user_files(args.files)
         return
     from rfverify.random_problems import random_problem
 
