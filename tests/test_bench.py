@@ -96,10 +96,12 @@ def test_report_files_and_figures(run_dir):
         png = path / name
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
     summary = (path / "summary.md").read_text()
-    for heading in ("At a glance", "Performance profiles", "Success per collection", "Error against run time",
-                    "How far double precision gets", "mixed-precision path", "Per-iteration diagnostics",
-                    "Failures and their diagnosed causes"):
-        assert heading in summary
+    for heading in ("At a glance", "Robustness: solved per collection", "Speed on common solved sets",
+                    "Performance profiles", "How far double precision gets", "What 10 proven digits cost",
+                    "Per-iteration diagnostics", "Failures and their diagnosed causes"):
+        assert f"## {heading}" in summary
+    # Tables say yes/no/– instead of Python's True/False/None.
+    assert not re.search(r"\| (True|False|None) \|", summary)
     # A Clarabel run that misses the criterion is listed with the measure that failed.
     assert re.search(r"\| \S+ \| clarabel \| [0-9.e-]+ \| \w+ \| .*recheck: \w+ = ", summary)
     # The lockstep diagnosis is cached.
@@ -244,3 +246,134 @@ def test_progress_fraction_lines_off_a_terminal():
     quiet = io.StringIO()
     Progress(100, "gen", stream=quiet, quiet=True).update_fraction(0.5)
     assert quiet.getvalue() == ""
+
+
+# ---------------------------------------------------------------------- the report's first screen
+def _md_tables(text: str) -> list[tuple[list, list]]:
+    """Every Markdown table of ``text`` as (header, rows of cells)."""
+    tables, lines = [], text.splitlines()
+    i = 0
+    while i < len(lines):
+        if lines[i].startswith("| ") and i + 1 < len(lines) and lines[i + 1].startswith("|---"):
+            header = [c.strip() for c in lines[i].strip("|").split(" | ")]
+            rows, i = [], i + 2
+            while i < len(lines) and lines[i].startswith("| "):
+                rows.append([c.strip() for c in lines[i].strip().strip("|").split(" | ")])
+                i += 1
+            tables.append((header, rows))
+        else:
+            i += 1
+    return tables
+
+
+def _table_with(text: str, first_header: str, *columns) -> tuple[list, list]:
+    for header, rows in _md_tables(text):
+        if header[0] == first_header and all(any(c in h for h in header) for c in columns):
+            return header, rows
+    raise AssertionError(f"no table with {first_header!r} and {columns}")
+
+
+def _section(text: str, heading: str) -> str:
+    start = text.index(f"## {heading}")
+    end = text.find("\n## ", start + 3)
+    return text[start:end if end >= 0 else len(text)]
+
+
+def _records(path: Path, kind: str) -> list[dict]:
+    recs = [json.loads(p.read_text()) for p in (path / "runs").rglob("*.json")]
+    return [r for r in recs if r["kind"] == kind]
+
+
+def test_glance_numbers_agree_with_the_tables_below(run_dir):
+    """The four answers of the first screen are the numbers of the tables under it: same sets,
+    same median, same formatting; the cost of proven digits is recomputed from the records."""
+    path, _ = run_dir
+    make_report(path, diagnose_count=1, diagnose_max_contacts=4)
+    text = (path / "summary.md").read_text()
+    glance = _section(text, "At a glance")
+
+    # Fastest: the SGM time pivot table of "Speed on common solved sets".
+    speed = _section(text, "Speed on common solved sets")
+    header, rows = _table_with(speed.split("SGM iterations")[0], "method", "A1 common")
+    cell = {(r[0], h): c for r in rows for h, c in zip(header[1:], r[1:])}
+    a1_forms = [r[0] for r in rows if r[0] != "clarabel"]
+    lines = re.findall(r"tol (\S+): Algorithm 1 form (\w+), (\S+) s on the (\d+) problems every form solved"
+                       r"(?: \(([^)]*)\))?; overall (\w+), (\S+) s on the (\d+) problems every method solved", glance)
+    assert len(lines) == 2, glance
+    for tol, form, t_form, n_a1, others, best, t_best, n_all in lines:
+        col_a1 = next(h for h in header if h.startswith(f"{tol} A1 common (n={n_a1})"))
+        col_all = next(h for h in header if h.startswith(f"{tol} all common (n={n_all})"))
+        times_a1 = {m: float(cell[(m, col_a1)]) for m in a1_forms}
+        assert cell[(form, col_a1)] == t_form and times_a1[form] == min(times_a1.values())
+        for m, t in re.findall(r"(\w+) (\S+) s", others or ""):
+            assert cell[(m, col_a1)] == t
+        times_all = {r[0]: float(cell[(r[0], col_all)]) for r in rows}
+        assert cell[(best, col_all)] == t_best and times_all[best] == min(times_all.values())
+
+    # Most robust: the "all" rows of the robustness table.
+    robust = re.findall(r"tol (\S+): ([\w, ]+) \((\d+)/(\d+) verified\)(?:; (.*))?", glance)
+    assert len(robust) == 2
+    rows = [r for r in _table_with(text, "collection", "solved", "refuted claims")[1] if r[0] == "all"]
+    for tol, best, top, total, rest in robust:
+        solved = {r[1]: int(r[3].split("/")[0]) for r in rows if r[2] == tol}
+        assert max(solved.values()) == int(top) and {r[3].split("/")[1] for r in rows if r[2] == tol} == {total}
+        assert set(best.split(", ")) == {m for m, k in solved.items() if k == int(top)}
+        assert {m: int(k) for m, k in re.findall(r"(\w+) (\d+)", rest or "")} == \
+            {m: k for m, k in solved.items() if k != int(top)}
+
+    # How far double precision gets, per form: its summary table.
+    per_form = re.findall(r"- (\w+): (\S+) digits of v \((\d+) reached on (\d+)/(\d+)\), best criterion (\S+)", glance)
+    assert {m for m, *_ in per_form} == {"jqinv", "qp2"}
+    header, rows = _table_with(_section(text, "How far double precision gets"), "method", "median best digits of v")
+    table = {r[0]: dict(zip(header, r)) for r in rows}
+    for m, digs, target, reached, n, crit in per_form:
+        assert table[m]["median best digits of v"] == digs
+        assert table[m]["median best verified criterion"] == crit
+        assert table[m][f"reach {target} digits"] == f"{reached}/{n}"
+
+    # 10 proven digits cost: recomputed from the records (total path time; ratio to the
+    # bench's jqinv solve at the loosest tolerance ≤ 1e-10, here 1e-10), numpy's median.
+    got = re.search(r"\*\*10 proven digits cost\*\* (\S+) s \((\S+)× the double solve\) — median over the (\d+) "
+                    r"of (\d+) problems", glance)
+    assert got, glance
+    digits = {r["problem"]: r for r in _record_files(path, "digits")}
+    solves = {(r["problem"], r["method"], r["tol"]): r for r in _record_files(path, "solve")}
+    cert = [d for d in digits.values() if d["certified"]]
+    times = [d["time"] for d in cert]
+    ratios = [d["time"] / solves[(d["problem"], "jqinv", 1e-10)]["time"] for d in cert]
+    assert (int(got[3]), int(got[4])) == (len(cert), len(digits))
+    assert got[1] == format(float(np.median(times)), ".3g")
+    assert got[2] == format(float(np.median(ratios)), ".1f")
+    paragraph = _section(text, "What 10 proven digits cost")
+    assert f"path time {got[1]} s; ratio {got[2]}×" in paragraph
+
+
+def _record_files(path: Path, kind: str) -> list[dict]:
+    return _records(path, kind)
+
+
+def test_refuted_claims_equal_an_independent_recount_of_the_records(run_dir):
+    """Every saved solve whose solver itself said Solved or AlmostSolved and whose recheck's
+    criterion exceeds the tolerance that claim asserts — recounted here from the JSON files,
+    without the report's code — is what the glance and the tables count."""
+    path, _ = run_dir
+    make_report(path, diagnose_count=1, diagnose_max_contacts=4)
+    recount = 0
+    for rec in _records(path, "solve"):
+        crit = rec["verified"]["max"]
+        crit = math.inf if crit is None else crit
+        own = rec["solver_status_own"]  # the solver's own word (Clarabel's status for clarabel)
+        assert rec["claim"] == (own if own in ("Solved", "AlmostSolved") else None)
+        if rec["claim"] == "Solved":
+            assert rec["claim_tol"] == rec["tol"]
+        false = rec["claim"] in ("Solved", "AlmostSolved") and not crit <= rec["claim_tol"]
+        assert rec["refuted"] == false, rec["problem"]
+        recount += false
+    assert recount > 0  # the fixture has Clarabel answers the recheck refutes
+    text = (path / "summary.md").read_text()
+    got = re.search(r"\*\*Refuted claims:\*\* (\d+) run\(s\)", text)
+    assert got and int(got[1]) == recount
+    rows = [r for r in _table_with(text, "collection", "refuted claims")[1] if r[0] == "all"]
+    assert sum(int(r[4]) for r in rows) == recount
+    failures = _table_with(text, "problem", "claim refuted")[1]
+    assert sum(r[4] == "yes" for r in failures) == recount

@@ -35,6 +35,7 @@ class RunData:
     digits: dict = field(default_factory=dict)      # problem key -> record
     references: dict = field(default_factory=dict)  # problem key -> {"v","u","r"}
     issues: list = field(default_factory=list)      # one line per missing or damaged file
+    absolute_v: set = field(default_factory=set)    # problems whose v* ≈ 0: no relative digits of v
     running: bool = False                           # a bench holds the run directory's lock
 
     @property
@@ -108,6 +109,8 @@ _FINISHED = {
                "certified": (lambda x: isinstance(x, bool), "true or false", True),
                "certified_digits": (lambda x: x is None or (isinstance(x, dict) and all(
                    v is None or _is_num(v) for v in x.values())), "an object of numbers", False),
+               "certified_modes": (lambda x: isinstance(x, dict) and all(isinstance(v, str) for v in x.values()),
+                                   "an object of strings", False),
                "has_reference": (lambda x: isinstance(x, bool), "true or false", False)},
 }
 
@@ -155,8 +158,8 @@ def _normalise(rec: dict) -> None:
         for it in rec.get("iterates") or []:
             if it.get("verified_max") is None:
                 it["verified_max"] = math.inf
-    if rec.get("kind") == "digits" and isinstance(rec.get("certified_digits"), dict):
-        rec["certified_digits"] = {k: math.inf if v is None else v for k, v in rec["certified_digits"].items()}
+    # certified_digits: None means "no relative digits" (x* ≈ 0, judged in the absolute sense,
+    # DESIGN §6.3), never +inf: proven digits are capped at 15.95, so no record holds inf there.
 
 
 def _stem_task(stem: str) -> dict | None:
@@ -289,8 +292,28 @@ def _saved(npz: str, keys):
         return None
 
 
+def certified_mode(rec: dict, quantity: str) -> str | None:
+    """How the certificate of a digits record judged ``quantity``: "relative", "absolute"
+    (x* ≈ 0, against a data scale) or "information"; None when the record does not say.
+    Records written before modes were recorded: no relative digits (None) means absolute."""
+    modes = rec.get("certified_modes")
+    if isinstance(modes, dict) and quantity in modes:
+        return modes[quantity]
+    digs = rec.get("certified_digits")
+    if isinstance(digs, dict) and quantity in digs:
+        return "absolute" if digs[quantity] is None else "relative"
+    return None
+
+
 def _add_forward_errors(data: RunData) -> None:
-    """Digits of v (and u) against the problem's reference, for every saved solution/iterate."""
+    """Digits of v (and u) against the problem's reference, for every saved solution/iterate.
+
+    Where the certificate judged v in the absolute sense (v* ≈ 0, DESIGN §6.3) v has no
+    relative digits: such a problem is listed in
+    ``data.absolute_v`` and gets no digits of v, so no statistic mixes it in."""
+    for key, d in data.digits.items():
+        if key in data.references and certified_mode(d, "v") == "absolute":
+            data.absolute_v.add(key)
     for rec in data.solves:
         ref = data.references.get(rec["problem"])
         rec["digits_v"] = rec["digits_u"] = None
@@ -298,12 +321,14 @@ def _add_forward_errors(data: RunData) -> None:
             continue
         z = _saved(rec["_npz"], ("v", "u"))
         if z is not None:
-            rec["digits_v"] = forward_digits(z["v"], ref["v"])
+            if rec["problem"] not in data.absolute_v:
+                rec["digits_v"] = forward_digits(z["v"], ref["v"])
             rec["digits_u"] = forward_digits(z["u"], ref["u"])
     for rec in data.trajectories:
         ref = data.references.get(rec["problem"])
         rec["digits_v_iterates"] = None
-        if ref is None or rec.get("_npz_damaged") or not Path(rec["_npz"]).exists():
+        if ref is None or rec["problem"] in data.absolute_v or rec.get("_npz_damaged") \
+                or not Path(rec["_npz"]).exists():
             continue
         z = _saved(rec["_npz"], ("v",))
         if z is not None:
@@ -311,6 +336,28 @@ def _add_forward_errors(data: RunData) -> None:
 
 
 # ----------------------------------------------------------------------- aggregates
+DIGITS_CAP = 16.0
+"""Digits are counted up to 16 (shown "16+"): beyond that two float64 vectors agree to the
+last bit, so more "digits" would only measure the rounding of the reference."""
+
+DIGITS_BASE_TOL = 1e-10
+"""The k-digit path starts with a double jqinv solve to 1e-10; its cost is compared with the
+bench's jqinv solve at the loosest bench tolerance ≤ this (:func:`digits_baseline_tol`)."""
+
+
+def median(values) -> float | None:
+    """The report's one median, used by the glance, every table and every figure: numpy's
+    (the mean of the two middle values for an even count) over the values that are numbers —
+    None and NaN are left out, ±inf kept (they sort to the ends).  None when none is left."""
+    vals = [float(v) for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))]
+    return float(np.median(vals)) if vals else None
+
+
+def capped(d):
+    """Digits capped at :data:`DIGITS_CAP` (None stays None)."""
+    return None if d is None else min(float(d), DIGITS_CAP)
+
+
 def sgm(values, shift: float = SGM_SHIFT) -> float:
     """Shifted geometric mean exp(mean(log(t + s))) − s."""
     values = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
@@ -327,34 +374,59 @@ def _refuted(rec: dict) -> bool:
     return bool(rec.get("solver_claims_solved")) and not rec.get("solved")
 
 
+def refuted_runs(data: RunData) -> list[dict]:
+    """Every counted solve whose solver claimed Solved or AlmostSolved (its ``claim``) and
+    whose independent recheck failed the tolerance that claim asserts (``refuted``)."""
+    return [r for r in data.solves if _refuted(r)]
+
+
+def algorithm1_methods(data: RunData) -> list:
+    from ..bench.runner import ALGORITHM1_METHODS
+
+    return [m for m in data.methods if m in ALGORITHM1_METHODS]
+
+
+def _keys(data: RunData, coll: str) -> list:
+    return [k for k, p in data.problems.items() if coll == "all" or p["collection"] == coll]
+
+
+def common_solved(data: RunData, keys, methods, tol) -> list:
+    """The problems of ``keys`` that every one of ``methods`` solved (verified) at ``tol``."""
+    if not methods:
+        return []
+    return [k for k in keys if all((r := data.solve_record(k, m, tol)) and r.get("solved") for m in methods)]
+
+
 def success_table(data: RunData) -> list[dict]:
-    """Rows (collection incl. "all", method, tol): solved/total, SGM time over the problems
-    every method solved at that tolerance, SGM iterations, solver's false claims."""
+    """Rows (collection incl. "all", tol, method): solved/total, refuted claims, median digits
+    of v; and speed on two common solved sets — the problems every Algorithm 1 form solved at
+    that tolerance (``*_a1``; Algorithm 1 forms only) and the problems every method solved
+    (``*_all``) — as shifted geometric means of time and iterations over the set."""
     rows = []
+    a1 = algorithm1_methods(data)
     for coll in data.collections + ["all"]:
-        keys = [k for k, p in data.problems.items() if coll == "all" or p["collection"] == coll]
+        keys = _keys(data, coll)
         for tol in data.tols:
-            common = [k for k in keys if all((r := data.solve_record(k, m, tol)) and r.get("solved")
-                                             for m in data.methods)]
+            common_a1 = common_solved(data, keys, a1, tol)
+            common_all = common_solved(data, keys, data.methods, tol)
             for m in data.methods:
-                recs = [data.solve_record(k, m, tol) for k in keys]
-                recs = [r for r in recs if r is not None]
-                solved = [r for r in recs if r.get("solved")]
-                false_claims = [r for r in recs if _refuted(r)]
+                recs = [r for r in (data.solve_record(k, m, tol) for k in keys) if r is not None]
+                digs = [capped(r.get("digits_v")) for r in recs if r.get("digits_v") is not None]
                 rows.append({
-                    "collection": coll, "method": m, "tol": tol, "solved": len(solved), "total": len(recs),
-                    "sgm_time_common": sgm([data.solve_record(k, m, tol)["time"] for k in common]),
-                    "n_common": len(common),
-                    "sgm_iter_common": sgm([data.solve_record(k, m, tol).get("nit") for k in common], shift=1.0),
-                    "false_claims": len(false_claims),
-                    "median_digits_v": _median([r.get("digits_v") for r in recs]),
+                    "collection": coll, "method": m, "tol": tol,
+                    "solved": sum(bool(r.get("solved")) for r in recs), "total": len(recs),
+                    "false_claims": sum(_refuted(r) for r in recs),
+                    "median_digits_v": median(digs), "n_digits": len(digs),
+                    "n_common_a1": len(common_a1),
+                    "sgm_time_a1": sgm([data.solve_record(k, m, tol)["time"] for k in common_a1])
+                    if m in a1 else None,
+                    "sgm_iter_a1": sgm([data.solve_record(k, m, tol).get("nit") for k in common_a1], shift=1.0)
+                    if m in a1 else None,
+                    "n_common_all": len(common_all),
+                    "sgm_time_all": sgm([data.solve_record(k, m, tol)["time"] for k in common_all]),
+                    "sgm_iter_all": sgm([data.solve_record(k, m, tol).get("nit") for k in common_all], shift=1.0),
                 })
     return rows
-
-
-def _median(values):
-    vals = [v for v in values if v is not None and math.isfinite(v)]
-    return float(np.median(vals)) if vals else None
 
 
 def performance_profile(data: RunData, tol: float, measure: str = "time"):
@@ -389,7 +461,7 @@ def failures(data: RunData) -> list[dict]:
         if r.get("solved"):
             continue
         out.append({"problem": r["problem"], "method": r["method"], "tol": r["tol"],
-                    "status": r.get("status"), "cause": failure_cause(r)})
+                    "status": r.get("status"), "refuted": _refuted(r), "cause": failure_cause(r)})
     return out
 
 
@@ -404,8 +476,11 @@ def failure_cause(rec: dict) -> str:
     measures = [k for k in CRITERION if _is_num(ver.get(k)) and not math.isnan(ver[k])]
     worst = max(measures, key=lambda k: ver[k]) if measures else None
     recheck = (f"recheck: {worst} = {ver[worst]:.2e} > tol {rec['tol']:g}" if worst else "no recheck")
-    if status == "Solved":
-        return f"solver claimed Solved but the independent {recheck} ({msg})"
+    if _refuted(rec):
+        claim = rec.get("claim") or "Solved"
+        tol = rec.get("claim_tol", rec["tol"])
+        return (f"solver claimed {claim} (at {tol:g}) but the independent {recheck} "
+                f"({status}: {msg})")
     return f"{status}: {msg}; {recheck}"
 
 
@@ -414,8 +489,7 @@ def double_limit(data: RunData) -> list[dict]:
     the best digits of v along the trajectory, and how the trajectory ended."""
     rows = []
     for t in sorted(data.trajectories, key=lambda r: (r["problem"], r["method"])):
-        digs = t.get("digits_v_iterates") or []
-        digs = [d for d in digs if d is not None]
+        digs = [capped(d) for d in (t.get("digits_v_iterates") or []) if d is not None]
         rows.append({"problem": t["problem"], "method": t["method"], "tol": t["tol"],
                      "status": t.get("status"), "message": t.get("message", ""),
                      "best_verified": t.get("best_verified_max"),
@@ -424,54 +498,114 @@ def double_limit(data: RunData) -> list[dict]:
     return rows
 
 
-def mixed_precision(data: RunData, method: str = "jqinv") -> list[dict]:
-    """Cost of the mixed-precision path per problem: the double solve at the loosest counted
-    tolerance ≤ 1e-10 against the certified path; seconds per extra digit of v."""
+def double_limit_summary(data: RunData) -> dict:
+    """Per Algorithm 1 form, over the same problems for every form: the median (and worst)
+    best verified criterion along its trajectory (problems every form has a trajectory of),
+    and the median (and worst) best correct digits of v (problems every form has digits for:
+    a reference, and v* not ≈ 0), and how many reach the k-digit target."""
+    per = double_limit(data)
+    forms = [m for m in algorithm1_methods(data) if any(r["method"] == m for r in per)]
+    by = {(r["problem"], r["method"]): r for r in per}
+    probs = sorted({r["problem"] for r in per})
+    with_traj = [k for k in probs if all((k, m) in by for m in forms)]
+    with_digs = [k for k in with_traj if all(by[(k, m)]["best_digits_v"] is not None for m in forms)]
+    target = int(data.manifest.get("digits") or 10)
     rows = []
-    tol = min(data.tols) if data.tols else 1e-10
+    for m in forms:
+        crit = [by[(k, m)]["best_verified"] for k in with_traj]
+        digs = [by[(k, m)]["best_digits_v"] for k in with_digs]
+        rows.append({"method": m, "median_best_verified": median(crit),
+                     "worst_best_verified": max(crit) if crit else None,
+                     "median_best_digits_v": median(digs), "worst_best_digits_v": min(digs) if digs else None,
+                     "reach_target": sum(d >= target for d in digs)})
+    return {"rows": rows, "n_problems": len(with_traj), "n_digits": len(with_digs), "target": target,
+            "tol": data.manifest.get("trajectory_tol"),
+            "n_absolute": len([k for k in with_traj if k in data.absolute_v])}
+
+
+def digits_baseline_tol(data: RunData):
+    """The loosest bench tolerance ≤ 1e-10 (the k-digit path's own double phase stops at
+    1e-10); None when the bench ran none."""
+    tols = [t for t in data.tols if t <= DIGITS_BASE_TOL * (1 + 1e-9)]
+    return max(tols) if tols else None
+
+
+def mixed_precision(data: RunData, method: str = "jqinv") -> list[dict]:
+    """Per problem with a k-digit path: its proven digits, its total time (double solve,
+    double-double phase and proof: what the proven digits cost), and that time against the
+    bench's double ``method`` solve at :func:`digits_baseline_tol` (ratio = path time /
+    double solve time)."""
+    tol = digits_baseline_tol(data)
+    rows = []
     for key, d in sorted(data.digits.items()):
-        base = data.solve_record(key, method, tol)
-        digs = d.get("certified_digits") or {}
-        got = min(digs.values()) if digs else None
-        got_v = digs.get("v")
-        row = {"problem": key, "certified": d.get("certified"), "digits_min": got, "digits_v": got_v,
-               "time_path": d.get("time"), "time_certify": d.get("time_certify"),
-               "double_tol": tol, "double_time": base.get("time") if base else None,
-               "double_digits_v": base.get("digits_v") if base else None, "per_digit": None}
-        if base and base.get("digits_v") is not None and got_v is not None:
-            # Beyond ~16 digits both roundings are the same double: count 16 at most.
-            extra = min(got_v, 16.0) - min(base["digits_v"], 16.0)
-            if extra > 0.5:
-                row["per_digit"] = (d["time"] - base["time"]) / extra
-        rows.append(row)
+        if d.get("status") in ("Timeout", "Crashed", "Error"):
+            rows.append({"problem": key, "certified": False, "status": d.get("status"),
+                         "message": d.get("message", ""), "digits": {}, "modes": {}, "time_path": None,
+                         "time_double": None, "time_warm": None, "time_certify": None,
+                         "base_tol": tol, "base_time": None, "base_solved": None, "ratio": None})
+            continue
+        base = data.solve_record(key, method, tol) if tol is not None else None
+        base_time = base.get("time") if base else None
+        ratio = d["time"] / base_time if base_time and d.get("time") is not None else None
+        rows.append({"problem": key, "certified": bool(d.get("certified")), "status": d.get("status"),
+                     "message": d.get("message", ""), "digits": dict(d.get("certified_digits") or {}),
+                     "modes": {q: certified_mode(d, q) for q in ("v", "u", "Hr", "r")},
+                     "time_path": d.get("time"), "time_double": d.get("time_double"),
+                     "time_warm": d.get("time_warm"), "time_certify": d.get("time_certify"),
+                     "base_tol": tol, "base_time": base_time,
+                     "base_solved": base.get("solved") if base else None, "ratio": ratio})
     return rows
 
 
-def worst_cases(data: RunData, count: int, max_contacts: int) -> list[tuple]:
-    """(problem, method, tol) to diagnose, at most one per problem, worst first: counted
-    Algorithm 1 runs that failed (tightest tolerance first), then trajectories that ended
-    without meeting their tight tolerance (where double precision broke down; jqinv first),
-    then the runs with the largest cond(Q_p).  Only problems with ≤ ``max_contacts`` contacts
-    (each iteration costs a reference step)."""
+def digits_cost(data: RunData) -> dict:
+    """What k proven digits cost, over the problems whose path certified them: the median
+    total path time and the median of the per-problem ratios path time / double solve."""
+    rows = mixed_precision(data)
+    cert = [r for r in rows if r["certified"]]
+    ratios = [r["ratio"] for r in cert if r["ratio"] is not None]
+    return {"digits": int(data.manifest.get("digits") or 10), "n": len(rows), "n_certified": len(cert),
+            "median_time": median([r["time_path"] for r in cert]), "median_ratio": median(ratios),
+            "n_ratio": len(ratios), "base_tol": digits_baseline_tol(data),
+            "median_base_time": median([r["base_time"] for r in cert if r["ratio"] is not None])}
+
+
+_DIAGNOSABLE_FAILURE = lambda r: r.get("status") not in ("Timeout", "Crashed", "Error") + UNUSABLE  # noqa: E731
+
+
+def worst_cases(data: RunData, count: int, max_contacts: int) -> list[dict]:
+    """Runs to diagnose in lockstep, at most one per problem, failures first: Algorithm 1
+    runs whose own claim the recheck refuted, then the other runs that were not solved
+    (tightest tolerance first, then largest cond(Q_p)); only when there are fewer failures
+    than ``count``, trajectories that ended without meeting their tight tolerance (jqinv
+    first), then the solved runs with the largest cond(Q_p).  Only problems with ≤
+    ``max_contacts`` contacts (each iteration costs a reference step); runs that timed out,
+    crashed or have no record are not rerun.  Each entry says why it was chosen."""
     from ..bench.runner import ALGORITHM1_METHODS
 
     small = {k for k, p in data.problems.items() if 0 < p["n_contacts"] <= max_contacts}
-    failed = [r for r in data.solves if not r.get("solved") and r["method"] in ALGORITHM1_METHODS
-              and r["problem"] in small and r.get("status") not in ("Timeout", "Crashed", "Error") + UNUSABLE]
-    failed.sort(key=lambda r: (r["tol"], -(r.get("max_cond_Qp") or 0)))
+    a1 = [r for r in data.solves if r["method"] in ALGORITHM1_METHODS and r["problem"] in small
+          and not r.get("_placeholder")]
+    cond = lambda r: -(r.get("max_cond_Qp") or 0)  # noqa: E731
+    refuted = sorted((r for r in a1 if _refuted(r) and _DIAGNOSABLE_FAILURE(r)), key=lambda r: (r["tol"], cond(r)))
+    failed = sorted((r for r in a1 if not r.get("solved") and not _refuted(r) and _DIAGNOSABLE_FAILURE(r)),
+                    key=lambda r: (r["tol"], cond(r)))
     broke = [t for t in data.trajectories if t["problem"] in small and t.get("status") != "Solved"
-             and t.get("status") not in ("Timeout", "Crashed", "Error")]
+             and _DIAGNOSABLE_FAILURE(t)]
     broke.sort(key=lambda t: (t["method"] != "jqinv", -max((it.get("max_cond_Qp") or 0)
                                                             for it in t.get("iterates") or [{}])))
-    hard = [r for r in data.solves if r["method"] in ALGORITHM1_METHODS and r["problem"] in small
-            and not r.get("_placeholder")]
-    hard.sort(key=lambda r: -(r.get("max_cond_Qp") or 0))
+    hard = sorted((r for r in a1 if r.get("solved")), key=cond)
+    why = ([(r, "solve", "its own claim refuted by the recheck") for r in refuted]
+           + [(r, "solve", f"not verified solved, {r.get('status')}") for r in failed]
+           + [(t, "trajectory", f"no failed run left; its trajectory at {t['tol']:g} ended {t.get('status')}")
+              for t in broke]
+           + [(r, "solve", "no failed run left; solved, largest cond(Q_p)") for r in hard])
     chosen, seen = [], set()
-    for r in failed + broke + hard:
+    for r, kind, reason in why:
         if r["problem"] in seen:
             continue
         seen.add(r["problem"])
-        chosen.append((r["problem"], r["method"], r["tol"]))
+        chosen.append({"problem": r["problem"], "method": r["method"], "tol": r["tol"], "kind": kind,
+                       "why": reason, "record": r})
         if len(chosen) >= count:
             break
     return chosen

@@ -8,12 +8,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .data import RunData, performance_profile
+from .data import DIGITS_CAP, RunData, performance_profile
 
 _STYLE = {
     "jqinv": ("tab:blue", "o"), "qp2": ("tab:orange", "s"), "reduced": ("tab:green", "^"),
     "reduced_factored": ("tab:olive", "v"), "noscaling": ("tab:purple", "D"),
     "clarabel": ("tab:red", "x"), "mixed precision": ("black", "*"),
+}
+
+_LINE = {
+    # Forms often take the same iterations or times: distinct dashes and widths (widest drawn
+    # first) keep a curve that lies under another visible.
+    "jqinv": ("-", 4.0, 0.45), "qp2": ("-", 2.2, 0.9), "reduced": ((0, (5, 2)), 2.2, 0.9),
+    "reduced_factored": ((0, (3, 1, 1, 1)), 1.8, 0.9), "noscaling": ((0, (1, 1.2)), 2.4, 1.0),
+    "clarabel": ((0, (6, 2, 1, 2)), 1.6, 1.0),
 }
 
 
@@ -56,12 +64,13 @@ def profiles(data: RunData, out: Path, measure: str) -> Path:
     """Dolan–Moré profiles, one panel per tolerance."""
     plt = _plt()
     tols = data.tols
-    fig, axes = plt.subplots(1, len(tols), figsize=(4.2 * len(tols), 3.6), squeeze=False, sharey=True)
+    fig, axes = plt.subplots(1, len(tols), figsize=(4.2 * len(tols), 3.9), squeeze=False, sharey=True)
     for ax, tol in zip(axes[0], tols):
         taus, prof = performance_profile(data, tol, measure)
         for m, rho in prof.items():
             color, marker = _style(m)
-            ax.step(taus, rho, where="post", color=color, label=m, lw=1.6)
+            ls, lw, alpha = _LINE.get(m, ("-", 1.6, 1.0))
+            ax.step(taus, rho, where="post", color=color, label=m, ls=ls, lw=lw, alpha=alpha)
         ax.set_xscale("log", base=2)
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlim(1, taus[-1])
@@ -69,167 +78,219 @@ def profiles(data: RunData, out: Path, measure: str) -> Path:
         ax.set_xlabel(f"τ  ({measure} ≤ τ × best {measure})")
         ax.grid(True, which="both", alpha=0.3)
     axes[0][0].set_ylabel("share of problems solved (verified)")
-    axes[0][-1].legend(loc="lower right", fontsize=8)
     what = "run time" if measure == "time" else "iterations"
-    fig.suptitle(f"Performance profiles of {what} ({len(data.problems)} problems; unverified runs count as failures)",
-                 fontsize=10)
-    fig.tight_layout()
+    fig.suptitle(f"Performance profiles of {what} ({len(data.problems)} problems; a run not verified solved never "
+                 "counts)", fontsize=10)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     path = out / f"profile_{'time' if measure == 'time' else 'iterations'}.png"
     _save(fig, path)
     return path
 
 
-def _time_to_digits(times, digits, k):
-    for t, d in zip(times, digits):
-        if d is not None and d >= k:
-            return t
-    return math.inf
+def _best_so_far(points):
+    """(times, digits) of a run's points, sorted by time, digits as the running maximum."""
+    pts = sorted((t, d) for t, d in points if t is not None and d is not None and math.isfinite(t))
+    times = np.array([max(t, 1e-6) for t, _ in pts], dtype=float)
+    best = np.maximum.accumulate(np.array([min(d, DIGITS_CAP) for _, d in pts], dtype=float)) if pts \
+        else np.array([])
+    return times, best
+
+
+def _at(times, best, grid):
+    """Best digits reached by each time of ``grid`` (0 before the first point)."""
+    if times.size == 0:
+        return np.zeros(grid.size)
+    idx = np.searchsorted(times, grid, side="right") - 1
+    return np.where(idx >= 0, best[np.maximum(idx, 0)], 0.0)
+
+
+def work_precision_series(data: RunData) -> tuple[list, dict]:
+    """Per method, per problem with relative digits of v: the points (time, correct digits of v)
+    of its run — every iterate of an Algorithm 1 trajectory, each Clarabel run (one per
+    tolerance), and the k-digit path's end (its proven digits of v at its total time)."""
+    keys = sorted(k for k in data.references if k not in data.absolute_v)
+    series: dict = {}
+    for t in data.trajectories:
+        if t["problem"] in keys and t.get("digits_v_iterates"):
+            series.setdefault(t["method"], {})[t["problem"]] = [
+                (it["time"], d) for it, d in zip(t["iterates"], t["digits_v_iterates"])]
+    for r in data.solves:
+        if r["method"] == "clarabel" and r["problem"] in keys and r.get("digits_v") is not None \
+                and r.get("time") is not None:
+            series.setdefault("clarabel", {}).setdefault(r["problem"], []).append((r["time"], r["digits_v"]))
+    for k in keys:
+        d = data.digits.get(k)
+        digs = (d or {}).get("certified_digits") or {}
+        if d and digs.get("v") is not None and d.get("time") is not None:
+            series.setdefault("mixed precision", {})[k] = [(d["time"], digs["v"])]
+    return keys, series
+
+
+def work_precision_medians(keys: list, series: dict, grid=None) -> tuple[np.ndarray, dict]:
+    """(grid of times, {method: median over ALL ``keys`` of the best digits reached by each
+    time}); a problem a method has no point for counts with 0 digits."""
+    if grid is None:
+        all_t = [t for per in series.values() for pts in per.values() for t, _ in pts if t is not None and t > 0]
+        grid = np.logspace(math.log10(max(min(all_t), 1e-5)) - 0.1, math.log10(max(all_t)) + 0.1, 400)
+    grid = np.asarray(grid, dtype=float)
+    medians = {}
+    for m, per in series.items():
+        curves = np.array([_at(*_best_so_far(per.get(k, [])), grid) for k in keys])
+        medians[m] = np.median(curves, axis=0)  # the report's median (numpy's), over all problems
+    return grid, medians
 
 
 def work_precision_aggregate(data: RunData, out: Path) -> Path | None:
-    """Left: median time to reach k correct digits of v; right: share of problems whose
-    double run ever reaches k digits (how far double precision gets)."""
-    keys = sorted(data.references)
-    if not keys:
+    """Left: at each elapsed time t, the median over ALL problems with a reference of the best
+    correct digits of v a method has reached by t (a problem it has not reached yet, or never
+    reaches, counts with what it has: no method is judged only where it does well).  Right:
+    the share of those problems on which it ever reaches k digits."""
+    keys, series = work_precision_series(data)
+    if not keys or not series:
         return None
     plt = _plt()
+    grid, medians = work_precision_medians(keys, series)
     ks = np.arange(1, 17)
-    series = {}
-    for t in data.trajectories:
-        if t["problem"] in data.references and t.get("digits_v_iterates"):
-            times = [it["time"] for it in t["iterates"]]
-            series.setdefault(t["method"], {})[t["problem"]] = [
-                _time_to_digits(times, t["digits_v_iterates"], k) for k in ks]
-    # The peer has no iterates: its points are its runs at each tolerance.
-    for r in data.solves:
-        if r["method"] == "clarabel" and r["problem"] in data.references and r.get("digits_v") is not None \
-                and r.get("time") is not None:
-            row = series.setdefault("clarabel", {}).setdefault(r["problem"], [math.inf] * len(ks))
-            for i, k in enumerate(ks):
-                if r["digits_v"] >= k:
-                    row[i] = min(row[i], r["time"])
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10.5, 4.0))
-    for m, per in series.items():
-        T = np.array([per.get(k_, [math.inf] * len(ks)) for k_ in keys], dtype=float)
-        med = np.median(T, axis=0)
-        share = np.isfinite(T).mean(axis=0)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11.5, 4.3))
+    order = [m for m in list(_STYLE) if m in series]
+    for m in order:
+        per = series[m]
         color, marker = _style(m)
-        ok = np.isfinite(med)
-        if ok.any():
-            ax1.plot(med[ok], ks[ok], color=color, marker=marker, ms=4, label=m)
-        ax2.plot(ks, share, color=color, marker=marker, ms=4, label=m)
-    mp = [d for k_, d in data.digits.items() if k_ in data.references and d.get("certified")]
-    if mp:
-        tt = np.median([d["time"] for d in mp])
-        dv = np.median([min(d["certified_digits"]["v"], 17) for d in mp])
-        ax1.plot([tt], [dv], marker="*", color="black", ms=12, ls="none",
-                 label=f"mixed precision (double + warm mpmath), median of {len(mp)} certified")
+        med = medians[m]
+        label = (f"k-digit path (proven digits of v at its end; it stops once {data.manifest.get('digits', 10)} "
+                 "are proven)" if m == "mixed precision"
+                 else "clarabel (one run per tolerance)" if m == "clarabel" else m)
+        ls, lw, alpha = _LINE.get(m, ("-", 2.2, 1.0))
+        ax1.step(grid, med, where="post", color=color, ls=ls, lw=lw, alpha=alpha, label=label)
+        best = np.array([_best_so_far(per.get(k, []))[1][-1] if per.get(k) else 0.0 for k in keys])
+        share = [(best >= k - 1e-9).mean() for k in ks]
+        ax2.plot(ks, share, color=color, marker=marker, ms=4, ls=ls, lw=lw, alpha=alpha, label=label)
     _log_x(ax1)
-    ax1.set_xlabel("median elapsed time to reach k digits (s)")
-    ax1.set_ylabel("k = correct digits of v (vs certified reference)")
-    ax1.set_title("Work–precision (median over problems that reach k)", fontsize=10)
+    ax1.set_xlabel("elapsed time t (s)")
+    ax1.set_ylabel("median best correct digits of v by time t")
+    ax1.set_ylim(-0.3, DIGITS_CAP + 0.5)
+    ax1.set_title(f"Work–precision: median over all {len(keys)} problems with a reference", fontsize=10)
     ax1.grid(True, which="both", alpha=0.3)
-    ax1.legend(fontsize=7, loc="lower right")
     ax2.set_xlabel("k = correct digits of v")
     ax2.set_ylabel("share of problems ever reaching k digits")
-    ax2.set_title(f"How far each method gets ({len(keys)} problems with a reference)", fontsize=10)
+    ax2.set_title(f"How far each method gets ({len(keys)} problems)", fontsize=10)
     ax2.set_ylim(-0.02, 1.02)
+    ax2.set_xticks(ks)
     ax2.grid(True, alpha=0.3)
-    ax2.legend(fontsize=7, loc="lower left")
-    fig.tight_layout()
+    handles, labels = ax1.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.12 if len(labels) > 4 else 0.07, 1, 1))
     path = out / "work_precision.png"
     _save(fig, path)
     return path
 
 
 def work_precision_problems(data: RunData, out: Path, keys: list) -> Path | None:
-    """Per problem: verified error of each iterate against elapsed time."""
+    """Per problem: every iterate against elapsed time — correct digits of v where a proven
+    reference exists (v* not ≈ 0), otherwise −log10 of the verified criterion."""
     if not keys:
         return None
     plt = _plt()
     cols = min(3, len(keys))
     rows = math.ceil(len(keys) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols, 3.6 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols, 3.4 * rows + 0.6), squeeze=False)
+    seen = {}
     for ax, key in zip(axes.ravel(), keys):
-        has_ref = key in data.references
-        for t in data.trajectories:
-            if t["problem"] != key or not t.get("iterates"):
-                continue
+        has_ref = key in data.references and key not in data.absolute_v
+        for t in sorted((t for t in data.trajectories if t["problem"] == key and t.get("iterates")),
+                        key=lambda t: list(_STYLE).index(t["method"]) if t["method"] in _STYLE else 99):
             color, marker = _style(t["method"])
             times = np.array([it["time"] for it in t["iterates"]])
             if has_ref and t.get("digits_v_iterates"):
-                y = np.array([d if d is not None else np.nan for d in t["digits_v_iterates"]])
-                y = np.minimum(y, 17)
+                y = np.array([min(d, DIGITS_CAP) if d is not None else np.nan for d in t["digits_v_iterates"]])
             else:
                 y = -np.log10(np.maximum([it["verified_max"] for it in t["iterates"]], 1e-30))
-            ax.plot(np.maximum(times, 1e-4), y, color=color, marker=marker, ms=3, lw=1, label=t["method"])
+            line, = ax.plot(np.maximum(times, 1e-4), y, color=color, marker=marker, ms=3, lw=1)
+            seen.setdefault(t["method"], line)
         pts = sorted(((r["time"], r) for r in data.solves if r["problem"] == key and r["method"] == "clarabel"
                       and r.get("time") is not None), key=lambda p: p[0])
         if pts:
             xs = [p[0] for p in pts]
             if has_ref:
-                ys = [min(p[1].get("digits_v") or 0, 17) for p in pts]
+                ys = [min(p[1].get("digits_v") or 0, DIGITS_CAP) for p in pts]
             else:
                 ys = [-math.log10(max(p[1]["verified"]["max"], 1e-30)) if p[1].get("verified") else 0 for p in pts]
                 ys = [y if math.isfinite(y) else 0 for y in ys]
             color, marker = _style("clarabel")
-            ax.plot(xs, ys, color=color, marker=marker, ls=":", label="clarabel (one run per tol)")
+            line, = ax.plot(xs, ys, color=color, marker=marker, ls=":")
+            seen.setdefault("clarabel (one run per tolerance)", line)
         d = data.digits.get(key)
-        if d and has_ref and d.get("certified_digits"):
-            ax.plot([d["time"]], [min(d["certified_digits"]["v"], 17)], "k*", ms=11, label="mixed precision")
+        digs = (d or {}).get("certified_digits") or {}
+        if d and has_ref and digs.get("v") is not None:
+            line, = ax.plot([d["time"]], [min(digs["v"], DIGITS_CAP)], "k*", ms=11, ls="none")
+            seen.setdefault("k-digit path (proven digits of v)", line)
         _log_x(ax)
         ax.set_xlabel("elapsed time (s)")
         ax.set_ylabel("correct digits of v" if has_ref else "−log10 verified criterion")
         p = data.problems[key]
-        ax.set_title(f"{key}\n(n = {p['n_contacts']}, m = {p['n_dofs']})", fontsize=9)
+        ax.set_title(f"{key}\n(n = {p['n_contacts']} contacts, m = {p['n_dofs']} dofs)", fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=6, loc="upper left")
     for ax in axes.ravel()[len(keys):]:
         ax.axis("off")
-    fig.suptitle("Verified error of each iterate against elapsed time", fontsize=10)
-    fig.tight_layout()
+    fig.suptitle("Each iterate against elapsed time: correct digits of v (proven reference) or −log10 of the "
+                 "verified criterion (no reference)", fontsize=10)
+    fig.legend(list(seen.values()), list(seen), loc="lower center", ncol=min(len(seen), 4), fontsize=8,
+               frameon=False)
+    fig.tight_layout(rect=(0, 0.1 / rows + (0.04 if len(seen) > 4 else 0), 1, 0.97))
     path = out / "work_precision_problems.png"
     _save(fig, path)
     return path
 
 
-def diagnostics(diag: dict, key: str, out: Path, index: int) -> Path:
+def diagnostics(diag: dict, key: str, out: Path, index: int, what: str = "") -> Path:
     """Lockstep diagnosis: digits of agreement, max cond(Q_p), min λ2 double vs reference."""
     plt = _plt()
     its = diag["iterations"]
     k = np.array([r["iter"] for r in its])
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(13, 3.6))
-    for name, lab in (("digits_v", "v"), ("digits_r_t", "r̃"), ("digits_z", "z")):
-        y = np.array([min(r[name], 17) if r[name] is not None else np.nan for r in its], dtype=float)
+    for name, lab in (("digits_v", "$v$"), ("digits_r_t", r"$\tilde r$"), ("digits_z", "$z$")):
+        # Below 0 there is no digit of agreement at all (the error exceeds the value): drawn at 0.
+        y = np.array([min(max(r[name], 0.0), DIGITS_CAP) if r[name] is not None else np.nan for r in its],
+                     dtype=float)
         a1.plot(k + 1, y, marker="o", ms=3, label=lab)
+    from matplotlib.ticker import MaxNLocator
+
+    for ax in (a1, a2, a3):
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     a1.set_xlabel("iteration")
     a1.set_ylabel("digits of agreement, double vs exact step")
+    a1.set_title("Rounding error of each iteration", fontsize=9)
     a1.set_ylim(bottom=0)
-    a1.legend(fontsize=8)
+    a1.legend(fontsize=8, loc="best")
     a1.grid(alpha=0.3)
     cond = np.array([r["max_cond_Qp"] for r in its], dtype=float)
     # cond(Q_p) of iterate k scales the step that produces iterate k + 1.
     a2.semilogy(k + 1, np.where(cond > 0, cond, np.nan), marker="o", ms=3, color="tab:red")
     a2.axhline(1 / np.finfo(float).eps, color="gray", ls="--", lw=1, label="1/ε (double)")
     a2.set_xlabel("iteration (step taken with this scaling)")
-    a2.set_ylabel("max cond(Q_p)")
+    a2.set_ylabel("max cond($Q_p$) over cones")
+    a2.set_title("Conditioning of the NT scaling", fontsize=9)
     a2.legend(fontsize=8)
     a2.grid(alpha=0.3, which="both")
     for fam, color in (("min_lam2_z", "tab:blue"), ("min_lam2_s", "tab:green")):
         dbl = np.array([r[fam]["double"] for r in its], dtype=float)
         ref = np.array([r[fam]["reference"] for r in its], dtype=float)
-        label = "z" if fam.endswith("z") else "Jᵀr̃"
-        a3.semilogy(k + 1, np.where(dbl > 0, dbl, np.nan), color=color, marker="o", ms=3, label=f"λ2({label}) double")
-        a3.semilogy(k + 1, np.where(ref > 0, ref, np.nan), color=color, ls="--", label=f"λ2({label}) exact")
+        label = "z" if fam.endswith("z") else r"J^T\tilde r"
+        a3.semilogy(k + 1, np.where(dbl > 0, dbl, np.nan), color=color, marker="o", ms=3,
+                    label=rf"$\lambda_2({label})$ double")
+        a3.semilogy(k + 1, np.where(ref > 0, ref, np.nan), color=color, ls="--", label=rf"$\lambda_2({label})$ exact")
     events = [r["iter"] + 1 for r in its if r["flags"]]
     for e in events:
         a3.axvline(e, color="red", alpha=0.4, lw=1)
     a3.set_xlabel("iteration" + (" (red: λ2 underflow / sign events)" if events else ""))
-    a3.set_ylabel("min λ2 over cones")
-    a3.legend(fontsize=7)
+    a3.set_ylabel(r"min $\lambda_2$ over cones")
+    a3.set_title("Distance to the cone boundary", fontsize=9)
+    a3.legend(fontsize=7, loc="best")
     a3.grid(alpha=0.3, which="both")
-    fig.suptitle(f"{key}: {diag['method']} at tol {diag.get('tol', float('nan')):g} — {diag['status']}"
-                 f" after {diag['nit']} iterations", fontsize=10)
+    what = what or f"{diag['method']}, tol {diag.get('tol', float('nan')):g}"
+    fig.suptitle(f"{key} ({what}): {diag['status']} after {diag['nit']} iterations", fontsize=10)
     fig.tight_layout()
     path = out / f"diagnostics_{index}.png"
     _save(fig, path)
