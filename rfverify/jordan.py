@@ -40,12 +40,14 @@ Structure: one copy of every formula
 * *Kernels* (``_product``, ``_quad``, ``_nt`` …) evaluate the formulas on 2-D arrays whose rows
   need no rescaling; they check nothing.
 * *Row operations* (``product_rows``, ``quad_rows``, ``power_rows`` …, not in ``__all__``) take
-  finite-or-not 2-D arrays ``(N, k)`` of one dtype, rescale the rows that need it by a power of
-  two, check the domain and call the kernels.  They are the whole computation: the public
-  functions below add argument parsing (shapes, dtypes, broadcasting, single cones), and
-  :class:`rfverify.solver.cones.ProductCone` applies them to the two families of its flat
-  L3/L1 vectors (views, no copies).  A cheap test (:func:`_moderate`) rules out rescaling for
-  ordinary data, so that path costs a few passes over the data and nothing per cone.
+  2-D arrays ``(N, k)`` of one dtype, rescale the rows that need it by a power of two, check
+  finiteness and the domain, call the kernels and refuse a NaN result.  They are the whole
+  computation: the public functions below add argument parsing (shapes, dtypes, broadcasting,
+  single cones), and :class:`rfverify.solver.cones.ProductCone` applies them to the two
+  families of its flat L3/L1 vectors (views, no copies).  One cheap test of the whole flat
+  vector (:func:`moderate`) lets ordinary data skip the per-row magnitude test and the NaN
+  check (``scale=False``), so the solver's hot path is the formulas and a few passes over the
+  data, with the same results bit for bit.
 
 Numerical design
 ----------------
@@ -176,7 +178,12 @@ def _raise_first(op, bad, single, describe):
         raise ConeDomainError(op, text, cone=_cone_index(i, single), value=value)
 
 
-def _check_nan_free(op, out, single):
+def _check_nan_free(op, out, single, scale=True):
+    """out, or ConeDomainError(op) at the first row holding a NaN.  With ``scale=False`` the
+    inputs were shown moderate() and passed the domain checks, so every intermediate of the
+    kernels is finite and there is nothing to look for."""
+    if not scale:
+        return out
     bad = np.isnan(out)
     if bad.any():
         i = int(np.argmax(bad.reshape(bad.shape[0], -1).any(axis=1)))
@@ -207,7 +214,9 @@ def _bounds(dtype):
 def moderate(*arrays) -> bool:
     """True when provably no row of the arrays needs rescaling: every nonzero |entry| lies in
     [2^-T, 2^T], hence so does every row's maximum (the criterion of :func:`_scaled`), and
-    every entry is finite.  Row operations may then be called with ``scale=False``.
+    every entry is finite.  Row operations may then be called with ``scale=False``: products
+    of up to four such numbers stay finite and normal, so once the domain checks pass no
+    kernel can produce a NaN.
 
     Checked on the float64 image, which costs a fifth of longdouble arithmetic; False where
     that image cannot tell (NaN, Inf, entries beyond float64's range or flushed to 0 by the
@@ -217,8 +226,11 @@ def moderate(*arrays) -> bool:
         if x.size == 0:
             continue
         _, hi, lo = _bounds(x.dtype)
-        with np.errstate(over="ignore"):
-            mag = np.abs(x.astype(np.float64, copy=False))
+        if x.dtype == np.float64:
+            mag = np.abs(x)
+        else:
+            with np.errstate(over="ignore"):
+                mag = np.abs(x.astype(np.float64))
         top = mag.max()
         if not (top <= hi and top < np.inf):  # also catches NaN
             return False
@@ -264,19 +276,20 @@ def _scaled(x, op, name, single, scale=True):
 
 
 def _shift(a, e):
-    """a·2^e row by row (exact barring over/underflow); e = 0 leaves a untouched."""
-    if np.ndim(e) == 0:
-        return a if e == 0 else np.ldexp(a, e)
+    """a·2^e row by row (exact barring over/underflow); e = 0 (no row rescaled) leaves a
+    untouched."""
+    if not isinstance(e, np.ndarray):
+        return a
     return np.ldexp(a, e.reshape(e.shape + (1,) * (a.ndim - 1)))
 
 
 def _take(e, rows):
-    return e if np.ndim(e) == 0 else e[rows]
+    return e[rows] if isinstance(e, np.ndarray) else e
 
 
 def _at(a, e, i):
     """a[i]·2^e[i] as a Python float (the unscaled value, for messages)."""
-    return float(np.ldexp(a[i], e if np.ndim(e) == 0 else e[i]))
+    return float(np.ldexp(a[i], _take(e, i)))
 
 
 # --------------------------------------------------------------------------------------------
@@ -285,17 +298,22 @@ def _at(a, e, i):
 
 
 def _bar_norm(xb):
-    """‖x̄‖ per row, hypot-style: scaled by max|x̄_i| so that neither the squares overflow
-    (x̄ ~ 1e200) nor underflow (subnormal x̄)."""
-    n_bar = xb.shape[-1]
-    if n_bar == 0:
-        return np.zeros(xb.shape[:-1], dtype=xb.dtype)
-    if n_bar == 1:
-        return np.abs(xb[..., 0])
-    if n_bar == 2:
+    """‖x̄‖ per row of the bar block x̄ (N, k-1); see :func:`_norm`."""
+    return _norm([xb[:, j] for j in range(xb.shape[1])], xb.shape[0], xb.dtype)
+
+
+def _norm(cols, n, dtype):
+    """Euclidean norm of rows given as columns, hypot-style: scaled by the largest entry so
+    that neither the squares overflow (x̄ ~ 1e200) nor underflow (subnormal x̄)."""
+    if not cols:
+        return np.zeros(n, dtype=dtype)
+    if len(cols) == 1:
+        return np.abs(cols[0])
+    if len(cols) == 2:
         # L3, the hot case: libm's hypot is already overflow/underflow-safe and correctly
         # rounded to within an ulp, at a fraction of the cost of the scaled sum below.
-        return np.hypot(xb[..., 0], xb[..., 1])
+        return np.hypot(cols[0], cols[1])
+    xb = np.stack(cols, axis=1)
     m = np.max(np.abs(xb), axis=-1)
     safe = np.where(m > 0, m, 1)
     r = xb / safe[..., None]
@@ -358,8 +376,13 @@ def _product(x, y):
 
 def _quad(x, y, det):
     """Q_x y = 2(xᵀy) x − det(x) R y, with det(x) = λ1 λ2 given (reused across many y)."""
-    h = 2 * _dot(x, y)
-    return _rows(h * x[:, 0] - det * y[:, 0], [h * xj + det * yj for xj, yj in zip(_bar(x), _bar(y))])
+    return _rows(*_quad_cols(x, y, det))
+
+
+def _quad_cols(x, y, det):
+    h = _dot(x, y)
+    h *= 2
+    return h * x[:, 0] - det * y[:, 0], [h * xj + det * yj for xj, yj in zip(_bar(x), _bar(y))]
 
 
 def _inverse(x, l1, l2):
@@ -493,17 +516,6 @@ def _arrow(x):
     return a
 
 
-def step_from_lambda2(l2y):
-    """Step to the boundary from λ2(y) of y = Q_{x^{-1/2}} dx: −1/λ2(y) if λ2(y) < 0, else inf.
-
-    -1/λ2(y) overflows when the true step exceeds the dtype's range (e.g. a subnormal dx
-    pointing out of the cone); inf would claim "never leaves the cone", which is false, so the
-    largest representable step is returned instead (x + max·dx is still in L)."""
-    neg = l2y < 0
-    alpha = np.where(neg, -1 / np.where(neg, l2y, -1), np.inf)
-    return np.where(neg & np.isinf(alpha), np.finfo(alpha.dtype).max, alpha)
-
-
 # --------------------------------------------------------------------------------------------
 # row operations: 2-D arrays (N, k) of one floating dtype; rescaling, domain checks, kernels.
 # Errors name `op` and the row (None when `single`); scale=False skips the per-row magnitude
@@ -515,7 +527,8 @@ def product_rows(x, y, *, op="jordan_product", single=False, scale=True):
     """x∘y row by row (also x² for y = x)."""
     xs, ex = _scaled(x, op, "x", single, scale)
     ys, ey = _scaled(y, op, "y", single, scale)
-    return _check_nan_free(op, _shift(_product(xs, ys), ex + ey), single)
+    out = _shift(_product(xs, ys), ex + ey)
+    return _check_nan_free(op, out, single, scale)
 
 
 def spectral_rows(x, *, op="spectral_values", single=False, scale=True):
@@ -544,8 +557,7 @@ def quad_apply_rows(qx: QuadRows, y, *, op="quad_apply", single=False, scale=Tru
     """Q_x y row by row; y is scaled by a power of two too, so that the two terms stay finite
     and the result over/underflows only when its true value does (no inf − inf)."""
     ys, ey = _scaled(y, op, "y", single, scale)
-    q = _quad(qx.xs, ys, qx.det)
-    return _check_nan_free(op, _shift(q, 2 * qx.e + ey), single)
+    return _check_nan_free(op, _shift(_quad(qx.xs, ys, qx.det), 2 * qx.e + ey), single, scale)
 
 
 def _invertible(x, op, single, scale):
@@ -560,13 +572,13 @@ def _invertible(x, op, single, scale):
 
 def inverse_rows(x, *, op="inverse", single=False, scale=True):
     xs, e, l1, l2 = _invertible(x, op, single, scale)
-    return _check_nan_free(op, _shift(_inverse(xs, l1, l2), -e), single)
+    return _check_nan_free(op, _shift(_inverse(xs, l1, l2), -e), single, scale)
 
 
 def inverse_square_rows(x, *, op="power", single=False, scale=True):
     """x⁻² = R x²/det(x)² row by row, wherever det x != 0."""
     xs, e, l1, l2 = _invertible(x, op, single, scale)
-    return _check_nan_free(op, _shift(_inverse_square(xs, l1, l2), -2 * e), single)
+    return _check_nan_free(op, _shift(_inverse_square(xs, l1, l2), -2 * e), single, scale)
 
 
 def arrow_solve_rows(x, y, *, op="arrow_solve", single=False, scale=True):
@@ -577,7 +589,7 @@ def arrow_solve_rows(x, y, *, op="arrow_solve", single=False, scale=True):
     _raise_first(op, (l1 == 0) | (l2 == 0) | (x0 == 0), single, lambda i: (
         f"Arw(x) is singular (x0 = {_at(x0, ex, i)}, λ2 = {_at(l2, ex, i)}): x∘d = y has no "
         "unique solution", 0.0))
-    return _check_nan_free(op, _shift(_arrow_solve(xs, ys, l1, l2), ey - ex), single)
+    return _check_nan_free(op, _shift(_arrow_solve(xs, ys, l1, l2), ey - ex), single, scale)
 
 
 def sqrt_rows(x, *, op="sqrt", single=False, scale=True):
@@ -586,7 +598,7 @@ def sqrt_rows(x, *, op="sqrt", single=False, scale=True):
     _raise_first(op, l2 < 0, single, lambda i: (
         f"x is outside the cone (λ2 = {_at(l2, e, i)} < 0); the square root exists only on L",
         _at(l2, e, i)))
-    return _check_nan_free(op, _shift(_sqrt(xs, np.sqrt(l1), np.sqrt(l2)), e // 2), single)
+    return _check_nan_free(op, _shift(_sqrt(xs, np.sqrt(l1), np.sqrt(l2)), e // 2), single, scale)
 
 
 def power_rows(x, p, *, op="power", single=False, scale=True):
@@ -652,7 +664,7 @@ def _power_integer(op, x, p, single):
 def quad_matrix_rows(x, *, op="quad_matrix", single=False, scale=True):
     xs, e = _scaled(x, op, "x", single, scale)
     l1, l2, _ = _spec(xs)
-    return _check_nan_free(op, _shift(_quad_matrix(xs, l1 * l2), 2 * e), single)
+    return _check_nan_free(op, _shift(_quad_matrix(xs, l1 * l2), 2 * e), single, scale)
 
 
 def arrow_rows(x, *, op="arrow", single=False, scale=True):
@@ -701,7 +713,7 @@ def nt_rows(z, s, *, op="nt_scaling", single=False, scale=True) -> NTScaling:
     sh = (es - ez) // 4  # es, ez are multiples of 4
     p, p_inv, lam = _shift(p, sh), _shift(p_inv, -sh), _shift(lam, (es + ez) // 2)
     for arr in (p, p_inv, lam):
-        _check_nan_free(op, arr, single)
+        _check_nan_free(op, arr, single, scale)
     return NTScaling(p=p, p_inv=p_inv, lam=lam, v=v, beta=_shift(q * q, 2 * sh), cond=cond)
 
 
@@ -728,11 +740,21 @@ def step_point_rows(x, *, op="step_to_boundary", single=False, scale=True) -> St
 def ray_lambda2_rows(point: StepPoint, dx, *, op="step_to_boundary", single=False, scale=True):
     """λ2(Q_{x^{-1/2}} dx) row by row: x + α dx ∈ L iff 1 + α·λ2 >= 0."""
     ds, ed = _scaled(dx, op, "dx", single, scale)  # α(x, dx) = α(c x, c dx): scale dx on its own
-    _, l2, _ = _spec(_quad(point.w, ds, point.det_w))
-    l2 = _shift(l2, ed - point.e)
-    if np.isnan(l2).any():
-        _check_nan_free(op, l2[:, None], single)
+    head, bars = _quad_cols(point.w, ds, point.det_w)
+    l2 = _shift(head - _norm(bars, head.shape[0], head.dtype), ed - point.e)
+    _check_nan_free(op, l2[:, None], single, scale)
     return l2
+
+
+def step_from_lambda2(l2y):
+    """Step to the boundary from λ2(y) of y = Q_{x^{-1/2}} dx: −1/λ2(y) if λ2(y) < 0, else inf.
+
+    -1/λ2(y) overflows when the true step exceeds the dtype's range (e.g. a subnormal dx
+    pointing out of the cone); inf would claim "never leaves the cone", which is false, so the
+    largest representable step is returned instead (x + max·dx is still in L)."""
+    neg = l2y < 0
+    alpha = np.where(neg, -1 / np.where(neg, l2y, -1), np.inf)
+    return np.where(neg & np.isinf(alpha), np.finfo(alpha.dtype).max, alpha)
 
 
 # --------------------------------------------------------------------------------------------

@@ -22,7 +22,8 @@ u is recomputed as Hᵀ v + w in the original layout.
 
 Layout of the cone variables: all L3 cones first (array ``(n3, 3)`` when reshaped), then all
 L1 cones (``(n1, 1)``), so each family is one contiguous block that the Jordan algebra
-processes in one vectorised call.
+processes in one vectorised call; :class:`rfverify.solver.cones.ProductCone` splits, joins and
+operates on such vectors.
 """
 
 from __future__ import annotations
@@ -99,17 +100,6 @@ class LiftedProblem:
     def reduction_counts(self) -> dict:
         """How many contacts of each kind (the cone-reduction part of the presolve report)."""
         return {name: int(np.sum(self.kinds == k)) for k, name in enumerate(KIND_NAMES)}
-
-    def split(self, z: np.ndarray):
-        """Views ``(z3 (n3, 3), z1 (n1, 1))`` of a cone vector of length nz."""
-        return z[: 3 * self.n3].reshape(self.n3, 3), z[3 * self.n3:].reshape(self.n1, 1)
-
-    def identity(self, dtype=np.float64) -> np.ndarray:
-        """e of the product cone: (1, 0, 0) for each L3 cone and 1 for each L1 cone."""
-        e = np.zeros(self.nz, dtype=dtype)
-        e[0: 3 * self.n3: 3] = 1
-        e[3 * self.n3:] = 1
-        return e
 
     def r_from_lifted(self, r_t: np.ndarray) -> np.ndarray:
         """r = P r̃ in the original 5n layout (dropped components are 0)."""

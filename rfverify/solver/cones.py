@@ -63,18 +63,17 @@ class ProductCone:
         the global cone index.
         """
         scale = not jordan.moderate(*(a for a in args if not isinstance(a, tuple)))
-        out = []
-        for fam, (size, offset) in enumerate(((self.n3, 0), (self.n1, self.n3))):
-            if not size:
-                out.append(None)
-                continue
-            parts = [a[fam] if isinstance(a, tuple) else self.split(a)[fam] for a in args]
-            try:
-                with np.errstate(all="ignore"):
-                    out.append(fn(*parts, scale=scale))
-            except ConeDomainError as exc:
-                cone = None if exc.cone is None else offset + exc.cone
-                raise ConeDomainError(op, _strip(exc), cone=cone, value=exc.value) from exc
+        fams = [a if isinstance(a, tuple) else self.split(a) for a in args]
+        out = [None, None]
+        with np.errstate(all="ignore"):
+            for fam, size, offset in ((0, self.n3, 0), (1, self.n1, self.n3)):
+                if not size:
+                    continue
+                try:
+                    out[fam] = fn(*(f[fam] for f in fams), scale=scale)
+                except ConeDomainError as exc:
+                    cone = None if exc.cone is None else offset + exc.cone
+                    raise ConeDomainError(op, _strip(exc), cone=cone, value=exc.value) from exc
         return tuple(out)
 
     def _flat(self, fn, *args, op):
