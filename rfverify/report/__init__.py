@@ -317,7 +317,9 @@ def _digits_section(doc: _Doc, data: RunData) -> None:
     doc.p(f"rfverify solve --digits {k} (DESIGN §6.5): a double jqinv solve to 1e-10, Algorithm 1 continued in "
           f"double-double arithmetic from its last iterate, and a rigorous error bound evaluated exactly, until "
           f"v, u, Hr (and r where unique) are proven to {k} digits. 'path time' is the whole of it (what the "
-          f"proven digits cost); 'ratio' = path time / {base}, per problem. Proven digits are lower bounds; "
+          f"proven digits cost) in the bench's fresh process per run, so it includes loading the compiled "
+          f"double-double kernels once (numba's cache; a second path in the same process skips it); 'ratio' = "
+          f"path time / {base}, per problem. Proven digits are lower bounds; "
           "'abs.' = x* ≈ 0, proven in the absolute sense against a data scale (DESIGN §6.3); 'info' = r is not "
           "unique, so not certified (information only).")
     rows = mixed_precision(data)
@@ -432,7 +434,7 @@ def _glance(data: RunData, table, diags) -> list:
                                                          if cost["median_ratio"] is not None else ""))
             text += (f" — median over the {cost['n_certified']} of {cost['n']} problems proven to {k} digits of "
                      "v, u, Hr (and r where unique); time of the whole path (double solve to 1e-10, double-double "
-                     "continuation, proof); ratio = path time / the bench's jqinv solve at "
+                     "continuation, proof) in a fresh process; ratio = path time / the bench's jqinv solve at "
                      f"{_fmt(cost['base_tol'], 'g')}, per problem (median of {cost['n_ratio']} ratios)")
         else:
             text = f"not measured: none of the {cost['n']} k-digit paths proved {k} digits"
