@@ -79,25 +79,9 @@ import numpy as np
 from .errors import ConeDomainError
 
 __all__ = [
-    "NTScaling",
-    "arrow",
-    "arrow_solve",
-    "cond_quad",
-    "det",
-    "identity",
-    "inverse",
-    "jordan_product",
-    "max_step",
-    "min_lambda2",
-    "nt_scaling",
-    "power",
-    "quad_apply",
-    "quad_matrix",
-    "reflect",
-    "spectral_frames",
-    "spectral_values",
-    "sqrt",
-    "step_to_boundary",
+    "NTScaling", "arrow", "arrow_solve", "cond_quad", "det", "identity", "inverse",
+    "jordan_product", "max_step", "min_lambda2", "nt_scaling", "power", "quad_apply",
+    "quad_matrix", "reflect", "spectral_frames", "spectral_values", "sqrt", "step_to_boundary",
     "trace",
 ]
 
@@ -717,16 +701,9 @@ def nt_rows(z, s, *, op="nt_scaling", single=False, scale=True) -> NTScaling:
     return NTScaling(p=p, p_inv=p_inv, lam=lam, v=v, beta=_shift(q * q, 2 * sh), cond=cond)
 
 
-class StepPoint(NamedTuple):
-    """An interior x prepared for step lengths along many directions: w = x̂^{-1/2} of
-    x̂ = x·2^-e and det w (the route of :func:`step_to_boundary`)."""
-
-    w: np.ndarray
-    det_w: np.ndarray
-    e: object
-
-
-def step_point_rows(x, *, op="step_to_boundary", single=False, scale=True) -> StepPoint:
+def step_point_rows(x, *, op="step_to_boundary", single=False, scale=True) -> QuadRows:
+    """Q_{x^{-1/2}} of an interior x, prepared for the step lengths along many directions
+    (the route of :func:`step_to_boundary`): x^{-1/2} = x̂^{-1/2}·2^(-e/2) for x = x̂·2^e."""
     xs, e = _scaled(x, op, "x", single, scale)
     l1, l2, _ = _spec(xs)
     _raise_first(op, ~(l2 > 0), single, lambda i: (
@@ -734,14 +711,15 @@ def step_point_rows(x, *, op="step_to_boundary", single=False, scale=True) -> St
         "measured from an interior point", _at(l2, e, i)))
     w = _inverse_sqrt(xs, l1, l2)
     lw1, lw2, _ = _spec(w)
-    return StepPoint(w, lw1 * lw2, e)
+    return QuadRows(w, lw1 * lw2, -e // 2)
 
 
-def ray_lambda2_rows(point: StepPoint, dx, *, op="step_to_boundary", single=False, scale=True):
-    """λ2(Q_{x^{-1/2}} dx) row by row: x + α dx ∈ L iff 1 + α·λ2 >= 0."""
-    ds, ed = _scaled(dx, op, "dx", single, scale)  # α(x, dx) = α(c x, c dx): scale dx on its own
-    head, bars = _quad_cols(point.w, ds, point.det_w)
-    l2 = _shift(head - _norm(bars, head.shape[0], head.dtype), ed - point.e)
+def ray_lambda2_rows(point: QuadRows, dx, *, op="step_to_boundary", single=False, scale=True):
+    """λ2(Q_{x^{-1/2}} dx) row by row for ``point = step_point_rows(x)``: x + α dx ∈ L iff
+    1 + α·λ2 >= 0."""
+    ds, ed = _scaled(dx, op, "dx", single, scale)
+    head, bars = _quad_cols(point.xs, ds, point.det)
+    l2 = _shift(head - _norm(bars, head.shape[0], head.dtype), 2 * point.e + ed)
     _check_nan_free(op, l2[:, None], single, scale)
     return l2
 

@@ -1,13 +1,13 @@
 """The product cone of the lifted problem, L3^{n3} × L1^{n1}, as flat vectors.
 
-A flat cone vector (length nz = 3·n3 + n1, L3 cones first) is viewed as its two families,
-(n3, 3) and (n1, 1) arrays without copying, and each operation is the row operation of
-:mod:`rfverify.jordan` applied to each family — the code behind the validated public
-functions, minus their argument parsing.  Rows of ordinary magnitude are recognised by one
-cheap test and never rescaled, so the hot path is the formulas themselves; rows of extreme
-magnitude are rescaled by powers of two exactly as the public functions do.  Domain errors
-are re-raised with the *global* cone index, which :class:`~rfverify.lifting.LiftedProblem`
-maps to a contact.
+A flat cone vector (length nz = 3·n3 + n1, L3 cones first) is handed to the row operations
+of :mod:`rfverify.jordan` — the code behind the validated public functions, minus their
+argument parsing — as one array of cone rows, so each operation is one call whatever the mix
+of cones (see :meth:`ProductCone.rows`).  Rows of ordinary magnitude are recognised by one
+cheap test of the flat vector and never rescaled, so the hot path is the formulas themselves;
+rows of extreme magnitude are rescaled by powers of two exactly as the public functions do.
+Row indices are the global cone indices, which domain errors report and
+:class:`~rfverify.lifting.LiftedProblem` maps to contacts.
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ from __future__ import annotations
 import numpy as np
 
 from .. import jordan
-from ..errors import ConeDomainError
 
 
 class ProductCone:
@@ -48,50 +47,43 @@ class ProductCone:
         e[3 * self.n3:] = 1
         return e
 
-    def _same_dtype(self, *args):
-        """Flat vectors in their common working dtype; per-family pairs pass through."""
-        dtype = np.result_type(*(a for a in args if not isinstance(a, tuple)), np.float64)
-        return [a if isinstance(a, tuple) else np.asarray(a, dtype=dtype) for a in args]
+    def rows(self, x):
+        """x as one array of cone rows, row i = cone i: the (n3, 3) view when there are no L1
+        cones, the (n1, 1) view when there are no L3 cones, otherwise a copy with each L1 cone
+        padded to the L3 row (x, 0, 0).  The jordan formulas on a zero bar are exactly their
+        k = 1 forms (λ1 = λ2 = x0, det = x0², Q_x y = x0² y0 …), so a mixed product cone costs
+        one call per operation instead of one per family."""
+        if not self.n1:
+            return x.reshape(self.n3, 3)
+        if not self.n3:
+            return x.reshape(self.n1, 1)
+        r = np.zeros((self.n_cones, 3), dtype=x.dtype)
+        r[: self.n3] = x[: 3 * self.n3].reshape(self.n3, 3)
+        r[self.n3:, 0] = x[3 * self.n3:]
+        return r
 
-    def _map(self, fn, *args, op: str):
-        """``fn(*parts, scale=...)`` on each non-empty family: (result for L3 or None, result
-        for L1 or None).
+    def flat(self, r):
+        """The flat vector of a row array from :meth:`rows` (padding dropped)."""
+        if not (self.n1 and self.n3):
+            return r.reshape(-1)
+        return np.concatenate((r[: self.n3].reshape(-1), r[self.n3:, 0]))
 
-        An argument is a flat vector (split here) or a pair already per family.  One test of
-        the flat vectors (:func:`rfverify.jordan.moderate`) spares the row operations their
-        per-row magnitude test for ordinary data.  Domain errors are re-raised as ``op`` with
-        the global cone index.
-        """
-        scale = not jordan.moderate(*(a for a in args if not isinstance(a, tuple)))
-        fams = [a if isinstance(a, tuple) else self.split(a) for a in args]
-        out = [None, None]
+    def _call(self, fn, *args, op: str):
+        """``fn(*rows, op=op, scale=...)`` on the flat vectors ``args`` in their common dtype.
+        One test of the flat vectors (:func:`rfverify.jordan.moderate`) spares the row
+        operation its per-row magnitude test and NaN check for ordinary data."""
+        dtype = np.result_type(*args, np.float64)
+        args = [np.asarray(a, dtype=dtype) for a in args]
         with np.errstate(all="ignore"):
-            for fam, size, offset in ((0, self.n3, 0), (1, self.n1, self.n3)):
-                if not size:
-                    continue
-                try:
-                    out[fam] = fn(*(f[fam] for f in fams), scale=scale)
-                except ConeDomainError as exc:
-                    cone = None if exc.cone is None else offset + exc.cone
-                    raise ConeDomainError(op, _strip(exc), cone=cone, value=exc.value) from exc
-        return tuple(out)
-
-    def _flat(self, fn, *args, op):
-        """``fn`` family by family, joined into one flat vector."""
-        args = self._same_dtype(*args)
-        o3, o1 = self._map(fn, *args, op=op)
-        parts = [o.reshape(-1) for o in (o3, o1) if o is not None]
-        if len(parts) == 1:
-            return parts[0]
-        return np.concatenate(parts) if parts else np.empty(0, args[-1].dtype)
+            return fn(*(self.rows(a) for a in args), op=op, scale=not jordan.moderate(*args))
 
     # ------------------------------------------------------------------ algebra
     def product(self, x, y):
-        return self._flat(jordan.product_rows, x, y, op="jordan_product")
+        return self.flat(self._call(jordan.product_rows, x, y, op="jordan_product"))
 
     def arrow_solve(self, x, y):
         """Solve x ∘ d = y for d (Arw(x)⁻¹ y)."""
-        return self._flat(jordan.arrow_solve_rows, x, y, op="arrow_solve")
+        return self.flat(self._call(jordan.arrow_solve_rows, x, y, op="arrow_solve"))
 
     def quad_apply(self, p, y):
         return self.quad_operator(p)(y)
@@ -101,16 +93,19 @@ class ProductCone:
         return QuadOperator(self, p)
 
     def inverse(self, x):
-        return self._flat(jordan.inverse_rows, x, op="inverse")
+        return self.flat(self._call(jordan.inverse_rows, x, op="inverse"))
 
     def power(self, x, t):
-        """x^t cone by cone; t = ±2 in the closed forms x∘x and x⁻¹∘x⁻¹."""
-        return self._flat(lambda a, scale: jordan.power_rows(a, t, scale=scale), x, op=f"power({t})")
+        """x^t cone by cone; t = ±2 in the closed forms x∘x and R x²/det(x)²."""
+        return self.flat(self._call(lambda a, **kw: jordan.power_rows(a, t, **kw), x, op=f"power({t})"))
 
     def _blocks(self, fn, x, op):
-        b3, b1 = self._map(fn, *self._same_dtype(x), op=op)
-        parts = [np.asarray(b, dtype=np.float64).ravel() for b in (b3, b1) if b is not None]
-        return np.concatenate(parts) if parts else np.empty(0)
+        """Diagonal blocks (3×3 per L3 cone, 1 value per L1 cone) as float64, in the order of
+        (bd_rows, bd_cols)."""
+        b = np.asarray(self._call(fn, x, op=op), dtype=np.float64)
+        if not (self.n1 and self.n3):
+            return b.reshape(-1)
+        return np.concatenate((b[: self.n3].reshape(-1), b[self.n3:, 0, 0]))
 
     def quad_blocks(self, p) -> np.ndarray:
         """Values of the block-diagonal Q_p in the order of (bd_rows, bd_cols), float64."""
@@ -122,39 +117,33 @@ class ProductCone:
 
     def nt_scaling(self, z, s):
         """NT scaling of the pair, flat: (p, p⁻¹, λ = Q_p z = Q_{p⁻¹} s, cond(Q_p) per cone)."""
-        z, s = self._same_dtype(z, s)
-        fams = [r for r in self._map(jordan.nt_rows, z, s, op="nt_scaling") if r is not None]
-        if not fams:
-            return z.copy(), z.copy(), z.copy(), np.empty(0)
-        p, p_inv, lam = (np.concatenate([np.ravel(getattr(r, f)) for r in fams]) for f in ("p", "p_inv", "lam"))
-        cond = np.concatenate([np.asarray(r.cond, dtype=np.float64) for r in fams])
-        return p, p_inv, lam, cond
+        r = self._call(jordan.nt_rows, z, s, op="nt_scaling")
+        return self.flat(r.p), self.flat(r.p_inv), self.flat(r.lam), np.asarray(r.cond, dtype=np.float64)
 
     # ------------------------------------------------------------------ step lengths
-    def _step_points(self, x):
-        return self._map(jordan.step_point_rows, x, op="step_to_boundary")
-
-    def _min_lambda2_along(self, points, dx):
-        """min over cones of λ2(Q_{x^{-1/2}} dx) (+inf for no cones)."""
-        l3, l1 = self._map(jordan.ray_lambda2_rows, points, dx, op="step_to_boundary")
-        return min((np.min(l) for l in (l3, l1) if l is not None and l.size), default=np.inf)
+    def _min_lambda2_along(self, point, dx):
+        """min over cones of λ2(Q_{x^{-1/2}} dx) for a point of step_point_rows (+inf for no
+        cones)."""
+        l2 = self._call(lambda d, **kw: jordan.ray_lambda2_rows(point, d, **kw), dx, op="step_to_boundary")
+        return np.min(l2, initial=np.inf)
 
     def max_step(self, x, dx) -> float:
         """Largest α ≥ 0 (possibly ∞) with x + α dx in the cone, for x strictly interior."""
-        x, dx = self._same_dtype(x, dx)
-        return float(jordan.step_from_lambda2(np.asarray(self._min_lambda2_along(self._step_points(x), dx))))
+        return self.stepper(x, x)(dx, None)
 
     def stepper(self, z, s):
         """A function (dz, ds) ↦ max_step_pair(z, dz, s, ds) for this (z, s), which keeps what
-        depends on the point only (x^{-1/2} of each cone) for the next direction."""
-        z, s = self._same_dtype(z, s)
-        pz, ps = self._step_points(z), self._step_points(s)
+        depends on the point only (x^{-1/2} of each cone) for the next direction; ds = None
+        measures dz alone."""
+        pz = self._call(jordan.step_point_rows, z, op="step_to_boundary")
+        ps = pz if s is z else self._call(jordan.step_point_rows, s, op="step_to_boundary")
 
         def max_step(dz, ds):
-            dz, ds = (np.asarray(d, dtype=z.dtype) for d in (dz, ds))
             # α = −1/λ2(y) decreases with −λ2(y): the smallest step belongs to the most negative
             # λ2, so one reduction replaces a division per cone.
-            lo = min(self._min_lambda2_along(pz, dz), self._min_lambda2_along(ps, ds))
+            lo = self._min_lambda2_along(pz, dz)
+            if ds is not None:
+                lo = min(lo, self._min_lambda2_along(ps, ds))
             return float(jordan.step_from_lambda2(np.asarray(lo)))
 
         return max_step
@@ -171,7 +160,7 @@ class ProductCone:
         return float(lam[k]), k
 
     def lambda2(self, x) -> np.ndarray:
-        return self._flat(lambda a, scale: jordan.spectral_rows(a, scale=scale)[1], x, op="spectral_values")
+        return self._call(jordan.spectral_rows, x, op="spectral_values")[1]
 
 
 class QuadOperator:
@@ -186,13 +175,8 @@ class QuadOperator:
     def __init__(self, cones: ProductCone, p):
         self.cones = cones
         self.p = p
-        self._prepared = cones._map(jordan.quad_rows, *cones._same_dtype(p), op="quad_apply")
+        self._prepared = cones._call(jordan.quad_rows, p, op="quad_apply")
 
     def __call__(self, y):
-        return self.cones._flat(jordan.quad_apply_rows, self._prepared, y, op="quad_apply")
-
-
-def _strip(exc: ConeDomainError) -> str:
-    text = str(exc)
-    head = f"{exc.operation} (cone {exc.cone}): " if exc.cone is not None else f"{exc.operation}: "
-    return text[len(head):] if text.startswith(head) else text
+        return self.cones.flat(self.cones._call(
+            lambda r, **kw: jordan.quad_apply_rows(self._prepared, r, **kw), y, op="quad_apply"))
