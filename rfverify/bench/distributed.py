@@ -185,7 +185,10 @@ def _run(client, run_dir: Path, todo: list, time_limit: float, bar, jobs, priori
     try:
         while pending or running:
             if jobs is None and time.monotonic() - cap_checked > 2.0:
-                cap = max(1, 2 * sum(client.nthreads().values()))
+                try:
+                    cap = max(1, 2 * sum(client.nthreads().values()))
+                except Exception:  # noqa: BLE001 - a lost scheduler shows in the futures below
+                    pass
                 cap_checked = time.monotonic()
             limit = jobs if jobs is not None else cap
             while pending and len(running) < limit:
