@@ -629,7 +629,8 @@ def cmd_diagnose(args) -> int:
 
     problem = _load(args)
     with _recorded_warnings() as caught:
-        d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps)
+        d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps,
+                     progress=_progress(args))
     d["numerical_warnings"] = _warning_summary(caught)
     # The exit code is the double run's outcome, so scripts can tell a failing run apart.
     code = EXIT_OK if d["status"] == "Solved" else EXIT_NOT_SOLVED

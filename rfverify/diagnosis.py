@@ -30,12 +30,14 @@ def _digits(a, b) -> float:
 
 
 def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter: int = 100,
-             dps: int = 40, **options) -> dict:
+             dps: int = 40, progress=None, **options) -> dict:
     """Run ``method`` in double and the reference in lockstep; see the module docstring.
 
     Returns a JSON-able dict: ``status``/``message`` of the double run and ``iterations``, a
-    list of per-iteration records.
+    list of per-iteration records.  ``progress(message)`` receives one line per stage and per
+    exact step (the steps are the slow part: seconds each at a few hundred contacts).
     """
+    say = progress or (lambda message: None)
     import reference
     from reference import jordan as RJ
 
@@ -45,9 +47,11 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     active = res.extras["active_dofs"]
     iterates = res.extras["iterates"]
     tr = res.trace
+    say(f"double run ({method}): {res.status} after {res.nit} iterations; building the reference at {dps} digits")
     exact = reference.Solver(problem, dps=dps)  # one build for every step of the run
     records = []
     for k in range(len(iterates) - 1):
+        say(f"exact step {k + 1} of {len(iterates) - 1}")
         v_k, r_k, z_k = iterates[k]
         v_full = np.array(res.v, dtype=np.longdouble)
         v_full[active] = v_k

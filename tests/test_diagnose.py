@@ -92,3 +92,17 @@ def test_iterate_without_an_exact_step_is_reported(monkeypatch):
     assert math.isnan(bad["min_lam2_z"]["reference"]) and bad["min_lam2_z"]["double"] > 0
     assert bad["flags"] == ["no exact step from the double iterate: nt_scaling: 'z' not interior"]
     assert min(good["digits_v"], good["digits_z"]) > 12 and not good["flags"]
+
+
+def test_cli_diagnose_reports_progress_on_stderr_only(capsys):
+    """Long lockstep runs are not silent: one stderr line for the double run and one per exact
+    step; --json keeps stderr quiet and stdout pure JSON."""
+    assert main(["diagnose", "bundled:sphere", "--max-iter", "3"]) == 1
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert lines[0].startswith("rfverify diagnose: double run (jqinv): MaxIterations after 3 iterations")
+    assert [ln for ln in lines if "exact step" in ln] == [f"rfverify diagnose: exact step {k} of 3" for k in (1, 2, 3)]
+    assert "exact step" not in captured.out
+    assert main(["diagnose", "bundled:sphere", "--max-iter", "3", "--json"]) == 1
+    captured = capsys.readouterr()
+    assert captured.err == "" and json.loads(captured.out)["status"] == "MaxIterations"
