@@ -331,8 +331,14 @@ def _reflect(x):
 
 
 def _dot(x, y):
-    # einsum avoids numpy's slow reduction over a short last axis (3× faster for L3 batches).
-    return np.einsum("ij,ij->i", x, y)
+    """xᵀy per row.  numpy's reduction over a short last axis is slow: einsum is fastest in
+    longdouble, a sum of column products in float64 (measured on L3 batches)."""
+    if x.dtype == np.longdouble or y.dtype == np.longdouble or not x.shape[1]:
+        return np.einsum("ij,ij->i", x, y)
+    s = x[:, 0] * y[:, 0]
+    for j in range(1, x.shape[1]):
+        s += x[:, j] * y[:, j]
+    return s
 
 
 def _bar(x):
