@@ -346,10 +346,12 @@ def _bar(x):
     return [x[:, j] for j in range(1, x.shape[1])]
 
 
-def _rows(head, bars):
-    """The (N, k) array with these columns.  Kernels work column by column: numpy's whole-row
-    broadcasts and in-place updates of 2-D slices cost several times more for L3 batches."""
-    out = np.empty((head.shape[0], 1 + len(bars)), dtype=np.result_type(head, *bars))
+def _rows(head, bars, out=None):
+    """The (N, k) array with these columns (written into ``out`` if given).  Kernels work column
+    by column: numpy's whole-row broadcasts and in-place updates of 2-D slices cost several
+    times more for L3 batches."""
+    if out is None:
+        out = np.empty((head.shape[0], 1 + len(bars)), dtype=np.result_type(head, *bars))
     out[:, 0] = head
     for j, c in enumerate(bars, 1):
         out[:, j] = c
@@ -362,9 +364,9 @@ def _product(x, y):
     return _rows(_dot(x, y), [x0 * yj + y0 * xj for xj, yj in zip(_bar(x), _bar(y))])
 
 
-def _quad(x, y, det):
+def _quad(x, y, det, out=None):
     """Q_x y = 2(xᵀy) x − det(x) R y, with det(x) = λ1 λ2 given (reused across many y)."""
-    return _rows(*_quad_cols(x, y, det))
+    return _rows(*_quad_cols(x, y, det), out=out)
 
 
 def _quad_cols(x, y, det):
@@ -541,11 +543,16 @@ def quad_rows(x, *, op="quad_apply", single=False, scale=True) -> QuadRows:
     return QuadRows(xs, l1 * l2, e)
 
 
-def quad_apply_rows(qx: QuadRows, y, *, op="quad_apply", single=False, scale=True):
-    """Q_x y row by row; y is scaled by a power of two too, so that the two terms stay finite
-    and the result over/underflows only when its true value does (no inf − inf)."""
+def quad_apply_rows(qx: QuadRows, y, *, op="quad_apply", single=False, scale=True, out=None):
+    """Q_x y row by row (into ``out`` if given); y is scaled by a power of two too, so that the
+    two terms stay finite and the result over/underflows only when its true value does (no
+    inf − inf)."""
     ys, ey = _scaled(y, op, "y", single, scale)
-    return _check_nan_free(op, _shift(_quad(qx.xs, ys, qx.det), 2 * qx.e + ey), single, scale)
+    q = _quad(qx.xs, ys, qx.det, out)
+    e = 2 * qx.e + ey
+    if isinstance(e, np.ndarray):
+        np.ldexp(q, e[:, None], out=q)
+    return _check_nan_free(op, q, single, scale)
 
 
 def _invertible(x, op, single, scale):

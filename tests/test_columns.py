@@ -220,7 +220,7 @@ def test_nan_is_reported_with_its_cone_not_propagated(dtype):
         d = _direction(rng, cones, dtype, 0)
         d[bad] = np.nan
         for call in (lambda: cones.product(z, d), lambda: cones.arrow_solve(z, d),
-                     lambda: cones.quad_operator(z)(d), lambda: cones.arrow_blocks(d),
+                     lambda: cones.quad_apply(z, d), lambda: cones.arrow_blocks(d),
                      lambda: cones.power(d, 2), lambda: cones.stepper(z, z)(d, z)):
             with pytest.raises(ConeDomainError) as info:
                 call()

@@ -86,7 +86,9 @@ class ProductCone:
         return self.flat(self._call(jordan.arrow_solve_rows, x, y, op="arrow_solve"))
 
     def quad_apply(self, p, y):
-        return self.quad_operator(p)(y)
+        """Q_p y with p and y checked (see :class:`QuadOperator` for the hot loop)."""
+        return self.flat(self._call(lambda a, b, **kw: jordan.quad_apply_rows(jordan.quad_rows(a, **kw), b, **kw),
+                                    p, y, op="quad_apply"))
 
     def quad_operator(self, p) -> "QuadOperator":
         """Q_p as a reusable operator (det p computed once; see :class:`QuadOperator`)."""
@@ -167,16 +169,34 @@ class QuadOperator:
     """y ↦ Q_p y = 2(pᵀy)p − det(p) R y for a fixed p, applied many times per iteration.
 
     The interior-point method applies Q_p and Q_{p⁻¹} a dozen times per iteration (refinement,
-    corrector, back-substitution) with the same p, so det p (in the cancellation-free form of
-    :func:`rfverify.jordan.det`) is computed once and each application is a dot product and
-    an axpy per cone.
+    corrector, back-substitution) with the same p, so p is checked and det p (in the
+    cancellation-free form of :func:`rfverify.jordan.det`) computed once, and each application
+    is a dot product and an axpy per cone, written family by family into the flat result.
+    y is trusted: it is the solver's own vector, whose linear solves the interior-point method
+    checks for NaN/Inf, and looking at it would cost a fifth of the operation in this hottest
+    loop.  For finite y of ordinary size (float64: within 2^±766 when p is ordinary) the
+    result is bit for bit :func:`rfverify.jordan.quad_apply`'s; :meth:`ProductCone.quad_apply`
+    checks y.
     """
 
     def __init__(self, cones: ProductCone, p):
         self.cones = cones
         self.p = p
-        self._prepared = cones._call(jordan.quad_rows, p, op="quad_apply")
+        prepared = cones._call(jordan.quad_rows, p, op="quad_apply")
+        self._dtype = prepared.xs.dtype
+        self._families = []
+        for lo, hi, k, first in ((0, 3 * cones.n3, 3, 0), (3 * cones.n3, cones.nz, 1, cones.n3)):
+            if hi > lo:
+                rows = slice(first, first + (hi - lo) // k)
+                e = prepared.e[rows] if isinstance(prepared.e, np.ndarray) else prepared.e
+                fam = jordan.QuadRows(prepared.xs[rows, :k], prepared.det[rows], e)
+                self._families.append((fam, lo, hi, k))
 
     def __call__(self, y):
-        return self.cones.flat(self.cones._call(
-            lambda r, **kw: jordan.quad_apply_rows(self._prepared, r, **kw), y, op="quad_apply"))
+        y = np.asarray(y)
+        out = np.empty(y.shape[0], dtype=np.result_type(y, self._dtype))
+        with np.errstate(all="ignore"):
+            for fam, lo, hi, k in self._families:
+                jordan.quad_apply_rows(fam, y[lo:hi].reshape(-1, k), scale=False,
+                                       out=out[lo:hi].reshape(-1, k))
+        return out
