@@ -18,7 +18,7 @@ import rfverify
 from reference import jordan as RJ
 from rfverify.extended import cones as C
 from rfverify.extended import dd
-from rfverify.extended.ldl import DDCholesky
+from rfverify.extended.ldl import DDCholesky, MixedCholesky
 from rfverify.extended.system import ContactSpace, DofSpace, ExtendedData
 
 U_DD = 2.0 ** -104
@@ -140,6 +140,93 @@ def test_sparse_ldl_solves_spd_systems_in_double_double():
     assert ch.factor(vh, np.zeros_like(vh)) >= 0  # indefinite: refused, never a wrong factor
 
 
+def _upper_values(ch, A):
+    coo = sp.triu(A).tocoo()
+    vh = np.zeros(ch.nnz_upper)
+    vl = np.zeros(ch.nnz_upper)
+    pos = ch.positions(coo.row, coo.col)
+    for p_, x in zip(pos, coo.data):  # a few hundred entries: exact double-double sums
+        vh[p_], vl[p_] = dd.add(vh[p_], vl[p_], float(x), 0.0)
+    return vh, vl
+
+
+def _residual_mp(A, xh, xl, b):
+    """max_i |(A x − b)_i| in 60 digits, and ‖A‖∞‖x‖∞."""
+    with mpmath.workdps(60):
+        Ad = A.toarray()
+        x = [_mp(h, l) for h, l in zip(xh, xl)]
+        res = max(abs(sum(mpmath.mpf(float(Ad[i, j])) * x[j] for j in np.flatnonzero(Ad[i])) - b[i])
+                  for i in range(A.shape[0]))
+        return float(res), float(np.abs(Ad).sum(axis=1).max()) * float(max(abs(t) for t in x))
+
+
+def test_mixed_ldl_reaches_double_double_accuracy_on_a_badly_scaled_matrix():
+    """D B D with B well conditioned and D spanning 1e-12 … 1e12 (condition ~1e24, far beyond
+    float64): a float64 factor refined with double-double residuals solves it to a
+    double-double backward error, as the contact-space matrices of the extended phase."""
+    rng = np.random.default_rng(3)
+    n = 150
+    B = sp.random(n, n, density=0.04, random_state=4)
+    B = (B @ B.T + sp.identity(n)).tocsc()
+    D = sp.diags(10.0 ** rng.uniform(-12, 12, size=n))
+    A = (D @ B @ D).tocsc()
+    mixed = MixedCholesky(A)
+    assert mixed.factor(*_upper_values(mixed, A)) == -1
+    b = rng.normal(size=n) * 10.0 ** rng.uniform(-6, 6, size=n)
+    xh, xl = mixed.solve(b, np.zeros(n))
+    assert mixed.precision == "mixed" and mixed.fallback_reason == ""
+    assert mixed.last_backward_error <= mixed.backward_target and mixed.last_steps >= 2
+    res, scale = _residual_mp(A, xh, xl, b)
+    assert res <= 1e-28 * scale
+    # the same answer as the double-double factorisation, to ~30 digits in D-scaled terms
+    full = DDCholesky(A)
+    assert full.factor(*_upper_values(full, A)) == -1
+    yh, yl = full.solve(b, np.zeros(n))
+    d = D.diagonal()
+    assert np.max(np.abs(d * (dd.to_longdouble(xh, xl) - dd.to_longdouble(yh, yl)))) <= 1e-14 * np.max(np.abs(d * yh))
+
+
+def test_mixed_ldl_falls_back_to_double_double_where_float64_cannot_see_the_matrix():
+    """A matrix whose float64 part is singular (its definiteness is in the low words): the
+    float64 factorisation fails, the double-double one is used, and says why."""
+    n = 40
+    A = sp.identity(n, format="csc")
+    mixed = MixedCholesky(A + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))
+    hi, lo = np.zeros(mixed.nnz_upper), np.zeros(mixed.nnz_upper)
+    # [[1, 1], [1, 1 + 2⁻⁶⁰]] blocks chained: hi part singular, exact matrix SPD
+    rows, cols = np.arange(0, n, 2), np.arange(1, n, 2)
+    hi[mixed.positions(np.arange(n), np.arange(n))] = 1.0
+    lo[mixed.positions(cols, cols)] = 2.0 ** -60
+    hi[mixed.positions(rows, cols)] = 1.0
+    assert mixed.factor(hi, lo) == -1
+    assert mixed.precision == "double-double" and "pivot" in mixed.fallback_reason
+    b = np.arange(1.0, n + 1)
+    xh, xl = mixed.solve(b, np.zeros(n))
+    x = dd.to_longdouble(xh, xl)
+    # exact solution of each block [[1,1],[1,1+δ]] x = (b0, b1): x1 = (b1 − b0)/δ, x0 = b0 − x1
+    x1 = (b[1::2] - b[0::2]) * 2.0 ** 60
+    assert np.allclose(np.asarray(x[1::2], dtype=float), x1, rtol=1e-12)
+
+
+def test_mixed_ldl_falls_back_when_refinement_stalls():
+    """A condition number of 1e17 in a random basis (no scaling removes it): the float64
+    factor exists (seed chosen so that no pivot fails) but refinement with it cannot converge;
+    the solve is redone in double-double, and the next factorisation stays there."""
+    rng = np.random.default_rng(4)
+    n = 60
+    Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    A = sp.csc_matrix((Q * np.logspace(0, -17, n)) @ Q.T)
+    A = ((A + A.T) / 2).tocsc()
+    mixed = MixedCholesky(A)
+    assert mixed.factor(*_upper_values(mixed, A)) == -1 and mixed.precision == "mixed"
+    b = rng.normal(size=n)
+    xh, xl = mixed.solve(b, np.zeros(n))
+    assert mixed.precision == "double-double" and "refinement stalled" in mixed.fallback_reason
+    res, scale = _residual_mp(A, xh, xl, b)
+    assert res <= 1e-27 * scale  # the double-double factor's answer, not the stalled one
+    assert mixed.factor(*_upper_values(mixed, A)) == -1 and mixed.precision == "double-double"
+
+
 @pytest.mark.parametrize("name", ["chute", "cube"])
 def test_both_back_ends_solve_the_same_newton_system(name):
     problem = rfverify.load(f"bundled:{name}")
@@ -155,7 +242,7 @@ def test_both_back_ends_solve_the_same_newton_system(name):
     a = (rng.normal(size=data.m), np.zeros(data.m))
     t = (rng.normal(size=data.nk), np.zeros(data.nk))
     sols = []
-    for backend in (ContactSpace(data), DofSpace(data, max_local_dofs=10**6)):
+    for backend in (ContactSpace(data), ContactSpace(data, mixed=False), DofSpace(data, max_local_dofs=10**6)):
         assert backend.update(ph, pl, pih, pil, spec)
         dv, dr = backend.solve(a, t)
         sols.append(dd.to_longdouble(*dv))
@@ -176,3 +263,21 @@ def test_extended_run_reaches_the_double_double_floor():
     mu, pinf = out.trace["mu"], out.trace["pinfeas"]
     assert mu[-1] < 1e-25 < mu[0] and pinf[-1] < 1e-29
     assert all(np.diff(np.log10(mu)) < 0)  # μ falls at every iteration
+
+
+def test_extended_run_stops_with_numerical_error_when_a_solve_fails():
+    """A back end whose solve returns NaN (a double-double fallback factorisation that lost
+    definiteness) ends the run as NumericalError at that iteration, not steps later."""
+    from rfverify.digits import _start_from
+    from rfverify.extended import ipm as X
+
+    problem = rfverify.load("bundled:chute")
+    res = rfverify.solve(problem, tol=1e-10)
+    data = ExtendedData(problem)
+
+    class Failing(ContactSpace):
+        def solve(self, a, t):
+            return (np.full(data.m, np.nan), np.zeros(data.m)), (np.full(data.nk, np.nan), np.zeros(data.nk))
+
+    out = X.run(data, _start_from(data, res), max_iter=5, backend=Failing(data))
+    assert out.status == "NumericalError" and "solve failed" in out.message and out.nit == 0

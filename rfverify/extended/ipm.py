@@ -12,8 +12,8 @@ the double solver in three places, each for a reason measured on the reference (
   cones at μ ≈ 1e-28 in 32-digit arithmetic; with one step it stayed at 1e-34;
 * the run stops when the *proof* succeeds (``until`` callback), not at a fixed μ.
 
-The Newton system is solved by a back end of :mod:`.system` (dof-space or contact-space
-Schur complement, whichever factors cheaper).
+The Newton system is solved by a back end of :mod:`.system` (by default the scaled
+contact-space Schur complement, factored in float64 and refined in double-double).
 """
 
 from __future__ import annotations
@@ -256,6 +256,9 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
 
         a, b = -r_d, -r_p
         dv_a, dr_a, dz_a, st_a, res_a = newton(a, b, -lam)
+        if not math.isfinite(res_a):
+            status, message = "NumericalError", f"iteration {k}: the {backend.name} solve failed"
+            break
         ds_a = mv(data.JT, dr_a)
         alpha_a = min(1.0, C.max_step(n3, z.h, z.l, dz_a.h, dz_a.l), C.max_step(n3, s.h, s.l, ds_a.h, ds_a.l))
         mu_a = z.axpy(alpha_a, dz_a).dot(s.axpy(alpha_a, ds_a)) / n
@@ -268,6 +271,9 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
         xi = e.scaled(sigma * mu_c) - cone(C.product, lam, lam) - cone(C.product, dzs, dss)
         c = cone(C.arrow_solve, lam, xi)
         dv, dr, dz, st, res = newton(a, b, c)
+        if not math.isfinite(res):
+            status, message = "NumericalError", f"iteration {k}: the {backend.name} solve failed"
+            break
         ds = mv(data.JT, dr)
         alpha_max = min(C.max_step(n3, z.h, z.l, dz.h, dz.l), C.max_step(n3, s.h, s.l, ds.h, ds.l))
         alpha = min(1.0, gamma * alpha_max)

@@ -13,6 +13,8 @@ The fill-reducing ordering is scipy's multiple minimum degree on AᵀA + A (Supe
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 import scipy.sparse as sp
@@ -198,4 +200,171 @@ class DDCholesky:
         ol = np.empty(self.n)
         oh[self.perm] = xh
         ol[self.perm] = xl
+        return oh, ol
+
+
+@numba.njit(cache=True)
+def _numeric_double(n, Ap, Ai, Ax, Lp, parent, Li, Lx, D):
+    """:func:`_numeric` in float64 (same algorithm, same symbolic factor)."""
+    y = np.zeros(n)
+    flag = np.empty(n, dtype=np.int64)
+    pattern = np.empty(n, dtype=np.int64)
+    lnz = np.zeros(n, dtype=np.int64)
+    for k in range(n):
+        y[k] = 0.0
+        top = n
+        flag[k] = k
+        lnz[k] = 0
+        for p in range(Ap[k], Ap[k + 1]):
+            i = Ai[p]
+            if i > k:
+                continue
+            y[i] += Ax[p]
+            ln = 0
+            while flag[i] != k:
+                pattern[ln] = i
+                ln += 1
+                flag[i] = k
+                i = parent[i]
+            while ln > 0:
+                top -= 1
+                ln -= 1
+                pattern[top] = pattern[ln]
+        d = y[k]
+        y[k] = 0.0
+        while top < n:
+            i = pattern[top]
+            top += 1
+            v = y[i]
+            y[i] = 0.0
+            p2 = Lp[i] + lnz[i]
+            for p in range(Lp[i], p2):
+                y[Li[p]] -= Lx[p] * v
+            li = v / D[i]
+            d -= li * v
+            Li[p2] = k
+            Lx[p2] = li
+            lnz[i] += 1
+        if not d > 0.0:
+            return k
+        D[k] = d
+    return -1
+
+
+@numba.njit(cache=True)
+def _solve_double(n, Lp, Li, Lx, D, x):
+    """In place: x ← (L D Lᵀ)⁻¹ x in float64 (x already permuted)."""
+    for j in range(n):
+        v = x[j]
+        for p in range(Lp[j], Lp[j + 1]):
+            x[Li[p]] -= Lx[p] * v
+    for j in range(n):
+        x[j] /= D[j]
+    for j in range(n - 1, -1, -1):
+        s = x[j]
+        for p in range(Lp[j], Lp[j + 1]):
+            s -= Lx[p] * x[Li[p]]
+        x[j] = s
+
+
+@numba.njit(cache=True)
+def _symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl):
+    """r = b − A x in double-double, A symmetric given by its upper triangle in CSC; returns
+    the componentwise backward error max_i |r_i| / (|A||x| + |b|)_i (Oettli–Prager), which,
+    unlike a normwise one, does not let the large rows of a badly scaled matrix hide the
+    error in the small ones."""
+    ax = np.zeros(n)
+    for i in range(n):
+        rh[i] = bh[i]
+        rl[i] = bl[i]
+    for j in range(n):
+        for p in range(Ap[j], Ap[j + 1]):
+            i = Ai[p]
+            rh[i], rl[i] = dd.fms_acc(rh[i], rl[i], Axh[p], Axl[p], xh[j], xl[j])
+            ax[i] += abs(Axh[p] * xh[j])
+            if i != j:
+                rh[j], rl[j] = dd.fms_acc(rh[j], rl[j], Axh[p], Axl[p], xh[i], xl[i])
+                ax[j] += abs(Axh[p] * xh[i])
+    worst = 0.0
+    for i in range(n):
+        den = ax[i] + abs(bh[i])
+        if den > 0.0:
+            e = abs(rh[i]) / den
+            if not e <= worst:  # NaN propagates
+                worst = e
+    return worst
+
+
+class MixedCholesky(DDCholesky):
+    """:class:`DDCholesky` whose factorisation is done in float64 and whose solves are refined
+    to double-double accuracy (a double "oracle" with double-double residuals, as in SoPlex's
+    iterative refinement): 15–20× cheaper per factorisation.
+
+    Refinement converges when the double factor is accurate in the matrix's own scaling, which
+    holds for the scaled contact-space matrix I + F⁻¹W̃F⁻ᵀ while W̃ is well conditioned on the
+    contacts that carry load, however small μ is.  Where it does not (the backward error of a
+    solve stays above ``backward_target``, or the double factorisation meets a non-positive
+    pivot) the matrix is refactored in double-double and every later factorisation stays in
+    double-double: :attr:`precision` says which is in use, :attr:`fallback_reason` why.
+    """
+
+    def __init__(self, pattern: sp.spmatrix, perm: np.ndarray | None = None,
+                 backward_target: float = 1e-29, max_steps: int = 12):
+        super().__init__(pattern, perm)
+        self.Lx = np.zeros(self.nnz_L)
+        self.backward_target = backward_target
+        self.max_steps = max_steps
+        self.precision = "mixed"
+        self.fallback_reason = ""
+        self.last_backward_error = math.nan
+        self.last_steps = 0
+        self._A = None
+
+    def _fall_back(self, reason: str) -> int:
+        self.precision = "double-double"
+        self.fallback_reason = reason
+        return super().factor(*self._A)
+
+    def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
+        self._A = (np.ascontiguousarray(Axh, dtype=np.float64).copy(),
+                   np.ascontiguousarray(Axl, dtype=np.float64).copy())
+        if self.precision == "double-double":
+            return super().factor(*self._A)
+        bad = _numeric_double(self.n, self.Ap, self.Ai, self._A[0], self.Lp, self.parent, self.Li, self.Lx,
+                              self.Dh)
+        if bad >= 0:
+            return self._fall_back(f"non-positive pivot {bad} in the float64 factorisation")
+        self.factored = True
+        return -1
+
+    def solve(self, bh: np.ndarray, bl: np.ndarray):
+        """x = A⁻¹ b to double-double accuracy (b in original ordering)."""
+        if self.precision == "double-double":
+            return super().solve(bh, bl)
+        n = self.n
+        pbh = np.ascontiguousarray(bh[self.perm])
+        pbl = np.ascontiguousarray(bl[self.perm])
+        xh, xl = np.zeros(n), np.zeros(n)
+        rh, rl = pbh.copy(), pbl.copy()
+        best, best_x = math.inf, (xh, xl)
+        steps = 0
+        for steps in range(1, self.max_steps + 1):
+            d = rh.copy()  # the correction's right-hand side to float64: its error is refined away
+            _solve_double(n, self.Lp, self.Li, self.Lx, self.Dh, d)
+            nh, nl = np.empty(n), np.empty(n)
+            dd.vadd(best_x[0], best_x[1], d, np.zeros(n), nh, nl)
+            backward = _symmetric_residual(n, self.Ap, self.Ai, self._A[0], self._A[1], pbh, pbl, nh, nl, rh, rl)
+            if not backward < 0.5 * best:  # stalled (or NaN): keep the best solution
+                best = min(best, backward) if backward == backward else best
+                break
+            best, best_x = backward, (nh, nl)
+            if backward < 1e-31:
+                break
+        self.last_backward_error, self.last_steps = best, steps
+        if not best <= self.backward_target:
+            if self._fall_back(f"refinement stalled at backward error {best:.1e}") >= 0:
+                return np.full(n, np.nan), np.full(n, np.nan)
+            return super().solve(bh, bl)
+        oh, ol = np.empty(n), np.empty(n)
+        oh[self.perm], ol[self.perm] = best_x
         return oh, ol

@@ -26,7 +26,7 @@ from ..lifting import KIND_COULOMB, KIND_FULL, KIND_NORMAL, KIND_ROLLING, lift
 from ..problem import SPACEDIM, Problem
 from . import cones as C
 from . import dd
-from .ldl import DDCholesky
+from .ldl import DDCholesky, MixedCholesky
 
 njit = numba.njit(cache=True)
 DENSE_BLOCK = 200  # blocks of M up to this size are inverted densely when forming W̃
@@ -586,9 +586,14 @@ class ContactSpace(_Backend):
     Jordan-algebra factors without squaring a condition number.
     """
 
-    name = "contact-space, scaled (I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ)"
+    @property
+    def name(self) -> str:
+        how = {"mixed": "float64 factor refined in double-double",
+               "double-double": "double-double factor"}[getattr(self.chol, "precision", "double-double")]
+        reason = getattr(self.chol, "fallback_reason", "")
+        return f"contact-space, scaled (I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ), {how}" + (f" ({reason})" if reason else "")
 
-    def __init__(self, data: ExtendedData):
+    def __init__(self, data: ExtendedData, mixed: bool = True):
         from scipy.sparse.csgraph import connected_components
 
         self.data = data
@@ -618,7 +623,7 @@ class ContactSpace(_Backend):
         same = (self.pc == self.pd)[:, None, None]
         take = valid & (~same | (ii[None] <= jj[None]))
         pattern = sp.coo_matrix((np.ones(int(take.sum())), (gi[take], gj[take])), shape=(nk, nk))
-        self.chol = DDCholesky(pattern)
+        self.chol = MixedCholesky(pattern) if mixed else DDCholesky(pattern)
         self.pos = np.full(valid.shape, -1, dtype=np.int64)
         self.pos[take] = self.chol.positions(gi[take], gj[take])
         self._W = None
@@ -791,19 +796,17 @@ class Hybrid(_Backend):
 
 
 def choose_backend(data: ExtendedData, backend: str = "auto"):
-    """The back end asked for; ``auto`` is :class:`Hybrid` when the dof-space form factors at
-    least twice as cheap as the contact-space form and its contacts touch few dofs (rigid
-    bodies), else the contact-space form alone (dense lifted local problems, finite elements)."""
+    """The back end asked for.  ``auto`` is the scaled contact-space form with a float64
+    factorisation refined in double-double (:class:`ContactSpace`): with the factorisation in
+    float64 it is as fast as or faster than the dof-space and hybrid forms on every problem
+    measured (docs/DECISIONS.md), and its accuracy does not depend on μ.  ``contact-dd`` factors
+    in double-double throughout; ``dof`` and ``hybrid`` are the dof-space forms."""
     if backend == "dof":
         return DofSpace(data, max_local_dofs=10**9)
-    if backend == "contact":
+    if backend in ("auto", "contact"):
         return ContactSpace(data)
+    if backend == "contact-dd":
+        return ContactSpace(data, mixed=False)
     if backend == "hybrid":
         return Hybrid(data)
-    if backend != "auto":
-        raise ValueError(f"backend {backend!r} is not one of auto, hybrid, contact, dof")
-    contact = ContactSpace(data)
-    dof = DofSpace(data)
-    if not dof.too_dense and dof.flops() <= 0.5 * contact.flops():
-        return Hybrid(data, dof=dof, contact=contact)
-    return contact
+    raise ValueError(f"backend {backend!r} is not one of auto, contact, contact-dd, hybrid, dof")
