@@ -18,6 +18,8 @@ from rfverify.errors import InvalidArgumentError, RfverifyError
 from rfverify.io import write_fclib
 from rfverify.random_problems import random_problem
 
+from privileges import as_ordinary_user, world_traversable_dir
+
 
 def run(capsys, *argv):
     code = main([str(a) for a in argv])
@@ -209,33 +211,25 @@ def test_all_zero_unwritten_solution_is_read(tmp_path):
     assert np.all(q.solution.v == 0)
 
 
-def _unreadable(path):
-    path.chmod(0)
-    try:
-        with open(path, "rb"):
-            pass
-    except PermissionError:
-        return
-    path.chmod(0o644)
-    pytest.skip("chmod 000 does not prevent reading here (running as root)")
+def _unreadable_info(capsys, name: str, content: bytes):
+    """`info` on a mode-000 file, run as an ordinary user (root drops to nobody: see
+    tests/privileges.py), where the operating system really refuses the read."""
+    with world_traversable_dir() as folder:
+        path = folder / name
+        path.write_bytes(content)
+        path.chmod(0)
+        with as_ordinary_user():
+            with pytest.raises(PermissionError):
+                open(path, "rb").close()
+            one_line_error(capsys, "info", path, names=[path, "permission denied"])
 
 
 def test_unreadable_hdf5(capsys, good):
-    _unreadable(good)
-    try:
-        one_line_error(capsys, "info", good, names=[good, "permission denied"])
-    finally:
-        good.chmod(0o644)
+    _unreadable_info(capsys, "good.hdf5", good.read_bytes())
 
 
-def test_unreadable_dat(capsys, tmp_path):
-    path = tmp_path / "locked.dat"
-    path.write_text(local_dat())
-    _unreadable(path)
-    try:
-        one_line_error(capsys, "info", path, names=[path, "permission denied"])
-    finally:
-        path.chmod(0o644)
+def test_unreadable_dat(capsys):
+    _unreadable_info(capsys, "locked.dat", local_dat().encode())
 
 
 @pytest.mark.parametrize("name", ["p.hdf5", "p.dat"])

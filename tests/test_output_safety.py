@@ -17,6 +17,8 @@ from rfverify.errors import OutputPathError
 from rfverify.io import write_fclib
 from rfverify.random_problems import random_problem
 
+from privileges import as_ordinary_user, world_traversable_dir
+
 ROOT = "fclib_global_rolling"
 
 
@@ -221,16 +223,15 @@ def test_missing_directory_is_refused_before_solving(capsys, tmp_path, no_solve)
             expect=["does not exist", "mkdir"])
 
 
-def test_read_only_directory_is_refused_before_solving(capsys, tmp_path, no_solve):
-    ro = tmp_path / "ro"
-    ro.mkdir()
-    ro.chmod(0o555)
-    try:
-        if os.access(ro, os.W_OK):
-            pytest.skip("a read-only directory is writable here (running as root)")
-        refused(capsys, "solve", "bundled:sphere", "--out", ro / "x.h5", expect=["not writable"])
-    finally:
-        ro.chmod(0o755)
+def test_read_only_directory_is_refused_before_solving(capsys, no_solve):
+    """Mode bits, enforced: as an ordinary user (root drops to nobody, tests/privileges.py)."""
+    with world_traversable_dir() as folder:
+        ro = folder / "ro"
+        ro.mkdir()
+        ro.chmod(0o555)
+        with as_ordinary_user():
+            assert not os.access(ro, os.W_OK, effective_ids=os.access in os.supports_effective_ids)
+            refused(capsys, "solve", "bundled:sphere", "--out", ro / "x.h5", expect=["not writable"])
 
 
 def test_unwritable_directory_is_refused_before_solving_even_as_root(capsys, tmp_path, no_solve,
