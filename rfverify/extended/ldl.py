@@ -57,6 +57,29 @@ def _symbolic(n, Ap, Ai):
     return parent, Lp
 
 
+@numba.njit(cache=True, inline="always")
+def _row_pattern(k, Ap, Ai, parent, flag, pattern, n):
+    """The nonzero pattern of row k of L (the columns reached from column k's upper entries
+    along the elimination tree), in topological order in pattern[top:n]; returns top."""
+    top = n
+    flag[k] = k
+    for p in range(Ap[k], Ap[k + 1]):
+        i = Ai[p]
+        if i > k:
+            continue
+        ln = 0
+        while flag[i] != k:
+            pattern[ln] = i
+            ln += 1
+            flag[i] = k
+            i = parent[i]
+        while ln > 0:
+            top -= 1
+            ln -= 1
+            pattern[top] = pattern[ln]
+    return top
+
+
 @numba.njit(cache=True)
 def _numeric(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl):
     """Returns -1 on success, else the index of the first non-positive pivot."""
@@ -66,26 +89,11 @@ def _numeric(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl):
     pattern = np.empty(n, dtype=np.int64)
     lnz = np.zeros(n, dtype=np.int64)
     for k in range(n):
-        yh[k] = 0.0
-        yl[k] = 0.0
-        top = n
-        flag[k] = k
         lnz[k] = 0
         for p in range(Ap[k], Ap[k + 1]):
-            i = Ai[p]
-            if i > k:
-                continue
-            yh[i], yl[i] = dd.add(yh[i], yl[i], Axh[p], Axl[p])
-            ln = 0
-            while flag[i] != k:
-                pattern[ln] = i
-                ln += 1
-                flag[i] = k
-                i = parent[i]
-            while ln > 0:
-                top -= 1
-                ln -= 1
-                pattern[top] = pattern[ln]
+            if Ai[p] <= k:
+                yh[Ai[p]], yl[Ai[p]] = dd.add(yh[Ai[p]], yl[Ai[p]], Axh[p], Axl[p])
+        top = _row_pattern(k, Ap, Ai, parent, flag, pattern, n)
         dh, dl = yh[k], yl[k]
         yh[k] = 0.0
         yl[k] = 0.0
@@ -211,25 +219,11 @@ def _numeric_double(n, Ap, Ai, Ax, Lp, parent, Li, Lx, D):
     pattern = np.empty(n, dtype=np.int64)
     lnz = np.zeros(n, dtype=np.int64)
     for k in range(n):
-        y[k] = 0.0
-        top = n
-        flag[k] = k
         lnz[k] = 0
         for p in range(Ap[k], Ap[k + 1]):
-            i = Ai[p]
-            if i > k:
-                continue
-            y[i] += Ax[p]
-            ln = 0
-            while flag[i] != k:
-                pattern[ln] = i
-                ln += 1
-                flag[i] = k
-                i = parent[i]
-            while ln > 0:
-                top -= 1
-                ln -= 1
-                pattern[top] = pattern[ln]
+            if Ai[p] <= k:
+                y[Ai[p]] += Ax[p]
+        top = _row_pattern(k, Ap, Ai, parent, flag, pattern, n)
         d = y[k]
         y[k] = 0.0
         while top < n:
