@@ -253,6 +253,18 @@ def contact_block_apply(n, row_start, row_count, Gh, Gl, xh, xl, oh, ol):
 
 
 @njit
+def _small_product(Ah, Al, Bh, Bl, rows, cols, inner, Th, Tl):
+    """T[:rows, :cols] = A[:rows, :inner] · B[:inner, :cols] in double-double (small dense blocks)."""
+    for a in range(rows):
+        for j in range(cols):
+            sh, sl = 0.0, 0.0
+            for b in range(inner):
+                sh, sl = dd.fma_acc(sh, sl, Ah[a, b], Al[a, b], Bh[b, j], Bl[b, j])
+            Th[a, j] = sh
+            Tl[a, j] = sl
+
+
+@njit
 def _assemble_dof(n, row_start, row_count, loc_dofs, loc_cnt, Hh, Hl, Gih, Gil, pos, Sh, Sl):
     """S += Σ_c H̃_cᵀ G_c⁻¹ H̃_c (upper entries only; pos[c, a, b] = -1 off the upper half)."""
     dmax = Hh.shape[2]
@@ -261,14 +273,7 @@ def _assemble_dof(n, row_start, row_count, loc_dofs, loc_cnt, Hh, Hl, Gih, Gil, 
     for c in range(n):
         k = row_count[c]
         d = loc_cnt[c]
-        # tmp = G⁻¹ H̃_c  (k × d)
-        for a in range(k):
-            for j in range(d):
-                sh, sl = 0.0, 0.0
-                for b in range(k):
-                    sh, sl = dd.fma_acc(sh, sl, Gih[c, a, b], Gil[c, a, b], Hh[c, b, j], Hl[c, b, j])
-                tmph[a, j] = sh
-                tmpl[a, j] = sl
+        _small_product(Gih[c], Gil[c], Hh[c], Hl[c], k, d, k, tmph, tmpl)  # tmp = G⁻¹ H̃_c (k × d)
         for i in range(d):
             for j in range(d):
                 q = pos[c, i, j]
@@ -534,13 +539,7 @@ def _scaled_blocks(pc, pd, Wh, Wl, row_count, Fh, Fl, pos, Sh, Sl):
         d = pd[p]
         kc = row_count[c]
         kd = row_count[d]
-        for a in range(kc):
-            for b in range(kd):
-                sh, sl = 0.0, 0.0
-                for q in range(kc):
-                    sh, sl = dd.fma_acc(sh, sl, Fh[c, a, q], Fl[c, a, q], Wh[p, q, b], Wl[p, q, b])
-                Th[a, b] = sh
-                Tl[a, b] = sl
+        _small_product(Fh[c], Fl[c], Wh[p], Wl[p], kc, kd, kc, Th, Tl)  # T = F_c⁻¹ W̃_cd
         for a in range(kc):
             for b in range(kd):
                 q_ = pos[p, a, b]

@@ -168,6 +168,13 @@ class KKTSystem:
         self.N = size
         self.asm = SparseAssembler(np.concatenate(rows), np.concatenate(cols), (size, size))
 
+    def _set_quasidefinite_pattern(self, rows, cols, size):
+        """The pattern in the order :meth:`_factor_quasidefinite` fills it: M and −H̃ᵀ, the
+        form's varying blocks (``rows``, ``cols``: lists of index arrays), −δ on the dr̃ diagonal."""
+        m, diag = self.m, self.m + np.arange(self.nk)
+        Mc, Hc = self._Mcoo, self._Hcoo
+        self._set_pattern([Mc.row, Hc.col, *rows, diag], [Mc.col, m + Hc.row, *cols, diag], size)
+
     def _factor_quasidefinite(self, *varying):
         """Assemble the upper triangle — M and −H̃ᵀ (fixed), this iteration's blocks
         ``varying``, then −δ on the dr̃ diagonal — and factor it with QDLDL, reusing the
@@ -371,11 +378,9 @@ class JQinvSystem(KKTSystem):
         super().__init__(*args, **kw)
         m, nk, nz = self.m, self.nk, self.nz
         cones = self.cones
-        Mc, Hc = self._Mcoo, self._Hcoo
         up = self.rho[cones.bd_rows]  # J row of the Q row
-        rows = [Mc.row, Hc.col, m + up, m + nk + np.arange(nz), m + np.arange(nk)]
-        cols = [Mc.col, m + Hc.row, m + nk + cones.bd_cols, m + nk + np.arange(nz), m + np.arange(nk)]
-        self._set_pattern(rows, cols, m + nk + nz)
+        self._set_quasidefinite_pattern([m + up, m + nk + np.arange(nz)],
+                                        [m + nk + cones.bd_cols, m + nk + np.arange(nz)], m + nk + nz)
 
     def factor(self):
         self._factor_quasidefinite(self.cones.quad_blocks(self.p_inv), np.ones(self.nz))
@@ -397,13 +402,10 @@ class QP2System(KKTSystem):
         super().__init__(*args, **kw)
         m, nk, nz = self.m, self.nk, self.nz
         cones = self.cones
-        Mc, Hc = self._Mcoo, self._Hcoo
         upper = cones.bd_rows <= cones.bd_cols
         self._upper = upper
-        rows = [Mc.row, Hc.col, m + self.rho, m + nk + cones.bd_rows[upper], m + np.arange(nk)]
-        cols = [Mc.col, m + Hc.row, m + nk + np.arange(nz), m + nk + cones.bd_cols[upper],
-                m + np.arange(nk)]
-        self._set_pattern(rows, cols, m + nk + nz)
+        self._set_quasidefinite_pattern([m + self.rho, m + nk + cones.bd_rows[upper]],
+                                        [m + nk + np.arange(nz), m + nk + cones.bd_cols[upper]], m + nk + nz)
 
     def factor(self):
         q2 = self.cones.quad_blocks(self.cones.power(self.p, 2))[self._upper]
@@ -426,13 +428,10 @@ class ReducedSystem(KKTSystem):
         super().__init__(*args, **kw)
         m, nk = self.m, self.nk
         cones = self.cones
-        Mc, Hc = self._Mcoo, self._Hcoo
         gr, gc = self.rho[cones.bd_rows], self.rho[cones.bd_cols]
         upper = gr <= gc
         self._upper = upper
-        rows = [Mc.row, Hc.col, m + gr[upper], m + np.arange(nk)]
-        cols = [Mc.col, m + Hc.row, m + gc[upper], m + np.arange(nk)]
-        self._set_pattern(rows, cols, m + nk)
+        self._set_quasidefinite_pattern([m + gr[upper]], [m + gc[upper]], m + nk)
 
     def factor(self):
         p_inv2 = self.cones.power(self.p, -2)
