@@ -147,16 +147,24 @@ def nt_scaling(n3, zh, zl, sh, sl, ph, pl, pih, pil, lh, ll, spec):
     return -1
 
 
+@numba.njit(cache=True, inline="always")
+def _det_and_pairing(xh, xl, yh, yl, i, sign):
+    """det x = λ1λ2 of the L3 block at i, and x0y0 + sign·x̄ᵀȳ (sign ±1: xᵀy or xᵀRy)."""
+    l1, l1l, l2, l2l = _lams(xh[i], xl[i], xh[i + 1], xl[i + 1], xh[i + 2], xl[i + 2])
+    d, dl = dd.mul(l1, l1l, l2, l2l)
+    t, tl = dd.mul(xh[i], xl[i], yh[i], yl[i])
+    for j in (1, 2):
+        ph, pl = dd.mul(xh[i + j], xl[i + j], yh[i + j], yl[i + j])
+        t, tl = dd.add(t, tl, sign * ph, sign * pl)
+    return d, dl, t, tl
+
+
 @njit
 def quad_apply(n3, xh, xl, yh, yl, oh, ol):
     """o = Q_x y = 2(xᵀy)x − det(x) R y, cone by cone (L1: x0² y0)."""
     for c in range(n3):
         i = 3 * c
-        l1, l1l, l2, l2l = _lams(xh[i], xl[i], xh[i + 1], xl[i + 1], xh[i + 2], xl[i + 2])
-        d, dl = dd.mul(l1, l1l, l2, l2l)
-        s, sl_ = dd.mul(xh[i], xl[i], yh[i], yl[i])
-        s, sl_ = dd.fma_acc(s, sl_, xh[i + 1], xl[i + 1], yh[i + 1], yl[i + 1])
-        s, sl_ = dd.fma_acc(s, sl_, xh[i + 2], xl[i + 2], yh[i + 2], yl[i + 2])
+        d, dl, s, sl_ = _det_and_pairing(xh, xl, yh, yl, i, 1.0)
         s, sl_ = 2.0 * s, 2.0 * sl_
         t, tl = dd.mul(s, sl_, xh[i], xl[i])
         oh[i], ol[i] = dd.fms_acc(t, tl, d, dl, yh[i], yl[i])
@@ -194,11 +202,7 @@ def arrow_solve(n3, xh, xl, yh, yl, oh, ol):
     """o with x ∘ o = y: o0 = (x0 y0 − x̄ᵀȳ)/det x, ō = (ȳ − o0 x̄)/x0."""
     for c in range(n3):
         i = 3 * c
-        l1, l1l, l2, l2l = _lams(xh[i], xl[i], xh[i + 1], xl[i + 1], xh[i + 2], xl[i + 2])
-        d, dl = dd.mul(l1, l1l, l2, l2l)
-        t, tl = dd.mul(xh[i], xl[i], yh[i], yl[i])
-        t, tl = dd.fms_acc(t, tl, xh[i + 1], xl[i + 1], yh[i + 1], yl[i + 1])
-        t, tl = dd.fms_acc(t, tl, xh[i + 2], xl[i + 2], yh[i + 2], yl[i + 2])
+        d, dl, t, tl = _det_and_pairing(xh, xl, yh, yl, i, -1.0)
         o0, o0l = dd.div(t, tl, d, dl)
         oh[i], ol[i] = o0, o0l
         for j in (1, 2):
