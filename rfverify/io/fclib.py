@@ -353,18 +353,22 @@ def _check_declared_sizes(M, H, m_f, n_mu, spacedim):
     is allocated (a file declaring m = 2^31 − 1 with a 768-entry f is refused here)."""
     if spacedim != SPACEDIM:
         return  # Problem.from_arrays explains a wrong spacedim better
-    if M["m"] != M["n"]:
-        raise InvalidProblemError("M", f"is declared {M['m']}×{M['n']} (M/m, M/n), must be square",
-                                  fix="M is the m×m mass matrix")
-    if M["m"] != m_f:
-        raise InvalidProblemError("M", f"declares m = {M['m']} dofs (M/m) but vectors/f has "
-                                       f"{m_f} entries", fix="f has one entry per dof of M: make "
-                                                           "M/m, M/n and f agree")
+    check_mass_declaration(M, m_f)
     if (H["m"], H["n"]) != (m_f, SPACEDIM * n_mu):
         raise InvalidProblemError("H", f"is declared {H['m']}×{H['n']} (H/m, H/n), expected "
                                        f"(m, 5n) = ({m_f}, {SPACEDIM * n_mu}) from f ({m_f} "
                                        f"entries) and mu ({n_mu} contacts)",
                                   fix="H has one row per dof and 5 columns per contact")
+
+
+def check_mass_declaration(M_meta, m: int) -> None:
+    """M's declared shape (M/m, M/n) is square and matches the m entries of vectors/f."""
+    if M_meta["m"] != M_meta["n"]:
+        raise InvalidProblemError("M", f"is declared {M_meta['m']}×{M_meta['n']} (M/m, M/n), must be square",
+                                  fix="M is the m×m mass matrix")
+    if M_meta["m"] != m:
+        raise InvalidProblemError("M", f"declares m = {M_meta['m']} dofs (M/m) but vectors/f has {m} entries",
+                                  fix="f has one entry per dof of M: make M/m, M/n and f agree")
 
 
 def _read_matrix(meta, path):

@@ -231,15 +231,22 @@ def _contact_vector_size(name: str, size: int, n: int, fix: str):
                                         f"from mu ({n} contacts){hint}", fix=fix)
 
 
-def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
-    from .fclib import (_h5py, _matrix_meta, _member, _read_info, _read_matrix, _read_vector)
+def _vectors_without(g, group_members, vector_members, path, why, fix):
+    """g/vectors, after refusing the members of g and of g/vectors that rfverify cannot model."""
+    from .fclib import _h5py, _member
 
-    h5py = _h5py()
-    _refuse(g, ["G"], path, "equality constraints (G, b) are not supported by rfverify",
-            fix="eliminate the constraints (or remove G and b) before passing the problem")
-    vectors = _member(g, "vectors", path, h5py.Group)
-    _refuse(vectors, ["b"], path, "equality constraints (G, b) are not supported by rfverify",
-            fix="eliminate the constraints (or remove G and b) before passing the problem")
+    _refuse(g, group_members, path, why, fix=fix)
+    vectors = _member(g, "vectors", path, _h5py().Group)
+    _refuse(vectors, vector_members, path, why, fix=fix)
+    return vectors
+
+
+def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
+    from .fclib import (_matrix_meta, _read_info, _read_matrix, _read_vector,
+                        check_mass_declaration)
+
+    vectors = _vectors_without(g, ["G"], ["b"], path, "equality constraints (G, b) are not supported by rfverify",
+                               "eliminate the constraints (or remove G and b) before passing the problem")
     _refuse(vectors, ["mu_r"], path, "rolling resistance in a 3-D Coulomb problem: /fclib_global "
                                      "has no mu_r",
             fix="store a rolling problem as /fclib_global_rolling (spacedim 5), or remove mu_r")
@@ -250,12 +257,7 @@ def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
     M_meta = _matrix_meta(g, "M", path)
     H_meta = _matrix_meta(g, "H", path)
     m, n = f.size, mu.size
-    if M_meta["m"] != M_meta["n"]:
-        raise InvalidProblemError("M", f"is declared {M_meta['m']}×{M_meta['n']} (M/m, M/n), must be "
-                                       "square", fix="M is the m×m mass matrix")
-    if M_meta["m"] != m:
-        raise InvalidProblemError("M", f"declares m = {M_meta['m']} dofs (M/m) but vectors/f has {m} "
-                                       "entries", fix="f has one entry per dof of M: make M/m, M/n and f agree")
+    check_mass_declaration(M_meta, m)
     if H_meta["n"] == SPACEDIM * n and n > 0:
         raise InvalidProblemError(
             "H", f"is declared {H_meta['m']}×{H_meta['n']}: 5 columns per contact ({n} contacts), the "
@@ -281,16 +283,11 @@ def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
 
 
 def _read_local(fh, g, path, max_asymmetry, ignored) -> Problem:
-    from .fclib import (_h5py, _matrix_meta, _member, _read_info, _read_matrix, _read_vector)
+    from .fclib import (_matrix_meta, _read_info, _read_matrix, _read_vector)
 
-    h5py = _h5py()
-    _refuse(g, ["V", "R"], path, "the extra constraints V, R (and s) of a local problem are not "
-                                 "supported by rfverify",
-            fix="eliminate them (or remove V, R and s) before passing the problem")
-    vectors = _member(g, "vectors", path, h5py.Group)
-    _refuse(vectors, ["s"], path, "the extra constraints V, R (and s) of a local problem are not "
-                                  "supported by rfverify",
-            fix="eliminate them (or remove V, R and s) before passing the problem")
+    vectors = _vectors_without(g, ["V", "R"], ["s"], path,
+                               "the extra constraints V, R (and s) of a local problem are not supported by rfverify",
+                               "eliminate them (or remove V, R and s) before passing the problem")
     _refuse(vectors, ["mu_r"], path, "rolling resistance in a 3-D Coulomb problem: /fclib_local "
                                      "has no mu_r",
             fix="lift the local rolling problem to /fclib_global_rolling (spacedim 5), or remove mu_r")
