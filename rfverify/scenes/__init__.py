@@ -189,17 +189,24 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
     return out
 
 
-def _description(sc: Scene, prov: dict, problem) -> str:
-    p = prov
-    nb = problem.n_dofs // 6
-    solves = ", ".join(f"{s['status']} ({s['iterations']} it)" for s in p["solves"])
-    lines = [
+def _header_lines(sc: Scene, p: dict) -> list[str]:
+    """The first lines of every generated problem's description: generator, scene, seed, stage."""
+    return [
         f"rfverify.scenes {sc.name} (generator version {p['generator_version']}, "
         f"rfverify {p['rfverify_version']})",
         f"scene: {sc.summary}",
         f"configuration: {sc.configuration}",
         f"seed {p['seed']}; problem K = {p['trace_index']} of {p['count']} in the trace "
         f"(stage {p['stage']:.4f}); size {p['size']} {sc.size_unit} at the last stage",
+    ]
+
+
+def _description(sc: Scene, prov: dict, problem) -> str:
+    p = prov
+    nb = problem.n_dofs // 6
+    solves = ", ".join(f"{s['status']} ({s['iterations']} it)" for s in p["solves"])
+    lines = [
+        *_header_lines(sc, p),
         f"bodies {nb} (m = {problem.n_dofs} dofs), contacts {problem.n_contacts}",
         f"time stepping: Moreau-Jean, theta = 1, h = {p['parameters']['h']:g}, e = 0, "
         f"w_N = max(gap, 0)/h (speculative contacts within margin {p['parameters']['margin']:g}); "
@@ -274,12 +281,7 @@ def _fe_description(sc: Scene, prov: dict, problem) -> str:
     p, nt = prov, prov["notes"]
     par = p["parameters"]
     lines = [
-        f"rfverify.scenes {sc.name} (generator version {p['generator_version']}, "
-        f"rfverify {p['rfverify_version']})",
-        f"scene: {sc.summary}",
-        f"configuration: {sc.configuration}",
-        f"seed {p['seed']}; problem K = {p['trace_index']} of {p['count']} in the trace "
-        f"(stage {p['stage']:.4f}); size {p['size']} {sc.size_unit} at the last stage",
+        *_header_lines(sc, p),
         f"mesh: {' x '.join(map(str, nt['cells']))} cells of edge {par['cell']:g} m, "
         f"{nt['nodes']} nodes (m = {problem.n_dofs} dofs, 3 per node), {nt['tetrahedra']} linear "
         f"tetrahedra; contacts {problem.n_contacts} (one per bottom node, support normal +z)",
