@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import ConeDomainError
 from .cones import ProductCone
 from .kkt import FORMS, ScalingPoint
-from .result import TRACE_FIELDS, IterationInfo, Settings, Status
+from .result import TRACE_FIELDS, IterationInfo, Outcome, Settings, Status
 from .termination import Termination, Verdict
 
 _TINY = np.finfo(float).tiny
@@ -32,7 +32,7 @@ def _norm(x) -> float:
 
 
 @dataclass
-class RunResult:
+class RunResult(Outcome):
     """What one run of Algorithm 1 returns (one independent component or the whole problem):
     the lifted iterate (v, r̃, z) in the working precision, its status and measures, the
     trace, timings and factorisation counts, and (on request) every iterate."""
@@ -40,12 +40,6 @@ class RunResult:
     v: np.ndarray
     r_t: np.ndarray
     z: np.ndarray
-    status: Status
-    message: str
-    nit: int
-    pinfeas: float
-    dinfeas: float
-    mu: float
     measures: object
     trace: dict
     timings: dict

@@ -180,7 +180,20 @@ class IterationInfo:
 
 
 @dataclass
-class SolveResult:
+class Outcome:
+    """What every run reports: status, message, iterations and the paper's measures of the
+    returned iterate (DESIGN §4)."""
+
+    status: Status
+    message: str
+    nit: int
+    pinfeas: float
+    dinfeas: float
+    mu: float
+
+
+@dataclass
+class SolveResult(Outcome):
     """Result of :func:`rfverify.solve` (scipy ``OptimizeResult``-like).
 
     Attributes
@@ -206,12 +219,6 @@ class SolveResult:
     v: np.ndarray
     u: np.ndarray
     r: np.ndarray
-    status: Status
-    message: str
-    nit: int
-    pinfeas: float
-    dinfeas: float
-    mu: float
     trace: dict
     timings: dict
     method: str
