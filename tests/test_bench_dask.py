@@ -181,19 +181,7 @@ def test_time_limit_kills_on_the_worker_then_retry(cluster, tmp_path, capsys):
 
 
 def test_killing_the_bench_stops_its_tasks_on_the_workers(cluster, tmp_path):
-    coll = tmp_path / "c"
-    coll.mkdir()
-    # Trajectory tasks (every iterate rechecked in 30 digits) that run for seconds.
-    save(random_problem(200, 600, seed=3), coll / "big.hdf5")
-    save(random_problem(200, 600, seed=4), coll / "big2.hdf5")
-    cmd = [sys.executable, "-m", "rfverify", "bench", str(coll), "--out", str(tmp_path / "run"),
-           "--methods", "jqinv", "--tol", "1e-8", "--digits", "0", "--quiet", "--scheduler", cluster]
-    bench = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and len(_task_processes()) < 2:
-        time.sleep(0.05)
-    running = _task_processes()
-    assert len(running) == 2 and bench.poll() is None, "no task running on both workers"
+    bench = _bench_two_big_problems(tmp_path, cluster, running=2)
     bench.kill()
     bench.wait(timeout=30)
     deadline = time.monotonic() + 20
@@ -236,7 +224,9 @@ def test_a_dead_worker_takes_its_task_process_along_and_the_task_is_retried(clus
         client.wait_for_workers(2, timeout=60)  # the nanny's new worker joined: cluster intact
 
 
-def _bench_two_big_problems(tmp_path, address):
+def _bench_two_big_problems(tmp_path, address, running: int = 1):
+    """Start `bench --scheduler` on two problems whose trajectory tasks (every iterate rechecked
+    in 30 digits) run for seconds; return once ``running`` tasks run on the workers."""
     coll = tmp_path / "c"
     coll.mkdir()
     save(random_problem(200, 600, seed=3), coll / "big.hdf5")
@@ -245,9 +235,9 @@ def _bench_two_big_problems(tmp_path, address):
            "--methods", "jqinv", "--tol", "1e-8", "--digits", "0", "--quiet", "--scheduler", address]
     bench = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and not _task_processes():
+    while time.monotonic() < deadline and len(_task_processes()) < running:
         time.sleep(0.02)
-    assert _task_processes() and bench.poll() is None, "no task running"
+    assert len(_task_processes()) >= running and bench.poll() is None, f"fewer than {running} task(s) running"
     return bench
 
 

@@ -333,14 +333,15 @@ def test_handwritten_triplet_uses_only_nz_entries(tmp_path):
     np.testing.assert_array_equal(q.H.toarray(), H_DENSE)
 
 
-def test_handwritten_csr(tmp_path):
-    def csr(dense):
-        A = sp.csr_matrix(dense)
-        return {"m": dense.shape[0], "n": dense.shape[1], "nz": -2, "p": A.indptr,
-                "i": A.indices, "x": A.data}
+def _compressed(dense, nz: int):
+    """An FCLIB matrix group in compressed storage: nz = -1 CSC, nz = -2 CSR (scipy's arrays)."""
+    A = sp.csc_matrix(dense) if nz == -1 else sp.csr_matrix(dense)
+    return {"m": dense.shape[0], "n": dense.shape[1], "nz": nz, "p": A.indptr, "i": A.indices, "x": A.data}
 
+
+def test_handwritten_csr(tmp_path):
     path = tmp_path / "csr.hdf5"
-    write_raw(path, M=csr(M_DENSE), H=csr(H_DENSE), **VECTORS)
+    write_raw(path, M=_compressed(M_DENSE, -2), H=_compressed(H_DENSE, -2), **VECTORS)
     q = read_fclib(path)
     assert q.storage == {"M": "csr", "H": "csr"}
     np.testing.assert_array_equal(q.H.toarray(), H_DENSE)
@@ -362,13 +363,8 @@ def test_handwritten_csr_by_hand_pointers(tmp_path):
 
 
 def test_handwritten_csc(tmp_path):
-    def csc(dense):
-        A = sp.csc_matrix(dense)
-        return {"m": dense.shape[0], "n": dense.shape[1], "nz": -1, "p": A.indptr,
-                "i": A.indices, "x": A.data}
-
     path = tmp_path / "csc.hdf5"
-    write_raw(path, M=csc(M_DENSE), H=csc(H_DENSE), **VECTORS, title="hand-written")
+    write_raw(path, M=_compressed(M_DENSE, -1), H=_compressed(H_DENSE, -1), **VECTORS, title="hand-written")
     q = read_fclib(path)
     assert q.storage == {"M": "csc", "H": "csc"}
     assert q.title == "hand-written"
