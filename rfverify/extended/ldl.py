@@ -58,6 +58,12 @@ def _symbolic(n, Ap, Ai):
 
 
 @numba.njit(cache=True, inline="always")
+def _workspace(n):
+    """flag and pattern for :func:`_row_pattern`; lnz, the entries of each column of L so far."""
+    return np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+
+
+@numba.njit(cache=True, inline="always")
 def _row_pattern(k, Ap, Ai, parent, flag, pattern, n):
     """The nonzero pattern of row k of L (the columns reached from column k's upper entries
     along the elimination tree), in topological order in pattern[top:n]; returns top."""
@@ -83,13 +89,9 @@ def _row_pattern(k, Ap, Ai, parent, flag, pattern, n):
 @numba.njit(cache=True)
 def _numeric(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl):
     """Returns -1 on success, else the index of the first non-positive pivot."""
-    yh = np.zeros(n)
-    yl = np.zeros(n)
-    flag = np.empty(n, dtype=np.int64)
-    pattern = np.empty(n, dtype=np.int64)
-    lnz = np.zeros(n, dtype=np.int64)
+    yh, yl = np.zeros(n), np.zeros(n)
+    flag, pattern, lnz = _workspace(n)
     for k in range(n):
-        lnz[k] = 0
         for p in range(Ap[k], Ap[k + 1]):
             if Ai[p] <= k:
                 yh[Ai[p]], yl[Ai[p]] = dd.add(yh[Ai[p]], yl[Ai[p]], Axh[p], Axl[p])
@@ -215,11 +217,8 @@ class DDCholesky:
 def _numeric_double(n, Ap, Ai, Ax, Lp, parent, Li, Lx, D):
     """:func:`_numeric` in float64 (same algorithm, same symbolic factor)."""
     y = np.zeros(n)
-    flag = np.empty(n, dtype=np.int64)
-    pattern = np.empty(n, dtype=np.int64)
-    lnz = np.zeros(n, dtype=np.int64)
+    flag, pattern, lnz = _workspace(n)
     for k in range(n):
-        lnz[k] = 0
         for p in range(Ap[k], Ap[k + 1]):
             if Ai[p] <= k:
                 y[Ai[p]] += Ax[p]
