@@ -468,7 +468,7 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
     attributes ``layout`` and ``symmetrised`` (what was symmetrised for solving, with the
     entrywise and normwise asymmetry: ``asymmetry_entrywise``, ``asymmetry_normwise``).
     """
-    from .fclib3d import LOCAL, ROLLING, check_embedded, file_layout, solution_attributes, write_group
+    from .fclib3d import LOCAL, ROLLING, check_embedded, file_layout, write_group
 
     h5py = _h5py()
     layout = file_layout(problem)
@@ -495,13 +495,13 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
             if layout != ROLLING:
                 write_group(fh, problem, fmts)  # /fclib_global or /fclib_local, 3 per contact
             else:
-                _write_rolling(fh, problem, fmts, solution_attributes)
+                _write_rolling(fh, problem, fmts)
             if extra is not None:  # more groups (a certificate), written before the rename
                 extra(fh)
     return path
 
 
-def _write_rolling(fh, problem, fmts, solution_attributes):
+def _write_rolling(fh, problem, fmts):
     g = fh.create_group(ROOT)
     _write_matrix(g, "M", problem.M, fmts["M"])
     _write_matrix(g, "H", problem.H, fmts["H"])
@@ -509,19 +509,27 @@ def _write_rolling(fh, problem, fmts, solution_attributes):
     for name in ("f", "w", "mu", "mu_r"):
         vec.create_dataset(name, data=np.asarray(getattr(problem, name), dtype=np.float64))
     g.create_dataset("spacedim", data=np.array([problem.spacedim], dtype=np.int32))
+    write_info_and_solutions(fh, g, problem, _write_solution)
+
+
+def write_info_and_solutions(fh, g, problem, write_solution) -> None:
+    """g/info (title, description, math_info), /solution with its attributes, and /guesses;
+    ``write_solution(group, solution)`` writes one solution's datasets."""
+    from .fclib3d import solution_attributes
+
     info = g.create_group("info")
     for name in ("title", "description", "math_info"):
         info.create_dataset(name, data=np.bytes_(getattr(problem, name).encode("utf-8")))
     if problem.solution is not None:
         sg = fh.create_group("solution")
-        _write_solution(sg, problem.solution)
+        write_solution(sg, problem.solution)
         for key, val in solution_attributes(problem).items():
             sg.attrs[key] = val
     if problem.guesses:
         gg = fh.create_group("guesses")
         gg.create_dataset("number_of_guesses", data=np.array([len(problem.guesses)], dtype=np.int32))
         for k, guess in enumerate(problem.guesses, start=1):
-            _write_solution(gg.create_group(str(k)), guess)
+            write_solution(gg.create_group(str(k)), guess)
 
 
 def write_solution_in_place(target, solution: StoredSolution, *, extra=None, problem=None) -> Path:

@@ -231,13 +231,16 @@ def _contact_vector_size(name: str, size: int, n: int, fix: str):
                                         f"from mu ({n} contacts){hint}", fix=fix)
 
 
-def _vectors_without(g, group_members, vector_members, path, why, fix):
-    """g/vectors, after refusing the members of g and of g/vectors that rfverify cannot model."""
+def _vectors_without(g, group_members, vector_members, path, why, fix, *, mu_r_fix):
+    """g/vectors, after refusing the members of g and of g/vectors that rfverify cannot model,
+    and a rolling resistance mu_r (a 3-D Coulomb group has none)."""
     from .fclib import _h5py, _member
 
     _refuse(g, group_members, path, why, fix=fix)
     vectors = _member(g, "vectors", path, _h5py().Group)
     _refuse(vectors, vector_members, path, why, fix=fix)
+    _refuse(vectors, ["mu_r"], path, f"rolling resistance in a 3-D Coulomb problem: {g.name} has no mu_r",
+            fix=mu_r_fix)
     return vectors
 
 
@@ -246,10 +249,8 @@ def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
                         check_mass_declaration)
 
     vectors = _vectors_without(g, ["G"], ["b"], path, "equality constraints (G, b) are not supported by rfverify",
-                               "eliminate the constraints (or remove G and b) before passing the problem")
-    _refuse(vectors, ["mu_r"], path, "rolling resistance in a 3-D Coulomb problem: /fclib_global "
-                                     "has no mu_r",
-            fix="store a rolling problem as /fclib_global_rolling (spacedim 5), or remove mu_r")
+                               "eliminate the constraints (or remove G and b) before passing the problem",
+                               mu_r_fix="store a rolling problem as /fclib_global_rolling (spacedim 5), or remove mu_r")
     f = _read_vector(vectors, "f", path)
     w = _read_vector(vectors, "w", path)
     mu = _read_vector(vectors, "mu", path)
@@ -287,10 +288,9 @@ def _read_local(fh, g, path, max_asymmetry, ignored) -> Problem:
 
     vectors = _vectors_without(g, ["V", "R"], ["s"], path,
                                "the extra constraints V, R (and s) of a local problem are not supported by rfverify",
-                               "eliminate them (or remove V, R and s) before passing the problem")
-    _refuse(vectors, ["mu_r"], path, "rolling resistance in a 3-D Coulomb problem: /fclib_local "
-                                     "has no mu_r",
-            fix="lift the local rolling problem to /fclib_global_rolling (spacedim 5), or remove mu_r")
+                               "eliminate them (or remove V, R and s) before passing the problem",
+                               mu_r_fix="lift the local rolling problem to /fclib_global_rolling (spacedim 5), "
+                                        "or remove mu_r")
     q = _read_vector(vectors, "q", path)
     mu = _read_vector(vectors, "mu", path)
     _spacedim(g, path)
@@ -376,7 +376,7 @@ def _embed_solution(s: StoredSolution, loc: str, path, m: int, n: int, local_H) 
 def write_group(fh, problem: Problem, fmts: dict) -> None:
     """Write ``problem`` (read from a 3-D file) into the open h5py file ``fh`` as it was read:
     its group, ``/solution`` and ``/guesses`` 3 per contact."""
-    from .fclib import _write_matrix, _write_solution_arrays
+    from .fclib import _write_matrix, _write_solution_arrays, write_info_and_solutions
 
     layout = file_layout(problem)
     check_embedded(problem)
@@ -392,19 +392,8 @@ def write_group(fh, problem: Problem, fmts: dict) -> None:
         vec.create_dataset("q", data=np.asarray(problem.native.q, dtype=np.float64))
     vec.create_dataset("mu", data=np.asarray(problem.mu, dtype=np.float64))
     g.create_dataset("spacedim", data=np.array([FILE_SPACEDIM], dtype=np.int32))
-    info = g.create_group("info")
-    for name in ("title", "description", "math_info"):
-        info.create_dataset(name, data=np.bytes_(getattr(problem, name).encode("utf-8")))
-    if problem.solution is not None:
-        grp = fh.create_group("solution")
-        _write_solution_arrays(grp, solution_datasets(problem, problem.solution))
-        for k, v in solution_attributes(problem).items():
-            grp.attrs[k] = v
-    if problem.guesses:
-        gg = fh.create_group("guesses")
-        gg.create_dataset("number_of_guesses", data=np.array([len(problem.guesses)], dtype=np.int32))
-        for k, guess in enumerate(problem.guesses, start=1):
-            _write_solution_arrays(gg.create_group(str(k)), solution_datasets(problem, guess))
+    write_info_and_solutions(fh, g, problem, lambda grp, sol: _write_solution_arrays(
+        grp, solution_datasets(problem, sol)))
 
 
 def detect_layout(fh) -> str:
