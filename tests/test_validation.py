@@ -163,19 +163,25 @@ def test_wrong_vector_size_is_refused(arrays, name, delta):
     assert str(size) in str(err)
 
 
+def _resized_along(A, axis: int, delta: int, smallest: int):
+    """A copy of A with its size along ``axis`` changed by ``delta`` (at least ``smallest``,
+    never the original size), truncated or zero-padded."""
+    size = max(A.shape[axis] + delta, smallest)
+    if size == A.shape[axis]:
+        size += 1
+    bad = np.zeros((size, A.shape[1]) if axis == 0 else (A.shape[0], size))
+    keep = min(size, A.shape[axis])
+    if axis == 0:
+        bad[:keep] = A[:keep]
+    else:
+        bad[:, :keep] = A[:, :keep]
+    return bad
+
+
 @given(arrays=problem_arrays(), axis=st.sampled_from([0, 1]),
        delta=st.integers(-12, 12).filter(bool))
 def test_wrong_H_shape_is_refused(arrays, axis, delta):
-    H = arrays["H"].toarray()
-    size = max(H.shape[axis] + delta, 0)
-    if size == H.shape[axis]:
-        size += 1
-    bad = np.zeros((size, H.shape[1]) if axis == 0 else (H.shape[0], size))
-    keep = min(size, H.shape[axis])
-    if axis == 0:
-        bad[:keep] = H[:keep]
-    else:
-        bad[:, :keep] = H[:, :keep]
+    bad = _resized_along(arrays["H"].toarray(), axis, delta, smallest=0)
     err = rejected(arrays, H=bad)
     assert err.field == "H"
     assert str(bad.shape) in str(err)
@@ -184,19 +190,7 @@ def test_wrong_H_shape_is_refused(arrays, axis, delta):
 @given(arrays=problem_arrays(), axis=st.sampled_from([0, 1]),
        delta=st.integers(-5, 5).filter(bool))
 def test_non_square_M_is_refused(arrays, axis, delta):
-    M = arrays["M"].toarray()
-    m = M.shape[0]
-    size = max(m + delta, 1)
-    if size == m:
-        size += 1
-    shape = (size, m) if axis == 0 else (m, size)
-    bad = np.zeros(shape)
-    k = min(size, m)
-    if axis == 0:
-        bad[:k] = M[:k]
-    else:
-        bad[:, :k] = M[:, :k]
-    err = rejected(arrays, M=bad)
+    err = rejected(arrays, M=_resized_along(arrays["M"].toarray(), axis, delta, smallest=1))
     assert err.field == "M"
     assert "square" in str(err)
 
