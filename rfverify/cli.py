@@ -39,7 +39,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .solver.result import METHODS
+    from .solver.result import ALGORITHM1_METHODS, METHODS
 
     parser = _Parser(
         prog="rfverify",
@@ -163,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
                "option; 3 internal error.",
     )
     diag.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
-    diag.add_argument("--method", choices=[m for m in METHODS if m != "clarabel"], default="jqinv",
+    diag.add_argument("--method", choices=ALGORITHM1_METHODS, default="jqinv",
                       help="linear-system form of the double run (default: %(default)s)")
     diag.add_argument("--tol", type=_tolerance, default=1e-10, metavar="T",
                       help="tolerance of the double run; set it below what double precision "

@@ -8,8 +8,9 @@ import sys
 
 from ..cli import _dumps, _nonneg_int, _out_path, _positive_float, _positive_int, _tolerance
 from ..solver.result import METHODS
+from .runner import DEFAULT_METHODS as _METHODS
 
-DEFAULT_METHODS = "jqinv,qp2,noscaling,reduced,clarabel"
+DEFAULT_METHODS = ",".join(_METHODS)
 DEFAULT_TOLS = "1e-8,1e-9,1e-10"
 
 

@@ -34,12 +34,15 @@ from pathlib import Path
 
 from ..errors import BenchInputError
 from ..progress import Progress
+from ..solver.result import ALGORITHM1_METHODS, METHODS
 from . import records
 from .records import FAILED_STATUSES, task_stem, write_json
 from .tasks import base_record, run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
-ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling")
+DEFAULT_METHODS = tuple(m for m in METHODS if m != "reduced_factored")
+"""What ``bench`` runs unless told otherwise: every method but (16), the factored twin of (15)."""
+DEFAULT_TOLS = (1e-8, 1e-9, 1e-10)
 MANIFEST_SCHEMA = 2
 """2: adds ``schema``, ``rfverify_version`` and the planned ``tasks`` (what report expects)."""
 
@@ -313,8 +316,8 @@ def _stop(procs) -> None:
         proc.join(timeout=5)
 
 
-def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced", "clarabel"),
-              tols=(1e-8, 1e-9, 1e-10), jobs: int | None = None, time_limit: float = 600.0,
+def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
+              tols=DEFAULT_TOLS, jobs: int | None = None, time_limit: float = 600.0,
               trajectory_tol: float = 1e-14, trajectories: bool = True, digits: int = 10,
               reference_max_contacts: int = 60, max_iter: int = 100, quiet: bool = False,
               command: str | None = None, retry_failed: bool = False,
@@ -339,7 +342,6 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
     import math
 
     from ..io import load
-    from ..solver.result import METHODS
 
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
@@ -384,7 +386,6 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
 def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit, trajectory_tol,
                 digits, reference_max_contacts, quiet, command, retry_failed, scheduler) -> dict:
     from .. import __version__
-    from ..solver.result import METHODS
 
     old = read_manifest(run_dir, required=False)
     known = {p["key"]: p for p in old.get("problems", [])}

@@ -19,6 +19,7 @@ import numpy as np
 from ..bench.records import FIX_RERUN as _FIX_RERUN
 from ..bench.verify import forward_digits
 from ..measures import CRITERION
+from ..solver.result import ALGORITHM1_METHODS, METHODS
 
 SGM_SHIFT = 0.01
 """Shift (seconds) of the shifted geometric mean of times: keeps runs of a few milliseconds
@@ -40,9 +41,8 @@ class RunData:
 
     @property
     def methods(self) -> list:
-        order = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel"]
         present = {r["method"] for r in self.solves}
-        return [m for m in order if m in present]
+        return [m for m in METHODS if m in present]
 
     @property
     def tols(self) -> list:
@@ -303,8 +303,6 @@ def refuted_runs(data: RunData) -> list[dict]:
 
 
 def algorithm1_methods(data: RunData) -> list:
-    from ..bench.runner import ALGORITHM1_METHODS
-
 
     return [m for m in data.methods if m in ALGORITHM1_METHODS]
 
@@ -503,7 +501,6 @@ def worst_cases(data: RunData, count: int, max_contacts: int) -> list[dict]:
     first), then the solved runs with the largest cond(Q_p).  Only problems with ≤
     ``max_contacts`` contacts (each iteration costs a reference step); runs that timed out,
     crashed or have no record are not rerun.  Each entry says why it was chosen."""
-    from ..bench.runner import ALGORITHM1_METHODS
 
     small = {k for k, p in data.problems.items() if 0 < p["n_contacts"] <= max_contacts}
     a1 = [r for r in data.solves if r["method"] in ALGORITHM1_METHODS and r["problem"] in small
