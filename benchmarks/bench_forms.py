@@ -25,9 +25,8 @@ import rfverify
 from rfverify.bench.runner import BenchInputError, discover_problems
 from rfverify.measures import measures
 from rfverify.random_problems import random_problem
-from rfverify.solver import solve
+from rfverify.solver import METHODS, solve
 
-METHODS = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel"]
 TOLS = [1e-8, 1e-9, 1e-10]
 
 

@@ -101,6 +101,12 @@ class OutputPathError(RfverifyError, OSError):
         return self.args[0]
 
 
+class BenchInputError(RfverifyError):
+    """Bad benchmark input: no problems found, an unknown method, a bad, busy or damaged run
+    directory, an unusable record (:class:`rfverify.bench.records.RecordError`).  The message
+    names the file or option, what is wrong and the fix."""
+
+
 class ConeDomainError(RfverifyError, ArithmeticError):
     """A Jordan-algebra operation was given an argument outside its domain, e.g. the square
     root of a vector outside the Lorentz cone, or the inverse of an element with det = 0.

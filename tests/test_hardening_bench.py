@@ -16,8 +16,9 @@ from pathlib import Path
 import pytest
 
 from rfverify.bench import run_bench
+from rfverify.bench.records import FORMAT_VERSION as RECORD_SCHEMA
+from rfverify.bench.records import task_stem
 from rfverify.bench.runner import BenchInputError, RunLock
-from rfverify.bench.tasks import RECORD_SCHEMA, task_stem
 from rfverify.cli import main
 from rfverify.io import save
 from rfverify.random_problems import random_problem

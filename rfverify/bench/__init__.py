@@ -5,7 +5,8 @@ run counted as solved only after an independent high-precision recheck (:mod:`.v
 ``report.html`` and ``summary.md``.
 """
 
-from .runner import BenchInputError, discover_problems, plan_tasks, run_bench
+from ..errors import BenchInputError
+from .runner import discover_problems, plan_tasks, run_bench
 from .verify import HighPrecisionChecker, forward_digits, verified_criterion
 
 __all__ = ["run_bench", "discover_problems", "plan_tasks", "BenchInputError", "HighPrecisionChecker",

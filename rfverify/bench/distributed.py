@@ -227,7 +227,7 @@ def _run(client, run_dir: Path, todo: list, time_limit: float, bar, jobs, priori
 
 
 def _problem_bytes(task: dict) -> bytes:
-    from .runner import BenchInputError
+    from ..errors import BenchInputError
 
     try:
         data = Path(task["path"]).read_bytes()
@@ -244,7 +244,8 @@ def _store(run_dir: Path, task: dict, result: dict, time_limit: float) -> int:
     """Write what the worker returned as a local worker would have written it; returns 1 for a
     timeout, else 0."""
     from .runner import _record_failure, crash_message, problem_dir, timeout_message
-    from .tasks import task_key, task_stem
+    from .records import task_stem
+    from .tasks import task_key
 
     where = f" (on worker {result.get('host', '?')})"
     if result.get("outcome") == "timeout":
@@ -293,7 +294,7 @@ def run_remote(task: dict, problem: bytes, time_limit: float) -> dict:
     problem file, kill it after ``time_limit`` seconds (or when the task is cancelled), and
     return ``{"outcome", "exitcode", "host", "files": {"json", "npz"}}`` with the bytes of the
     record and arrays it wrote."""
-    from .tasks import task_stem
+    from .records import task_stem
 
     host = socket.gethostname()
     worker, key = _current_task()

@@ -8,7 +8,7 @@ Layout of a run directory::
     RUN_DIR/.lock                            held (flock) by the bench working in it
     RUN_DIR/manifest.json                    schema, problems (key, path, sha256, sizes),
                                              methods, tolerances, planned tasks, options
-    RUN_DIR/runs/<collection>/<problem>/     one directory per problem
+    RUN_DIR/runs/<collection>/<problem>/     one directory per problem (records: .records)
         <method>@<tol>.json / .npz           a timed solve and its independent recheck
         trajectory-<method>@<tol>.json/.npz  every iterate, rechecked (work–precision data)
         digits<K>.json / .npz                mixed-precision path, certificate, reference
@@ -32,22 +32,22 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import RfverifyError
+from ..errors import BenchInputError
 from ..progress import Progress
-from .tasks import (FAILED_STATUSES, RECORD_SCHEMA, base_record, run_task, task_key, task_label,
-                    task_stem, write_json)
+from ..solver.result import ALGORITHM1_METHODS, METHODS
+from . import records
+from .records import FAILED_STATUSES, task_stem, write_json
+from .tasks import base_record, run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
-ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling")
+DEFAULT_METHODS = tuple(m for m in METHODS if m != "reduced_factored")
+"""What ``bench`` runs unless told otherwise: every method but (16), the factored twin of (15)."""
+DEFAULT_TOLS = (1e-8, 1e-9, 1e-10)
 MANIFEST_SCHEMA = 2
 """2: adds ``schema``, ``rfverify_version`` and the planned ``tasks`` (what report expects)."""
 
 _FIX_MANIFEST = ("delete it and re-run the bench command: finished records under runs/ are "
                  "checked and reused")
-
-
-class BenchInputError(RfverifyError):
-    """Bad benchmark input (no problems found, unknown method, bad or busy run directory)."""
 
 
 @dataclass(frozen=True)
@@ -147,13 +147,8 @@ def record_path(run_dir: Path, task: dict) -> Path:
     return problem_dir(run_dir, task["problem"]) / f"{task_stem(task)}.json"
 
 
-def read_record(path: Path) -> dict | None:
-    """A record as a dict, or None when it is missing, truncated or not a JSON object."""
-    try:
-        rec = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return rec if isinstance(rec, dict) else None
+read_record = records.read_json
+"""A record as a dict, unchecked, or None when it is missing, truncated or not a JSON object."""
 
 
 def npz_intact(path: Path) -> bool:
@@ -170,10 +165,8 @@ def is_done(run_dir: Path, task: dict, *, retry_failed: bool = False) -> bool:
     problem content, settings, tolerance and rfverify version) and its arrays are intact;
     with ``retry_failed`` a Timeout/Crashed/Error record does not count as done."""
     path = record_path(run_dir, task)
-    rec = read_record(path)
-    if rec is None or rec.get("complete") is not True:
-        return False
-    if rec.get("schema") != RECORD_SCHEMA or rec.get("task_key") != task_key(task):
+    rec = records.is_current(path, task_key(task))
+    if rec is None:
         return False
     status = rec.get("status")
     if status in FAILED_STATUSES:
@@ -323,8 +316,8 @@ def _stop(procs) -> None:
         proc.join(timeout=5)
 
 
-def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced", "clarabel"),
-              tols=(1e-8, 1e-9, 1e-10), jobs: int | None = None, time_limit: float = 600.0,
+def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
+              tols=DEFAULT_TOLS, jobs: int | None = None, time_limit: float = 600.0,
               trajectory_tol: float = 1e-14, trajectories: bool = True, digits: int = 10,
               reference_max_contacts: int = 60, max_iter: int = 100, quiet: bool = False,
               command: str | None = None, retry_failed: bool = False,
@@ -349,7 +342,6 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
     import math
 
     from ..io import load
-    from ..solver.result import METHODS
 
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
@@ -394,7 +386,6 @@ def run_bench(inputs, out_dir, *, methods=("jqinv", "qp2", "noscaling", "reduced
 def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit, trajectory_tol,
                 digits, reference_max_contacts, quiet, command, retry_failed, scheduler) -> dict:
     from .. import __version__
-    from ..solver.result import METHODS
 
     old = read_manifest(run_dir, required=False)
     known = {p["key"]: p for p in old.get("problems", [])}

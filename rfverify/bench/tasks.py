@@ -12,15 +12,15 @@ Task kinds
                 its parts) and its certificate; the certificate's independent reference
                 solution is saved and serves as the problem's reference for forward errors.
 
-Each task writes ``<stem>.npz`` (arrays) then ``<stem>.json`` (record); the JSON is written
-last, atomically, so its presence means the task finished (what resume relies on).
+Each task writes ``<stem>.npz`` (arrays) then ``<stem>.json`` (record, declared in
+:mod:`rfverify.bench.records`); the JSON is written last, atomically, so its presence means the
+task finished (what resume relies on).
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
-import os
 import time
 import traceback
 import warnings
@@ -29,33 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from ..io.output import dumps
+from .records import FORMAT_VERSION, new_record, task_stem, tol_text, write_json
 from .verify import HighPrecisionChecker
-
-RECORD_SCHEMA = 2
-"""Version of the record layout.  2: strict JSON (null for non-finite numbers), ``task_key``,
-exact tolerance stems.  Records of another schema are never reused by a resumed bench."""
-
-READABLE_SCHEMAS = (1, 2)
-"""Schemas ``rfverify report`` can read (1 differs only by what resume needs)."""
-
-FAILED_STATUSES = ("Timeout", "Crashed", "Error")
-"""Run outcomes that ``bench --retry-failed`` runs again."""
-
-
-def tol_text(tol: float) -> str:
-    """The shortest text that reads back as exactly ``tol`` (1e-08, 1.5e-10): distinct
-    tolerances never share a file name."""
-    return repr(float(tol))
-
-
-def task_stem(task: dict) -> str:
-    """File stem of a task's outputs inside its problem directory."""
-    if task["kind"] == "solve":
-        return f"{task['method']}@{tol_text(task['tol'])}"
-    if task["kind"] == "trajectory":
-        return f"trajectory-{task['method']}@{tol_text(task['tol'])}"
-    return f"digits{task['digits']}"
-
 
 def task_key(task: dict) -> str:
     """Hash of everything that determines a task's result: the problem file's content, the
@@ -69,7 +44,7 @@ def task_key(task: dict) -> str:
     for name in Settings.names():
         value = getattr(Settings(), name)
         settings[name] = value if isinstance(value, (bool, int, float, str, type(None))) else repr(value)
-    what = {"schema": RECORD_SCHEMA, "rfverify": __version__, "sha256": task["sha256"],
+    what = {"schema": FORMAT_VERSION, "rfverify": __version__, "sha256": task["sha256"],
             "kind": task["kind"], "method": task.get("method"),
             "tol": None if task.get("tol") is None else tol_text(task["tol"]),
             "max_iter": task.get("max_iter"), "dps": task.get("dps"), "digits": task.get("digits"),
@@ -85,24 +60,8 @@ def task_label(task: dict) -> str:
 
 
 def base_record(task: dict) -> dict:
-    """The fields every record of ``task`` carries (the absolute path is this machine's
-    business; the manifest keeps a portable one)."""
-    from .. import __version__
-
-    return {"schema": RECORD_SCHEMA, "rfverify_version": __version__, "task_key": task_key(task),
-            **{k: v for k, v in task.items() if k != "path"}, "complete": True}
-
-
-def write_json(path: Path, record: dict) -> None:
-    """Strict JSON (non-finite numbers as null), written to a temporary file and renamed: a
-    reader never sees half a record."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(dumps(record, indent=1, default=str))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    """The fields every record of ``task`` carries (:func:`rfverify.bench.records.new_record`)."""
+    return new_record(task, task_key(task))
 
 
 def run_task(task: dict, out_dir: str) -> None:

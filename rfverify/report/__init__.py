@@ -24,7 +24,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .. import __version__
-from ..bench.tasks import tol_text
+from ..bench.records import tol_text
 from ..io.output import tag_floats, untag_floats, write_text_atomic
 from . import figures
 from .data import (DIGITS_CAP, SGM_SHIFT, RunData, algorithm1_methods, digits_cost, double_limit,
@@ -140,7 +140,7 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     data = load_run(run_dir)
     out = Path(run_dir)
     if not any(not r.get("_placeholder") for r in data.solves):
-        from ..bench.runner import BenchInputError
+        from ..errors import BenchInputError
 
         first = data.issues[0].split("; fix:")[0] if data.issues else ""
         damage = f" ({len(data.issues)} records missing or damaged, e.g. {first})" if data.issues else ""

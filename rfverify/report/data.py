@@ -8,7 +8,6 @@ task), and a failure's cause is the solver's own diagnosis plus the recheck's ve
 
 from __future__ import annotations
 
-import json
 import math
 import zipfile
 from collections import defaultdict
@@ -17,8 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..bench.records import FIX_RERUN as _FIX_RERUN
 from ..bench.verify import forward_digits
 from ..measures import CRITERION
+from ..solver.result import ALGORITHM1_METHODS, METHODS
 
 SGM_SHIFT = 0.01
 """Shift (seconds) of the shifted geometric mean of times: keeps runs of a few milliseconds
@@ -40,9 +41,8 @@ class RunData:
 
     @property
     def methods(self) -> list:
-        order = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel"]
         present = {r["method"] for r in self.solves}
-        return [m for m in order if m in present]
+        return [m for m in METHODS if m in present]
 
     @property
     def tols(self) -> list:
@@ -63,83 +63,8 @@ UNUSABLE = ("Missing", "Damaged")
 """Statuses the report gives a planned solve whose record is absent or unreadable: it is
 counted as a run that did not solve, never silently left out."""
 
-_FIX_RERUN = "re-run the same bench command (it redoes missing and damaged runs)"
-
-
 def _is_num(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
-def _is_int(x) -> bool:
-    return isinstance(x, int) and not isinstance(x, bool)
-
-
-def _check_fields(rec: dict, spec: dict) -> str | None:
-    """The first field of ``rec`` that is missing or of the wrong type, as a phrase."""
-    for name, (test, what, required) in spec.items():
-        if name not in rec:
-            if required:
-                return f"field {name!r} is missing"
-            continue
-        if not test(rec[name]):
-            return f"field {name!r} is {type(rec[name]).__name__} {str(rec[name])[:30]!r}, expected {what}"
-    return None
-
-
-_NUM_OR_NULL = (lambda x: x is None or _is_num(x), "a number or null")
-_COMMON = {"problem": (lambda x: isinstance(x, str), "a string", True),
-           "kind": (lambda x: x in ("solve", "trajectory", "digits"), "solve, trajectory or digits", True),
-           "status": (lambda x: isinstance(x, str), "a string", True),
-           "solved": (lambda x: isinstance(x, bool), "true or false", True),
-           "message": (lambda x: isinstance(x, str), "a string", False)}
-_METHOD_TOL = {"method": (lambda x: isinstance(x, str), "a method name", True),
-               "tol": (lambda x: _is_num(x) and math.isfinite(x) and x > 0, "a number > 0", True)}
-_FINISHED = {
-    "solve": {"time": (_is_num, "a number", True), "nit": (lambda x: x is None or _is_int(x), "an integer", False),
-              "verified": (lambda x: isinstance(x, dict) and _NUM_OR_NULL[0](x.get("max")),
-                           "an object with a numeric 'max'", True),
-              "max_cond_Qp": (*_NUM_OR_NULL, False), "min_lam2": (*_NUM_OR_NULL, False),
-              "solver_claims_solved": (lambda x: isinstance(x, bool), "true or false", False)},
-    "trajectory": {"time": (_is_num, "a number", True),
-                   "iterates": (lambda x: isinstance(x, list) and all(
-                       isinstance(i, dict) and _is_num(i.get("time")) and _NUM_OR_NULL[0](i.get("verified_max"))
-                       for i in x), "a list of {time, verified_max}", True),
-                   "best_verified_max": (*_NUM_OR_NULL, False)},
-    "digits": {"time": (_is_num, "a number", True), "time_certify": (*_NUM_OR_NULL, False),
-               "certified": (lambda x: isinstance(x, bool), "true or false", True),
-               "certified_digits": (lambda x: x is None or (isinstance(x, dict) and all(
-                   v is None or _is_num(v) for v in x.values())), "an object of numbers", False),
-               "certified_modes": (lambda x: isinstance(x, dict) and all(isinstance(v, str) for v in x.values()),
-                                   "an object of strings", False),
-               "has_reference": (lambda x: isinstance(x, bool), "true or false", False)},
-}
-
-
-def validate_record(rec, key: str, stem: str) -> str | None:
-    """Why a record cannot be used (None when it can): not an object, an unknown schema, a
-    missing or wrong-typed field, or a file name that does not match its contents."""
-    from ..bench.tasks import FAILED_STATUSES, READABLE_SCHEMAS, task_stem
-
-    if not isinstance(rec, dict):
-        return f"is a JSON {type(rec).__name__}, expected an object"
-    schema = rec.get("schema", rec.get("format"))
-    if schema not in READABLE_SCHEMAS:
-        return f"has schema {schema!r}; this rfverify reads {', '.join(map(str, READABLE_SCHEMAS))}"
-    reason = _check_fields(rec, _COMMON)
-    if reason is None and rec["kind"] != "digits":
-        reason = _check_fields(rec, _METHOD_TOL)
-    if reason is None and rec["kind"] == "digits" and not _is_int(rec.get("digits")):
-        reason = "field 'digits' is missing or not an integer"
-    if reason is None and rec["status"] not in FAILED_STATUSES:
-        reason = _check_fields(rec, _FINISHED[rec["kind"]])
-    if reason is not None:
-        return reason
-    if rec["problem"] != key:
-        return f"belongs to problem {rec['problem']!r}, not to its directory {key!r}"
-    if task_stem(rec) != stem:
-        return (f"holds {task_stem(rec)}, not what its file name says (an older rfverify gave "
-                "close tolerances one name)")
-    return None
 
 
 def _normalise(rec: dict) -> None:
@@ -189,8 +114,8 @@ def load_run(run_dir) -> RunData:
     missing, truncated, not an object, of an unknown schema or with a wrong-typed field, and
     arrays that cannot be read, are listed in ``RunData.issues``; such a planned solve is kept
     as a run with status Missing or Damaged (not solved), so no method silently loses runs."""
+    from ..bench.records import FAILED_STATUSES, RecordError, load_record
     from ..bench.runner import bench_running, npz_intact, read_manifest
-    from ..bench.tasks import FAILED_STATUSES
 
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir, required=True)
@@ -210,15 +135,12 @@ def load_run(run_dir) -> RunData:
                                f"not shown; fix: {_FIX_RERUN}")
             continue
         try:
-            rec = json.loads(path.read_text(encoding="utf-8"))
-            reason = validate_record(rec, key, stem)
-        except (OSError, ValueError) as exc:
-            rec, reason = None, f"is truncated or not JSON ({' '.join(str(exc).split())[:80]})"
-        if reason is not None:
-            data.issues.append(f"{rel}: {reason}; fix: delete it and {_FIX_RERUN}")
+            rec = load_record(path, key=key, stem=stem, name=rel)
+        except RecordError as exc:  # one unusable record: listed, and its run counts as not solved
+            data.issues.append(str(exc))
             task = _stem_task(stem)
             if task and task["kind"] == "solve":
-                data.solves.append(_placeholder(key, task, "Damaged", f"record {reason}",
+                data.solves.append(_placeholder(key, task, "Damaged", f"record {exc.reason}",
                                                 path.with_suffix(".npz")))
             continue
         _normalise(rec)
@@ -257,7 +179,7 @@ def load_run(run_dir) -> RunData:
 def _expected(data: RunData):
     """(problem, stem, task) of every run the manifest planned.  Manifests before schema 2 did
     not list their tasks: then every problem × method × tolerance solve is expected."""
-    from ..bench.tasks import task_stem
+    from ..bench.records import task_stem
 
     planned = data.manifest.get("tasks")
     if isinstance(planned, list):
@@ -381,7 +303,6 @@ def refuted_runs(data: RunData) -> list[dict]:
 
 
 def algorithm1_methods(data: RunData) -> list:
-    from ..bench.runner import ALGORITHM1_METHODS
 
     return [m for m in data.methods if m in ALGORITHM1_METHODS]
 
@@ -580,7 +501,6 @@ def worst_cases(data: RunData, count: int, max_contacts: int) -> list[dict]:
     first), then the solved runs with the largest cond(Q_p).  Only problems with ≤
     ``max_contacts`` contacts (each iteration costs a reference step); runs that timed out,
     crashed or have no record are not rerun.  Each entry says why it was chosen."""
-    from ..bench.runner import ALGORITHM1_METHODS
 
     small = {k for k, p in data.problems.items() if 0 < p["n_contacts"] <= max_contacts}
     a1 = [r for r in data.solves if r["method"] in ALGORITHM1_METHODS and r["problem"] in small

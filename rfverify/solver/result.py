@@ -7,8 +7,14 @@ from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
-METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel")
-"""Linear-system forms of Algorithm 1 (DESIGN §4), plus the Clarabel peer."""
+ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling")
+"""Linear-system forms of Algorithm 1 (DESIGN §4): (14), (11), (15), (16), (6)."""
+
+PEER_METHODS = ("clarabel",)
+"""Other solvers run on the same problem (no Algorithm 1 iterates, traces or lockstep)."""
+
+METHODS = ALGORITHM1_METHODS + PEER_METHODS
+"""Every method name rfverify accepts: the one declaration the CLI, bench and report derive from."""
 
 
 class Status(enum.Enum):

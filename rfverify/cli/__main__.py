@@ -1,0 +1,7 @@
+"""``python -m rfverify.cli`` is the ``rfverify`` command."""
+
+import sys
+
+from .app import main
+
+sys.exit(main())

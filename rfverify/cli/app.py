@@ -1,0 +1,112 @@
+"""The ``rfverify`` program: the parser assembled from the command modules, and :func:`main`,
+which runs a command and maps what it raises to an exit code (see :mod:`rfverify.cli`)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import warnings
+
+from .. import __version__
+from ..errors import RfverifyError
+from . import bench, certify, diagnose, generate, info, report, solve
+from .common import EXIT_BAD_INPUT, EXIT_INTERNAL
+
+COMMANDS = (info, solve, certify, diagnose, bench, report, generate)
+"""Command modules in the order ``rfverify --help`` lists them; each has ``add_parser(sub)``."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's one-line error format and exit code 2."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="rfverify",
+        description="Verification-focused toolkit for rolling-friction contact problems "
+                    "(FCLIB conventions: M v = H r + f, u = Hᵀ v + w, K* ∋ u ⊥ r ∈ K). "
+                    "Conventions, cones, the algorithm, the stopping criterion and what a "
+                    "certificate proves: docs/DESIGN.md in the source repository; a walk-through "
+                    "with your own file: docs/TUTORIAL.md.",
+        epilog="Exit codes: 0 success, 1 tolerance not reached (solve) or not certified "
+               "(solve --digits, certify), 2 bad input or arguments, 3 internal error, 130 "
+               "interrupted, 141 stdout closed early (e.g. | head), 143 bench stopped by SIGTERM "
+               "(per command: README, 'Guarantees'). "
+               "--json output is strict JSON: non-finite numbers are null.",
+    )
+    parser.add_argument("--version", action="version", version=f"rfverify {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for command in COMMANDS:
+        command.add_parser(sub)
+    return parser
+
+
+EXIT_BROKEN_PIPE = 141
+"""Exit code when stdout is closed early (``rfverify info ... | head -1``): 128 + SIGPIPE, what
+a shell reports for a program killed by the signal."""
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            # numpy/matplotlib warnings are not for the user's terminal: they are recorded and
+            # shown only with RFVERIFY_DEBUG (commands turn the ones that matter into messages).
+            warnings.simplefilter("always")
+            check = getattr(args, "check_outputs", None)
+            if check is not None:  # refuse an unusable output path before any work
+                check(args)
+            code = args.func(args)
+            sys.stdout.flush()
+        if os.environ.get("RFVERIFY_DEBUG"):
+            for w in caught:
+                print(f"rfverify {args.command}: debug: {w.category.__name__}: {w.message} "
+                      f"({w.filename}:{w.lineno})", file=sys.stderr)
+        return code
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
+    except RfverifyError as exc:
+        exc = _with_problem_file(exc, args)
+        print(f"rfverify {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("rfverify: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug, not bad input: say so in one line unless debugging
+        if os.environ.get("RFVERIFY_DEBUG"):
+            raise
+        print(f"rfverify {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              "(please report; set RFVERIFY_DEBUG=1 for a traceback)", file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+def _silence_stdout() -> None:
+    """After EPIPE: point stdout at /dev/null so the interpreter's final flush stays quiet."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (e.g. captured in tests)
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    os.close(devnull)
+
+
+def _with_problem_file(exc, args):
+    """A data error raised after loading names the PROBLEM file it is about."""
+    from ..errors import InvalidProblemError
+
+    spec = getattr(args, "problem", None)
+    if isinstance(exc, InvalidProblemError) and exc.path is None and spec:
+        return exc.with_path(spec)
+    return exc
+
+
+def _one_line(exc) -> str:
+    return " ".join(str(exc).split())

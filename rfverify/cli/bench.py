@@ -1,0 +1,107 @@
+"""``rfverify bench``: every method on every problem at every tolerance, rechecked independently
+(the work is :func:`rfverify.bench.run_bench`)."""
+
+from __future__ import annotations
+
+import re
+import shlex
+import sys
+
+from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
+from ..solver.result import METHODS
+from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
+from .common import EXIT_OK, dumps
+
+HELP = "run every method on every problem at every tolerance, verified independently"
+
+DESCRIPTION = """\
+Run each method on each problem at each tolerance, one process per run (--jobs at a time, each
+killed after --time-limit seconds; on a Dask cluster with --scheduler), save every solution and
+trace under RUN_DIR/runs/, and count a run as solved only when an independent 30-digit
+recomputation of the stopping criterion from the saved solution meets the tolerance. Also, per
+problem: a trajectory of each Algorithm 1 method at --trajectory-tol with every iterate
+rechecked (work-precision data, how far double precision gets), and, for problems with at most
+--reference-max-contacts contacts, the mixed-precision --digits path with its certificate
+(whose independent reference gives correct digits). Resumable: a finished run is reused only
+when the problem file's content, the method, tolerance, settings and rfverify version are
+unchanged (--retry-failed also redoes timed-out, crashed and failed runs); one bench at a time
+per RUN_DIR. Then run `rfverify report RUN_DIR`."""
+
+
+def add_parser(sub) -> None:
+    """The ``bench`` subcommand."""
+    bench = sub.add_parser("bench", help=HELP, description=DESCRIPTION)
+    bench.add_argument("inputs", nargs="+", metavar="DIR_OR_FILE",
+                       help="problem files, directories of them (the directory name is the "
+                            "collection), 'bundled' (every bundled problem) or 'bundled:NAME'")
+    bench.add_argument("--out", required=True, metavar="RUN_DIR", type=out_path,
+                       help="run directory (created or resumed)")
+    bench.add_argument("--methods", type=method_list, default=list(DEFAULT_METHODS), metavar="M,M,...",
+                       help=f"comma-separated methods (default: {','.join(DEFAULT_METHODS)}; all: {','.join(METHODS)})")
+    bench.add_argument("--tol", type=tol_list, default=sorted(DEFAULT_TOLS, reverse=True), metavar="T,T,...",
+                       help=f"comma-separated tolerances (default: {','.join(map(_short, DEFAULT_TOLS))})")
+    bench.add_argument("--jobs", type=positive_int, default=None, metavar="K",
+                       help="runs in parallel (default: 1; parallel runs share the machine, so "
+                            "times are comparable only within one bench run); with --scheduler, "
+                            "the most runs in flight on the cluster (default: twice its worker "
+                            "threads)")
+    bench.add_argument("--time-limit", type=positive_float, default=600.0, metavar="S",
+                       help="wall-clock limit per run in seconds (default: %(default)g)")
+    bench.add_argument("--max-iter", type=positive_int, default=100, metavar="K",
+                       help="iteration limit of each solve (default: %(default)s)")
+    bench.add_argument("--trajectory-tol", type=tolerance, default=1e-14, metavar="T",
+                       help="tolerance of the per-iterate trajectory runs (default: %(default)g)")
+    bench.add_argument("--no-trajectories", action="store_true", help="skip the trajectory runs")
+    bench.add_argument("--digits", type=nonneg_int, default=10, metavar="K",
+                       help="digits of the mixed-precision path (0 skips it; default: %(default)s)")
+    bench.add_argument("--reference-max-contacts", type=nonneg_int, default=60, metavar="N",
+                       help="largest problem (contacts) given the mixed-precision path and a "
+                            "reference solution; the reference costs ~1 min at 100 contacts "
+                            "(default: %(default)s)")
+    bench.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="run the tasks on a Dask distributed cluster whose scheduler listens "
+                            "at ADDRESS (tcp://HOST:8786; needs pip install 'rfverify[distributed]' "
+                            "here and on every worker). Each run executes in a subprocess on a "
+                            "worker, killed there at --time-limit; problem files are sent with the "
+                            "tasks (no shared filesystem needed); this process writes the records, "
+                            "the same as a local run's. See docs/DISTRIBUTED.md")
+    bench.add_argument("--retry-failed", action="store_true",
+                       help="also re-run runs recorded as Timeout, Crashed or Error (e.g. with a "
+                            "longer --time-limit); other finished runs are reused as usual")
+    bench.add_argument("--quiet", action="store_true", help="no progress output")
+    bench.add_argument("--json", action="store_true", help="print the outcome as JSON")
+    bench.set_defaults(func=cmd_bench, check_outputs=check_outputs)
+
+
+def _short(tol: float) -> str:
+    """1e-08 as 1e-8."""
+    return re.sub(r"e([+-])0+(\d)", r"e\1\2", f"{tol:g}")
+
+
+def check_outputs(args) -> None:
+    """Refuse an unusable RUN_DIR before any work."""
+    from ..io.output import check_output_dir
+
+    check_output_dir(args.out)
+
+
+def cmd_bench(args) -> int:
+    from ..bench import run_bench
+
+    command = "rfverify " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["bench"] else None
+    out = run_bench(args.inputs, args.out, methods=tuple(args.methods), tols=tuple(args.tol), jobs=args.jobs,
+                    time_limit=args.time_limit, trajectory_tol=args.trajectory_tol,
+                    trajectories=not args.no_trajectories, digits=args.digits,
+                    reference_max_contacts=args.reference_max_contacts, max_iter=args.max_iter,
+                    quiet=args.quiet, command=command, retry_failed=args.retry_failed,
+                    scheduler=args.scheduler)
+    if args.json:
+        out = dict(out, counts=[{"method": m, "tol": t, "solved": s, "total": n}
+                                for (m, t), (s, n) in out["counts"].items()])
+        print(dumps(out))
+    else:
+        print(f"bench: {out['ran']} runs done, {out['skipped']} already finished, {out['timeouts']} timed out; "
+              f"records in {out['run_dir']}/runs. Next: rfverify report {out['run_dir']}")
+        for (method, tol), (solved, total) in sorted(out["counts"].items(), key=lambda kv: (kv[0][0], -kv[0][1])):
+            print(f"  {method:<16} tol {tol:g}: {solved}/{total} verified solved")
+    return EXIT_OK

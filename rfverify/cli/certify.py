@@ -1,0 +1,129 @@
+"""``rfverify certify``: prove how many digits of a stored solution are right."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .argtypes import digit_count, out_path, positive_int
+from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
+                     load_problem, print_quantities, progress_printer)
+
+HELP = "prove how many digits of a solution are right (a rigorous error bound)"
+
+DESCRIPTION = """\
+Prove a lower bound on the correct significant digits of a solution (v, u, r) of the convex
+relaxation (docs/DESIGN.md §6): an extended-precision point near the solution set (stored in
+the solution file by 'solve --digits --out', or computed by a double solve and double-double
+iterations) is evaluated in exact arithmetic, and the bound ||v - v*||_M <= sqrt(g'M^-1 g + 2
+r'u) is carried to the solution. Exit code 0 only when --digits are proven."""
+
+
+def add_parser(sub) -> None:
+    """The ``certify`` subcommand."""
+    cert = sub.add_parser("certify", help=HELP, description=DESCRIPTION)
+    cert.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
+    cert.add_argument("--solution", metavar="SOL.h5",
+                      help="FCLIB file whose /solution/{v,u,r} is certified (default: the "
+                           "problem file's own /solution); its /certificate/point is used when present")
+    cert.add_argument("--digits", type=digit_count, default=10, metavar="K",
+                      help="digits to prove, 1-15 (default: %(default)s)")
+    cert.add_argument("--cross-check", action="store_true",
+                      help="also run the independent mpmath reference and report the digits of "
+                           "agreement (a second opinion; slow beyond a few hundred contacts)")
+    cert.add_argument("--dps", type=positive_int, default=50, metavar="D",
+                      help="accuracy of the --cross-check reference in decimal digits (default: %(default)s)")
+    cert.add_argument("--json", action="store_true", help="print the certificate as JSON")
+    cert.add_argument("--out", metavar="CERT.h5", type=out_path,
+                      help="write the problem, the given solution and /certificate (the point, "
+                           "exactly and as decimal strings, the bound and every intermediate norm)")
+    cert.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_load_options(cert)
+    cert.set_defaults(func=cmd_certify, check_outputs=check_outputs)
+
+
+def check_outputs(args) -> None:
+    """Refuse an unusable --out (an input of the command, ...) before any work."""
+    from ..io.output import check_output_file
+
+    if args.out is not None:
+        args.out_target = check_output_file(args.out, inputs=[args.problem, args.solution])
+
+
+def cmd_certify(args) -> int:
+    from ..certification import certify
+    from ..errors import ProblemFileError
+    from ..io import load
+    from ..io.certificate import read_point
+
+    problem = load_problem(args)
+    point = None
+    if args.solution:
+        other = load(args.solution, max_asymmetry=np.inf)
+        _require_same_problem(problem, other, args.solution)
+        sol = other.solution
+        where = args.solution
+        point = read_point(_resolve(args.solution))
+    else:
+        sol, where = problem.solution, args.problem
+        if is_hdf5_input(args.problem):
+            point = read_point(_resolve(args.problem))
+    # A 3-D file's /solution (3 per contact; local: u and r, v = H r) is read into the rolling
+    # layout by load(), so it is certified like any other.
+    if sol is None or sol.v is None or sol.r is None:
+        need = "r" if problem.provenance.get("format") == "fclib_local" else "v and r"
+        raise ProblemFileError(where, f"has no /solution with {need} to certify",
+                               fix="pass --solution SOL.h5 (written by rfverify solve --out)")
+    if point is not None and (point.v_hi.size != problem.n_dofs or point.r_hi.size != 5 * problem.n_contacts):
+        raise ProblemFileError(where, "/certificate/point does not match the problem's sizes",
+                               location="/certificate/point", fix="certify the solution file written for this problem")
+    u = sol.u if sol.u is not None else problem.H.T @ sol.v + problem.w
+    cert = certify(problem, sol.v, u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
+                   dps=args.dps, progress=progress_printer(args))
+    if args.out:
+        _write_certificate(args, problem, sol, u, cert)
+    if args.json:
+        print(dumps(cert.as_dict(), indent=2))
+    else:
+        print(cert.verdict)
+        print_quantities(cert)
+        src = cert.extra.get("point_source")
+        print(f"point: {'stored in ' + where if src == 'given' else 'computed (double solve + double-double phase)'}; "
+              f"time {cert.seconds:.2f} s")
+        if cert.cross_check is not None:
+            cc = cert.cross_check
+            shown = ", ".join(f"{k[7:]} {v:.1f}" for k, v in cc.items() if k.startswith("digits_") and v is not None)
+            print(f"cross-check against the mpmath reference ({cc.get('reference_status')}): "
+                  f"agreement {shown or cc.get('note', '')}")
+    return EXIT_OK if cert.certified else EXIT_NOT_SOLVED
+
+
+def _resolve(spec):
+    from ..io import resolve_path
+
+    return resolve_path(spec)
+
+
+def _require_same_problem(problem, other, path):
+    """A solution is only certified against the problem it was computed for."""
+    from ..errors import InvalidProblemError
+
+    same = (problem.M.shape == other.M.shape and problem.H.shape == other.H.shape
+            and all(np.array_equal(getattr(problem, k), getattr(other, k)) for k in ("f", "w", "mu", "mu_r"))
+            and (problem.M != other.M).nnz == 0 and (problem.H != other.H).nnz == 0)
+    if not same:
+        raise InvalidProblemError(
+            "solution", f"{path} holds a different problem (m = {other.n_dofs}, n = {other.n_contacts} "
+                        f"vs m = {problem.n_dofs}, n = {problem.n_contacts}, or different data)",
+            fix="pass the solution file written for this problem (rfverify solve ... --out)")
+
+
+def _write_certificate(args, problem, sol, u, cert):
+    """``certify --out``: the problem, the certified solution and /certificate."""
+    from ..io import save
+    from ..io.certificate import write_certificate
+    from ..io.output import check_output_file
+    from ..problem import StoredSolution
+
+    target = getattr(args, "out_target", None) or check_output_file(args.out, inputs=[args.problem, args.solution])
+    save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), target,
+         extra=lambda fh: write_certificate(fh, cert))

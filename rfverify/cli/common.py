@@ -1,0 +1,93 @@
+"""What the commands share: exit codes, the PROBLEM argument and its load options, loading,
+strict JSON output, progress lines and recorded warnings."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import warnings
+
+from ..errors import RfverifyError
+from .argtypes import nonneg_float
+
+EXIT_OK = 0
+EXIT_NOT_SOLVED = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERNAL = 3
+
+PROBLEM_HELP = ("problem file: FCLIB .hdf5 (fclib_global_rolling) or Siconos .dat (local problems "
+                "are lifted to global form), or bundled:NAME for a problem shipped with rfverify "
+                "(bundled:chute, bundled:chute-dat, bundled:sphere, bundled:cube, "
+                "bundled:sphere-from-global)")
+
+
+def add_load_options(p: argparse.ArgumentParser):
+    p.add_argument("--max-asymmetry", type=nonneg_float, default=None, metavar="X",
+                   help="largest accepted entrywise asymmetry max|M_ij - M_ji|/sqrt(M_ii M_jj) "
+                        "before M (W of a local problem) is refused (default: 1e-2; 'inf' accepts "
+                        "any); the refusal and 'info' also show the normwise "
+                        "||M - Mᵀ||_F/||M||_F. An accepted M is symmetrised as (M + Mᵀ)/2.")
+
+
+def load_problem(args):
+    from ..io import load
+    from ..problem import DEFAULT_MAX_ASYMMETRY
+
+    limit = DEFAULT_MAX_ASYMMETRY if args.max_asymmetry is None else args.max_asymmetry
+    return load(args.problem, max_asymmetry=limit)
+
+
+@contextlib.contextmanager
+def recorded_warnings():
+    """Record warnings (numpy floating-point, ...) instead of letting Python print them."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught
+
+
+def warning_summary(caught) -> list[str]:
+    """Distinct warnings with their counts, e.g. ``"RuntimeWarning: overflow in add (×13)"``."""
+    counts = {}
+    for w in caught:
+        key = f"{w.category.__name__}: {' '.join(str(w.message).split())}"
+        counts[key] = counts.get(key, 0) + 1
+    return [f"{k} (×{n})" if n > 1 else k for k, n in counts.items()]
+
+
+def print_warnings(items, where: str) -> None:
+    if items:
+        print(f"numerical warnings {where}: {'; '.join(items)}")
+
+
+def dumps(obj, **kwargs) -> str:
+    """Strict JSON (non-finite numbers as null): what every --json output prints."""
+    from ..io.output import dumps as strict_dumps
+
+    return strict_dumps(obj, **kwargs)
+
+
+def progress_printer(args):
+    """One line per stage on stderr, unless --json or --quiet."""
+    if getattr(args, "json", False) or getattr(args, "quiet", False):
+        return None
+
+    def say(message):
+        print(f"rfverify {args.command}: {message}", file=sys.stderr, flush=True)
+
+    return say
+
+
+def print_quantities(cert) -> None:
+    for q in cert.quantities.values():
+        print("  " + q.describe())
+
+
+def is_hdf5_input(spec) -> bool:
+    from ..io import resolve_path
+
+    try:
+        with open(resolve_path(spec), "rb") as fh:
+            return fh.read(8) == b"\x89HDF\r\n\x1a\n"
+    except (OSError, RfverifyError):
+        return False

@@ -1,0 +1,47 @@
+"""``rfverify info``: describe a problem (sizes, coefficients, M asymmetry, stored solution)."""
+
+from __future__ import annotations
+
+from .argtypes import tolerance
+from .common import (EXIT_OK, PROBLEM_HELP, add_load_options, dumps, load_problem, print_warnings,
+                     recorded_warnings, warning_summary)
+
+HELP = "describe a problem: sizes, coefficients, M asymmetry, stored solution"
+
+DESCRIPTION = """\
+Load and validate a problem, then report its sizes (m dofs, n contacts, nnz), the ranges of mu
+and mu_r and how many contacts have mu = 0 or mu_r = 0, the asymmetry of M (entrywise, the
+measure --max-asymmetry limits, and normwise) and what was symmetrised for solving, the block
+structure of M, the storage formats, and an independent check of the stored /solution (never
+trusted). For a 3-D FCLIB file (/fclib_global, /fclib_local) it also says how it was read:
+convex relaxation, mu_r = 0 in the rolling layout, a local problem lifted (rank, dropped
+eigenvalues)."""
+
+
+def add_parser(sub) -> None:
+    """The ``info`` subcommand."""
+    info = sub.add_parser("info", help=HELP, description=DESCRIPTION)
+    info.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
+    info.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    add_load_options(info)
+    info.add_argument("--solution-tol", type=tolerance, default=1e-6, metavar="TOL",
+                      help="relative residual up to which a stored solution is called "
+                           "consistent (default: %(default)g)")
+    info.set_defaults(func=cmd_info)
+
+
+def cmd_info(args) -> int:
+    from ..summary import format_summary, problem_summary
+
+    problem = load_problem(args)
+    with recorded_warnings() as caught:
+        summary = problem_summary(problem, solution_tol=args.solution_tol,
+                                  max_asymmetry=args.max_asymmetry)
+    if caught:
+        summary["numerical_warnings"] = warning_summary(caught)
+    if args.json:
+        print(dumps(summary, indent=2))
+    else:
+        print(format_summary(summary))
+        print_warnings(summary.get("numerical_warnings"), "while describing the problem")
+    return EXIT_OK

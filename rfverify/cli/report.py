@@ -1,0 +1,55 @@
+"""``rfverify report``: report.html and summary.md of a bench run directory (the work is
+:func:`rfverify.report.make_report`)."""
+
+from __future__ import annotations
+
+import sys
+
+from .argtypes import nonneg_int, positive_int
+from .common import EXIT_OK, dumps
+
+HELP = "write RUN_DIR/report.html and RUN_DIR/summary.md from a bench run"
+
+DESCRIPTION = """\
+Build the report of a bench run directory: Dolan–Moré performance profiles of time and
+iterations per tolerance, verified error against run time, a success table per collection ×
+method × tolerance with shifted geometric mean times, how far double precision gets, the cost
+of the mixed-precision path, per-iteration lockstep diagnostics (double against reference) of
+the worst cases, and every failure with its diagnosed cause. PNG figures are written beside
+report.html."""
+
+
+def add_parser(sub) -> None:
+    """The ``report`` subcommand."""
+    report = sub.add_parser("report", help=HELP, description=DESCRIPTION)
+    report.add_argument("run_dir", metavar="RUN_DIR")
+    report.add_argument("--diagnose", type=nonneg_int, default=3, metavar="N",
+                        help="lockstep-diagnose the N worst cases (default: %(default)s; 0 skips)")
+    report.add_argument("--diagnose-max-contacts", type=positive_int, default=40, metavar="N",
+                        help="only diagnose problems with at most N contacts (default: %(default)s)")
+    report.add_argument("--dps", type=positive_int, default=40, metavar="D",
+                        help="digits of the lockstep reference steps (default: %(default)s)")
+    report.add_argument("--quiet", action="store_true", help="no progress output")
+    report.add_argument("--json", action="store_true", help="print paths and counts as JSON")
+    report.set_defaults(func=cmd_report)
+
+
+def cmd_report(args) -> int:
+    from ..report import make_report
+
+    out = make_report(args.run_dir, diagnose_count=args.diagnose,
+                      diagnose_max_contacts=args.diagnose_max_contacts, diagnose_dps=args.dps,
+                      quiet=args.quiet)
+    if out["issues"]:
+        first = out["issues"][0].split("; fix:")[0]
+        print(f"rfverify report: warning: {args.run_dir}: {len(out['issues'])} record(s) or array "
+              f"file(s) missing or damaged, e.g. {first} (all listed in summary.md under 'Missing or "
+              "damaged records'); fix: re-run the bench command, which redoes them", file=sys.stderr)
+    if args.json:
+        print(dumps({"report": out["report"], "summary": out["summary"], "issues": out["issues"],
+                      "bench_running": out["running"],
+                      "counts": [{"collection": c, "method": m, "tol": t, "solved": s, "total": n}
+                                 for (c, m, t), (s, n) in out["counts"].items()]}))
+    else:
+        print(f"report: {out['report']}\nsummary: {out['summary']}")
+    return EXIT_OK

@@ -1,0 +1,183 @@
+"""``rfverify solve``: Algorithm 1 (or the Clarabel peer), and with ``--digits`` the proven
+k-digit path; ``--out`` writes the solution (and certificate) through :mod:`rfverify.io`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..solver.result import METHODS
+from .argtypes import digit_count, out_path, positive_float, positive_int, tolerance
+from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
+                     load_problem, print_quantities, print_warnings, progress_printer,
+                     recorded_warnings, warning_summary)
+
+HELP = "solve a problem with Algorithm 1 (or the Clarabel peer)"
+
+DESCRIPTION = """\
+Solve the convex relaxation of a rolling-friction problem with the mixed-precision
+interior-point method (Algorithm 1, docs/DESIGN.md §4). Exit code 0 only when the criterion
+(docs/DESIGN.md §4.5: residuals of the returned v, u, r scaled by their terms and by the data)
+is <= --tol; 1 when the solver stopped without reaching it (the status says why). The paper's
+pinfeas, dinfeas and mu are printed beside it."""
+
+
+def add_parser(sub) -> None:
+    """The ``solve`` subcommand."""
+    sol = sub.add_parser("solve", help=HELP, description=DESCRIPTION)
+    sol.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
+    sol.add_argument("--method", choices=METHODS, default="jqinv",
+                     help="linear-system form: jqinv (14), qp2 (11), reduced (15), "
+                          "reduced_factored (16), noscaling (6), or clarabel, the same problem "
+                          "handed to Clarabel (default: %(default)s)")
+    sol.add_argument("--tol", type=tolerance, default=1e-10, metavar="T",
+                     help="stop when the criterion of docs/DESIGN.md §4.5 is <= T (default: "
+                          "%(default)g)")
+    sol.add_argument("--max-iter", type=positive_int, default=100, metavar="K",
+                     help="iteration limit (default: %(default)s)")
+    sol.add_argument("--out", metavar="SOL.h5", type=out_path,
+                     help="write the problem data plus /solution/{v,u,r} (FCLIB layout) here, in "
+                          "the input's own layout (3-D /fclib_global: 3 per contact; /fclib_local: "
+                          "u and r only); naming the input .hdf5 file itself replaces only its "
+                          "/solution (and /certificate with --digits) and "
+                          "keeps everything else in it")
+    sol.add_argument("--json", action="store_true",
+                     help="print status, iterations, time and final residuals as JSON")
+    sol.add_argument("--verbose", action="store_true",
+                     help="print a settings header and each iteration as it happens (every independent "
+                          "component, labelled); with --method clarabel, Clarabel's own log")
+    sol.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
+                     help="stop after S seconds with the best iterate (status MaxTime, exit 1)")
+    sol.add_argument("--digits", type=digit_count, default=None, metavar="K",
+                     help="produce a solution proven right to K significant digits (1-15): the "
+                          "double solve, then Algorithm 1 continued in double-double until the "
+                          "rigorous error bound of docs/DESIGN.md §6 proves K digits of v, u and Hr "
+                          "(and r where it is unique); exit code 0 only when proven. With --out the "
+                          "file also gets /certificate (the point and the bound, to recheck with "
+                          "'rfverify certify')")
+    sol.add_argument("--no-presolve", action="store_true",
+                     help="switch off the presolve reductions (cone reduction for mu = 0 / "
+                          "mu_r = 0 requires them; such problems are refused)")
+    add_load_options(sol)
+    sol.set_defaults(func=cmd_solve, check_outputs=check_outputs)
+
+
+def check_outputs(args) -> None:
+    """Refuse an unusable --out before any work; FCLIB keeps /solution beside the problem, so
+    naming the input .hdf5 file itself is allowed."""
+    from ..io.output import check_output_file
+
+    if args.out is not None:
+        args.out_target = check_output_file(args.out, inputs=[args.problem],
+                                            in_place_ok=is_hdf5_input(args.problem))
+
+
+def cmd_solve(args) -> int:
+    import time
+
+    from ..solver import solve
+
+    problem = load_problem(args)
+    options = {}
+    if args.no_presolve:
+        options.update(reduce_cones=False, drop_free_bodies=False, split_components=False)
+        if np.any(problem.mu == 0) or np.any(problem.mu_r == 0):
+            from ..errors import InvalidProblemError
+
+            raise InvalidProblemError("mu", "has zero coefficients, which the unreduced lifting "
+                                            "would divide by", fix="drop --no-presolve")
+    if args.digits is not None:
+        return _solve_digits(args, problem, options)
+    t0 = time.perf_counter()
+    # --verbose: the solver prints its header and each iteration as it happens (Clarabel its own log).
+    options["verbose"] = bool(args.verbose and not args.json)
+    if args.time_limit is not None:
+        options["time_limit"] = args.time_limit
+    with recorded_warnings() as caught:
+        result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, **options)
+    wall = time.perf_counter() - t0
+    if args.out:
+        _write_solution_file(args, problem, result.v, result.u, result.r)
+    summary = {
+        "status": str(result.status), "success": result.success, "message": result.message,
+        "method": result.method, "iterations": result.nit, "time": wall, "tol": args.tol,
+        "criterion": result.criterion,
+        "measures": result.measures.as_dict() if result.measures is not None else None,
+        "pinfeas": result.pinfeas, "dinfeas": result.dinfeas, "mu": result.mu,
+        "presolve": result.presolve, "out": args.out,
+        "numerical_warnings": warning_summary(caught),
+        "timings": result.timings,
+        "trace": {k: np.asarray(v).tolist() for k, v in result.trace.items()},
+        "component_traces": [{"status": str(c["status"]), "message": c["message"], "nit": c["nit"],
+                              "trace": {k: np.asarray(v).tolist() for k, v in c["trace"].items()}}
+                             for c in result.extras.get("component_runs", [])],
+    }
+    if args.json:
+        print(dumps(summary, indent=2))
+    else:
+        print(f"status {result.status}: {result.message}")
+        m = result.measures
+        if m is not None:
+            print(f"criterion {m.max:.2e} (dynamics {m.dynamics:.1e}, velocity {m.velocity:.1e}, cone "
+                  f"{m.cone:.1e}, complementarity {m.complementarity:.1e}; rfverify.measures)")
+        print(f"iterations {result.nit}, time {wall:.3f} s; the paper's measures: pinfeas {result.pinfeas:.2e}, "
+              f"dinfeas {result.dinfeas:.2e}, mu {result.mu:.2e}")
+        if args.out:
+            print(f"solution written to {args.out}")
+        print_warnings(summary["numerical_warnings"], "during the solve (the status above is "
+                        "judged by the recomputed criterion, not by these)")
+    return EXIT_OK if result.success else EXIT_NOT_SOLVED
+
+
+def _solve_digits(args, problem, options) -> int:
+    import time
+
+    from ..digits import solve_to_digits
+
+    say = progress_printer(args)
+    t0 = time.perf_counter()
+    out = solve_to_digits(problem, digits=args.digits, method=args.method, tol=args.tol,
+                          max_iter=args.max_iter, progress=say, **options)
+    wall = time.perf_counter() - t0
+    cert = out.certificate
+    if args.out:
+        _write_solution_file(args, problem, out.v, out.u, out.r, certificate=cert)
+    summary = {"status": "Certified" if out.success else "NotCertified",
+               "success": out.success, "digits_requested": args.digits,
+               "certificate": cert.as_dict(), "double_status": str(out.double.status),
+               "double_iterations": out.double.nit, "extended_iterations": out.extended.nit,
+               "extended_status": out.extended.status, "backend": out.extended.backend,
+               "timings": out.timings, "time": wall, "out": args.out}
+    if args.json:
+        print(dumps(summary, indent=2))
+    else:
+        print(f"double solve: {out.double.status} in {out.double.nit} iterations; extended "
+              f"(double-double) iterations: {out.extended.nit}")
+        print(cert.verdict)
+        print_quantities(cert)
+        t = out.timings
+        print(f"time {wall:.2f} s (double {t['double']:.2f}, extended {t['setup'] + t['extended']:.2f}, "
+              f"proof {t['proof']:.2f})" + (f"; solution and certificate written to {args.out}" if args.out else ""))
+    return EXIT_OK if out.success else EXIT_NOT_SOLVED
+
+
+def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
+    """``solve --out``: the problem plus /solution, or only /solution written into the input
+    .hdf5 file itself when --out names it (everything else in that file is kept)."""
+    from ..io import save, write_solution_in_place
+    from ..io.output import check_output_file
+    from ..problem import StoredSolution
+
+    target = getattr(args, "out_target", None) or check_output_file(
+        args.out, inputs=[args.problem], in_place_ok=is_hdf5_input(args.problem))
+    solution = StoredSolution(v=v, u=u, r=r)
+    extra = None
+    if certificate is not None:
+        from ..io.certificate import write_certificate
+
+        def extra(fh):
+            write_certificate(fh, certificate)
+    if target.in_place:  # the file's own layout (3 per contact for 3-D files), see io/fclib3d.py
+        write_solution_in_place(target, problem.with_solution(solution).solution, extra=extra,
+                                problem=problem)
+    else:
+        save(problem.with_solution(solution), target, extra=extra)

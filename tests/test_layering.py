@@ -1,0 +1,123 @@
+"""Issue 14 item 3, layering: the CLI is the top layer (no module outside ``rfverify/cli/``
+imports it), every package is installed, and the method names are declared once."""
+
+from __future__ import annotations
+
+import ast
+import re
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = ROOT / "rfverify"
+CLI = "rfverify.cli"
+
+ENTRY_POINTS = {"rfverify/__main__.py"}
+"""``python -m rfverify`` runs the CLI, as the console script does: an entry point, not a layer."""
+
+
+def _module_name(path: Path, root: Path) -> tuple[str, bool]:
+    """Dotted name of a source file and whether it is a package's ``__init__``."""
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    is_init = parts[-1] == "__init__"
+    return ".".join(parts[:-1] if is_init else parts), is_init
+
+
+def imported_modules(path: Path, root: Path) -> list[tuple[int, str]]:
+    """(line, absolute module name) of every import in ``path`` — relative imports resolved,
+    ``from X import name`` counted as X and X.name (name may be a submodule), and
+    ``importlib.import_module("...")`` / ``__import__("...")`` with a literal name."""
+    module, is_init = _module_name(path, root)
+    package = module.split(".") if is_init else module.split(".")[:-1]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[:len(package) - (node.level - 1)] if node.level > 1 else package
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if node.module:
+                found.append((node.lineno, target))
+            found += [(node.lineno, f"{target}.{a.name}") for a in node.names if a.name != "*"]
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant):
+            func = node.func
+            name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", None)
+            if name in ("import_module", "__import__") and isinstance(node.args[0].value, str):
+                found.append((node.lineno, node.args[0].value))
+    return found
+
+
+def cli_importers(root: Path) -> list[str]:
+    """``file:line module`` for every import of rfverify.cli outside rfverify/cli/."""
+    bad = []
+    for path in sorted((root / "rfverify").rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel.startswith("rfverify/cli/") or rel in ENTRY_POINTS:
+            continue
+        for line, name in imported_modules(path, root):
+            if name == CLI or name.startswith(CLI + "."):
+                bad.append(f"{rel}:{line} {name}")
+    return bad
+
+
+def test_no_module_outside_the_cli_package_imports_it():
+    assert cli_importers(ROOT) == [], ("the CLI is the top layer: move what these modules need "
+                                       "out of rfverify/cli/ into the library")
+
+
+@pytest.mark.parametrize("source, where", [
+    ("from rfverify.cli import main\n", "rfverify/bench/x.py"),
+    ("import rfverify.cli.app\n", "rfverify/bench/x.py"),
+    ("from ..cli.argtypes import tolerance\n", "rfverify/bench/x.py"),
+    ("from ..cli import common\n", "rfverify/report/x.py"),
+    ("from .cli import main\n", "rfverify/summary_x.py"),
+    ("from . import cli\n", "rfverify/summary_x.py"),
+    ("def f():\n    from .. import cli\n", "rfverify/io/x.py"),
+    ("import importlib\nimportlib.import_module('rfverify.cli')\n", "rfverify/x.py"),
+])
+def test_the_layering_check_finds_every_form_of_import(tmp_path, source, where):
+    for pkg in ("rfverify", "rfverify/cli", "rfverify/bench", "rfverify/report", "rfverify/io"):
+        (tmp_path / pkg).mkdir(parents=True, exist_ok=True)
+        (tmp_path / pkg / "__init__.py").write_text("")
+    (tmp_path / "rfverify/cli/app.py").write_text("from ..bench import x\n")  # allowed direction
+    assert cli_importers(tmp_path) == []
+    (tmp_path / where).write_text(source)
+    assert {b.split(":")[0] for b in cli_importers(tmp_path)} == {where}
+
+
+def test_relative_imports_resolve_inside_the_cli_package():
+    names = {n for _, n in imported_modules(PACKAGE / "cli" / "app.py", ROOT)}
+    assert {"rfverify.errors", "rfverify.cli.common", "rfverify.cli.bench"} <= names
+
+
+def test_every_package_is_installed():
+    """pyproject lists packages by hand: a new package (rfverify.cli) must be in the list, or a
+    non-editable install would have no CLI."""
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    present = {p.parent.relative_to(ROOT).as_posix().replace("/", ".") for p in ROOT.glob("rfverify/**/__init__.py")}
+    assert present <= listed
+
+
+def test_method_names_are_declared_once():
+    """METHODS in rfverify/solver/result.py is the one list of method names; the rest derive from it."""
+    from rfverify.bench.runner import DEFAULT_METHODS
+    from rfverify.report.data import RunData
+    from rfverify.solver.result import ALGORITHM1_METHODS, METHODS, PEER_METHODS
+
+    assert METHODS == ALGORITHM1_METHODS + PEER_METHODS
+    assert set(DEFAULT_METHODS) < set(METHODS)
+    data = RunData(Path("."), {}, {}, solves=[{"method": m} for m in reversed(METHODS)])
+    assert data.methods == list(METHODS)
+    from rfverify.report.figures import _LINE, _STYLE  # per-method styles: one for every method
+
+    assert set(METHODS) <= set(_STYLE) and set(METHODS) <= set(_LINE)
+    # No other source spells out a list of three or more method names.
+    listing = re.compile(r"""[\[(]\s*(["'](%s)["']\s*,\s*){2,}""" % "|".join(METHODS))
+    where = [p.relative_to(ROOT).as_posix() for d in ("rfverify", "benchmarks")
+             for p in sorted((ROOT / d).rglob("*.py")) if listing.search(p.read_text(encoding="utf-8"))]
+    assert where == ["rfverify/solver/result.py"]
