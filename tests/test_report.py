@@ -108,3 +108,17 @@ def test_one_median():
     assert median([1.0, None, float("nan"), 3.0]) == 2.0
     assert median([1.0, math.inf, math.inf]) == math.inf
     assert median([None]) is None
+
+
+def test_report_of_algorithm1_forms_only_without_trajectories(tmp_path, capsys):
+    """A bench of one Algorithm 1 form, no trajectories and no k-digit path, has no line to
+    draw in the work–precision figure: the report is still written (it once crashed on an
+    empty legend, exit 3)."""
+    from rfverify.cli import main
+
+    run = tmp_path / "run"
+    assert main(["bench", "bundled:sphere", "--methods", "jqinv", "--tol", "1e-8", "--digits", "0",
+                 "--no-trajectories", "--out", str(run), "--quiet"]) == 0
+    assert main(["report", str(run), "--quiet"]) == 0
+    assert "internal error" not in capsys.readouterr().err
+    assert any(run.rglob("*.html"))

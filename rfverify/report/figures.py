@@ -236,8 +236,9 @@ def work_precision_problems(data: RunData, out: Path, keys: list) -> Path | None
         ax.axis("off")
     fig.suptitle("Each iterate against elapsed time: correct digits of v (proven reference) or −log10 of the "
                  "verified criterion (no reference)", fontsize=10)
-    fig.legend(list(seen.values()), list(seen), loc="lower center", ncol=min(len(seen), 4), fontsize=8,
-               frameon=False)
+    if seen:  # a run of Algorithm 1 forms only, without trajectories or the k-digit path, has no lines
+        fig.legend(list(seen.values()), list(seen), loc="lower center", ncol=min(len(seen), 4), fontsize=8,
+                   frameon=False)
     fig.tight_layout(rect=(0, 0.1 / rows + (0.04 if len(seen) > 4 else 0), 1, 0.97))
     path = out / "work_precision_problems.png"
     _save(fig, path)
