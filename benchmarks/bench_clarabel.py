@@ -51,7 +51,10 @@ def main(argv=None):
     ap.add_argument("--min-contacts", type=int, default=750)
     ap.add_argument("--methods", default="jqinv,clarabel")
     ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "rfverify-bench-digits"))
+    ap.add_argument("--options", default="",
+                    help="solver options for the Algorithm 1 methods, e.g. sigma_rule=paper,start=paper")
     args = ap.parse_args(argv)
+    options = dict(kv.split("=", 1) for kv in args.options.split(",") if kv)
     methods = args.methods.split(",")
     print(f"{'problem':<16} {'n':>5} " + " ".join(f"{m + ' s':>12} {'crit':>8} {'it':>3}" for m in methods)
           + "   ratio")
@@ -64,7 +67,7 @@ def main(argv=None):
         for _ in range(args.repeat):
             for m in methods:
                 t0 = time.perf_counter()
-                res[m] = rfverify.solve(p, method=m, tol=args.tol)
+                res[m] = rfverify.solve(p, method=m, tol=args.tol, **({} if m == "clarabel" else options))
                 times[m].append(time.perf_counter() - t0)
         cells, ok = [], {}
         for m in methods:

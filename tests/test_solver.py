@@ -84,8 +84,8 @@ def recheck_file(path, problem, dps=40):
                 "primal_cone": float(primal / r_scale), "dual_cone": float(dual / u_scale)}
 
 
-def _solve_and_recheck(problem, method, tmp_path, tol=1e-10):
-    res = solve(problem, method=method, tol=tol)
+def _solve_and_recheck(problem, method, tmp_path, tol=1e-10, **options):
+    res = solve(problem, method=method, tol=tol, **options)
     path = tmp_path / f"sol-{method}.h5"
     rfverify.save(problem.with_solution(rfverify.StoredSolution(res.v, res.u, res.r)), path)
     return res, recheck_file(path, problem)
@@ -195,6 +195,20 @@ def test_trace_columns():
     assert np.all(res.trace["min_lam2_z"] > 0)
 
 
+@pytest.mark.parametrize("method", ["jqinv", "noscaling"])
+@pytest.mark.parametrize("name", ["chute", "cube"])
+def test_least_squares_start_and_siconos_sigma_reach_1e_10_verified(name, method, tmp_path):
+    """The alternative start (Newton step from the origin at identity scaling, shifted into the
+    cones) and σ rule are a different run, judged by the same independent oracle."""
+    problem = rfverify.load(f"bundled:{name}")
+    paper = solve(problem, method=method, tol=1e-10)
+    res, chk = _solve_and_recheck(problem, method, tmp_path, start="least_squares", sigma_rule="siconos")
+    assert res.trace["mu"][0] != paper.trace["mu"][0]  # the start was taken
+    assert res.status is Status.SOLVED, res.message
+    assert chk["dynamics"] <= 1e-10 and chk["complementarity"] <= 1e-10 and chk["velocity"] <= 1e-12
+    assert chk["dual_cone"] <= 1e-10 and chk["primal_cone"] <= 1e-12
+
+
 def test_bad_arguments():
     problem = rfverify.load("bundled:sphere")
     with pytest.raises(ValueError, match="method"):
@@ -203,6 +217,8 @@ def test_bad_arguments():
         solve(problem, refine=3)
     with pytest.raises(ValueError, match="tol"):
         solve(problem, tol=-1)
+    with pytest.raises(ValueError, match="start"):
+        solve(problem, start="origin")
 
 
 def test_cli_solve_json_and_out(capsys, tmp_path):

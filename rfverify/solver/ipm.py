@@ -82,6 +82,8 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     r_t = np.zeros(nk, dtype=work)
     r_t[J.tocsc().indices[np.flatnonzero(e)]] = 1.0  # rows of the cone heads = N components
     z = e.copy()
+    if settings.start == "least_squares":
+        v, r_t, z = _least_squares_start(system, cones, f_x, w_x, JTx, v, r_t, z, jd, work)
 
     trace = {k: [] for k in TRACE_FIELDS}
     timings = {"factor": 0.0, "solve": 0.0}
@@ -200,6 +202,34 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                      trace={key: np.asarray(val) for key, val in trace.items()}, timings=timings,
                      factorisations=system.factor_count, unregularised_factorisations=system.unregularised_count,
                      tol=settings.tol, iterates=iterates)
+
+
+def _least_squares_start(system, cones, f, w_t, JT, v, r_t, z, jd, work):
+    """The Newton step from the origin at identity scaling (z = Jᵀr̃ = e, so the
+    complementarity row reads dz + Jᵀdr̃ = 0), then each of z and s = Jᵀr̃ shifted by
+    (1 + its most negative λ2)·e unless it is already interior; s is shifted through the
+    normal rows of r̃ (Jᵀ of them is e).  Returns the paper's start unchanged if that solve
+    fails."""
+    e = cones.identity(jd)
+    s = JT @ r_t
+    if system.symmetric:
+        p, p_inv, _, _ = cones.nt_scaling(z.astype(jd), s.astype(jd))
+        point = ScalingPoint(p=p, p_inv=p_inv)
+    else:
+        point = ScalingPoint(z=z.astype(jd), s=s.astype(jd))
+    if not system.update(point):
+        return v, r_t, z
+    sol = system.solve(np.asarray(f, dtype=work), np.asarray(w_t, dtype=work), np.zeros(cones.nz, dtype=jd))
+    if not all(np.all(np.isfinite(x)) for x in (sol.dv, sol.dr, sol.dz)):
+        return v, r_t, z
+    v0, r0, z0 = sol.dv.astype(work), sol.dr.astype(work), sol.dz.astype(work)
+    normal = r_t.copy()  # 1 on the normal rows: Jᵀ normal = e
+    for x, shift_along in ((z0, None), (r0, normal)):
+        lam2 = cones.lambda2((JT @ x) if shift_along is not None else x)
+        worst = -float(lam2.min(initial=0.0))
+        if worst >= -1e-8 * max(float(np.max(np.abs(x), initial=0.0)), 1.0):
+            x += (1.0 + worst) * (e.astype(work) if shift_along is None else shift_along)
+    return v0, r0, z0
 
 
 def _info(record, component) -> IterationInfo:

@@ -54,6 +54,11 @@ class Settings:
     gamma0 : float
         Step-to-boundary fraction of the first iteration (paper 0.9; Siconos 0.999);
         afterwards γ = 0.9 + 0.09 α of the previous step.
+    start : {"paper", "least_squares"}
+        ``paper``: v = 0, r̃ = 1 on the normal rows (Jᵀr̃ = e), z = e.  ``least_squares``: the
+        Newton step at identity scaling from the origin (a least-squares point of the primal
+        and dual equations, CVXOPT's and Clarabel's start), each cone part shifted by
+        (1 + its most negative λ2)·e where it is not interior.
     extended_jordan : bool
         Jordan operations, NT scaling and step lengths in numpy.longdouble.
     extended_residuals : bool
@@ -105,6 +110,7 @@ class Settings:
     max_iter: int = 100
     sigma_rule: str = "paper"
     gamma0: float = 0.9
+    start: str = "paper"
     extended_jordan: bool = True
     extended_residuals: bool = True
     refine_max: int = 10
@@ -125,6 +131,8 @@ class Settings:
             raise ValueError(f"tol = {self.tol!r} must be a positive finite number")
         if self.max_iter < 1:
             raise ValueError(f"max_iter = {self.max_iter!r} must be ≥ 1")
+        if self.start not in ("paper", "least_squares"):
+            raise ValueError(f"start = {self.start!r} must be 'paper' or 'least_squares'")
         if self.sigma_rule not in ("paper", "siconos"):
             raise ValueError(f"sigma_rule = {self.sigma_rule!r} must be 'paper' or 'siconos'")
         if not 0 < self.gamma0 < 1:
