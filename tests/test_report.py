@@ -4,11 +4,13 @@ first, the work–precision median counts every problem, and one median everywhe
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy
 import scipy.sparse as sp
 
 from rfverify import Problem, solve
@@ -122,3 +124,8 @@ def test_report_of_algorithm1_forms_only_without_trajectories(tmp_path, capsys):
     assert main(["report", str(run), "--quiet"]) == 0
     assert "internal error" not in capsys.readouterr().err
     assert any(run.rglob("*.html"))
+    # The versions of the libraries whose builds change results are recorded and shown.
+    machine = json.loads((run / "manifest.json").read_text())["machine"]
+    assert machine["scipy"] == scipy.__version__ and "qdldl" in machine and "clarabel" in machine
+    summary = (run / "summary.md").read_text()
+    assert f"scipy {scipy.__version__}" in summary

@@ -540,7 +540,16 @@ def _machine() -> dict:
     import os
     import platform
 
-    import numpy
+    from importlib import metadata
 
-    return {"python": platform.python_version(), "numpy": numpy.__version__,
+    def version(dist: str) -> str:
+        try:
+            return metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            return "not installed"
+
+    # The numerical libraries whose builds change results in the last bits (the scene files
+    # are simulated with the solver, so they differ with these; see `generate --help`).
+    return {"python": platform.python_version(),
+            **{name: version(name) for name in ("numpy", "scipy", "qdldl", "clarabel", "numba", "mpmath")},
             "platform": platform.platform(), "cpus": os.cpu_count()}

@@ -166,8 +166,11 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     doc.bullets(_glance(data, table, diags))
 
     machine = data.manifest.get("machine", {})
+    libraries = ", ".join(f"{name} {machine[name]}" for name in ("numpy", "scipy", "qdldl", "clarabel", "numba",
+                                                                  "mpmath") if name in machine)
     doc.p(f"Machine: {machine.get('platform', '?')}, {machine.get('cpus', '?')} CPUs, Python "
-          f"{machine.get('python', '?')}, {data.manifest.get('jobs', '?')} parallel job(s); times are "
+          f"{machine.get('python', '?')}{f' ({libraries})' if libraries else ''}, "
+          f"{data.manifest.get('jobs', '?')} parallel job(s); times are "
           "wall-clock per run (compare ratios, not absolute values, on a shared machine). Medians are "
           "numpy's (mean of the two middle values) everywhere in this report. Correct digits of v are "
           "counted against the proven extended-precision point of each problem's k-digit path "
