@@ -13,7 +13,10 @@ DESCRIPTION = """\
 For every iteration of a double-precision run, take the exact step from the double iterate with
 the mpmath reference and print the digits of agreement of the next iterate, max cond(Q_p), min
 λ2 of z and Jᵀr̃ in double and in the reference (flagging double λ2 that underflowed or went
-non-positive while the exact one is positive), and where and why a failed run stopped."""
+non-positive while the exact one is positive), and where and why a failed run stopped.
+
+The double run refines every linear solve to 4·eps (solver setting refine_tol=None), not to the
+default inexact-Newton stop, so that the digits measure rounding alone."""
 
 EPILOG = """\
 Exit codes: 0 the double run was Solved; 1 it was not (MaxIterations, NumericalError, ...) —

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..problem import SPACEDIM, Problem
+from ..solver.result import Settings
 
 
 def solve_groups(problem: Problem, settings):
@@ -44,6 +45,11 @@ def component_problem(problem: Problem, lp, group) -> tuple[Problem, np.ndarray]
     return sub, contacts
 
 
+# The bench runs the solver with its default settings; the diagnosis repeats that run
+# (diagnose alone would refine every solve to 4·eps, see rfverify.diagnosis.diagnose).
+AS_BENCHED = {"refine_tol": Settings.refine_tol}
+
+
 def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int = 100, dps: int = 40,
                     kind: str = "solve", bench_status: str | None = None) -> dict:
     """Lockstep diagnosis of the run the bench made (``kind`` "solve": a timed solve, split
@@ -54,17 +60,17 @@ def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int 
     component its ``index``, ``count``, ``contacts``, ``n_dofs``, the ``status`` and ``nit``
     it had inside the bench's run and whether the diagnosed run ``reproduced`` them."""
     from ..diagnosis import diagnose
-    from ..solver import Settings, Status, solve
+    from ..solver import Status, solve
 
     if kind == "trajectory":
-        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps)
+        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED)
         diag["scope"] = {"mode": "whole", "text": "the trajectory run solves the problem as one system "
                                                   "(it keeps every iterate, so it never splits components); "
                                                   "diagnosed the same way"}
         return diag
     split = solve_groups(problem, Settings(tol=tol, max_iter=max_iter))
     if split is None:
-        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps)
+        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED)
         diag["scope"] = {"mode": "whole", "text": "the bench solved the problem as one system; so does the "
                                                   "diagnosis"}
         return _compare_status(diag, bench_status)
@@ -73,7 +79,7 @@ def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int 
     comps = rerun.extras.get("component_runs") or []
     bad = [i for i, c in enumerate(comps) if c["status"] is not Status.SOLVED]
     if len(comps) != len(groups) or not bad:
-        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps)
+        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED)
         why = (f"every one of its {len(groups)} independent components met the tolerance on its own"
                if not bad else f"its {len(groups)} components could not be matched to the solver's runs")
         diag["scope"] = {"mode": "unsplit", "count": len(groups),
@@ -83,7 +89,7 @@ def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int 
         return _compare_status(diag, bench_status, rerun)
     i = bad[0]
     sub, contacts = component_problem(problem, lp, groups[i])
-    diag = diagnose(sub, method=method, tol=tol, max_iter=max_iter, dps=dps)
+    diag = diagnose(sub, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED)
     inside = comps[i]
     reproduced = diag["status"] == str(inside["status"]) and diag["nit"] == inside["nit"]
     shown = ", ".join(map(str, contacts[:12])) + (", …" if contacts.size > 12 else "")

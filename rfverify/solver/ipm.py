@@ -68,7 +68,9 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     work = np.result_type(ext, jd)
     system = FORMS[form](M, H_t, J, cones, dtype_ref=np.longdouble if settings.refine_extended else np.float64,
                          static_reg=settings.static_reg, adaptive_reg=settings.adaptive_reg,
-                         refine_max=settings.refine_max, refine_tol=settings.refine_tol)
+                         refine_max=settings.refine_max,
+                         refine_tol=None if settings.refine_tol == "adaptive" else settings.refine_tol,
+                         forcing=REFINE_FORCING if settings.refine_tol == "adaptive" else None)
     term = Termination(settings, callback, t0)
     Mx, Hx, HTx = M.astype(work), H_t.astype(work), H_t.T.tocsr().astype(work)
     Jx, JTx = J.astype(work), J.T.tocsr().astype(work)
@@ -230,6 +232,11 @@ def _least_squares_start(system, cones, f, w_t, JT, v, r_t, z, jd, work):
         if worst >= -1e-8 * max(float(np.max(np.abs(x), initial=0.0)), 1.0):
             x += (1.0 + worst) * (e.astype(work) if shift_along is None else shift_along)
     return v0, r0, z0
+
+
+# Settings.refine_tol = "adaptive": the forcing term of the inexact-Newton test that may end
+# refinement early (KKTSystem.refined).
+REFINE_FORCING = 1e-4
 
 
 def _info(record, component) -> IterationInfo:

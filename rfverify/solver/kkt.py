@@ -67,6 +67,9 @@ class SolveInfo:
     backward_error: float
     steps: int
     refactored: bool = False
+    # Ended by the inexact-Newton test (every block residual at most ``forcing`` × its
+    # right-hand side) before the backward error reached the refinement target.
+    forced: bool = False
 
 
 class KKTSolver(Protocol):
@@ -122,7 +125,7 @@ class KKTSystem:
     regularisable = False
 
     def __init__(self, M, H_t, J, cones: ProductCone, *, dtype_ref=np.longdouble, static_reg=1e-12,
-                 adaptive_reg=True, refine_max=10, refine_tol=None):
+                 adaptive_reg=True, refine_max=10, refine_tol=None, forcing=None):
         self.M = sp.csc_matrix(M)
         self.H_t = sp.csr_matrix(H_t)
         self.J = sp.csr_matrix(J)
@@ -154,6 +157,7 @@ class KKTSystem:
         self.factor_count = 0
         self._solver = None
         self.refine_max = refine_max
+        self.forcing = forcing
         eps_ref = float(np.finfo(dtype_ref).eps)
         self.refine_target = 4 * eps_ref if refine_tol is None else refine_tol
         # A refined backward error this far above the target means δ is in the way.
@@ -312,7 +316,7 @@ class KKTSystem:
         """
         info = self.refined(a, b, c)
         if adapt and self.adaptive_reg and self.regularisable:
-            if info.backward_error > self.reg_fallback_above:
+            if info.backward_error > self.reg_fallback_above and not info.forced:
                 if self.regularised:
                     if self.refactor_unregularised():
                         retry = self.refined(a, b, c)
@@ -348,12 +352,13 @@ class KKTSystem:
         rhs_norms = [_amax(rhs[i:j]) for i, j in cuts]
         best_rel, best_x, prev = np.inf, x, np.inf
         steps = 0
+        forced = False
         tiny = np.finfo(float).tiny
         for steps in range(self.refine_max + 1):
             r = rhs - self.apply(x)
             xn = _amax(x)
-            rel = max(_amax(r[i:j]) / max(nrm * xn + rn, tiny)
-                      for (i, j), nrm, rn in zip(cuts, self.block_norms, rhs_norms))
+            block_res = [_amax(r[i:j]) for i, j in cuts]
+            rel = max(e / max(nrm * xn + rn, tiny) for e, nrm, rn in zip(block_res, self.block_norms, rhs_norms))
             if not np.isfinite(rel):
                 best_rel, best_x = float("nan"), x
                 break
@@ -361,11 +366,17 @@ class KKTSystem:
             # digits on a hyperstatic lattice; see docs/DECISIONS.md, "Speed").
             if rel < best_rel:
                 best_rel, best_x = rel, x
-            if rel <= self.refine_target or steps == self.refine_max or rel > 0.8 * prev:
+            # Inexact Newton: a direction whose every block residual is a small fraction of
+            # that block's right-hand side (here the iteration's own residuals) is as good
+            # for the iteration as an exact one; relative to the rhs, not to ‖A‖‖x‖, so a
+            # large x (dr̃ drifting along null(H̃ᵀ) on redundant contacts) does not hide it.
+            forced = (self.forcing is not None and rel == best_rel
+                      and all(e <= self.forcing * rn for e, rn in zip(block_res, rhs_norms)))
+            if forced or rel <= self.refine_target or steps == self.refine_max or rel > 0.8 * prev:
                 break
             prev = rel
             x = x + self.solve_once(r)
-        return SolveInfo(best_x[:m], best_x[m:mk], best_x[mk:], float(best_rel), steps)
+        return SolveInfo(best_x[:m], best_x[m:mk], best_x[mk:], float(best_rel), steps, forced=forced)
 
 
 class JQinvSystem(KKTSystem):

@@ -69,9 +69,13 @@ class Settings:
         error by less than 20%.
     refine_extended : bool
         Iterative-refinement residuals in numpy.longdouble.
-    refine_tol : float or None
-        Refinement stops once the normwise backward error of the unreduced system is at
-        most this; ``None`` (default) means 4·eps of the refinement precision.
+    refine_tol : "adaptive", float or None
+        Refinement stops once the blockwise backward error of the unreduced system is at
+        most this.  ``None``: 4·eps of the refinement precision.  ``"adaptive"`` (default):
+        the same target, but refinement also stops as soon as every block residual (dual,
+        primal, complementarity) is at most 1e-4 of that block's right-hand side — an
+        inexact Newton step, as accurate as the iteration needs (1368-contact Chute at 1e-8:
+        1.49 s → 0.81 s; every problem of the DECISIONS sweep still verified at 1e-10).
     static_reg : float
         Static regularisation δ (relative to the largest diagonal entry of the KKT matrix)
         added on the dr̃ diagonal with the sign that keeps the symmetric forms
@@ -115,7 +119,7 @@ class Settings:
     extended_residuals: bool = True
     refine_max: int = 10
     refine_extended: bool = True
-    refine_tol: float | None = None
+    refine_tol: float | str | None = "adaptive"
     static_reg: float = 1e-12
     adaptive_reg: bool = True
     stall_iterations: int = 8
@@ -139,6 +143,10 @@ class Settings:
             raise ValueError(f"gamma0 = {self.gamma0!r} must be in (0, 1)")
         if self.refine_max < 0:
             raise ValueError("refine_max must be ≥ 0")
+        if not (self.refine_tol is None or self.refine_tol == "adaptive" or (
+                isinstance(self.refine_tol, (int, float)) and not isinstance(self.refine_tol, bool)
+                and 0 < self.refine_tol < 1)):
+            raise ValueError(f"refine_tol = {self.refine_tol!r} must be 'adaptive', None or a number in (0, 1)")
         if self.time_limit is not None and not (self.time_limit > 0):
             raise ValueError(f"time_limit = {self.time_limit!r} must be a positive number of seconds")
 
