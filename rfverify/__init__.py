@@ -62,7 +62,7 @@ def _checked(func, *, tol=False):
 
             if not isinstance(method, str) or method not in METHODS:
                 raise InvalidArgumentError("method", f"{method!r} is not one of {', '.join(METHODS)}",
-                                           fix="pass method='jqinv' (the default) or another listed form")
+                                           fix="pass method='auto' (the default) or another listed method")
         return func(*args, **kwargs)
 
     return wrapper

@@ -188,7 +188,7 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say):
     from .extended.system import ExtendedData, choose_backend
     from .solver import solve
 
-    double = solve(problem, method="jqinv", tol=1e-10)
+    double = solve(problem, method="auto", tol=1e-10)
     data = ExtendedData(problem)
     system = choose_backend(data)
     driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say)

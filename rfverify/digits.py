@@ -144,7 +144,7 @@ class ProofDriver:
         return stalled
 
 
-def solve_to_digits(problem: Problem, digits: int = 10, method: str = "jqinv", tol: float = 1e-10,
+def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", tol: float = 1e-10,
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
                     progress=None, **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
@@ -153,12 +153,13 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "jqinv", t
     digits = validate_digits(digits)
     if method == "clarabel":
         raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
-                                   fix="use method='jqinv' (default) or another Algorithm 1 form")
+                                   fix="use method='auto' (default) or an Algorithm 1 form")
     say = progress or (lambda msg: None)
     t0 = time.perf_counter()
     double = solve(problem, method=method, tol=tol, max_iter=max_iter, **options)
     t_double = time.perf_counter() - t0
-    say(f"double solve ({method}): {double.status} in {double.nit} iterations, {t_double:.2f} s")
+    say(f"double solve ({double.method}{' by auto' if method == 'auto' else ''}): {double.status} in "
+        f"{double.nit} iterations, {t_double:.2f} s")
     t1 = time.perf_counter()
     ctx = ProofContext(problem)
     data = ExtendedData(problem)

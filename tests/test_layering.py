@@ -107,9 +107,10 @@ def test_method_names_are_declared_once():
     """METHODS in rfverify/solver/result.py is the one list of method names; the rest derive from it."""
     from rfverify.bench.runner import DEFAULT_METHODS
     from rfverify.report.data import RunData
-    from rfverify.solver.result import ALGORITHM1_METHODS, METHODS, PEER_METHODS
+    from rfverify.solver.result import ALGORITHM1_METHODS, AUTO_SEQUENCE, METHODS, PEER_METHODS, PORTFOLIO_METHODS
 
-    assert METHODS == ALGORITHM1_METHODS + PEER_METHODS
+    assert METHODS == ALGORITHM1_METHODS + PORTFOLIO_METHODS + PEER_METHODS
+    assert set(AUTO_SEQUENCE) <= set(ALGORITHM1_METHODS)
     assert set(DEFAULT_METHODS) < set(METHODS)
     data = RunData(Path("."), {}, {}, solves=[{"method": m} for m in reversed(METHODS)])
     assert data.methods == list(METHODS)

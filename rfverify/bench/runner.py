@@ -40,7 +40,7 @@ from .records import FAILED_STATUSES, task_stem, write_json
 from .tasks import base_record, run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
-DEFAULT_METHODS = tuple(m for m in METHODS if m != "reduced_factored")
+DEFAULT_METHODS = tuple(m for m in METHODS if m not in ("reduced_factored", "auto"))  # auto: forms in turn
 """What ``bench`` runs unless told otherwise: every method but (16), the factored twin of (15)."""
 DEFAULT_TOLS = (1e-8, 1e-9, 1e-10)
 MANIFEST_SCHEMA = 2

@@ -25,10 +25,12 @@ def add_parser(sub) -> None:
     """The ``solve`` subcommand."""
     sol = sub.add_parser("solve", help=HELP, description=DESCRIPTION)
     sol.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
-    sol.add_argument("--method", choices=METHODS, default="jqinv",
+    sol.add_argument("--method", choices=METHODS, default="auto",
                      help="linear-system form: jqinv (14), qp2 (11), reduced (15), "
-                          "reduced_factored (16), noscaling (6), or clarabel, the same problem "
-                          "handed to Clarabel (default: %(default)s)")
+                          "reduced_factored (16), noscaling (6); auto, jqinv then reduced then "
+                          "noscaling until one is Solved (the output names the form returned and "
+                          "what was tried); or clarabel, the same problem handed to Clarabel "
+                          "(default: %(default)s)")
     sol.add_argument("--tol", type=tolerance, default=1e-10, metavar="T",
                      help="stop when the criterion of docs/DESIGN.md §4.5 is <= T (default: "
                           "%(default)g)")

@@ -12,7 +12,7 @@ from .data import DIGITS_CAP, RunData, performance_profile
 
 _STYLE = {
     "jqinv": ("tab:blue", "o"), "qp2": ("tab:orange", "s"), "reduced": ("tab:green", "^"),
-    "reduced_factored": ("tab:olive", "v"), "noscaling": ("tab:purple", "D"),
+    "reduced_factored": ("tab:olive", "v"), "noscaling": ("tab:purple", "D"), "auto": ("tab:cyan", "P"),
     "clarabel": ("tab:red", "x"), "mixed precision": ("black", "*"),
 }
 
@@ -21,7 +21,7 @@ _LINE = {
     # first) keep a curve that lies under another visible.
     "jqinv": ("-", 4.0, 0.45), "qp2": ("-", 2.2, 0.9), "reduced": ((0, (5, 2)), 2.2, 0.9),
     "reduced_factored": ((0, (3, 1, 1, 1)), 1.8, 0.9), "noscaling": ((0, (1, 1.2)), 2.4, 1.0),
-    "clarabel": ((0, (6, 2, 1, 2)), 1.6, 1.0),
+    "auto": ((0, (2, 2)), 1.4, 1.0), "clarabel": ((0, (6, 2, 1, 2)), 1.6, 1.0),
 }
 
 

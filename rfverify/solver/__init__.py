@@ -12,20 +12,24 @@ from ..lifting import KIND_NAMES, lift
 from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
 from ..problem import SPACEDIM, Problem
 from .cones import ProductCone
-from .result import METHODS, IterationInfo, Settings, SolveResult, Status
+from .result import AUTO_SEQUENCE, METHODS, IterationInfo, Settings, SolveResult, Status
 
 __all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo"]
 
 
-def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter: int = 100,
+def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: int = 100,
           keep_iterates: bool = False, callback=None, **options) -> SolveResult:
     """Solve a rolling-friction problem with Algorithm 1 (or the Clarabel peer).
 
     Parameters
     ----------
     problem : Problem
-    method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "clarabel"}
-        Linear-system form (DESIGN §4); ``clarabel`` hands the same convex problem to Clarabel.
+    method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "auto", "clarabel"}
+        Linear-system form (DESIGN §4); ``auto`` (default) runs the forms of
+        :data:`AUTO_SEQUENCE` (jqinv, then reduced, then noscaling), each from the start, while
+        the previous one stalled or broke down, and returns the Solved run or else the answer
+        with the smallest criterion — ``extras["attempts"]`` lists every run and ``method``
+        names the form returned; ``clarabel`` hands the same convex problem to Clarabel.
     tol : float
         Stop when the criterion of :mod:`rfverify.measures` on the returned (v, u, r) is at
         most tol; the paper's pinfeas, dinfeas and μ = zᵀJᵀr̃/n (DESIGN §4) are reported
@@ -60,6 +64,8 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
         options["split_components"] = False
     settings = Settings(tol=tol, max_iter=max_iter, **options)
     t0 = time.perf_counter()
+    if method == "auto":
+        return _solve_in_turn(problem, settings, keep_iterates, callback, options)
     if method == "clarabel":
         if callback is not None:
             from ..errors import InvalidArgumentError
@@ -164,6 +170,38 @@ def solve(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter:
     if printer is not None:
         printer.summary(result)
     return result
+
+
+def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> SolveResult:
+    """``method="auto"``: the forms of AUTO_SEQUENCE in turn, each from the standard start,
+    while the previous one stalled or broke down (InsufficientProgress, NumericalError,
+    AlmostSolved); Solved, a user stop, the iteration limit or the time limit end the sequence
+    (the limits are the user's budget; the time limit holds for all runs together).  Returns the Solved run, else the one with the smallest criterion, with
+    ``extras["attempts"]`` and a message naming what was tried."""
+    t0 = time.perf_counter()
+    attempts, results = [], []
+    for form in AUTO_SEQUENCE:
+        opts = dict(options)
+        if settings.time_limit is not None:
+            left = settings.time_limit - (time.perf_counter() - t0)
+            if left <= 0:
+                break
+            opts["time_limit"] = left
+        res = solve(problem, method=form, tol=settings.tol, max_iter=settings.max_iter,
+                    keep_iterates=keep_iterates, callback=callback, **opts)
+        results.append(res)
+        attempts.append({"method": form, "status": str(res.status), "criterion": res.criterion, "nit": res.nit,
+                         "seconds": res.timings.get("total", float("nan"))})
+        if res.status in (Status.SOLVED, Status.STOPPED, Status.MAX_TIME, Status.MAX_ITERATIONS):
+            break
+    best = next((r for r in results if r.success), None) or min(
+        results, key=lambda r: r.criterion if np.isfinite(r.criterion) else np.inf)
+    if len(results) > 1:
+        tried = "; ".join(f"{a['method']}: {a['status']} (criterion {a['criterion']:.2e})" for a in attempts)
+        best.message = f"auto returned {best.method} [{tried}]: {best.message}"
+    best.extras["attempts"] = attempts
+    best.timings["total"] = time.perf_counter() - t0
+    return best
 
 
 def _combined_status(runs, n_groups):

@@ -10,10 +10,18 @@ import numpy as np
 ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling")
 """Linear-system forms of Algorithm 1 (DESIGN §4): (14), (11), (15), (16), (6)."""
 
+AUTO_SEQUENCE = ("jqinv", "reduced", "noscaling")
+"""The forms ``method="auto"`` tries in turn until one is Solved: jqinv first (fastest and most
+robust on the scene collections), then the reduced and unscaled forms, which solve lifted local
+problems with a singular Delassus operator where jqinv stalls (docs/DECISIONS.md)."""
+
+PORTFOLIO_METHODS = ("auto",)
+"""Methods that run several Algorithm 1 forms; benches measure the forms themselves."""
+
 PEER_METHODS = ("clarabel",)
 """Other solvers run on the same problem (no Algorithm 1 iterates, traces or lockstep)."""
 
-METHODS = ALGORITHM1_METHODS + PEER_METHODS
+METHODS = ALGORITHM1_METHODS + PORTFOLIO_METHODS + PEER_METHODS
 """Every method name rfverify accepts: the one declaration the CLI, bench and report derive from."""
 
 
