@@ -480,6 +480,15 @@ def test_auto_goes_on_to_the_next_form_where_jqinv_stalls(tmp_path):
     assert max(chk["dynamics"], chk["complementarity"]) <= 1e-10 and chk["velocity"] <= 1e-12
 
 
+def test_cli_json_names_the_form_auto_returned(tmp_path, capsys):
+    path = tmp_path / "local.h5"
+    rfverify.save(_lifted_dense_local_problem(60, seed=0), path)
+    assert main(["solve", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["requested_method"] == "auto" and out["method"] == "reduced"
+    assert [a["method"] for a in out["attempts"]] == ["jqinv", "reduced"] and out["success"]
+
+
 def test_auto_is_jqinv_where_jqinv_solves_and_stops_on_the_users_word():
     problem = rfverify.load("bundled:chute")
     res = solve(problem)  # auto is the default

@@ -101,7 +101,8 @@ def cmd_solve(args) -> int:
         _write_solution_file(args, problem, result.v, result.u, result.r)
     summary = {
         "status": str(result.status), "success": result.success, "message": result.message,
-        "method": result.method, "iterations": result.nit, "time": wall, "tol": args.tol,
+        "method": result.method, "requested_method": args.method,
+        "attempts": result.extras.get("attempts", []), "iterations": result.nit, "time": wall, "tol": args.tol,
         "criterion": result.criterion,
         "measures": result.measures.as_dict() if result.measures is not None else None,
         "pinfeas": result.pinfeas, "dinfeas": result.dinfeas, "mu": result.mu,
