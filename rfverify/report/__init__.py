@@ -166,8 +166,8 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     doc.bullets(_glance(data, table, diags))
 
     machine = data.manifest.get("machine", {})
-    libraries = ", ".join(f"{name} {machine[name]}" for name in ("numpy", "scipy", "qdldl", "clarabel", "numba",
-                                                                  "mpmath") if name in machine)
+    libraries = ", ".join(f"{name} {version}" for name, version in machine.items()
+                          if name not in ("python", "platform", "cpus"))
     doc.p(f"Machine: {machine.get('platform', '?')}, {machine.get('cpus', '?')} CPUs, Python "
           f"{machine.get('python', '?')}{f' ({libraries})' if libraries else ''}, "
           f"{data.manifest.get('jobs', '?')} parallel job(s); times are "

@@ -176,8 +176,9 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
     """``method="auto"``: the forms of AUTO_SEQUENCE in turn, each from the standard start,
     while the previous one stalled or broke down (InsufficientProgress, NumericalError,
     AlmostSolved); Solved, a user stop, the iteration limit or the time limit end the sequence
-    (the limits are the user's budget; the time limit holds for all runs together).  Returns the Solved run, else the one with the smallest criterion, with
-    ``extras["attempts"]`` and a message naming what was tried."""
+    (the limits are the user's budget; the time limit holds for all runs together).  Returns
+    the Solved run, else the one with the smallest criterion, with ``extras["attempts"]`` and
+    a message naming what was tried."""
     t0 = time.perf_counter()
     attempts, results = [], []
     for form in AUTO_SEQUENCE:
