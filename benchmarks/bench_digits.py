@@ -29,6 +29,7 @@ import rfverify
 from rfverify.io import save
 from rfverify.io.certificate import read_point, write_certificate
 from rfverify.problem import StoredSolution
+from rfverify.random_problems import random_local_problem
 
 # (label, scene, size, count, which problem of the trace): published-size scenes as the issue lists them
 SCENES = [
@@ -55,22 +56,6 @@ def scene_file(cache: Path, scene: str, size, count: int, index: int) -> Path:
     return files[min(index, len(files) - 1)]
 
 
-def dense_local_problem(n_target: int = 260, seed: int = 0):
-    """A lifted local problem with a dense W: the Delassus operator W = Hᵀ M⁻¹ H of a random
-    rigid-body problem with ``n_target`` contacts, q = Hᵀ M⁻¹ f + w, lifted back with
-    W = GᵀG (M = I, H = G dense), as Siconos local files are."""
-    from rfverify.io.siconos_dat import LocalProblem, lift_local
-    from rfverify.random_problems import random_problem
-
-    base = random_problem(n_target // 2, n_target, seed=seed)
-    Minv_H = np.linalg.solve(base.M_sym.toarray(), base.H.toarray())
-    W = base.H.toarray().T @ Minv_H
-    W = (W + W.T) / 2
-    q = base.H.T @ np.linalg.solve(base.M_sym.toarray(), base.f) + base.w
-    problem, _report = lift_local(LocalProblem(W=W, q=q, mu=base.mu, mu_r=base.mu_r))
-    return problem
-
-
 def user_files(paths):
     """(label, Problem) for each file named on the command line."""
     for f in paths:
@@ -87,12 +72,12 @@ def problem_set(args):
     if args.quick:
         yield "bundled:chute", rfverify.load("bundled:chute")
         yield "random 200", random_problem(100, 200, seed=1)
-        yield "local dense 60", dense_local_problem(60)
+        yield "local dense 60", random_local_problem(60)
         return
     for label, scene, size, count, index in SCENES:
         yield label, rfverify.load(scene_file(cache, scene, size, count, index))
     yield "random 2269", random_problem(1100, 2269, seed=1)
-    yield "local dense W", dense_local_problem(260)
+    yield "local dense W", random_local_problem(260)
 
 
 def run_one(label, problem, digits: int, workdir: Path):

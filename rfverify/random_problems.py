@@ -107,3 +107,18 @@ def random_problem(n_bodies: int, n_contacts: int, *, seed: int = 0, mu=0.5, mu_
         description=f"rfverify.random_problems.random_problem(n_bodies={n_bodies}, "
                     f"n_contacts={n_contacts}, seed={seed}, free_bodies={free_bodies})",
     )
+
+
+def random_local_problem(n_contacts: int, *, seed: int = 0) -> Problem:
+    """A local problem as Siconos writes them, lifted back to global form (M = I, H = G with
+    W = GᵀG): W = Hᵀ M⁻¹ H and q = Hᵀ M⁻¹ f + w of :func:`random_problem` with ``n_contacts``
+    contacts on n_contacts // 2 bodies — more contact rows than dofs, so W is dense and
+    singular.  Used by ``benchmarks/bench_digits.py`` and the tests of ``method="auto"``."""
+    from .io.siconos_dat import LocalProblem, lift_local
+
+    base = random_problem(n_contacts // 2, n_contacts, seed=seed)
+    Minv_H = np.linalg.solve(base.M_sym.toarray(), base.H.toarray())
+    W = base.H.toarray().T @ Minv_H
+    q = base.H.T @ np.linalg.solve(base.M_sym.toarray(), base.f) + base.w
+    problem, _report = lift_local(LocalProblem(W=(W + W.T) / 2, q=q, mu=base.mu, mu_r=base.mu_r))
+    return problem

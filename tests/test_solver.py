@@ -15,7 +15,7 @@ import pytest
 import rfverify
 from rfverify.bench import HighPrecisionChecker
 from rfverify.cli import main
-from rfverify.random_problems import random_problem
+from rfverify.random_problems import random_local_problem, random_problem
 from rfverify.solver import Status, solve
 
 FORMS = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling"]
@@ -452,24 +452,11 @@ def test_inexact_newton_refinement_claims_only_what_holds(method):
         assert forced_seen > 0
 
 
-def _lifted_dense_local_problem(n_contacts: int, seed: int):
-    """A local problem W = Hᵀ M⁻¹ H, q = Hᵀ M⁻¹ f + w of a random rigid-body problem with more
-    contact rows than dofs (W singular), lifted back as Siconos local files are."""
-    from rfverify.io.siconos_dat import LocalProblem, lift_local
-
-    base = random_problem(n_contacts // 2, n_contacts, seed=seed)
-    Minv_H = np.linalg.solve(base.M_sym.toarray(), base.H.toarray())
-    W = base.H.toarray().T @ Minv_H
-    q = base.H.T @ np.linalg.solve(base.M_sym.toarray(), base.f) + base.w
-    problem, _ = lift_local(LocalProblem(W=(W + W.T) / 2, q=q, mu=base.mu, mu_r=base.mu_r))
-    return problem
-
-
 def test_auto_goes_on_to_the_next_form_where_jqinv_stalls(tmp_path):
     """On a lifted local problem with a singular W, jqinv stalls (measured: complementarity
     2.4e-7 after 26 iterations) and the reduced form solves it; auto returns the reduced run,
     rechecked independently from the written file, and says what it tried."""
-    problem = _lifted_dense_local_problem(60, seed=0)
+    problem = random_local_problem(60, seed=0)
     alone = solve(problem, method="jqinv")
     assert not alone.success
     res, chk = _solve_and_recheck(problem, "auto", tmp_path)
@@ -482,7 +469,7 @@ def test_auto_goes_on_to_the_next_form_where_jqinv_stalls(tmp_path):
 
 def test_cli_json_names_the_form_auto_returned(tmp_path, capsys):
     path = tmp_path / "local.h5"
-    rfverify.save(_lifted_dense_local_problem(60, seed=0), path)
+    rfverify.save(random_local_problem(60, seed=0), path)
     assert main(["solve", str(path), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["requested_method"] == "auto" and out["method"] == "reduced"
@@ -495,8 +482,8 @@ def test_auto_is_jqinv_where_jqinv_solves_and_stops_on_the_users_word():
     assert res.success and res.method == "jqinv" and len(res.extras["attempts"]) == 1
     assert np.array_equal(res.v, solve(problem, method="jqinv").v)
     # A callback that stops the run stops the sequence: no other form is tried.
-    stopped = solve(_lifted_dense_local_problem(60, seed=0), callback=lambda info: info.iteration >= 2)
+    stopped = solve(random_local_problem(60, seed=0), callback=lambda info: info.iteration >= 2)
     assert stopped.status is Status.STOPPED and len(stopped.extras["attempts"]) == 1
     # The time limit holds for the whole sequence.
-    limited = solve(_lifted_dense_local_problem(60, seed=0), time_limit=1e-3)
+    limited = solve(random_local_problem(60, seed=0), time_limit=1e-3)
     assert limited.status is Status.MAX_TIME and len(limited.extras["attempts"]) == 1
