@@ -183,8 +183,7 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say):
     outside) the cone boundaries, and an infeasible interior-point run shrinks its primal
     residual and μ at the same rate, so a start pushed into the cones from it never gets its
     residual below the cone margins (measured on the bundled Chute: ratio 5 at every step)."""
-    from .digits import ProofDriver, _start_from
-    from .extended import ipm as ext
+    from .digits import ProofDriver, _start_from, extend
     from .extended.system import ExtendedData, choose_backend
     from .solver import solve
 
@@ -194,13 +193,10 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say):
     driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say)
     say(f"extended point: double solve {double.status} in {double.nit} iterations, then double-double "
         f"({system.name})")
-    run = ext.run(data, _start_from(data, double), until=driver, max_iter=max_iter, backend=system)
-    if driver.best is None or not driver.best[1].certified:
-        for it in reversed(driver.recent):
-            driver(it, force=True)
+    out = extend(data, _start_from(data, double), driver, system, max_iter=max_iter, say=say)
     _, proof, point, _ = driver.best
-    return proof, point, {"point_source": "double solve + double-double phase", "extended_iterations": run.nit,
-                          "extended_status": run.status, "backend": run.backend, "proof_attempts": driver.attempts}
+    return proof, point, {"point_source": "double solve + " + out.point_source, **out.summary(),
+                          "proof_attempts": driver.attempts}
 
 
 def reference_agreement(problem: Problem, v, u, r, dps: int = 50) -> dict:

@@ -24,6 +24,7 @@ from .certification import Certificate, certificate_from_proof
 from .errors import InvalidArgumentError
 from .extended import ipm as ext
 from .extended.dd import vmul_d
+from .extended import wide
 from .extended.system import ExtendedData, choose_backend
 from .problem import SPACEDIM, Problem
 from .proof import Point, Proof, ProofContext, validate_digits
@@ -35,9 +36,11 @@ class DigitsSolution:
     """Result of :func:`solve_to_digits`.
 
     ``v`` (m,), ``u`` (5n,), ``r`` (5n,) are float64 (the extended point rounded to nearest);
-    ``point`` the double-double point the proof is about; ``certificate`` the proof's
-    verdict; ``double`` the double solve; ``extended`` the extended-phase run;
-    ``timings`` seconds per stage (``double``, ``setup``, ``extended``, ``proof``, ``total``).
+    ``point`` the extended-precision point the proof is about; ``certificate`` the proof's
+    verdict; ``double`` the double solve; ``extended`` the double-double run; ``wide`` the
+    multiple-precision tail (None when it did not run); ``timings`` seconds per stage
+    (``double``, ``setup``, ``extended``, ``wide``, ``proof``, ``total``; proofs excluded from
+    the others).
     """
 
     v: np.ndarray
@@ -47,6 +50,7 @@ class DigitsSolution:
     certificate: Certificate
     double: SolveResult
     extended: object
+    wide: object = None
     timings: dict = field(default_factory=dict)
 
     @property
@@ -70,6 +74,15 @@ def point_from_iterate(data: ExtendedData, v, r_t) -> Point:
     return Point(v.h.copy(), v.l.copy(), rh, rl)
 
 
+RECENT = 8
+"""Iterates the driver keeps: candidates for the wide tail's start, and the last three are
+proven when no proof succeeded."""
+
+WIDE_MAX_DOFS = 1500
+"""Largest problem (dofs) given the multiple-precision tail: its dense m × m mpfr matrix and
+factor (worst case O(m³) operations at ~100 ns) would not fit the time above that."""
+
+
 class ProofDriver:
     """The ``until`` callback of the extended phase: tries the proof where it may succeed,
     keeps the best one, and stops the run once ``requested`` digits are proven, or when μ
@@ -86,8 +99,18 @@ class ProofDriver:
         self._mu_best = math.inf
         self._since = 0
         self.progress = progress
-        self.recent = []  # the last few iterates, proven when the run ends without a proof
+        self.recent = []  # the last few iterates: handover to the wide tail, and proven at the end
         self.proven_at = set()
+        self.hopeless = False  # certifying a target: the point is already far closer than the target
+
+    @property
+    def certified(self) -> bool:
+        return self.best is not None and self.best[1].certified
+
+    def restart(self):
+        """Forget the stall counter and the recent iterates (a new phase begins)."""
+        self._mu_best, self._since = math.inf, 0
+        self.recent = []
 
     @staticmethod
     def score(proof: Proof) -> float:
@@ -111,18 +134,23 @@ class ProofDriver:
         stalled = self._since >= self.stall
         data = self.data
         if not force:
-            self.recent = (self.recent + [it])[-3:]
-        u_t = ext.V(*data.Ht.matvec(it.v.h, it.v.l)) + ext.V(*data.w_t)
-        gap = abs(it.r_t.dot(u_t))
+            self.recent = (self.recent + [it])[-RECENT:]
+        if isinstance(it, wide.WideIterate):
+            gap, point, v_inf, u_inf = it.describe()
+            key = ("wide", it.k)
+        else:
+            u_t = ext.V(*data.Ht.matvec(it.v.h, it.v.l)) + ext.V(*data.w_t)
+            gap = abs(it.r_t.dot(u_t))
+            point = point_from_iterate(data, it.v, it.r_t)
+            v_inf = float(np.max(np.abs(it.v.h), initial=0.0))
+            u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
+            key = ("dd", it.k)
         eps_lower = math.sqrt(2 * gap)
-        point = point_from_iterate(data, it.v, it.r_t)
-        v_inf = float(np.max(np.abs(it.v.h), initial=0.0))
-        u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
         if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested):
             return False
-        if it.k in self.proven_at:
+        if key in self.proven_at:
             return False
-        self.proven_at.add(it.k)
+        self.proven_at.add(key)
         t0 = time.perf_counter()
         sol = self.target if self.target is not None else self.ctx.rounded(point)
         proof = self.ctx.prove(point, *sol, requested=self.requested)
@@ -132,7 +160,8 @@ class ProofDriver:
         if self.best is None or sc > self.best[0]:
             self.best = (sc, proof, point, sol)
         if self.progress:
-            self.progress(f"proof at extended iteration {it.k} (μ = {it.mu:.1e}): {proof.summary()}")
+            phase = "multiple-precision" if key[0] == "wide" else "extended"
+            self.progress(f"proof at {phase} iteration {it.k} (μ = {it.mu:.1e}): {proof.summary()}")
         if proof.certified:
             return True
         if self.target is not None and self.best is not None and proof.valid:
@@ -140,16 +169,24 @@ class ProofDriver:
             # from the point to the solution, more iterations cannot improve the result.
             if self.best[0] > -math.inf and proof.eps_M < 1e-3 * max(
                     (q.abs_bound for q in proof.quantities.values() if q.mode != "information"), default=0):
+                self.hopeless = True
                 return True
         return stalled
 
 
 def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", tol: float = 1e-10,
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
+                    wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
                     progress=None, **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; see :mod:`rfverify.proof.bound` for what "digits" means when a
-    quantity is zero).  ``progress(message)`` receives one line per stage."""
+    quantity is zero).  ``progress(message)`` receives one line per stage.
+
+    Stages: the double solve (``method``, ``tol``, ``max_iter``), Algorithm 1 in double-double
+    (``extended_max_iter`` iterations at most, Newton back end ``backend``), and — only when
+    that ends without a proof and the problem has at most ``WIDE_MAX_DOFS`` dofs — Algorithm 1
+    in ``wide_bits``-bit arithmetic (``wide_max_iter`` iterations at most; ``wide_tail=False``
+    switches it off).  Each stage stops as soon as the proof succeeds."""
     digits = validate_digits(digits)
     if method == "clarabel":
         raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
@@ -168,27 +205,92 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
     start = _start_from(data, double)
     driver = ProofDriver(ctx, data, digits, progress=say)
-    t2 = time.perf_counter()
+    ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
+                     wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
+    _, proof, point, (v, u, r) = driver.best
+    cert = certificate_from_proof(proof, point, extra={"point_source": ext_out.point_source, **ext_out.summary(),
+                                                       "proof_attempts": driver.attempts})
+    timings = {"double": t_double, "setup": t_setup, "extended": ext_out.seconds_dd, "wide": ext_out.seconds_wide,
+               "proof": driver.proof_seconds, "total": time.perf_counter() - t0}
+    return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
+                          wide=ext_out.wide, timings=timings)
 
-    def tick(k, mu, pinf, dinf):
-        say(f"  extended iteration {k}: μ = {mu:.2e}, pinfeas = {pinf:.1e}, dinfeas = {dinf:.1e}")
 
-    run = ext.run(data, start, until=driver, max_iter=extended_max_iter, backend=system,
-                  progress=tick if progress else None)
-    t_ext = time.perf_counter() - t2 - driver.proof_seconds
-    if driver.best is None or not driver.best[1].certified:
+@dataclass
+class Extension:
+    """What :func:`extend` ran: the double-double run, the multiple-precision tail (None if it
+    did not run; ``wide_note`` says why), and their wall times without the proofs."""
+
+    run: ext.ExtendedResult
+    wide: wide.WideResult | None
+    wide_note: str
+    handover_iteration: int | None
+    seconds_dd: float
+    seconds_wide: float
+
+    @property
+    def point_source(self) -> str:
+        if self.wide is not None:
+            return f"extended phase, then the {self.wide.bits}-bit multiple-precision tail"
+        return "extended phase"
+
+    def summary(self) -> dict:
+        out = {"extended_status": self.run.status, "extended_iterations": self.run.nit, "backend": self.run.backend,
+               "wide_tail": self.wide_note}
+        if self.wide is not None:
+            out.update(wide_status=self.wide.status, wide_iterations=self.wide.nit, wide_bits=self.wide.bits,
+                       wide_handover_iteration=self.handover_iteration)
+        return out
+
+
+def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_iter: int = 80,
+           wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40, say=None,
+           verbose: bool = False) -> Extension:
+    """Algorithm 1 in double-double from ``start`` until ``driver`` accepts a proof or the run
+    stalls; then, if no proof succeeded and the problem has at most ``WIDE_MAX_DOFS`` dofs,
+    the multiple-precision tail (:mod:`.extended.wide`) from the latest healthy double-double
+    iterate.  At the end, if nothing was certified, the last iterates are proven so that the
+    driver's best proof reports the best digits reached."""
+    say = say or (lambda msg: None)
+
+    def tick(phase):
+        return (lambda k, mu, pinf, dinf: say(f"  {phase} iteration {k}: μ = {mu:.2e}, pinfeas = {pinf:.1e}, "
+                                              f"dinfeas = {dinf:.1e}")) if verbose else None
+
+    t0 = time.perf_counter()
+    p0 = driver.proof_seconds
+    run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system, progress=tick("extended"))
+    seconds_dd = time.perf_counter() - t0 - (driver.proof_seconds - p0)
+    tail, note, hand_k, seconds_wide = None, "not needed", None, 0.0
+    if not driver.certified:
+        if not wide_tail:
+            note = "not run (switched off)"
+        elif driver.hopeless:
+            note = "not run (the candidate is farther from the point than any tail could fix)"
+        elif data.m > WIDE_MAX_DOFS:
+            note = f"not run ({data.m} dofs > {WIDE_MAX_DOFS}: its dense factor would not fit the time)"
+        else:
+            it = wide.handover(data, driver.recent, bits=wide_bits)
+            if it is None:
+                note = "not run (no interior, centred double-double iterate to start from)"
+            else:
+                hand_k = it.k
+                say(f"multiple-precision tail: {wide_bits}-bit mpfr, dense dof-space factor, from extended "
+                    f"iteration {it.k} (μ = {it.mu:.2e})")
+                driver.restart()
+                t1 = time.perf_counter()
+                p1 = driver.proof_seconds
+                tail = wide.run(data, {"v": (it.v.h, it.v.l), "r_t": (it.r_t.h, it.r_t.l), "z": (it.z.h, it.z.l)},
+                                until=driver, max_iter=wide_max_iter, bits=wide_bits,
+                                progress=tick("multiple-precision"))
+                seconds_wide = time.perf_counter() - t1 - (driver.proof_seconds - p1)
+                note = f"{tail.status}: {tail.message}"
+    if not driver.certified:
         # No proof succeeded: prove the last iterates (the final one may have left a cone
         # after a failed step) so that the verdict reports the best proven digits.
-        for it in reversed(driver.recent):
+        for it in reversed(driver.recent[-3:]):
             driver(it, force=True)
-    _, proof, point, (v, u, r) = driver.best
-    cert = certificate_from_proof(proof, point, extra={"point_source": "extended phase", "extended_status": run.status,
-                                                       "extended_iterations": run.nit, "backend": run.backend,
-                                                       "proof_attempts": driver.attempts})
-    timings = {"double": t_double, "setup": t_setup, "extended": t_ext,
-               "proof": driver.proof_seconds, "total": time.perf_counter() - t0}
-    return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=run,
-                          timings=timings)
+    return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide)
 
 
 def _start_from(data: ExtendedData, double: SolveResult) -> dict:

@@ -14,7 +14,7 @@ DESCRIPTION = """\
 Prove a lower bound on the correct significant digits of a solution (v, u, r) of the convex
 relaxation (docs/DESIGN.md §6): an extended-precision point near the solution set (stored in
 the solution file by 'solve --digits --out', or computed by a double solve and double-double
-iterations) is evaluated in exact arithmetic, and the bound ||v - v*||_M <= sqrt(g'M^-1 g + 2
+iterations, continued in 320-bit arithmetic where double-double stalls) is evaluated in exact arithmetic, and the bound ||v - v*||_M <= sqrt(g'M^-1 g + 2
 r'u) is carried to the solution. Exit code 0 only when --digits are proven."""
 
 
@@ -87,7 +87,7 @@ def cmd_certify(args) -> int:
         print(cert.verdict)
         print_quantities(cert)
         src = cert.extra.get("point_source")
-        print(f"point: {'stored in ' + where if src == 'given' else 'computed (double solve + double-double phase)'}; "
+        print(f"point: {'stored in ' + where if src == 'given' else 'computed (' + str(src) + ')'}; "
               f"time {cert.seconds:.2f} s")
         if cert.cross_check is not None:
             cc = cert.cross_check

@@ -51,7 +51,9 @@ def add_parser(sub) -> None:
                      help="stop after S seconds with the best iterate (status MaxTime, exit 1)")
     sol.add_argument("--digits", type=digit_count, default=None, metavar="K",
                      help="produce a solution proven right to K significant digits (1-15): the "
-                          "double solve, then Algorithm 1 continued in double-double until the "
+                          "double solve, then Algorithm 1 continued in double-double (and, if that "
+                          "stalls short of a proof on a problem of at most 1500 dofs, in 320-bit "
+                          "arithmetic) until the "
                           "rigorous error bound of docs/DESIGN.md §6 proves K digits of v, u and Hr "
                           "(and r where it is unique); exit code 0 only when proven. With --out the "
                           "file also gets /certificate (the point and the bound, to recheck with "
@@ -149,16 +151,21 @@ def _solve_digits(args, problem, options) -> int:
                "certificate": cert.as_dict(), "double_status": str(out.double.status),
                "double_iterations": out.double.nit, "extended_iterations": out.extended.nit,
                "extended_status": out.extended.status, "backend": out.extended.backend,
+               "wide_iterations": None if out.wide is None else out.wide.nit,
+               "wide_status": None if out.wide is None else out.wide.status,
+               "wide_bits": None if out.wide is None else out.wide.bits,
                "timings": out.timings, "time": wall, "out": args.out}
     if args.json:
         print(dumps(summary, indent=2))
     else:
+        tail = "" if out.wide is None else f"; multiple-precision ({out.wide.bits} bits) iterations: {out.wide.nit}"
         print(f"double solve: {out.double.status} in {out.double.nit} iterations; extended "
-              f"(double-double) iterations: {out.extended.nit}")
+              f"(double-double) iterations: {out.extended.nit}{tail}")
         print(cert.verdict)
         print_quantities(cert)
         t = out.timings
-        print(f"time {wall:.2f} s (double {t['double']:.2f}, extended {t['setup'] + t['extended']:.2f}, "
+        wide_time = f", multiple precision {t['wide']:.2f}" if out.wide is not None else ""
+        print(f"time {wall:.2f} s (double {t['double']:.2f}, extended {t['setup'] + t['extended']:.2f}{wide_time}, "
               f"proof {t['proof']:.2f})" + (f"; solution and certificate written to {args.out}" if args.out else ""))
     return EXIT_OK if out.success else EXIT_NOT_SOLVED
 

@@ -353,6 +353,41 @@ class _Backend:
         return float(np.sum(cc * cc) + self.chol.nnz_upper)
 
 
+def contact_dof_pattern(data: ExtendedData) -> sp.csr_matrix:
+    """(n × m) pattern of the dofs each contact's kept rows of H̃ touch, sorted per row."""
+    Ht = sp.csr_matrix((np.ones_like(data.Ht.hi), data.Ht.indices, data.Ht.indptr), shape=data.Ht.shape)
+    contact_of_row = np.repeat(np.arange(data.n), data.row_count)
+    C = sp.csr_matrix((np.ones(data.nk), (contact_of_row, np.arange(data.nk))), shape=(data.n, data.nk))
+    CD = (C @ Ht).tocsr()
+    CD.sort_indices()
+    return CD
+
+
+def contact_local_H(data: ExtendedData, CD: sp.csr_matrix):
+    """Each contact's dense block of H̃: local dof lists (n, d) padded with -1, and H̃_c as
+    (n, 5, d) double-double (rows: the contact's kept rows, columns: its local dofs)."""
+    n = data.n
+    loc_cnt = np.diff(CD.indptr).astype(np.int64)
+    dmax = int(loc_cnt.max(initial=1))
+    loc_dofs = np.full((n, dmax), -1, dtype=np.int64)
+    slot = np.arange(CD.nnz) - np.repeat(CD.indptr[:-1], loc_cnt)
+    loc_dofs[np.repeat(np.arange(n), loc_cnt), slot] = CD.indices
+    Hh = np.zeros((n, 5, dmax))
+    Hl = np.zeros((n, 5, dmax))
+    contact_of_row = np.repeat(np.arange(n), data.row_count)
+    row_local = np.arange(data.nk) - data.row_start[contact_of_row]
+    rows = np.repeat(np.arange(data.nk), np.diff(data.Ht.indptr))
+    cont = contact_of_row[rows]
+    # position of each nonzero's dof in its contact's sorted local list (one searchsorted
+    # over keys contact·m + dof, which are sorted segment by segment)
+    key = cont.astype(np.int64) * data.m + data.Ht.indices
+    seg_keys = np.repeat(np.arange(n), loc_cnt).astype(np.int64) * data.m + CD.indices
+    local = np.searchsorted(seg_keys, key) - CD.indptr[cont]
+    Hh[cont, row_local[rows], local] = data.Ht.hi
+    Hl[cont, row_local[rows], local] = data.Ht.lo
+    return loc_dofs, Hh, Hl
+
+
 class DofSpace(_Backend):
     """S_v = M + H̃ᵀ G⁻¹ H̃ factored in double-double."""
 
@@ -360,13 +395,8 @@ class DofSpace(_Backend):
 
     def __init__(self, data: ExtendedData, max_local_dofs: int = 64):
         self.data = data
-        Ht = sp.csr_matrix((np.ones_like(data.Ht.hi), data.Ht.indices, data.Ht.indptr), shape=data.Ht.shape)
         n = data.n
-        # local dofs of each contact: union of the columns of its kept rows
-        contact_of_row = np.repeat(np.arange(n), data.row_count)
-        C = sp.csr_matrix((np.ones(data.nk), (contact_of_row, np.arange(data.nk))), shape=(n, data.nk))
-        CD = (C @ Ht).tocsr()
-        CD.sort_indices()
+        CD = contact_dof_pattern(data)
         self.loc_cnt = np.diff(CD.indptr).astype(np.int64)
         dmax = int(self.loc_cnt.max(initial=1))
         self.dmax = dmax
@@ -376,23 +406,7 @@ class DofSpace(_Backend):
         self.chol = DDCholesky(pattern)
         if self.too_dense:
             return
-        self.loc_dofs = np.full((n, dmax), -1, dtype=np.int64)
-        slot = np.arange(CD.nnz) - np.repeat(CD.indptr[:-1], self.loc_cnt)
-        crow = np.repeat(np.arange(n), self.loc_cnt)
-        self.loc_dofs[crow, slot] = CD.indices
-        # dense H̃_c (k × d) per contact
-        self.Hh = np.zeros((n, 5, dmax))
-        self.Hl = np.zeros((n, 5, dmax))
-        row_local = np.arange(data.nk) - data.row_start[contact_of_row]
-        rows = np.repeat(np.arange(data.nk), np.diff(data.Ht.indptr))
-        cont = contact_of_row[rows]
-        # position of each nonzero's dof in its contact's sorted local list (one searchsorted
-        # over keys contact·m + dof, which are sorted segment by segment)
-        key = cont.astype(np.int64) * data.m + data.Ht.indices
-        seg_keys = np.repeat(np.arange(n), self.loc_cnt).astype(np.int64) * data.m + CD.indices
-        local = np.searchsorted(seg_keys, key) - CD.indptr[cont]
-        self.Hh[cont, row_local[rows], local] = data.Ht.hi
-        self.Hl[cont, row_local[rows], local] = data.Ht.lo
+        self.loc_dofs, self.Hh, self.Hl = contact_local_H(data, CD)
         # positions of the local pairs in the upper CSC storage
         ii, jj = np.meshgrid(np.arange(dmax), np.arange(dmax), indexing="ij")
         valid = (ii[None] < self.loc_cnt[:, None, None]) & (jj[None] < self.loc_cnt[:, None, None])

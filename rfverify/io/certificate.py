@@ -10,8 +10,12 @@ beside the problem and its ``/solution``::
                                         the v of a lifted local problem)
     /certificate/point/v_hi, v_lo, r_hi, r_lo
                                  float64: the extended-precision point, exactly (v = v_hi + v_lo)
+    /certificate/point/v_more, r_more
+                                 float64 (k, m) and (k, 5n), only for a point of the
+                                 multiple-precision tail: further terms, v = v_hi + v_lo + Σ v_more
     /certificate/point/v_decimal, r_decimal
-                                 the same numbers as decimal strings (34 significant digits)
+                                 the same numbers as decimal strings (34 significant digits, or
+                                 16 per float64 term when there are more terms)
     /certificate/quantities/<v|u|Hr|r>
                                  attrs: abs_bound, norm, own_scale, data_scale, data_scale_name,
                                         digits (NaN: none), mode, certified, note
@@ -73,8 +77,15 @@ def write_certificate(fh, certificate) -> None:
         pg.attrs["layout"] = POINT_LAYOUT
         for k in ("v_hi", "v_lo", "r_hi", "r_lo"):
             pg.create_dataset(k, data=np.asarray(getattr(point, k), dtype=np.float64))
-        for name, hi, lo in (("v", point.v_hi, point.v_lo), ("r", point.r_hi, point.r_lo)):
-            pg.create_dataset(f"{name}_decimal", data=np.array(_decimal_strings(hi, lo), dtype=h5py.string_dtype()))
+        for k in ("v_more", "r_more"):
+            if getattr(point, k) is not None:
+                pg.create_dataset(k, data=np.asarray(getattr(point, k), dtype=np.float64))
+        for name in ("v", "r"):
+            parts = [getattr(point, f"{name}_hi"), getattr(point, f"{name}_lo")]
+            more = getattr(point, f"{name}_more")
+            parts += [] if more is None else list(more)
+            pg.create_dataset(f"{name}_decimal", data=np.array(_decimal_strings(parts, max(34, 16 * len(parts))),
+                                                               dtype=h5py.string_dtype()))
 
 
 def read_point(path):
@@ -111,6 +122,18 @@ def read_point(path):
                     raise ProblemFileError(path, f"{k} must be a 1-D float dataset",
                                            location=f"/certificate/point/{k}", fix="write the certificate again")
                 arrays[k] = np.asarray(a[()], dtype=np.float64)
+            for k, n in (("v_more", arrays["v_hi"].size), ("r_more", arrays["r_hi"].size)):
+                if k not in pg:
+                    continue
+                a = pg[k]
+                if not isinstance(a, h5py.Dataset) or a.dtype.kind != "f" or a.ndim != 2 or a.shape[1] != n:
+                    raise ProblemFileError(path, f"{k} must be a 2-D float dataset with {n} columns",
+                                           location=f"/certificate/point/{k}", fix="write the certificate again")
+                arrays[k] = np.asarray(a[()], dtype=np.float64)
+            if ("v_more" in arrays) != ("r_more" in arrays) or (
+                    "v_more" in arrays and len(arrays["v_more"]) != len(arrays["r_more"])):
+                raise ProblemFileError(path, "v_more and r_more must both be present, with as many terms",
+                                       location="/certificate/point", fix="write the certificate again")
     except ProblemFileError:
         raise
     except OSError as exc:
@@ -124,11 +147,13 @@ def read_point(path):
     return Point(**arrays)
 
 
-def _decimal_strings(hi, lo, digits: int = 34) -> list:
+def _decimal_strings(parts, digits: int = 34) -> list:
+    """Each number Σ parts[i][j] (float64 terms) as a decimal string of ``digits`` digits."""
     import mpmath
 
     out = []
-    with mpmath.workprec(240):
-        for h, l in zip(np.asarray(hi, dtype=np.float64), np.asarray(lo, dtype=np.float64)):
-            out.append(mpmath.nstr(mpmath.mpf(float(h)) + mpmath.mpf(float(l)), digits, strip_zeros=False))
+    cols = [np.asarray(p, dtype=np.float64) for p in parts]
+    with mpmath.workprec(max(240, 4 * digits)):
+        for terms in zip(*cols):
+            out.append(mpmath.nstr(mpmath.fsum(mpmath.mpf(float(t)) for t in terms), digits, strip_zeros=False))
     return out

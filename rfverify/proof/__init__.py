@@ -25,16 +25,31 @@ __all__ = ["Proof", "ProofContext", "QuantityBound", "Point", "validate_digits",
 
 @dataclass(frozen=True)
 class Point:
-    """An extended-precision point (v, r) in the original variables, as double-double pairs
-    (value = hi + lo exactly): v (m,), r (5n,)."""
+    """An extended-precision point (v, r) in the original variables, as float64 expansions:
+    v = v_hi + v_lo + Σ v_more[i] exactly, v (m,), r (5n,).  A double-double point has no
+    ``*_more`` terms; a point of the multiple-precision tail (:mod:`rfverify.extended.wide`)
+    has ``v_more`` and ``r_more`` of shape (k, m) and (k, 5n)."""
 
     v_hi: np.ndarray
     v_lo: np.ndarray
     r_hi: np.ndarray
     r_lo: np.ndarray
+    v_more: np.ndarray | None = None
+    r_more: np.ndarray | None = None
+
+    @property
+    def terms(self) -> int:
+        """Float64 terms per number (2: double-double)."""
+        return 2 + (0 if self.v_more is None else len(self.v_more))
 
     def exact(self):
-        return Dyadic.from_dd(self.v_hi, self.v_lo), Dyadic.from_dd(self.r_hi, self.r_lo)
+        v = Dyadic.from_dd(self.v_hi, self.v_lo)
+        r = Dyadic.from_dd(self.r_hi, self.r_lo)
+        for part in () if self.v_more is None else self.v_more:
+            v = v + Dyadic.from_float(part)
+        for part in () if self.r_more is None else self.r_more:
+            r = r + Dyadic.from_float(part)
+        return v, r
 
 
 class ProofContext:
