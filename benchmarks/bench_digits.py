@@ -1,12 +1,14 @@
 """Cost and outcome of the proven k-digit path (``solve --digits``) at FCLIB sizes.
 
 For each problem: the double solve alone (timed separately), then the whole k-digit path
-(double solve, double-double phase, proof), the solution and certificate written to an FCLIB
-file, and the certificate rechecked from that file alone in exact arithmetic (as
-``rfverify certify PROBLEM --solution FILE`` does).  Prints one row per problem:
+(double solve, double-double phase, the multiple-precision tail where double-double stalled,
+proof), the solution and certificate written to an FCLIB file, and the certificate rechecked
+from that file alone in exact arithmetic (as ``rfverify certify PROBLEM --solution FILE``
+does).  Prints one row per problem:
 
-    contacts, dofs, double s, extended s, proof s, total s, total/double,
-    recheck s (recheck/total), proven digits of v / u / Hr / r (r: "–" where not unique)
+    contacts, dofs, double s, extended s (double-double), mp s (multiple-precision tail, "–"
+    when it did not run), proof s, total s, total/double, recheck s (recheck/total), proven
+    digits of v / u / Hr / r (r: "–" where not unique)
 
 Not a test: timings on a shared 2-core machine are noisy; compare ratios from one run.
 
@@ -106,11 +108,13 @@ def run_one(label, problem, digits: int, workdir: Path):
 
     t = out.timings
     return {"label": label, "n": problem.n_contacts, "m": problem.n_dofs, "double": t_double,
-            "extended": t["setup"] + t["extended"], "proof": t["proof"], "total": t_path,
+            "extended": t["setup"] + t["extended"], "wide": t["wide"] if out.wide is not None else None,
+            "proof": t["proof"], "total": t_path,
             "ratio": t_path / t_double, "recheck": t_recheck, "recheck_frac": t_recheck / t_path,
             "certified": out.success, "recheck_certified": recheck.certified,
             "digits": "/".join(dig(k) for k in ("v", "u", "Hr", "r")), "double_status": str(double.status),
-            "ext_iters": out.extended.nit, "verdict": out.certificate.verdict}
+            "ext_iters": out.extended.nit, "wide_iters": None if out.wide is None else out.wide.nit,
+            "verdict": out.certificate.verdict}
 
 
 def main(argv=None):
@@ -121,7 +125,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
     rows = []
-    head = (f"{'problem':<22} {'n':>5} {'m':>5} {'double':>7} {'ext':>7} {'proof':>6} {'total':>7} "
+    head = (f"{'problem':<22} {'n':>5} {'m':>5} {'double':>7} {'ext':>7} {'mp':>6} {'proof':>6} {'total':>7} "
             f"{'×dbl':>6} {'recheck':>7} {'rc/tot':>6} {'proven':>5}  digits v/u/Hr/r")
     print(head)
     print("-" * len(head))
@@ -129,7 +133,8 @@ def main(argv=None):
         for label, problem in problem_set(args):
             r = run_one(label, problem, args.digits, Path(tmp))
             rows.append(r)
-            print(f"{r['label']:<22} {r['n']:>5} {r['m']:>5} {r['double']:>7.2f} {r['extended']:>7.2f} "
+            mp = "–" if r["wide"] is None else f"{r['wide']:.2f}"
+            print(f"{r['label']:<22} {r['n']:>5} {r['m']:>5} {r['double']:>7.2f} {r['extended']:>7.2f} {mp:>6} "
                   f"{r['proof']:>6.2f} {r['total']:>7.2f} {r['ratio']:>6.1f} {r['recheck']:>7.2f} "
                   f"{r['recheck_frac']:>6.1%} {'yes' if r['certified'] and r['recheck_certified'] else 'NO':>5}  "
                   f"{r['digits']}", flush=True)

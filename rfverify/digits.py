@@ -83,6 +83,11 @@ WIDE_MAX_DOFS = 1500
 factor (worst case O(m³) operations at ~100 ns) would not fit the time above that."""
 
 
+WIDE_GIVE_UP = 5
+"""The tail stops after this many invalid proofs in a row (measured: a Chute whose wedge
+contacts leave no strictly feasible point stays outside K* at every one of 40 iterations)."""
+
+
 class ProofDriver:
     """The ``until`` callback of the extended phase: tries the proof where it may succeed,
     keeps the best one, and stops the run once ``requested`` digits are proven, or when μ
@@ -102,15 +107,21 @@ class ProofDriver:
         self.recent = []  # the last few iterates: handover to the wide tail, and proven at the end
         self.proven_at = set()
         self.hopeless = False  # certifying a target: the point is already far closer than the target
+        self.invalid_limit = None  # stop after this many invalid proofs in a row (None: never)
+        self._invalid_run = 0
+        self.gave_up = ""
 
     @property
     def certified(self) -> bool:
         return self.best is not None and self.best[1].certified
 
-    def restart(self):
-        """Forget the stall counter and the recent iterates (a new phase begins)."""
+    def restart(self, invalid_limit: int | None = None):
+        """Forget the stall counter and the recent iterates (a new phase begins); with
+        ``invalid_limit``, stop once that many proofs in a row are invalid (a point outside the
+        cones at every iterate: the feasible set has no interior, and iterating does not help)."""
         self._mu_best, self._since = math.inf, 0
         self.recent = []
+        self.invalid_limit, self._invalid_run = invalid_limit, 0
 
     @staticmethod
     def score(proof: Proof) -> float:
@@ -125,6 +136,15 @@ class ProofDriver:
             else:
                 vals.append(q.digits if q.digits is not None else -math.inf)
         return min(vals) if vals else -math.inf
+
+    @staticmethod
+    def _distance_dominates(proof: Proof) -> bool:
+        """True when v's or u's bound is uncertified and its point part (√(M⁻¹)_jj·ε or
+        √W_kk·ε, the part more iterations shrink) is below 1e-3 of it: the rest is the fixed
+        distance from the point to the candidate."""
+        own = {"v": proof.terms["max_sqrt_Minv_jj"] * proof.eps_M, "u": proof.terms["max_sqrt_W_kk"] * proof.eps_M}
+        return any(not q.certified and own[name] < 1e-3 * q.abs_bound
+                   for name, q in proof.quantities.items() if name in own and q.mode != "information")
 
     def __call__(self, it: ext.Iterate, force: bool = False) -> bool:
         if it.mu < 0.5 * self._mu_best:
@@ -164,13 +184,15 @@ class ProofDriver:
             self.progress(f"proof at {phase} iteration {it.k} (μ = {it.mu:.1e}): {proof.summary()}")
         if proof.certified:
             return True
-        if self.target is not None and self.best is not None and proof.valid:
-            # Certifying a given solution: once the point's own bound is far below the distance
-            # from the point to the solution, more iterations cannot improve the result.
-            if self.best[0] > -math.inf and proof.eps_M < 1e-3 * max(
-                    (q.abs_bound for q in proof.quantities.values() if q.mode != "information"), default=0):
-                self.hopeless = True
-                return True
+        self._invalid_run = 0 if proof.valid else self._invalid_run + 1
+        if self.invalid_limit is not None and self._invalid_run >= self.invalid_limit:
+            self.gave_up = f"{self._invalid_run} proofs in a row were invalid ({proof.summary()})"
+            return True
+        if self.target is not None and proof.valid and self._distance_dominates(proof):
+            # Certifying a given solution: once an uncertified quantity's bound is the distance
+            # from the point to the solution, more iterations cannot certify it.
+            self.hopeless = True
+            return True
         return stalled
 
 
@@ -277,14 +299,14 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
                 hand_k = it.k
                 say(f"multiple-precision tail: {wide_bits}-bit mpfr, dense dof-space factor, from extended "
                     f"iteration {it.k} (μ = {it.mu:.2e})")
-                driver.restart()
+                driver.restart(invalid_limit=WIDE_GIVE_UP)
                 t1 = time.perf_counter()
                 p1 = driver.proof_seconds
                 tail = wide.run(data, {"v": (it.v.h, it.v.l), "r_t": (it.r_t.h, it.r_t.l), "z": (it.z.h, it.z.l)},
                                 until=driver, max_iter=wide_max_iter, bits=wide_bits,
                                 progress=tick("multiple-precision"))
                 seconds_wide = time.perf_counter() - t1 - (driver.proof_seconds - p1)
-                note = f"{tail.status}: {tail.message}"
+                note = f"{tail.status}: {tail.message}" + (f"; {driver.gave_up}" if driver.gave_up else "")
     if not driver.certified:
         # No proof succeeded: prove the last iterates (the final one may have left a cone
         # after a failed step) so that the verdict reports the best proven digits.

@@ -292,3 +292,24 @@ def test_help_states_the_tails_limits(capsys):
         main(["solve", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert f"at most {D.WIDE_MAX_DOFS} dofs" in text and f"{wide.DEFAULT_BITS}-bit" in text
+
+
+def test_the_tail_gives_up_where_no_point_can_be_proven():
+    """A Chute whose wedge contacts leave no strictly feasible point: every proof is invalid,
+    and the tail stops after WIDE_GIVE_UP of them instead of running its 40 iterations."""
+    from pathlib import Path
+
+    problem = rfverify.load(Path(__file__).parent / "data" / "hard" / "Chute-ndof-24-nc-4-0.hdf5")
+    out = rfverify.solve_to_digits(problem, digits=10)
+    assert not out.success and not out.certificate.proof.valid
+    assert out.wide is not None and out.wide.nit < D.WIDE_GIVE_UP + 2
+    assert f"{D.WIDE_GIVE_UP} proofs in a row were invalid" in out.certificate.extra["wide_tail"]
+
+
+def test_certify_without_a_stored_point_goes_on_to_the_tail(lattice):
+    """certify of the 10-digit lattice solution, given no point: the polish must not stop while
+    the point's own bound still dominates (√(M⁻¹)_jj ≈ 2e3 here), and the tail proves it."""
+    problem, out = lattice
+    cert = rfverify.certify(problem, out.v, out.u, out.r, digits=10)
+    assert cert.certified, cert.verdict
+    assert "multiple-precision" in cert.extra["point_source"] and cert.extra["wide_iterations"] > 0

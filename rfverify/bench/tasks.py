@@ -210,9 +210,10 @@ def _digits(problem, task, npz_path) -> dict:
     t = out.timings
     return {
         "status": "Certified" if cert.certified else "NotCertified", "message": cert.verdict,
-        "time": elapsed, "time_double": t["double"], "time_warm": t["setup"] + t["extended"],
+        "time": elapsed, "time_double": t["double"], "time_warm": t["setup"] + t["extended"] + t["wide"],
         "time_certify": t["proof"],
         "double_status": str(out.double.status), "warm_iterations": int(out.extended.nit),
+        "wide_iterations": 0 if out.wide is None else int(out.wide.nit),
         "certified": bool(cert.certified), "certified_digits": cert.digits,
         # relative, absolute (x* ≈ 0: judged against a data scale, DESIGN §6.3) or information
         "certified_modes": {k: q.mode for k, q in cert.quantities.items()},

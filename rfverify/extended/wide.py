@@ -547,7 +547,7 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
             if progress:
                 progress(k, mu, pinf, dinf)
             if until is not None and until(WideIterate(k, v, r_t, z, mu, pinf, dinf, bits, W)):
-                status, message = "Stopped", f"accepted at iteration {k} (μ = {mu:.2e})"
+                status, message = "Stopped", f"stopped by the proof driver at iteration {k} (μ = {mu:.2e})"
                 break
             if k == max_iter:
                 break
