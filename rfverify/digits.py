@@ -78,9 +78,14 @@ RECENT = 8
 """Iterates the driver keeps: candidates for the wide tail's start, and the last three are
 proven when no proof succeeded."""
 
-WIDE_MAX_DOFS = 1500
-"""Largest problem (dofs) given the multiple-precision tail: its dense m × m mpfr matrix and
-factor (worst case O(m³) operations at ~100 ns) would not fit the time above that."""
+WIDE_MAX_DOFS = 3000
+"""Largest problem (dofs) given the multiple-precision tail: its dense m × m matrix of mpfr
+references (8 bytes each, 72 MB at the limit) is copied at every factorisation."""
+
+WIDE_MAX_FACTOR_OPS = 2e7
+"""Largest factorisation given the tail, in multiply-subtract pairs (Σ c_j² over the column
+counts of L in its minimum-degree order): measured ~0.37 µs each at 320 bits, so about 7 s per
+iteration at the limit (a 274-contact Lattice: 1.0e6, a 769-contact SpheresPile: 1.5e7)."""
 
 
 WIDE_GIVE_UP = 5
@@ -206,7 +211,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
 
     Stages: the double solve (``method``, ``tol``, ``max_iter``), Algorithm 1 in double-double
     (``extended_max_iter`` iterations at most, Newton back end ``backend``), and — only when
-    that ends without a proof and the problem has at most ``WIDE_MAX_DOFS`` dofs — Algorithm 1
+    that ends without a proof, on a problem of at most ``WIDE_MAX_DOFS`` dofs whose dof-space
+    factor costs at most ``WIDE_MAX_FACTOR_OPS`` — Algorithm 1
     in ``wide_bits``-bit arithmetic (``wide_max_iter`` iterations at most; ``wide_tail=False``
     switches it off).  Each stage stops as soon as the proof succeeds."""
     digits = validate_digits(digits)
@@ -269,8 +275,8 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
            wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40, say=None,
            verbose: bool = False) -> Extension:
     """Algorithm 1 in double-double from ``start`` until ``driver`` accepts a proof or the run
-    stalls; then, if no proof succeeded and the problem has at most ``WIDE_MAX_DOFS`` dofs,
-    the multiple-precision tail (:mod:`.extended.wide`) from the latest healthy double-double
+    stalls; then, if no proof succeeded and the problem is within ``WIDE_MAX_DOFS`` and
+    ``WIDE_MAX_FACTOR_OPS``, the multiple-precision tail (:mod:`.extended.wide`) from the latest healthy double-double
     iterate.  At the end, if nothing was certified, the last iterates are proven so that the
     driver's best proof reports the best digits reached."""
     say = say or (lambda msg: None)
@@ -290,7 +296,10 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
         elif driver.hopeless:
             note = "not run (the candidate is farther from the point than any tail could fix)"
         elif data.m > WIDE_MAX_DOFS:
-            note = f"not run ({data.m} dofs > {WIDE_MAX_DOFS}: its dense factor would not fit the time)"
+            note = f"not run ({data.m} dofs > {WIDE_MAX_DOFS}: its dense matrix would not fit)"
+        elif (ops := wide.dof_space_ordering(data)[1]) > WIDE_MAX_FACTOR_OPS:
+            note = (f"not run (its factorisation would take {ops:.1e} multiply-subtract pairs > "
+                    f"{WIDE_MAX_FACTOR_OPS:.0e}, about {ops * 0.37e-6:.0f} s per iteration)")
         else:
             it = wide.handover(data, driver.recent, bits=wide_bits)
             if it is None:

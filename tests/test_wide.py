@@ -292,6 +292,7 @@ def test_help_states_the_tails_limits(capsys):
         main(["solve", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert f"at most {D.WIDE_MAX_DOFS} dofs" in text and f"{wide.DEFAULT_BITS}-bit" in text
+    assert f"at most {D.WIDE_MAX_FACTOR_OPS:.0e}".replace("e+0", "e") in text
 
 
 def test_the_tail_gives_up_where_no_point_can_be_proven():
@@ -313,3 +314,12 @@ def test_certify_without_a_stored_point_goes_on_to_the_tail(lattice):
     cert = rfverify.certify(problem, out.v, out.u, out.r, digits=10)
     assert cert.certified, cert.verdict
     assert "multiple-precision" in cert.extra["point_source"] and cert.extra["wide_iterations"] > 0
+
+
+def test_the_tail_is_skipped_when_its_factor_would_be_too_costly(lattice, monkeypatch):
+    problem, _ = lattice
+    _, ops = wide.dof_space_ordering(ExtendedData(problem))
+    assert 0 < ops < D.WIDE_MAX_FACTOR_OPS
+    monkeypatch.setattr(D, "WIDE_MAX_FACTOR_OPS", ops / 2)
+    out = rfverify.solve_to_digits(problem, digits=10)
+    assert not out.success and out.wide is None and "multiply-subtract pairs" in out.certificate.extra["wide_tail"]

@@ -52,7 +52,8 @@ def add_parser(sub) -> None:
     sol.add_argument("--digits", type=digit_count, default=None, metavar="K",
                      help="produce a solution proven right to K significant digits (1-15): the "
                           "double solve, then Algorithm 1 continued in double-double (and, if that "
-                          "stalls short of a proof on a problem of at most 1500 dofs, in 320-bit "
+                          "stalls short of a proof on a problem of at most 3000 dofs whose factor "
+                          "costs at most 2e7 operations, in 320-bit "
                           "arithmetic) until the "
                           "rigorous error bound of docs/DESIGN.md §6 proves K digits of v, u and Hr "
                           "(and r where it is unique); exit code 0 only when proven. With --out the "

@@ -31,8 +31,9 @@ from dataclasses import dataclass, field
 
 import gmpy2
 import numpy as np
+import scipy.sparse as sp
 
-from .ldl import fill_reducing_order
+from .ldl import _symbolic, fill_reducing_order
 from .system import DDMatrix, ExtendedData, contact_dof_pattern, contact_local_H
 
 DEFAULT_BITS = 320
@@ -328,6 +329,21 @@ def centrality(n3: int, sc: Scaling, mu) -> float:
     return float(min(lam2) / gmpy2.sqrt(mu)) if lam2.size else 1.0
 
 
+def dof_space_ordering(data: ExtendedData, CD=None):
+    """(minimum-degree order of M + H̃ᵀG⁻¹H̃'s pattern, the number of multiply-subtract pairs
+    its Cholesky factor costs in that order: Σ_j c_j² over the column counts c_j of L)."""
+    CD = contact_dof_pattern(data) if CD is None else CD
+    pattern = (abs(data.M_pattern) + abs(CD.T @ CD)).tocsc()
+    perm = fill_reducing_order(pattern)
+    n = pattern.shape[0]
+    P = (abs(pattern) + abs(pattern.T) + sp.identity(n, format="csc")).tocsc()
+    U = sp.triu(P[perm][:, perm], format="csc")
+    U.sort_indices()
+    _, Lp = _symbolic(n, U.indptr.astype(np.int64), U.indices.astype(np.int64))
+    counts = np.diff(Lp).astype(np.float64)
+    return perm, float(np.sum(counts * counts))
+
+
 class DenseDofSpace:
     """The dof-space Newton matrix S = M + H̃ᵀG⁻¹H̃ = M + BᵀB (B = F⁻¹H̃, per contact) as a
     dense m × m mpfr matrix with a dense Cholesky factor: O(m³) multiple-precision operations
@@ -347,7 +363,7 @@ class DenseDofSpace:
         CD = contact_dof_pattern(data)
         # rows and columns in a minimum-degree order: the factor keeps M + BᵀB's sparsity,
         # and the elimination below skips the exact zeros
-        self.perm = fill_reducing_order((abs(data.M_pattern) + abs(CD.T @ CD)).tocsc())
+        self.perm, _ = dof_space_ordering(data, CD)
         self.iperm = np.empty_like(self.perm)
         self.iperm[self.perm] = np.arange(m)
         loc_dofs, Hh, Hl = contact_local_H(data, CD)
