@@ -320,7 +320,8 @@ def _digits_section(doc: _Doc, data: RunData) -> None:
     base = (f"the bench's double jqinv solve at {cost['base_tol']:g} (the loosest bench tolerance ≤ 1e-10)"
             if cost["base_tol"] is not None else "no double solve (the bench ran no tolerance ≤ 1e-10)")
     doc.p(f"rfverify solve --digits {k} (DESIGN §6.5): a double jqinv solve to 1e-10, Algorithm 1 continued in "
-          f"double-double arithmetic from its last iterate, and a rigorous error bound evaluated exactly, until "
+          f"double-double arithmetic from its last iterate (then in 320-bit arithmetic where double-double "
+          f"stalls), and a rigorous error bound evaluated exactly, until "
           f"v, u, Hr (and r where unique) are proven to {k} digits. 'path time' is the whole of it (what the "
           f"proven digits cost) in the bench's fresh process per run, so it includes loading the compiled "
           f"double-double kernels once (numba's cache; a second path in the same process skips it); 'ratio' = "
@@ -340,7 +341,7 @@ def _digits_section(doc: _Doc, data: RunData) -> None:
         return {"information": "info", "absolute": "abs."}.get(mode) or _dig(r["digits"].get(q))
 
     doc.table(["problem", f"proven to {k}", "v", "u", "Hr", "r", "path time (s)", "double part (s)",
-               "double-double part (s)", "proof (s)", "double solve (s)", "ratio"],
+               "extended part (s)", "proof (s)", "double solve (s)", "ratio"],
               [[r["problem"], r["certified"] if r["status"] not in ("Timeout", "Crashed", "Error") else r["status"],
                 dq(r, "v"), dq(r, "u"), dq(r, "Hr"), dq(r, "r"), _sec(r["time_path"]), _sec(r["time_double"]),
                 _sec(r["time_warm"]), _sec(r["time_certify"]), _sec(r["base_time"]), _fmt(r["ratio"], ".1f")]
@@ -439,7 +440,7 @@ def _glance(data: RunData, table, diags) -> list:
                                                          if cost["median_ratio"] is not None else ""))
             text += (f" — median over the {cost['n_certified']} of {cost['n']} problems proven to {k} digits of "
                      "v, u, Hr (and r where unique); time of the whole path (double solve to 1e-10, double-double "
-                     "continuation, proof) in a fresh process; ratio = path time / the bench's jqinv solve at "
+                     "continuation and, where needed, the 320-bit tail; proof) in a fresh process; ratio = path time / the bench's jqinv solve at "
                      f"{_fmt(cost['base_tol'], 'g')}, per problem (median of {cost['n_ratio']} ratios)")
         else:
             text = f"not measured: none of the {cost['n']} k-digit paths proved {k} digits"
