@@ -33,6 +33,7 @@ import gmpy2
 import numpy as np
 import scipy.sparse as sp
 
+from .ipm import refined_newton, sigma_rule
 from .ldl import _symbolic, fill_reducing_order
 from .system import DDMatrix, ExtendedData, contact_dof_pattern, contact_local_H
 
@@ -581,23 +582,12 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
                 dz = quad_pow(n3, -1, sc, c - quad_pow(n3, -1, sc, W.JT @ dr))
                 return dv, dr, dz
 
+            def residual(a, b, c, dv, dr, dz):
+                return (a - W.M @ dv + W.HtT @ dr, b - W.Ht @ dv + W.J @ dz,
+                        c - quad_pow(n3, 1, sc, dz) - quad_pow(n3, -1, sc, W.JT @ dr))
+
             def newton(a, b, c):
-                dv, dr, dz = core(a, b, c)
-                scale = max(inf_norm(a), inf_norm(b), inf_norm(c), 1e-300)
-                best, steps = math.inf, 0
-                for _ in range(refine_max):
-                    e1 = a - W.M @ dv + W.HtT @ dr
-                    e2 = b - W.Ht @ dv + W.J @ dz
-                    e3 = c - quad_pow(n3, 1, sc, dz) - quad_pow(n3, -1, sc, W.JT @ dr)
-                    res = max(inf_norm(e1), inf_norm(e2), inf_norm(e3)) / scale
-                    if not res < 0.5 * best or res < tiny:
-                        best = min(best, res)
-                        break
-                    best = res
-                    ddv, ddr, ddz = core(e1, e2, e3)
-                    dv, dr, dz = dv + ddv, dr + ddr, dz + ddz
-                    steps += 1
-                return dv, dr, dz, steps, best
+                return refined_newton(core, residual, a, b, c, inf=inf_norm, refine_max=refine_max, floor=tiny)
 
             a, b = -r_d, -r_p
             dv_a, dr_a, dz_a, st_a, res_a = newton(a, b, -sc.lam)
@@ -607,8 +597,7 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
             ds_a = W.JT @ dr_a
             alpha_a = min(1.0, max_step(n3, z, dz_a), max_step(n3, s, ds_a))
             mu_a = float(dot(z + alpha_a * dz_a, s + alpha_a * ds_a) / n)
-            ratio = max(mu_a, 0.0) / mu if mu > 0 else 0.0
-            sigma = min(1.0, ratio ** max(1.0, 3 * alpha_a))
+            sigma = sigma_rule(mu, mu_a, alpha_a)
             mu_c = dot(z, s) / n_cones
             xi = sigma * mu_c * e - product(n3, sc.lam, sc.lam) - product(
                 n3, quad_pow(n3, 1, sc, dz_a), quad_pow(n3, -1, sc, ds_a))
