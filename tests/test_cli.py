@@ -145,3 +145,16 @@ def test_console_script_one_line_error(tmp_path):
 def test_solve_out_to_missing_directory_is_one_line(capsys, tmp_path):
     _one_line_error(capsys, "solve", "bundled:cube", "--out", str(tmp_path / "no" / "x.h5"),
                     expect="does not exist")
+
+
+def test_solve_quiet_silences_the_progress_lines(capsys):
+    """TUTORIAL: the `rfverify solve:` progress lines of --digits go to stderr and --quiet
+    silences them; the result still goes to stdout."""
+    from rfverify.cli import main
+
+    assert main(["solve", "bundled:sphere", "--digits", "6"]) == 0
+    loud = capsys.readouterr()
+    assert "rfverify solve: extended phase" in loud.err
+    assert main(["solve", "bundled:sphere", "--digits", "6", "--quiet"]) == 0
+    quiet = capsys.readouterr()
+    assert quiet.err == "" and "proven to 6 digits" in quiet.out

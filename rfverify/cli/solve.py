@@ -44,6 +44,8 @@ def add_parser(sub) -> None:
                           "keeps everything else in it")
     sol.add_argument("--json", action="store_true",
                      help="print status, iterations, time and final residuals as JSON")
+    sol.add_argument("--quiet", action="store_true",
+                     help="no progress lines on stderr (--digits prints one per stage otherwise)")
     sol.add_argument("--verbose", action="store_true",
                      help="print a settings header and each iteration as it happens (every independent "
                           "component, labelled); with --method clarabel, Clarabel's own log")
