@@ -323,4 +323,3 @@ def test_the_tail_is_skipped_when_its_factor_would_be_too_costly(lattice, monkey
     monkeypatch.setattr(D, "WIDE_MAX_FACTOR_OPS", ops / 2)
     out = rfverify.solve_to_digits(problem, digits=10)
     assert not out.success and out.wide is None and "multiply-subtract pairs" in out.certificate.extra["wide_tail"]
-
