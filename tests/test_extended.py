@@ -281,3 +281,27 @@ def test_extended_run_stops_with_numerical_error_when_a_solve_fails():
 
     out = X.run(data, _start_from(data, res), max_iter=5, backend=Failing(data))
     assert out.status == "NumericalError" and "solve failed" in out.message and out.nit == 0
+
+
+def test_dense_and_blockwise_constructions_of_W_agree():
+    """W̃ = H̃M⁻¹H̃ᵀ built as one dense YᵀY (chosen for a lifted local problem: M = I, H dense)
+    and block by block of M: the same pair blocks to double-double accuracy."""
+    from rfverify.random_problems import random_local_problem
+
+    data = ExtendedData(random_local_problem(30, seed=4))
+    built = {}
+    for dense in (None, False):
+        cs = ContactSpace(data)
+        cs.dense_W = dense
+        cs.Mchol.factor(*cs._M_upper())
+        cs._build_W()
+        built[dense] = (cs.dense_W_used, cs._W)
+    assert built[None][0] is True and built[False][0] is False
+    (ah, al), (bh, bl) = built[None][1], built[False][1]
+    scale = np.abs(bh).max()
+    assert scale > 0 and np.abs((ah - bh) + (al - bl)).max() <= 1e-28 * scale
+    # and a rigid-body problem keeps the block-by-block construction
+    cs = ContactSpace(ExtendedData(rfverify.load("bundled:chute")))
+    cs.Mchol.factor(*cs._M_upper())
+    cs._build_W()
+    assert cs.dense_W_used is False

@@ -30,6 +30,7 @@ from .ldl import DDCholesky, MixedCholesky
 
 njit = numba.njit(cache=True)
 DENSE_BLOCK = 200  # blocks of M up to this size are inverted densely when forming W̃
+DENSE_Y_ENTRIES = 2e7  # largest m × nk of a dense Y = blockdiag(L_b⁻¹)Hᵀ (2 float64 each: 320 MB)
 
 
 def _two_prod_np(a, b):
@@ -287,9 +288,9 @@ def _assemble_dof(n, row_start, row_count, loc_dofs, loc_cnt, Hh, Hl, Gih, Gil, 
 
 
 @njit
-def _dense_schur(Mh, Ml, Hh, Hl, Wh, Wl):
-    """W = H M⁻¹ Hᵀ for a small dense SPD M (double-double Cholesky M = L Lᵀ, Y = L⁻¹Hᵀ,
-    W = YᵀY).  Returns False if M is not positive definite."""
+def _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
+    """Y = L⁻¹Hᵀ (s × k) for a small dense SPD M = L Lᵀ (double-double Cholesky), so that
+    H M⁻¹ Hᵀ = YᵀY.  Returns False if M is not positive definite."""
     s = Mh.shape[0]
     k = Hh.shape[0]
     Lh = np.zeros((s, s))
@@ -307,21 +308,51 @@ def _dense_schur(Mh, Ml, Hh, Hl, Wh, Wl):
             for q in range(j):
                 ah, al = dd.fms_acc(ah, al, Lh[i, q], Ll[i, q], Lh[j, q], Ll[j, q])
             Lh[i, j], Ll[i, j] = dd.div(ah, al, dh, dl)
-    Yh = np.zeros((s, k))
-    Yl = np.zeros((s, k))
     for c in range(k):
         for i in range(s):
             ah, al = Hh[c, i], Hl[c, i]
             for q in range(i):
                 ah, al = dd.fms_acc(ah, al, Lh[i, q], Ll[i, q], Yh[q, c], Yl[q, c])
             Yh[i, c], Yl[i, c] = dd.div(ah, al, Lh[i, i], Ll[i, i])
+    return True
+
+
+@njit
+def _symmetric_gram(Yh, Yl, Wh, Wl):
+    """W = YᵀY (double-double), computing each pair once."""
+    k = Yh.shape[1]
     for a in range(k):
         for b in range(a, k):
             sh, sl = 0.0, 0.0
-            for i in range(s):
+            for i in range(Yh.shape[0]):
                 sh, sl = dd.fma_acc(sh, sl, Yh[i, a], Yl[i, a], Yh[i, b], Yl[i, b])
             Wh[a, b], Wl[a, b] = sh, sl
             Wh[b, a], Wl[b, a] = sh, sl
+
+
+@njit
+def _row_gram(Ah, Al, Wh, Wl):
+    """W = A Aᵀ (double-double) over the rows of A, each pair once: rows are contiguous, so
+    this is the cache-friendly form for a tall Y stored transposed."""
+    k = Ah.shape[0]
+    for a in range(k):
+        for b in range(a, k):
+            sh, sl = 0.0, 0.0
+            for i in range(Ah.shape[1]):
+                sh, sl = dd.fma_acc(sh, sl, Ah[a, i], Al[a, i], Ah[b, i], Al[b, i])
+            Wh[a, b], Wl[a, b] = sh, sl
+            Wh[b, a], Wl[b, a] = sh, sl
+
+
+@njit
+def _dense_schur(Mh, Ml, Hh, Hl, Wh, Wl):
+    """W = H M⁻¹ Hᵀ for a small dense SPD M (Y = L⁻¹Hᵀ, W = YᵀY).  Returns False if M is not
+    positive definite."""
+    Yh = np.zeros((Mh.shape[0], Hh.shape[0]))
+    Yl = np.zeros((Mh.shape[0], Hh.shape[0]))
+    if not _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
+        return False
+    _symmetric_gram(Yh, Yl, Wh, Wl)
     return True
 
 
@@ -640,6 +671,8 @@ class ContactSpace(_Backend):
         self.pos = np.full(valid.shape, -1, dtype=np.int64)
         self.pos[take] = self.chol.positions(gi[take], gj[take])
         self._W = None
+        self.dense_W = None  # None: choose the construction of W̃ by its cost; True/False: force it
+        self.dense_W_used = None
         self.Fh = np.zeros((n, 5, 5))
         self.Fl = np.zeros((n, 5, 5))
 
@@ -665,6 +698,19 @@ class ContactSpace(_Backend):
         dof_bounds = np.searchsorted(self.labels[dof_order], np.arange(self.n_blocks + 1))
         local = np.empty(d.m, dtype=np.int64)
         row_local = np.arange(d.nk) - d.row_start[self.contact_of_row]
+        # rows touching each block: Σ rows_b² is what the block-by-block scatter costs; where a
+        # few blocks touch most rows (a dense H, as in a lifted local problem with M = I), one
+        # dense Y = blockdiag(L_b⁻¹)Hᵀ and W̃ = YᵀY is far cheaper (DECISIONS, "dense W̃")
+        touching = np.unique(blk_of_nz.astype(np.int64) * d.nk + rows_all)
+        rows_per_block = np.bincount(touching // d.nk, minlength=self.n_blocks).astype(np.float64)
+        block_sizes = np.diff(dof_bounds)
+        dense_Y = (float(np.sum(rows_per_block ** 2)) > 4.0 * d.nk * d.nk and d.m * d.nk <= DENSE_Y_ENTRIES
+                   and int(block_sizes.max(initial=0)) <= DENSE_BLOCK)
+        if self.dense_W is not None:  # tests compare both constructions
+            dense_Y = bool(self.dense_W) and int(block_sizes.max(initial=0)) <= DENSE_BLOCK
+        self.dense_W_used = dense_Y
+        if dense_Y:
+            YTh, YTl = np.zeros((d.nk, d.m)), np.zeros((d.nk, d.m))  # Yᵀ: rows = kept rows of H̃
         for b in range(self.n_blocks):
             sel = order[bounds[b]:bounds[b + 1]]
             if sel.size == 0:
@@ -686,6 +732,12 @@ class ContactSpace(_Backend):
                 Mbl = np.zeros((s_, s_))
                 Mbh[local[mr[ms]], local[mc[ms]]] = mh[ms]
                 Mbl[local[mr[ms]], local[mc[ms]]] = ml[ms]
+                if dense_Y:
+                    Ybh, Ybl = np.zeros((s_, rows.size)), np.zeros((s_, rows.size))
+                    if not _dense_half(Mbh, Mbl, Hbh, Hbl, Ybh, Ybl):
+                        raise ArithmeticError(f"block {b} of M is not positive definite in double-double")
+                    YTh[np.ix_(rows, dofs)], YTl[np.ix_(rows, dofs)] = Ybh.T, Ybl.T
+                    continue
                 Wbh, Wbl = np.zeros((rows.size, rows.size)), np.zeros((rows.size, rows.size))
                 if not _dense_schur(Mbh, Mbl, Hbh, Hbl, Wbh, Wbl):
                     raise ArithmeticError(f"block {b} of M is not positive definite in double-double")
@@ -695,6 +747,14 @@ class ContactSpace(_Backend):
             pidx = self._pair_index(ci[keep], cj[keep])
             _scatter_pairs(pidx, row_local[rows[ii]][keep], row_local[rows[jj]][keep],
                            np.ascontiguousarray(Wbh[keep]), np.ascontiguousarray(Wbl[keep]), Wh, Wl)
+        if dense_Y:
+            Gh, Gl = np.zeros((d.nk, d.nk)), np.zeros((d.nk, d.nk))
+            _row_gram(YTh, YTl, Gh, Gl)
+            ii, jj = np.meshgrid(np.arange(5), np.arange(5), indexing="ij")
+            valid = (ii[None] < d.row_count[self.pc][:, None, None]) & (jj[None] < d.row_count[self.pd][:, None, None])
+            gi = d.row_start[self.pc][:, None, None] + ii[None]
+            gj = d.row_start[self.pd][:, None, None] + jj[None]
+            Wh[valid], Wl[valid] = Gh[gi[valid], gj[valid]], Gl[gi[valid], gj[valid]]
         self._W = (Wh, Wl)
 
     def _schur_sparse(self, Hbh, Hbl, dofs):
