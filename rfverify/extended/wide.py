@@ -1,26 +1,23 @@
 """Algorithm 1 continued in multiple precision (gmpy2 ``mpfr``), for the last iterations of the
 k-digit path on problems that need a duality gap below what double-double resolves.
 
-Why it exists (measured, DECISIONS "Wide tail"): the proof converts the M-norm bound
-ε ≈ √(2 rᵀu) into per-component digits, so 10 relative digits of a v* that is tiny against
-the data (a hyperstatic lattice at rest: ‖v*‖∞ ≈ 1e-10 of ‖M⁻¹f‖∞) need rᵀu ≈ 1e-48, while the
-double-double engine loses its cones' resolution near μ ≈ 1e-40: λ₂ of a cone whose λ₁ is
-O(1) is then below double-double's unit roundoff, and its iterates stop being interior in
-exact arithmetic.
+Why it exists (measured, DECISIONS "Multiple-precision tail"): the proof converts the M-norm
+bound ε ≈ √(2 rᵀu) into per-component digits, so 10 relative digits of a v* that is tiny
+against the data (a hyperstatic lattice at rest: ‖v*‖∞ ≈ 1e-10 of ‖M⁻¹f‖∞) need rᵀu ≈ 1e-48.
+Double-double fails there twice: λ₂ of a cone whose λ₁ is O(1) falls below its unit roundoff
+(the iterates leave the cones in exact arithmetic), and the Newton matrices have condition
+≈ 1/μ along redundant sticking contacts, so their float64 and double-double factors lose
+definiteness near μ = 1e-41 whatever precision the residuals have.
 
-What is wider here, and what is not:
+So everything is wider here: the iterate (v, r̃, z), the residuals, every cone kernel (NT
+scaling, Q_{p^k}, products, step lengths; the formulas of :mod:`.cones`, vectorised over cones
+in numpy object arrays) and the Newton solve — the dof-space matrix M + BᵀB, B = F⁻¹H̃, formed
+and factored densely in ``bits``-bit arithmetic (:class:`DenseDofSpace`), each solve refined
+against the unreduced three-block system.  The cost is O(m³) at worst, so the k-digit path
+runs this tail only where double-double stalled and the factorisation is affordable
+(:mod:`rfverify.digits`).
 
-* the iterate (v, r̃, z), the residuals of the unreduced Newton system, and every cone kernel
-  (NT scaling, Q_{p^k}, products, step lengths) are ``mpfr`` numbers of ``bits`` bits, held in
-  numpy object arrays and vectorised over cones;
-* the Newton *solve* is the double-double back end of :mod:`.system`, fed with the scaling
-  rounded to double-double and used as a preconditioner: each solve is refined against the
-  unreduced three-block system evaluated in ``mpfr`` until its residual is ~``bits`` deep.
-  Refinement converges because the scaled contact-space matrix the back end factors is well
-  conditioned (eigenvalues ≥ 1) whatever μ is; the wide arithmetic only has to carry what
-  that matrix does not see.
-
-gmpy2's precision is set in a local context for the duration of :func:`run`; nothing leaks.
+gmpy2's precision is set in a local context for the duration of each call; nothing leaks.
 """
 
 from __future__ import annotations
@@ -67,11 +64,6 @@ def expansion(x: np.ndarray, terms: int) -> list:
         parts.append(p)
         rest = rest - p
     return parts
-
-
-def to_dd(x: np.ndarray):
-    h, l = expansion(x, 2)
-    return h, l
 
 
 def _zeros(n: int) -> np.ndarray:
@@ -141,24 +133,12 @@ class Scaling:
     (a = λ₁(p), b = λ₂(p), unit direction (d1, d2) of p̄; L1 cones: a = b = p)."""
 
     p: np.ndarray
-    p_inv: np.ndarray
     lam: np.ndarray
     a: np.ndarray
     b: np.ndarray
     d1: np.ndarray
     d2: np.ndarray
     q1: np.ndarray  # L1 cones: p
-
-    def spec_dd(self) -> np.ndarray:
-        """The layout of :func:`.cones.nt_scaling`'s ``spec`` (rows of (a, b, d1, d2) as hi/lo)."""
-        n3, n1 = len(self.a), len(self.q1)
-        spec = np.zeros((n3 + n1, 8))
-        for j, arr in enumerate((self.a, self.b, self.d1, self.d2)):
-            spec[:n3, 2 * j], spec[:n3, 2 * j + 1] = to_dd(arr)
-        if n1:
-            qh, ql = to_dd(self.q1)
-            spec[n3:, 0], spec[n3:, 1], spec[n3:, 2], spec[n3:, 3] = qh, ql, qh, ql
-        return spec
 
 
 def nt_scaling(n3: int, z, s):
@@ -192,8 +172,7 @@ def nt_scaling(n3: int, z, s):
     lam = _join(n3, m * g, m * (cs * sb1 + cz * zb1), m * (cs * sb2 + cz * zb2), _sqrt(zt * st))
     qt = _sqrt(_sqrt(st / zt)) if len(zt) else zt
     p = _join(n3, q * v0, q * v1, q * v2, qt)
-    p_inv = _join(n3, v0 / q, -v1 / q, -v2 / q, 1 / qt)
-    return Scaling(p=p, p_inv=p_inv, lam=lam, a=q * l1v, b=q / l1v, d1=d1, d2=d2, q1=qt), -1
+    return Scaling(p=p, lam=lam, a=q * l1v, b=q / l1v, d1=d1, d2=d2, q1=qt), -1
 
 
 def quad_pow(n3: int, k: int, sc: Scaling, y) -> np.ndarray:
