@@ -27,7 +27,8 @@ BITS = wide.DEFAULT_BITS
 
 def _cones(rng, n3, n1, gap_exp):
     """Interior cone vectors: L3 cones with λ₂/λ₁ down to 10^-gap_exp (far below what
-    double-double resolves when gap_exp > 32), as mpfr, built exactly from λ and a direction."""
+    double-double resolves when gap_exp > 32), as mpfr built from λ₁, λ₂ and a direction in
+    the working precision (so λ₂ is exact to ~1e-96 relative: far inside the cone)."""
     out = []
     for c in range(n3):
         l1 = gmpy2.mpfr(float(rng.uniform(0.5, 2.0)))
