@@ -326,8 +326,10 @@ def dof_space_ordering(data: ExtendedData, CD=None):
 
 class DenseDofSpace:
     """The dof-space Newton matrix S = M + H̃ᵀG⁻¹H̃ = M + BᵀB (B = F⁻¹H̃, per contact) as a
-    dense m × m mpfr matrix with a dense Cholesky factor (lower triangle): O(m³) multiple-precision operations
-    per iteration, so for problems with up to a few hundred dofs (``max_dofs``).
+    dense m × m mpfr matrix with a Cholesky factor in its lower triangle, in a minimum-degree
+    order that skips exact zeros: Σ c_j² multiply-subtract pairs per factorisation
+    (:func:`dof_space_ordering`), O(m³) at worst — which is why :mod:`rfverify.digits` gives
+    the tail only problems within ``WIDE_MAX_DOFS`` and ``WIDE_MAX_FACTOR_OPS``.
 
     Why not the double-double back ends: S and the contact-space S' = I + F⁻¹W̃F⁻ᵀ both have
     condition numbers near 1/μ along redundant sticking contacts (W̃ singular), and near
