@@ -14,8 +14,9 @@ DESCRIPTION = """\
 Prove a lower bound on the correct significant digits of a solution (v, u, r) of the convex
 relaxation (docs/DESIGN.md §6): an extended-precision point near the solution set (stored in
 the solution file by 'solve --digits --out', or computed by a double solve and double-double
-iterations, continued in 320-bit arithmetic where double-double stalls) is evaluated in exact arithmetic, and the bound ||v - v*||_M <= sqrt(g'M^-1 g + 2
-r'u) is carried to the solution. Exit code 0 only when --digits are proven."""
+iterations, continued in 320-bit arithmetic where double-double stalls) is evaluated in exact
+arithmetic, and the bound ||v - v*||_M <= sqrt(g'M^-1 g + 2 r'u) is carried to the solution.
+Exit code 0 only when --digits are proven."""
 
 
 def add_parser(sub) -> None:
