@@ -324,3 +324,15 @@ def test_the_tail_is_skipped_when_its_factor_would_be_too_costly(lattice, monkey
     monkeypatch.setattr(D, "WIDE_MAX_FACTOR_OPS", ops / 2)
     out = rfverify.solve_to_digits(problem, digits=10)
     assert not out.success and out.wide is None and "multiply-subtract pairs" in out.certificate.extra["wide_tail"]
+
+
+def test_a_singular_contact_factor_in_the_tail_is_a_status_not_a_crash(lattice, monkeypatch):
+    problem, _ = lattice
+
+    def singular(data, sc):
+        raise ArithmeticError("a contact's factor is singular")
+
+    monkeypatch.setattr(wide, "contact_factor_inverse", singular)
+    out = rfverify.solve_to_digits(problem, digits=10)
+    assert not out.success and out.wide is not None and out.wide.status == "NumericalError"
+    assert "singular" in out.certificate.extra["wide_tail"]

@@ -557,7 +557,12 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
                 status, message = "NumericalError", f"iteration {k}: cone {bad} is not strictly interior"
                 break
             trace["centrality"].append(centrality(n3, sc, dot(z, s) / n_cones))
-            if not backend.update(sc):
+            try:
+                ok = backend.update(sc)
+            except ArithmeticError as exc:  # a singular contact factor
+                status, message = "NumericalError", f"iteration {k}: {exc}"
+                break
+            if not ok:
                 status, message = "NumericalError", f"iteration {k}: the {backend.name} matrix lost definiteness"
                 break
 
