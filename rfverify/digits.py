@@ -301,7 +301,8 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             note = "not run (the candidate is farther from the point than any tail could fix)"
         elif data.m > WIDE_MAX_DOFS:
             note = f"not run ({data.m} dofs > {WIDE_MAX_DOFS}: its dense matrix would not fit)"
-        elif (ops := wide.dof_space_ordering(data)[1]) > WIDE_MAX_FACTOR_OPS:
+        elif (ordering := wide.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:
+            ops = ordering[1]
             note = (f"not run (its factorisation would take {ops:.1e} multiply-subtract pairs > "
                     f"{WIDE_MAX_FACTOR_OPS:.0e}, about {ops * WIDE_SECONDS_PER_OP:.0f} s per factorisation)")
         else:
@@ -316,7 +317,7 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
                 t1 = time.perf_counter()
                 p1 = driver.proof_seconds
                 tail = wide.run(data, {"v": (it.v.h, it.v.l), "r_t": (it.r_t.h, it.r_t.l), "z": (it.z.h, it.z.l)},
-                                until=driver, max_iter=wide_max_iter, bits=wide_bits,
+                                until=driver, max_iter=wide_max_iter, bits=wide_bits, perm=ordering[0],
                                 progress=tick("multiple-precision"))
                 seconds_wide = time.perf_counter() - t1 - (driver.proof_seconds - p1)
                 note = f"{tail.status}: {tail.message}" + (f"; {driver.gave_up}" if driver.gave_up else "")

@@ -318,19 +318,6 @@ def _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
 
 
 @njit
-def _symmetric_gram(Yh, Yl, Wh, Wl):
-    """W = YᵀY (double-double), computing each pair once."""
-    k = Yh.shape[1]
-    for a in range(k):
-        for b in range(a, k):
-            sh, sl = 0.0, 0.0
-            for i in range(Yh.shape[0]):
-                sh, sl = dd.fma_acc(sh, sl, Yh[i, a], Yl[i, a], Yh[i, b], Yl[i, b])
-            Wh[a, b], Wl[a, b] = sh, sl
-            Wh[b, a], Wl[b, a] = sh, sl
-
-
-@njit
 def _row_gram(Ah, Al, Wh, Wl):
     """W = A Aᵀ (double-double) over the rows of A, each pair once: rows are contiguous, so
     this is the cache-friendly form for a tall Y stored transposed."""
@@ -352,7 +339,7 @@ def _dense_schur(Mh, Ml, Hh, Hl, Wh, Wl):
     Yl = np.zeros((Mh.shape[0], Hh.shape[0]))
     if not _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
         return False
-    _symmetric_gram(Yh, Yl, Wh, Wl)
+    _row_gram(np.ascontiguousarray(Yh.T), np.ascontiguousarray(Yl.T), Wh, Wl)
     return True
 
 

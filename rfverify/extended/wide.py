@@ -30,7 +30,7 @@ import gmpy2
 import numpy as np
 import scipy.sparse as sp
 
-from .ipm import refined_newton, sigma_rule
+from .ipm import ExtendedResult, refined_newton, sigma_rule
 from .ldl import _symbolic, fill_reducing_order
 from .system import DDMatrix, ExtendedData, contact_dof_pattern, contact_local_H
 
@@ -338,14 +338,14 @@ class DenseDofSpace:
 
     name = "dense dof-space (M + H̃ᵀG⁻¹H̃), multiple precision"
 
-    def __init__(self, data: ExtendedData, W: "WideData"):
+    def __init__(self, data: ExtendedData, W: "WideData", perm: np.ndarray | None = None):
         self.data = data
         self.W = W
         m = data.m
         CD = contact_dof_pattern(data)
-        # rows and columns in a minimum-degree order: the factor keeps M + BᵀB's sparsity,
-        # and the elimination below skips the exact zeros
-        self.perm, _ = dof_space_ordering(data, CD)
+        # rows and columns in a minimum-degree order (``perm`` if the caller has it already):
+        # the factor keeps M + BᵀB's sparsity, and the elimination below skips the exact zeros
+        self.perm = dof_space_ordering(data, CD)[0] if perm is None else np.asarray(perm, dtype=np.int64)
         self.iperm = np.empty_like(self.perm)
         self.iperm[self.perm] = np.arange(m)
         loc_dofs, Hh, Hl = contact_local_H(data, CD)
@@ -482,19 +482,11 @@ def handover(data: ExtendedData, iterates, bits: int = DEFAULT_BITS, min_central
 
 
 @dataclass
-class WideResult:
-    """Outcome of :func:`run` (see :class:`.ipm.ExtendedResult`)."""
+class WideResult(ExtendedResult):
+    """Outcome of :func:`run`: as :class:`.ipm.ExtendedResult`, with v, r̃, z as mpfr arrays
+    and the working precision ``bits``."""
 
-    v: np.ndarray
-    r_t: np.ndarray
-    z: np.ndarray
-    status: str
-    message: str
-    nit: int
-    bits: int
-    trace: dict = field(default_factory=dict)
-    backend: str = ""
-    seconds: float = 0.0
+    bits: int = DEFAULT_BITS
 
 
 class WideData:
@@ -509,11 +501,12 @@ class WideData:
 
 
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits: int = DEFAULT_BITS,
-        refine_max: int = 8, gamma_max: float = 0.99, progress=None) -> WideResult:
+        refine_max: int = 8, gamma_max: float = 0.99, perm=None, progress=None) -> WideResult:
     """Algorithm 1 in ``bits``-bit arithmetic from ``start`` = {"v", "r_t", "z"}, each a
     (hi, lo) pair of float64 arrays (a double-double iterate) or an mpfr array.
     ``until(WideIterate)`` is called at every iterate; True stops the run ("Stopped").
-    Same predictor–corrector, σ rule and step rule as :func:`.ipm.run`."""
+    Same predictor–corrector, σ rule and step rule as :func:`.ipm.run`.  ``perm``: the
+    factor's ordering from :func:`dof_space_ordering`, if the caller computed it."""
     t0 = time.perf_counter()
     n3, nz, n = data.n3, data.nz, data.n
     n_cones = n3 + data.n1
@@ -522,7 +515,7 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
     status, message = "MaxIterations", f"reached max_iter = {max_iter}"
     with _context(bits):
         W = WideData(data)
-        backend = DenseDofSpace(data, W)
+        backend = DenseDofSpace(data, W, perm=perm)
 
         def lift(x):
             return from_dd(*x) if isinstance(x, tuple) else np.asarray(x, dtype=object) + 0
@@ -603,4 +596,4 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
             trace["solve_residual"].append(max(res_a, res))
             v, r_t, z = v + alpha * dv, r_t + alpha * dr, z + alpha * dz
             gamma = min(gamma_max, 0.9 + (gamma_max - 0.9) * alpha)
-    return WideResult(v, r_t, z, status, message, k, bits, trace, backend.name, time.perf_counter() - t0)
+    return WideResult(v, r_t, z, status, message, k, trace, backend.name, time.perf_counter() - t0, bits=bits)
