@@ -41,9 +41,13 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     refines every linear solve to 4·eps (``refine_tol=None``) instead of the solver's default
     inexact-Newton stop, so that the digits of agreement measure rounding alone (the default
     stops a solve at residuals of 1e-4 of its right-hand side, which this comparison would
-    count as error: 11–12 digits on the bundled problems instead of 14–16).
+    count as error: 11–12 digits on the bundled problems instead of 14–16), and unless
+    ``extended_below`` is, it runs in the extended arithmetic from the first iteration
+    (``extended_below=None``) instead of the solver's default float64 start, so that every
+    iteration's digits measure the same arithmetic.
     """
     options.setdefault("refine_tol", None)
+    options.setdefault("extended_below", None)
     say = progress or (lambda message: None)
     import reference
     from reference import jordan as RJ

@@ -308,6 +308,8 @@ def test_hard_scene_instances_verified(name, method, tmp_path):
 def test_refinement_resolves_the_primal_block(tmp_path):
     # Refinement that stops at a 0.5 contraction rate (LAPACK's) ended this lattice at
     # pinfeas 1.5e-9 (AlmostSolved); the 0.8 rate solves it.  Measured, see data/hard/README.md.
+    # It also needs the float64 phase to end at the first float64 solve that falls short
+    # (Settings.extended_below): switching on the criterion alone ended it InsufficientProgress.
     problem = rfverify.load(HARD_DIR / "Lattice-ndof-360-nc-274-1.hdf5")
     res, chk = _solve_and_recheck(problem, "jqinv", tmp_path)
     assert res.status is Status.SOLVED, res.message
@@ -352,7 +354,8 @@ def test_always_regularising_stalls_on_redundant_contacts():
 class _ProtocolOnly:
     """A form seen through the KKTSolver protocol only: any other attribute access fails."""
 
-    ALLOWED = {"name", "symmetric", "update", "solve", "factor_count", "unregularised_count", "failure"}
+    ALLOWED = {"name", "symmetric", "update", "solve", "set_refinement_dtype", "factor_count", "unregularised_count",
+               "failure"}
 
     def __init__(self, inner):
         object.__setattr__(self, "_inner", inner)
@@ -487,3 +490,38 @@ def test_auto_is_jqinv_where_jqinv_solves_and_stops_on_the_users_word():
     # The time limit holds for the whole sequence.
     limited = solve(random_local_problem(60, seed=0), time_limit=1e-3)
     assert limited.status is Status.MAX_TIME and len(limited.extras["attempts"]) == 1
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_float64_start_then_extended_arithmetic(seed):
+    """The default run starts in float64 and switches to longdouble for good at the iteration
+    it reports, never later than the first iterate whose criterion is ≤ extended_below, and
+    its answer is verified; extended_below=None is longdouble throughout."""
+    problem = random_problem(30, 60, seed=seed)
+    res = solve(problem, method="jqinv", keep_iterates=True, split_components=False)
+    assert res.success and res.criterion <= 1e-10
+    (k,) = res.extras["extended_from"]
+    assert 0 < k < len(res.extras["iterates"])
+    dtypes = [v.dtype for v, r_t, z in res.extras["iterates"]]
+    # Iterate k is the float64 one the switch converts; the steps from it on are longdouble.
+    assert set(dtypes[:k + 1]) == {np.dtype(np.float64)} and set(dtypes[k + 1:]) == {np.dtype(np.longdouble)}
+    crit = res.trace["criterion"]
+    assert np.all(crit[:k] > 1e-6)
+    full = solve(problem, method="jqinv", keep_iterates=True, split_components=False, extended_below=None)
+    assert full.extras["extended_from"] == [0] and full.success
+    assert {v.dtype for v, r_t, z in full.extras["iterates"]} == {np.dtype(np.longdouble)}
+    # Both are answers to the same problem: they agree far beyond the tolerance's scale.
+    assert np.max(np.abs(res.v - full.v)) <= 1e-6 * max(np.max(np.abs(full.v)), 1.0)
+
+
+def test_data_beyond_float64_comfort_start_extended():
+    p = random_problem(4, 6, seed=2)
+    big = rfverify.Problem.from_arrays(p.M * 1e150, p.H * 1e150, p.f * 1e150, p.w, p.mu, p.mu_r)
+    res = solve(big, method="jqinv", split_components=False)
+    assert res.extras["extended_from"] == [0]
+
+
+@pytest.mark.parametrize("bad", [0.0, -1e-6, float("nan"), True, "1e-6"])
+def test_extended_below_is_checked(bad):
+    with pytest.raises(ValueError, match="extended_below"):
+        solve(rfverify.load("bundled:cube"), extended_below=bad)

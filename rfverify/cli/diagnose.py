@@ -16,7 +16,9 @@ the mpmath reference and print the digits of agreement of the next iterate, max 
 non-positive while the exact one is positive), and where and why a failed run stopped.
 
 The double run refines every linear solve to 4·eps (solver setting refine_tol=None), not to the
-default inexact-Newton stop, so that the digits measure rounding alone."""
+default inexact-Newton stop, and uses the extended arithmetic from the first iteration (setting
+extended_below=None), not the default float64 start, so that the digits measure the rounding of
+one arithmetic alone."""
 
 EPILOG = """\
 Exit codes: 0 the double run was Solved; 1 it was not (MaxIterations, NumericalError, ...) —

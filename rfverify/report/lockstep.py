@@ -46,8 +46,9 @@ def component_problem(problem: Problem, lp, group) -> tuple[Problem, np.ndarray]
 
 
 # The bench runs the solver with its default settings; the diagnosis repeats that run
-# (diagnose alone would refine every solve to 4·eps, see rfverify.diagnosis.diagnose).
-AS_BENCHED = {"refine_tol": Settings.refine_tol}
+# (diagnose alone would refine every solve to 4·eps and start in the extended arithmetic, see
+# rfverify.diagnosis.diagnose).
+AS_BENCHED = {"refine_tol": Settings.refine_tol, "extended_below": Settings.extended_below}
 
 
 def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int = 100, dps: int = 40,

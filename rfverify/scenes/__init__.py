@@ -40,7 +40,7 @@ from .analysis import StateMix, contact_state_mix, contacts_per_body, free_veloc
 from .assembly import contact_matrix, mass_matrix, relative_velocity
 from .geometry import Bodies, Contacts, Statics, detect_contacts
 from .library import ALIASES, ALL_SCENES, FE_SCENES, SCENES, Scene, World, resolve_scene
-from .stepper import MoreauJean, SceneError, StepRecord
+from .stepper import STEP_SOLVER_SETTINGS, MoreauJean, SceneError, StepRecord
 from ..problem import Problem
 
 GENERATOR_VERSION = "2"
@@ -174,7 +174,7 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
             "count": count, "trace_index": K, "stage": phi, "size": size,
             "steps": steps, "dumped_step": dumped.step, "time": dumped.time,
             "parameters": p, "units": sc.units, "notes": world.notes,
-            "solver": {"method": method, "tol": tol, "max_iter": max_iter},
+            "solver": {"method": method, "tol": tol, "max_iter": max_iter, **STEP_SOLVER_SETTINGS},
             "solves": solves, "failed_solves": sum(not r.success for r in records),
             "timing": {"base_configuration": round(t_base, 3),
                        "stage_without_solves": round(t_stage - sum(r.solve_time for r in records), 3),

@@ -88,6 +88,12 @@ class StepRecord:
     desaxce_solves: int = 0
 
 
+STEP_SOLVER_SETTINGS = {"sigma_rule": "paper", "start": "paper", "extended_below": None}
+"""Solver settings of every step solve, fixed here: a scene's trajectory, hence its problems,
+depends on each step's answer to the last digits, so the published collections must not change
+when the solver's speed-oriented defaults do (these are the settings they were generated with)."""
+
+
 @dataclass
 class MoreauJean:
     """Moreau–Jean (θ = 1) time stepper for a rigid-body scene (see the module docstring).
@@ -199,7 +205,7 @@ class MoreauJean:
 
         def run(p):
             try:
-                return solve(p, method=self.method, tol=self.tol, max_iter=self.max_iter)
+                return solve(p, method=self.method, tol=self.tol, max_iter=self.max_iter, **STEP_SOLVER_SETTINGS)
             except RfverifyError as exc:
                 raise SceneError(f"Moreau-Jean step {self.steps_done}: the solver raised "
                                  f"{type(exc).__name__}: {exc}") from exc

@@ -160,6 +160,7 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         timings=timings, method=method, settings=settings, presolve=presolve,
         extras={"factorisations": sum(o.factorisations for o in runs),
                 "unregularised_factorisations": sum(o.unregularised_factorisations for o in runs),
+                "extended_from": [o.extended_from for o in runs],
                 "r_t": r_t, "z": z,
                 "n_cones": {"L3": lp.n3, "L1": lp.n1},
                 "component_runs": [{"status": o.status, "message": o.message, "nit": o.nit, "trace": o.trace}
@@ -269,14 +270,13 @@ def _judge(problem, lp, dofs, rows, settings):
     :mod:`rfverify.measures` on the component's data in the original variables (u = Hᵀv + w,
     r = P r̃, as returned: in float64), evaluated in the solver's residual precision.  With ∞-norm measures, every component
     meeting tol implies the whole problem does (numerators are maxima, denominators grow)."""
-    dtype = np.longdouble if settings.extended_residuals else np.float64
     contacts = np.unique(lp.keep[rows] // SPACEDIM)
     cols = (SPACEDIM * contacts[:, None] + np.arange(SPACEDIM)).ravel()
     M_c = problem.M_sym[dofs][:, dofs].tocsc()
     H_c = problem.H[dofs][:, cols].tocsc()
     f_c, w_c = problem.f[dofs], problem.w[cols]
-    data = MeasureData(M_c, H_c, f_c, w_c, problem.mu[contacts], problem.mu_r[contacts],
-                       data_scales_from_arrays(M_c, H_c, f_c, w_c), Arithmetic(dtype))
+    scales = data_scales_from_arrays(M_c, H_c, f_c, w_c)
+    data = {}  # MeasureData per arithmetic, built on first use
     local = np.searchsorted(cols, lp.keep[rows])
     scale = lp.scale[rows]
     HT64 = H_c.T.tocsr()
@@ -284,10 +284,16 @@ def _judge(problem, lp, dofs, rows, settings):
     def judge(v, r_t):
         # Judge what would be returned: the iterate rounded to float64, u = Hᵀv + w in float64.
         # (A longdouble iterate of a hyperstatic lattice met 1e-10 with r ~ 600·‖f‖ of
-        # self-stress; rounded, its Hr lost 1e-9 of f.)
+        # self-stress; rounded, its Hr lost 1e-9 of f.)  The arithmetic is the iterate's: float64
+        # in the run's float64 phase (Settings.extended_below), where the criterion is far above
+        # the rounding of either; solve() judges the returned answer in longdouble regardless.
+        dtype = np.dtype(np.longdouble if np.asarray(v).dtype == np.longdouble else np.float64)
+        if dtype not in data:
+            data[dtype] = MeasureData(M_c, H_c, f_c, w_c, problem.mu[contacts], problem.mu_r[contacts], scales,
+                                      Arithmetic(dtype))
         v64 = np.asarray(v, dtype=np.float64)
         r = np.zeros(cols.size)
         r[local] = scale * np.asarray(r_t, dtype=np.float64)
-        return data.measures(v64, HT64 @ v64 + w_c, r)
+        return data[dtype].measures(v64, HT64 @ v64 + w_c, r)
 
     return judge

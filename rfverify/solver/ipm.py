@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import jordan
 from ..errors import ConeDomainError
 from .cones import ProductCone
 from .kkt import FORMS, ScalingPoint
@@ -47,6 +48,8 @@ class RunResult(Outcome):
     unregularised_factorisations: int
     tol: float
     iterates: list = field(default_factory=list)
+    # Iteration from which the run used the extended arithmetic (None: float64 throughout).
+    extended_from: int | None = None
 
 
 def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, settings: Settings,
@@ -63,19 +66,19 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     """
     t0 = time.perf_counter() if t0 is None else t0
     t_run = time.perf_counter()
-    ext = np.longdouble if settings.extended_residuals else np.float64
-    jd = np.longdouble if settings.extended_jordan else np.float64
-    work = np.result_type(ext, jd)
-    system = FORMS[form](M, H_t, J, cones, dtype_ref=np.longdouble if settings.refine_extended else np.float64,
+    arithmetic = _Arithmetic(settings, M, H_t, J, f, w_t)
+    # Data beyond [2^-128, 2^128] (squares near float64's range) start in the extended arithmetic.
+    extended = settings.extended_below is None or not jordan.moderate(
+        *(np.asarray(x, dtype=np.float64) for x in (M.data, H_t.data, f, w_t)))
+    extended_from = 0 if extended else None
+    work, jd, ref = arithmetic.dtypes(extended)
+    system = FORMS[form](M, H_t, J, cones, dtype_ref=ref,
                          static_reg=settings.static_reg, adaptive_reg=settings.adaptive_reg,
                          refine_max=settings.refine_max,
                          refine_tol=None if settings.refine_tol == "adaptive" else settings.refine_tol,
                          forcing=REFINE_FORCING if settings.refine_tol == "adaptive" else None)
     term = Termination(settings, callback, t0)
-    Mx, Hx, HTx = M.astype(work), H_t.astype(work), H_t.T.tocsr().astype(work)
-    Jx, JTx = J.astype(work), J.T.tocsr().astype(work)
-    f_x = np.asarray(f, dtype=work)
-    w_x = np.asarray(w_t, dtype=work)
+    Mx, Hx, HTx, Jx, JTx, f_x, w_x = arithmetic.operators(work)
     m, nk = M.shape[0], H_t.shape[0]
 
     # Infeasible start: v = 0, r̃ with r̃_N = 1 on every contact (so Jᵀr̃ = e), z = e.
@@ -95,6 +98,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     verdict = None
     current = None
     k = 0
+    double_short = False  # a float64 solve fell short of what the iteration needs
     try:
         for k in range(settings.max_iter + 1):
             if keep_iterates:
@@ -118,6 +122,16 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             verdict = term.observe(k, judged, (pinf, dinf, mu), (v.copy(), r_t.copy(), z.copy()))
             if verdict is not None:
                 break
+            if not extended and (judged.max <= settings.extended_below or double_short):
+                extended, extended_from = True, k
+                work, jd, ref = arithmetic.dtypes(extended)
+                Mx, Hx, HTx, Jx, JTx, f_x, w_x = arithmetic.operators(work)
+                v, r_t, z = v.astype(work), r_t.astype(work), z.astype(work)
+                system.set_refinement_dtype(ref)
+                s = JTx @ r_t
+                r_d = Mx @ v - HTx @ r_t - f_x
+                r_p = Hx @ v + w_x - Jx @ z
+                gap = float(z @ s)
             if lam2_z <= 0 or lam2_s <= 0:
                 which, c, val = ("z", cz, lam2_z) if lam2_z <= 0 else ("Jᵀr̃", cs, lam2_s)
                 verdict = Verdict(Status.NUMERICAL_ERROR,
@@ -166,6 +180,9 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             _check_finite(k, "corrector", form, corr)
             ds = JTx @ corr.dr
             timings["solve"] += time.perf_counter() - ts
+            # In float64 a solve must end by the inexact-Newton test or at its target; one
+            # that stalls between them needs the extended arithmetic from the next iteration.
+            double_short = not extended and not (pred.converged and corr.converged)
             alpha_max = max_step(corr.dz.astype(jd), ds.astype(jd))
             alpha = min(1.0, gamma * alpha_max)
             record.update(sigma=sigma, alpha_aff=alpha_aff, alpha=alpha, gamma=gamma,
@@ -203,7 +220,36 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                      pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o), measures=judged_o,
                      trace={key: np.asarray(val) for key, val in trace.items()}, timings=timings,
                      factorisations=system.factor_count, unregularised_factorisations=system.unregularised_count,
-                     tol=settings.tol, iterates=iterates)
+                     tol=settings.tol, iterates=iterates, extended_from=extended_from)
+
+
+class _Arithmetic:
+    """The run's two arithmetics: float64 while the criterion is above
+    ``settings.extended_below``, then the extended settings (longdouble where asked).  The
+    data as operators in each dtype are built on first use."""
+
+    def __init__(self, settings, M, H_t, J, f, w_t):
+        self.settings = settings
+        self.data = (M, H_t, J, f, w_t)
+        self._ops = {}
+
+    def dtypes(self, extended: bool):
+        """(work, jordan, refinement) dtypes of the phase."""
+        st = self.settings
+        if not extended:
+            return np.float64, np.float64, np.float64
+        ext = np.longdouble if st.extended_residuals else np.float64
+        jd = np.longdouble if st.extended_jordan else np.float64
+        return np.result_type(ext, jd), jd, np.longdouble if st.refine_extended else np.float64
+
+    def operators(self, work):
+        """(M, H̃, H̃ᵀ, J, Jᵀ, f, w̃) in ``work``."""
+        key = np.dtype(work)
+        if key not in self._ops:
+            M, H_t, J, f, w_t = self.data
+            self._ops[key] = (M.astype(work), H_t.astype(work), H_t.T.tocsr().astype(work), J.astype(work),
+                              J.T.tocsr().astype(work), np.asarray(f, dtype=work), np.asarray(w_t, dtype=work))
+        return self._ops[key]
 
 
 def _least_squares_start(system, cones, f, w_t, JT, v, r_t, z, jd, work):
@@ -253,6 +299,8 @@ def _sigma(rule: str, mu_aff: float, mu: float, alpha_aff: float) -> float:
     if rule == "paper":
         expo = max(1.0, 3 * alpha_aff) if mu < 1e-5 else 1.0
         return min(1.0, ratio ** expo)
+    if rule == "mehrotra":
+        return min(1.0, ratio ** 3)
     expo = max(1.0, 3 * alpha_aff ** 2) if mu > 1e-5 else max(1.0, 3 * alpha_aff)
     return min(1.0, ratio ** expo) / 5
 

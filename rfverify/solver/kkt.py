@@ -27,9 +27,10 @@ form: blockwise over the three block rows, ‖rhs_i − (A x)_i‖∞ / (‖A_i�
 with ‖A_i‖∞ the exact row-sum norms of that unreduced operator
 (:attr:`KKTSystem.block_norms`), not of the matrix a form factors.
 
-The interior-point driver sees a form only through two calls (the ``KKTSolver`` protocol):
-``update(point) -> bool`` (scale and factor; False when the factorisation fails) and
-``solve(a, b, c, adapt=...) -> SolveInfo``.  Static and adaptive regularisation and
+The interior-point driver sees a form only through three calls (the ``KKTSolver`` protocol):
+``update(point) -> bool`` (scale and factor; False when the factorisation fails),
+``solve(a, b, c, adapt=...) -> SolveInfo`` and ``set_refinement_dtype(dtype)`` (the driver's
+precision schedule).  Static and adaptive regularisation and
 iterative refinement are the form's own business.
 """
 
@@ -70,10 +71,12 @@ class SolveInfo:
     # Ended by the inexact-Newton test (every block residual at most ``forcing`` × its
     # right-hand side) before the backward error reached the refinement target.
     forced: bool = False
+    # Ended by that test or at the refinement target (not by the step limit or a stall).
+    converged: bool = False
 
 
 class KKTSolver(Protocol):
-    """The two calls the interior-point driver makes (see the module docstring)."""
+    """The calls the interior-point driver makes (see the module docstring)."""
 
     name: str
     symmetric: bool
@@ -84,6 +87,8 @@ class KKTSolver(Protocol):
     def update(self, point: ScalingPoint) -> bool: ...
 
     def solve(self, a, b, c, *, adapt: bool = False) -> SolveInfo: ...
+
+    def set_refinement_dtype(self, dtype_ref) -> None: ...
 
 
 def _amax(x) -> float:
@@ -146,27 +151,36 @@ class KKTSystem:
         # Exact operator in the refinement precision: one sparse matrix maps (dv, dr̃, dz) to
         # (a, b, Jᵀdr̃) — one matvec per refinement step instead of five — and c is completed
         # with the cone operators, never formed.
-        self.dtype_ref = dtype_ref
         Z = sp.csr_matrix
-        self.A_ref = sp.bmat([[self.M, -self.H_t.T, None],
-                              [-self.H_t, None, self.J],
-                              [Z((self.nz, self.m)), self.J.T, Z((self.nz, self.nz))]],
-                             format="csr").astype(dtype_ref)
+        self._A = sp.bmat([[self.M, -self.H_t.T, None],
+                           [-self.H_t, None, self.J],
+                           [Z((self.nz, self.m)), self.J.T, Z((self.nz, self.nz))]], format="csr")
+        self._A_ref = {}
         self._Mcoo = sp.triu(self.M, format="coo")
         self._Hcoo = self.H_t.tocoo()
         self.factor_count = 0
         self._solver = None
         self.refine_max = refine_max
         self.forcing = forcing
-        eps_ref = float(np.finfo(dtype_ref).eps)
-        self.refine_target = 4 * eps_ref if refine_tol is None else refine_tol
-        # A refined backward error this far above the target means δ is in the way.
-        self.reg_fallback_above = max(1e3 * eps_ref, 10 * (refine_tol or 0.0))
+        self.refine_tol = refine_tol
+        self.set_refinement_dtype(dtype_ref)
         self.failure = ""
         # Row sums of |A| of the first two block rows (dual, primal) are fixed; the third
         # (complementarity) block row's change with the point (see _set_point).
-        rows = np.asarray(abs(self.A_ref[: self.m + self.nk]).sum(axis=1)).ravel()
+        rows = np.asarray(abs(self._A[: self.m + self.nk]).sum(axis=1)).ravel()
         self.block_norms = [float(rows[: self.m].max(initial=0.0)), float(rows[self.m:].max(initial=0.0)), 0.0]
+
+    def set_refinement_dtype(self, dtype_ref):
+        """Evaluate refinement residuals in ``dtype_ref`` from now on (the driver's precision
+        schedule); the default target is 4·eps of it."""
+        self.dtype_ref = np.dtype(dtype_ref)
+        if self.dtype_ref not in self._A_ref:
+            self._A_ref[self.dtype_ref] = self._A.astype(self.dtype_ref)
+        self.A_ref = self._A_ref[self.dtype_ref]
+        eps_ref = float(np.finfo(self.dtype_ref).eps)
+        self.refine_target = 4 * eps_ref if self.refine_tol is None else self.refine_tol
+        # A refined backward error this far above the target means δ is in the way.
+        self.reg_fallback_above = max(1e3 * eps_ref, 10 * (self.refine_tol or 0.0))
 
     def _set_pattern(self, rows, cols, size):
         self.N = size
@@ -376,7 +390,8 @@ class KKTSystem:
                 break
             prev = rel
             x = x + self.solve_once(r)
-        return SolveInfo(best_x[:m], best_x[m:mk], best_x[mk:], float(best_rel), steps, forced=forced)
+        return SolveInfo(best_x[:m], best_x[m:mk], best_x[mk:], float(best_rel), steps, forced=forced,
+                         converged=forced or best_rel <= self.refine_target)
 
 
 class JQinvSystem(KKTSystem):

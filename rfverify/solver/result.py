@@ -71,6 +71,16 @@ class Settings:
         Jordan operations, NT scaling and step lengths in numpy.longdouble.
     extended_residuals : bool
         Residuals, right-hand sides and iterates in numpy.longdouble.
+    extended_below : float or None
+        When the three ``extended_*`` settings take effect.  ``None``: from the first
+        iteration (also when the data have entries beyond [2^-128, 2^128]).  A number
+        (default 1e-6): the run starts in float64 throughout and
+        switches for good, from the next iteration on, once the criterion is at most this
+        or a float64 linear solve ends short of what the iteration needs (neither the
+        inexact-Newton test nor the refinement target met) — the early iterations, far from
+        the solution, do not need the extra bits, which cost about five times as much
+        (1368-contact Chute at 1e-8: 0.83 s → 0.45 s, same iterations; docs/DECISIONS.md).
+        ``extras["extended_from"]`` gives the iteration of the switch for each run.
     refine_max : int
         Maximum iterative-refinement steps per linear solve (0 disables refinement).
         Refinement also stops, keeping its best iterate, once a step reduces the backward
@@ -125,6 +135,7 @@ class Settings:
     start: str = "paper"
     extended_jordan: bool = True
     extended_residuals: bool = True
+    extended_below: float | None = 1e-6
     refine_max: int = 10
     refine_extended: bool = True
     refine_tol: float | str | None = "adaptive"
@@ -145,10 +156,14 @@ class Settings:
             raise ValueError(f"max_iter = {self.max_iter!r} must be ≥ 1")
         if self.start not in ("paper", "least_squares"):
             raise ValueError(f"start = {self.start!r} must be 'paper' or 'least_squares'")
-        if self.sigma_rule not in ("paper", "siconos"):
+        if self.sigma_rule not in ("paper", "siconos", "mehrotra"):
             raise ValueError(f"sigma_rule = {self.sigma_rule!r} must be 'paper' or 'siconos'")
         if not 0 < self.gamma0 < 1:
             raise ValueError(f"gamma0 = {self.gamma0!r} must be in (0, 1)")
+        if self.extended_below is not None and not (isinstance(self.extended_below, (int, float))
+                                                    and not isinstance(self.extended_below, bool)
+                                                    and self.extended_below > 0):
+            raise ValueError(f"extended_below = {self.extended_below!r} must be None or a positive number")
         if self.refine_max < 0:
             raise ValueError("refine_max must be ≥ 0")
         if not (self.refine_tol is None or self.refine_tol == "adaptive" or (

@@ -91,6 +91,8 @@ class Termination:
         status, message = verdict.status, verdict.message
         if status in (Status.SOLVED, Status.STOPPED) and current is not None:
             return status, message, current
+        if self.best is None:  # the first iterate already failed (e.g. its residuals overflowed)
+            return status, message, current
         merit, kb, bundle = self.best
         if merit <= self.settings.almost_factor * self.settings.tol:
             return (Status.ALMOST_SOLVED, f"{status}: {message}; best iterate (iteration {kb}) reached "
