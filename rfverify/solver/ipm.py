@@ -299,8 +299,6 @@ def _sigma(rule: str, mu_aff: float, mu: float, alpha_aff: float) -> float:
     if rule == "paper":
         expo = max(1.0, 3 * alpha_aff) if mu < 1e-5 else 1.0
         return min(1.0, ratio ** expo)
-    if rule == "mehrotra":
-        return min(1.0, ratio ** 3)
     expo = max(1.0, 3 * alpha_aff ** 2) if mu > 1e-5 else max(1.0, 3 * alpha_aff)
     return min(1.0, ratio ** expo) / 5
 

@@ -156,7 +156,7 @@ class Settings:
             raise ValueError(f"max_iter = {self.max_iter!r} must be ≥ 1")
         if self.start not in ("paper", "least_squares"):
             raise ValueError(f"start = {self.start!r} must be 'paper' or 'least_squares'")
-        if self.sigma_rule not in ("paper", "siconos", "mehrotra"):
+        if self.sigma_rule not in ("paper", "siconos"):
             raise ValueError(f"sigma_rule = {self.sigma_rule!r} must be 'paper' or 'siconos'")
         if not 0 < self.gamma0 < 1:
             raise ValueError(f"gamma0 = {self.gamma0!r} must be in (0, 1)")
