@@ -43,6 +43,16 @@ def problem_set(args):
     yield "random 1000", random_problem(600, 1000, seed=3)
 
 
+def _value(text: str):
+    """An option value: a Python literal (None, True, 1e-6, ...) or else the string itself."""
+    import ast
+
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--files", nargs="*", default=[])
@@ -52,9 +62,9 @@ def main(argv=None):
     ap.add_argument("--methods", default="jqinv,clarabel")
     ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "rfverify-bench-digits"))
     ap.add_argument("--options", default="",
-                    help="solver options for the Algorithm 1 methods, e.g. sigma_rule=paper,start=paper")
+                    help="solver options for the Algorithm 1 methods, e.g. sigma_rule=siconos,extended_below=None")
     args = ap.parse_args(argv)
-    options = dict(kv.split("=", 1) for kv in args.options.split(",") if kv)
+    options = {k: _value(v) for k, v in (kv.split("=", 1) for kv in args.options.split(",") if kv)}
     methods = args.methods.split(",")
     print(f"{'problem':<16} {'n':>5} " + " ".join(f"{m + ' s':>12} {'crit':>8} {'it':>3}" for m in methods)
           + "   ratio")

@@ -79,7 +79,7 @@ class Settings:
         or a float64 linear solve ends short of what the iteration needs (neither the
         inexact-Newton test nor the refinement target met) — the early iterations, far from
         the solution, do not need the extra bits, which cost about five times as much
-        (1368-contact Chute at 1e-8: 0.83 s → 0.45 s, same iterations; docs/DECISIONS.md).
+        (1368-contact Chute at 1e-8: 1.19 s → 0.73 s, same iterations; docs/DECISIONS.md).
         ``extras["extended_from"]`` gives the iteration of the switch for each run.
     refine_max : int
         Maximum iterative-refinement steps per linear solve (0 disables refinement).
