@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import jordan
 from ..errors import ConeDomainError
 from .cones import ProductCone
 from .kkt import FORMS, ScalingPoint
@@ -67,9 +66,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     t0 = time.perf_counter() if t0 is None else t0
     t_run = time.perf_counter()
     arithmetic = _Arithmetic(settings, M, H_t, J, f, w_t)
-    # Data beyond [2^-128, 2^128] (squares near float64's range) start in the extended arithmetic.
-    extended = settings.extended_below is None or not jordan.moderate(
-        *(np.asarray(x, dtype=np.float64) for x in (M.data, H_t.data, f, w_t)))
+    extended = settings.extended_below is None or not _float64_safe(M.data, H_t.data, f, w_t)
     extended_from = 0 if extended else None
     work, jd, ref = arithmetic.dtypes(extended)
     system = FORMS[form](M, H_t, J, cones, dtype_ref=ref,
@@ -221,6 +218,16 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                      trace={key: np.asarray(val) for key, val in trace.items()}, timings=timings,
                      factorisations=system.factor_count, unregularised_factorisations=system.unregularised_count,
                      tol=settings.tol, iterates=iterates, extended_from=extended_from)
+
+
+# Data entries above this start the run in the extended arithmetic: their products and squares
+# in residuals and norms would approach float64's range (tiny entries are harmless: they
+# underflow gracefully, and the cone kernels rescale rows on their own).
+FLOAT64_SAFE_MAGNITUDE = 2.0 ** 128
+
+
+def _float64_safe(*arrays) -> bool:
+    return all(np.all(np.abs(np.asarray(x, dtype=np.float64)) <= FLOAT64_SAFE_MAGNITUDE) for x in arrays)
 
 
 class _Arithmetic:

@@ -73,7 +73,7 @@ class Settings:
         Residuals, right-hand sides and iterates in numpy.longdouble.
     extended_below : float or None
         When the three ``extended_*`` settings take effect.  ``None``: from the first
-        iteration (also when the data have entries beyond [2^-128, 2^128]).  A number
+        iteration (also when the data have entries above 2^128 in magnitude).  A number
         (default 1e-6): the run starts in float64 throughout and
         switches for good, from the next iteration on, once the criterion is at most this
         or a float64 linear solve ends short of what the iteration needs (neither the
