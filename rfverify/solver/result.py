@@ -74,12 +74,12 @@ class Settings:
     extended_below : float or None
         When the three ``extended_*`` settings take effect.  ``None``: from the first
         iteration (also when the data have entries above 2^128 in magnitude).  A number
-        (default 1e-6): the run starts in float64 throughout and
-        switches for good, from the next iteration on, once the criterion is at most this
-        or a float64 linear solve ends short of what the iteration needs (neither the
-        inexact-Newton test nor the refinement target met) — the early iterations, far from
-        the solution, do not need the extra bits, which cost about five times as much
-        (1368-contact Chute at 1e-8: 1.19 s → 0.73 s, same iterations; docs/DECISIONS.md).
+        (default 1e-6): the run starts in float64 throughout and switches for good at the
+        first iterate whose criterion is at most this, or after an iteration whose float64
+        linear solve ended short of what the iteration needs (neither the inexact-Newton test
+        nor the refinement target met).  The early iterations, far from the solution, do not
+        need the extra bits, which cost about five times as much: same iterations, 18–44%
+        less time on the problems of benchmarks/bench_clarabel.py (docs/DECISIONS.md).
         ``extras["extended_from"]`` gives the iteration of the switch for each run.
     refine_max : int
         Maximum iterative-refinement steps per linear solve (0 disables refinement).
