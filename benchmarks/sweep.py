@@ -2,18 +2,20 @@
 every problem?
 
 Solves each problem with two option sets A and B (JSON, e.g. ``--a '{}' --b
-'{"sigma_rule": "siconos"}'``) of one method at ``--tol`` and judges each answer by rfverify's
-one criterion (:func:`rfverify.measures.measures`, recomputed in longdouble from the returned
-(v, u, r)), never by the solver's status.  Prints one line per problem and the counts verified,
-iterations and seconds of A and B.  Not a test: a sweep for deciding defaults.
+'{"sigma_rule": "siconos"}'``) of one method (``--method``, default ``auto``) at ``--tol`` and
+judges each answer by rfverify's one criterion (:func:`rfverify.measures.measures`, recomputed
+in longdouble from the returned (v, u, r)), never by the solver's status.  Prints one line per
+problem and the counts verified, iterations and seconds of A and B.  Not a test: a sweep for
+deciding defaults.  It counts verified answers only: forward accuracy at the same criterion
+(which the tests of the FE sticking block and of ``certify`` watch) is not in it.
 
-The problem set (about 100 problems, rebuilt deterministically and cached under ``--cache``):
-the bundled problems, ``tests/data`` (hard instances, scene samples, the elastic block), the
-example report's scenes, every scene family at two fresh seeds, fresh ElasticBlock problems,
-Lattices of 176/274/474 contacts, random problems of 100/400/900 contacts, the lifted local
-problems with a singular Delassus operator (60/100/160 contacts, seeds 0-2) and the generated
-collections at their published sizes.  ``--files`` adds your own; ``--quick`` keeps only the
-committed files.
+The problem set (76 problems, rebuilt deterministically and cached under ``--cache``): the
+bundled problems, ``tests/data`` (hard instances, scene samples, the elastic block), the example
+report's scenes, every rigid scene family at seeds 11 and 7 (sizes 80 and 40), two ElasticBlock
+problems, Lattices of 176/274/474 contacts, random problems of 100/400/900 contacts, the lifted
+local problems with a singular Delassus operator (60/100/160 contacts, seeds 0-2) and
+SpheresPile, Chute and PrimitiveSoup at their published sizes.  ``--files`` adds your own;
+``--quick`` keeps only the committed files (and ``--files``).
 
     python benchmarks/sweep.py --b '{"sigma_rule": "siconos"}'
     python benchmarks/sweep.py --a '{"extended_below": null}' --tol 1e-8
