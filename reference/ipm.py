@@ -416,7 +416,9 @@ class Solver:
     # ------------------------------------------------------------------ one iteration
     def step(self, it: Iterate, gamma, sigma_rule: str = "paper", residuals: Residuals | None = None) -> Step:
         """One iteration of Algorithm 1 from the interior iterate ``it`` with step-length
-        fraction ``gamma`` (α = min(1, γ·α_max)) and σ rule ``"paper"`` or ``"siconos"``.
+        fraction ``gamma`` (α = min(1, γ·α_max)) and σ rule ``"paper"``, ``"siconos"`` or
+        ``"mehrotra"`` (σ = max(0.2, min(1, (μ_a/μ)³)), the far phase of the production
+        solver's ``hybrid``).
         Raises :class:`reference.jordan.ReferenceDomainError` when z or Jᵀr̃ is not interior."""
         ctx, lifted = self.ctx, self.lifted
         mpf = ctx.mpf
@@ -449,9 +451,13 @@ class Solver:
                          for zc, dzc, sc, dsc in zip(z, dz_a, s, ds_a))
         mu, mu_a = res.mu, gap_a / self.n
         ratio = max(mu_a, mpf(0)) / mu
+        if sigma_rule not in ("paper", "siconos", "mehrotra"):
+            raise ValueError(f"sigma_rule = {sigma_rule!r} must be 'paper', 'siconos' or 'mehrotra'")
         if sigma_rule == "paper":
             expo = max(mpf(1), 3 * alpha_a) if mu < mpf("1e-5") else mpf(1)
             sigma = min(mpf(1), ratio ** expo)
+        elif sigma_rule == "mehrotra":
+            sigma = max(mpf("0.2"), min(mpf(1), ratio ** 3))
         else:
             expo = max(mpf(1), 3 * alpha_a ** 2) if mu > mpf("1e-5") else max(mpf(1), 3 * alpha_a)
             sigma = min(mpf(1), ratio ** expo) / 5

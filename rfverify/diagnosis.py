@@ -19,6 +19,7 @@ import numpy as np
 from .lifting import lift
 from .problem import Problem
 from .solver import solve
+from .solver.ipm import rule_at
 
 
 def _digits(a, b) -> float:
@@ -73,7 +74,8 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
         try:
             # Same step-length fraction γ and σ rule as the double run at this iteration.
             step = exact.step(exact.iterate(*_reference_layout(lp, order, v_full, r_k, z_k)),
-                              gamma=float(tr["gamma"][k]), sigma_rule=res.settings.sigma_rule)
+                              gamma=float(tr["gamma"][k]),
+                              sigma_rule=rule_at(res.settings.sigma_rule, float(tr["criterion"][k])))
         except RJ.ReferenceDomainError as exc:
             nan = float("nan")
             records.append({**record, "digits_v": nan, "digits_r_t": nan, "digits_z": nan,

@@ -25,6 +25,7 @@ class ProductCone:
         self.n1 = n1
         self.nz = 3 * n3 + n1
         self.n_cones = n3 + n1
+        self._quad_cache = []  # [(array, QuadOperator)], most recent first (quad_operator)
         # Block-diagonal pattern (z index pairs within one cone) in the order of
         # concatenate(Q3.ravel(), Q1.ravel()) for stacks Q3 (n3,3,3), Q1 (n1,1,1).
         c3 = np.arange(n3)
@@ -91,8 +92,16 @@ class ProductCone:
                                     p, y, op="quad_apply"))
 
     def quad_operator(self, p) -> "QuadOperator":
-        """Q_p as a reusable operator (det p computed once; see :class:`QuadOperator`)."""
-        return QuadOperator(self, p)
+        """Q_p as a reusable operator (det p computed once; see :class:`QuadOperator`).  The
+        operators of the last few arrays are kept: an iteration asks for Q_p and Q_{p⁻¹} of
+        the same arrays in the driver and in the KKT form.  The key is the array object
+        itself (held, so its identity cannot be reused), never its contents."""
+        for held, op in self._quad_cache:
+            if held is p:
+                return op
+        op = QuadOperator(self, p)
+        self._quad_cache = [(p, op)] + self._quad_cache[:3]
+        return op
 
     def inverse(self, x):
         return self.flat(self._call(jordan.inverse_rows, x, op="inverse"))

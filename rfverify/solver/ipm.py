@@ -78,12 +78,15 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     Mx, Hx, HTx, Jx, JTx, f_x, w_x = arithmetic.operators(work)
     m, nk = M.shape[0], H_t.shape[0]
 
-    # Infeasible start: v = 0, r̃ with r̃_N = 1 on every contact (so Jᵀr̃ = e), z = e.
+    # Infeasible start: v = 0, r̃ with r̃_N = 1 on every contact (so Jᵀr̃ = e), z = e
+    # (or θ·e, see velocity_scale).
     v = np.zeros(m, dtype=work)
     e = cones.identity(work)
     r_t = np.zeros(nk, dtype=work)
     r_t[J.tocsc().indices[np.flatnonzero(e)]] = 1.0  # rows of the cone heads = N components
     z = e.copy()
+    if settings.start == "velocity_scaled":
+        z *= velocity_scale(w_x)
     if settings.start == "least_squares":
         v, r_t, z = _least_squares_start(system, cones, f_x, w_x, JTx, v, r_t, z, jd, work)
 
@@ -161,7 +164,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             max_step = cones.stepper(zj, sj)  # predictor and corrector step from the same point
             alpha_aff = min(1.0, max_step(pred.dz.astype(jd), ds_a.astype(jd)))
             mu_aff = float((z + alpha_aff * pred.dz) @ (s + alpha_aff * ds_a)) / n_contacts
-            sigma = _sigma(settings.sigma_rule, mu_aff, mu, alpha_aff)
+            sigma = _sigma(rule_at(settings.sigma_rule, judged.max), mu_aff, mu, alpha_aff)
 
             # ---- corrector
             mu_c = gap / cones.n_cones
@@ -259,6 +262,15 @@ class _Arithmetic:
         return self._ops[key]
 
 
+def velocity_scale(w_t) -> float:
+    """θ = max(1, rms(w̃)) of ``start="velocity_scaled"`` (z = θ·e).  At v = 0 the primal
+    equation reads J z = w̃, so a z far below the free velocities w̃ starts the run far from
+    its own equations: on the Chutes (rms(w̃) ≈ 2.5, entries up to 30) the unit start took
+    ~8 iterations of short steps while μ grew tenfold, and z = 0.1·e never converged."""
+    w = np.asarray(w_t, dtype=np.float64)
+    return max(1.0, float(np.sqrt(np.mean(np.square(w))))) if w.size else 1.0
+
+
 def _least_squares_start(system, cones, f, w_t, JT, v, r_t, z, jd, work):
     """The Newton step from the origin at identity scaling (z = Jᵀr̃ = e, so the
     complementarity row reads dz + Jᵀdr̃ = 0), then each of z and s = Jᵀr̃ shifted by
@@ -301,11 +313,31 @@ def _info(record, component) -> IterationInfo:
                          solve_residual=float(record["solve_residual"]), elapsed=float(record["time"]))
 
 
+# sigma_rule="hybrid": Mehrotra's cubic σ, bounded below by HYBRID_SIGMA_FLOOR, while the
+# iterate's criterion is above HYBRID_SWITCH; the paper's rule below it (Settings.sigma_rule).
+HYBRID_SWITCH = 1e-4
+HYBRID_SIGMA_FLOOR = 0.2
+
+
+def rule_at(rule: str, criterion: float) -> str:
+    """The σ rule one iteration uses: ``rule`` itself, or for ``hybrid`` "mehrotra" (the
+    floored cube of :func:`_sigma`) while ``criterion`` (the iterate's, before the step) is
+    above :data:`HYBRID_SWITCH` and "paper" from there on.  The diagnosis's lockstep asks the
+    same question of the double run's trace."""
+    if rule == "hybrid":
+        return "mehrotra" if criterion > HYBRID_SWITCH else "paper"
+    return rule
+
+
 def _sigma(rule: str, mu_aff: float, mu: float, alpha_aff: float) -> float:
     ratio = max(mu_aff, 0.0) / mu if mu > 0 else 0.0
     if rule == "paper":
         expo = max(1.0, 3 * alpha_aff) if mu < 1e-5 else 1.0
         return min(1.0, ratio ** expo)
+    if rule == "mehrotra":
+        # The floor: with σ far below it the FE sticking blocks ended 1.3–2.8× less accurate
+        # at the same criterion than under the paper's rule (docs/DECISIONS.md, "σ rule").
+        return max(HYBRID_SIGMA_FLOOR, min(1.0, ratio ** 3))
     expo = max(1.0, 3 * alpha_aff ** 2) if mu > 1e-5 else max(1.0, 3 * alpha_aff)
     return min(1.0, ratio ** expo) / 5
 

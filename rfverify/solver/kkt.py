@@ -91,6 +91,14 @@ class KKTSolver(Protocol):
     def set_refinement_dtype(self, dtype_ref) -> None: ...
 
 
+# A predictor solve that needed more refinement steps than this converged at the rate
+# δ/(δ + λ_min) of a regularisation in the way (see KKTSystem.solve), even if it ended at the
+# inexact-Newton test: the other factorisation is tried, as for a solve that ended far above
+# its target.  (On Chute 1368 a float64 predictor took 7 steps and the corrector stalled at
+# 10; without δ both took 1–2.)
+SLOW_REFINEMENT_STEPS = 3
+
+
 def _amax(x) -> float:
     """‖x‖∞, taken on the float64 image of x: a norm needs no more than float64's relative
     precision, and longdouble arithmetic costs five times as much."""
@@ -269,13 +277,13 @@ class KKTSystem:
         if self.symmetric:
             self.Qp = self.cones.quad_operator(self.p)
             self.Qp_inv = self.cones.quad_operator(self.p_inv)
-            blocks = (self.cones.quad_blocks(self.p), self.cones.quad_blocks(self.p_inv))
+            # Q_{p⁻¹}'s blocks are also the varying block of form (14): kept for factor().
+            self.Qp_inv_blocks = self.cones.quad_blocks(self.p_inv)
+            blocks = (self.cones.quad_blocks(self.p), self.Qp_inv_blocks)
         else:
             blocks = (self.cones.arrow_blocks(self.s), self.cones.arrow_blocks(self.z))
-        rows3 = np.zeros(self.nz)
-        for b in blocks:
-            np.add.at(rows3, self.cones.bd_rows, np.abs(b))
-        self.block_norms[2] = float(rows3.max(initial=0.0))
+        rows3 = sum(np.bincount(self.cones.bd_rows, weights=np.abs(b), minlength=self.nz) for b in blocks)
+        self.block_norms[2] = float(np.max(rows3, initial=0.0))
 
     @property
     def operator_norm(self) -> float:
@@ -286,13 +294,15 @@ class KKTSystem:
     @property
     def Qp64(self):
         if self._Qp64 is None:
-            self._Qp64 = self.cones.quad_operator(np.asarray(self.p, dtype=np.float64))
+            self._Qp64 = self.Qp if self.p.dtype == np.float64 else \
+                self.cones.quad_operator(np.asarray(self.p, dtype=np.float64))
         return self._Qp64
 
     @property
     def Qp_inv64(self):
         if self._Qp_inv64 is None:
-            self._Qp_inv64 = self.cones.quad_operator(np.asarray(self.p_inv, dtype=np.float64))
+            self._Qp_inv64 = self.Qp_inv if self.p_inv.dtype == np.float64 else \
+                self.cones.quad_operator(np.asarray(self.p_inv, dtype=np.float64))
         return self._Qp_inv64
 
     def apply(self, x):
@@ -319,8 +329,9 @@ class KKTSystem:
     def solve(self, a, b, c, *, adapt: bool = False) -> SolveInfo:
         """Solve with iterative refinement (:meth:`refined`); with ``adapt`` (the predictor
         solve of an iteration) also run the adaptive regularisation: when refinement ends
-        far above its target, factor the same matrix without δ (or, if this iteration already
-        went without δ, with it) and keep whichever solves better.
+        far above its target, or needs more than :data:`SLOW_REFINEMENT_STEPS` steps to get
+        anywhere, factor the same matrix without δ (or, if this iteration already went without
+        δ, with it) and keep whichever solves better.
 
         Why it is needed: on sticking contacts J Q_{p⁻²} Jᵀ goes to zero, and where H̃ has
         dependent rows (redundant contacts) δ then dominates the dr̃ block in the directions
@@ -330,7 +341,8 @@ class KKTSystem:
         """
         info = self.refined(a, b, c)
         if adapt and self.adaptive_reg and self.regularisable:
-            if info.backward_error > self.reg_fallback_above and not info.forced:
+            slow = info.steps > SLOW_REFINEMENT_STEPS
+            if (info.backward_error > self.reg_fallback_above and not info.forced) or slow:
                 if self.regularised:
                     if self.refactor_unregularised():
                         retry = self.refined(a, b, c)
@@ -409,7 +421,7 @@ class JQinvSystem(KKTSystem):
                                         [m + nk + cones.bd_cols, m + nk + np.arange(nz)], m + nk + nz)
 
     def factor(self):
-        self._factor_quasidefinite(self.cones.quad_blocks(self.p_inv), np.ones(self.nz))
+        self._factor_quasidefinite(self.Qp_inv_blocks, np.ones(self.nz))
 
     def solve_once(self, rhs):
         x = self._solver.solve(np.asarray(rhs, dtype=np.float64))

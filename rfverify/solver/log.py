@@ -30,7 +30,7 @@ def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
         "cones:    " + ", ".join(f"{v} {k}" for k, v in cone_counts.items() if v)
         + " (full: L3×L3, coulomb/rolling: L3, normal: L1)",
         f"settings: tol = {st.tol:g} (rfverify.measures criterion), max_iter = {st.max_iter}, "
-        f"sigma_rule = {st.sigma_rule}, gamma0 = {st.gamma0}"
+        f"start = {st.start}, sigma_rule = {st.sigma_rule}, gamma0 = {st.gamma0}"
         + (f", time_limit = {st.time_limit:g} s" if st.time_limit else ""),
         f"          extended: jordan = {st.extended_jordan}, residuals = {st.extended_residuals}, "
         f"refinement = {st.refine_extended} (max {st.refine_max} steps, refine_tol = {st.refine_tol}), "

@@ -56,14 +56,21 @@ class Settings:
         A run that ends otherwise but whose best iterate reached ``almost_factor·tol`` is
         ``AlmostSolved``.
     max_iter : int
-    sigma_rule : {"paper", "siconos"}
+    sigma_rule : {"hybrid", "paper", "siconos"}
         ``paper``: σ = min(1, (μ_a/μ)^e), e = max(1, 3α_a) when μ < 1e-5, else e = 1.
         ``siconos``: e = max(1, 3α_a²) when μ > 1e-5, else e = max(1, 3α_a), and σ/5.
+        ``hybrid`` (default): Mehrotra's σ = min(1, (μ_a/μ)³), but at least 0.2, while the
+        iterate's criterion is above 1e-4, then the paper's rule.  Far from the solution the
+        cube cuts μ faster than the paper's e = 1 (σ ≈ 0.3–0.6 there); the floor keeps the
+        path close enough to the central path that the answer's forward error at a given
+        criterion is no worse than under the paper's rule (docs/DECISIONS.md, "σ rule").
     gamma0 : float
         Step-to-boundary fraction of the first iteration (paper 0.9; Siconos 0.999);
         afterwards γ = 0.9 + 0.09 α of the previous step.
-    start : {"paper", "least_squares"}
-        ``paper``: v = 0, r̃ = 1 on the normal rows (Jᵀr̃ = e), z = e.  ``least_squares``: the
+    start : {"velocity_scaled", "paper", "least_squares"}
+        ``paper``: v = 0, r̃ = 1 on the normal rows (Jᵀr̃ = e), z = e.  ``velocity_scaled``
+        (default): the same with z = θ·e, θ = max(1, rms(w̃)), so that z starts on the scale
+        of the free velocities w̃ that the primal equation H̃v + w̃ = Jz asks it to match.  ``least_squares``: the
         Newton step at identity scaling from the origin (a least-squares point of the primal
         and dual equations, CVXOPT's and Clarabel's start), each cone part shifted by
         (1 + its most negative λ2)·e where it is not interior.
@@ -74,12 +81,13 @@ class Settings:
     extended_below : float or None
         When the three ``extended_*`` settings take effect.  ``None``: from the first
         iteration (also when the data have entries above 2^128 in magnitude).  A number
-        (default 1e-6): the run starts in float64 throughout and switches for good at the
+        (default 1e-9): the run starts in float64 throughout and switches for good at the
         first iterate whose criterion is at most this, or after an iteration whose float64
         linear solve ended short of what the iteration needs (neither the inexact-Newton test
-        nor the refinement target met).  The early iterations, far from the solution, do not
-        need the extra bits, which cost about five times as much: same iterations, 18–44%
-        less time on the problems of benchmarks/bench_clarabel.py (docs/DECISIONS.md).
+        nor the refinement target met).  Iterations above that criterion do not need the extra
+        bits, which cost about five times as much: at the default tol = 1e-10 the last one or
+        two iterations run extended, at tol = 1e-8 usually none (the robustness sweep at 1e-10
+        verified the same problems with 1e-9 as with 1e-6 and with None; docs/DECISIONS.md).
         ``extras["extended_from"]`` gives the iteration of the switch for each run.
     refine_max : int
         Maximum iterative-refinement steps per linear solve (0 disables refinement).
@@ -130,12 +138,12 @@ class Settings:
     tol: float = 1e-10
     almost_factor: float = 100.0
     max_iter: int = 100
-    sigma_rule: str = "paper"
+    sigma_rule: str = "hybrid"
     gamma0: float = 0.9
-    start: str = "paper"
+    start: str = "velocity_scaled"
     extended_jordan: bool = True
     extended_residuals: bool = True
-    extended_below: float | None = 1e-6
+    extended_below: float | None = 1e-9
     refine_max: int = 10
     refine_extended: bool = True
     refine_tol: float | str | None = "adaptive"
@@ -154,10 +162,10 @@ class Settings:
             raise ValueError(f"tol = {self.tol!r} must be a positive finite number")
         if self.max_iter < 1:
             raise ValueError(f"max_iter = {self.max_iter!r} must be ≥ 1")
-        if self.start not in ("paper", "least_squares"):
-            raise ValueError(f"start = {self.start!r} must be 'paper' or 'least_squares'")
-        if self.sigma_rule not in ("paper", "siconos"):
-            raise ValueError(f"sigma_rule = {self.sigma_rule!r} must be 'paper' or 'siconos'")
+        if self.start not in ("velocity_scaled", "paper", "least_squares"):
+            raise ValueError(f"start = {self.start!r} must be 'velocity_scaled', 'paper' or 'least_squares'")
+        if self.sigma_rule not in ("hybrid", "paper", "siconos"):
+            raise ValueError(f"sigma_rule = {self.sigma_rule!r} must be 'hybrid', 'paper' or 'siconos'")
         if not 0 < self.gamma0 < 1:
             raise ValueError(f"gamma0 = {self.gamma0!r} must be in (0, 1)")
         if self.extended_below is not None and not (isinstance(self.extended_below, (int, float))
