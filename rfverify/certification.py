@@ -183,11 +183,11 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say):
     outside) the cone boundaries, and an infeasible interior-point run shrinks its primal
     residual and μ at the same rate, so a start pushed into the cones from it never gets its
     residual below the cone margins (measured on the bundled Chute: ratio 5 at every step)."""
-    from .digits import ProofDriver, _start_from, extend
+    from .digits import DOUBLE_SETTINGS, ProofDriver, _start_from, extend
     from .extended.system import ExtendedData, choose_backend
     from .solver import solve
 
-    double = solve(problem, method="auto", tol=1e-10)
+    double = solve(problem, method="auto", tol=1e-10, **DOUBLE_SETTINGS)
     data = ExtendedData(problem)
     system = choose_backend(data)
     driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say)

@@ -74,6 +74,14 @@ def point_from_iterate(data: ExtendedData, v, r_t) -> Point:
     return Point(v.h.copy(), v.l.copy(), rh, rl)
 
 
+DOUBLE_SETTINGS = {"sigma_rule": "paper"}
+"""Settings of the double solve the k-digit path continues (a caller's options override
+them).  Its iterate is a start, not an answer: the extended phase continues the central path
+from it, so the paper's centring rule is kept here — from the default (hybrid) rule's
+iterate the hyperstatic Lattice 474's double-double phase stalled at μ = 1e-18 and its
+multiple-precision tail took 74 s in all, against μ = 3e-40 and 40 s (measured,
+docs/DECISIONS.md).  The double solve is ≤ 1% of the path's time either way."""
+
 RECENT = 8
 """Iterates the driver keeps: candidates for the wide tail's start, and the last three are
 proven when no proof succeeded."""
@@ -213,7 +221,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     significant digits (1 … 15; see :mod:`rfverify.proof.bound` for what "digits" means when a
     quantity is zero).  ``progress(message)`` receives one line per stage.
 
-    Stages: the double solve (``method``, ``tol``, ``max_iter``), Algorithm 1 in double-double
+    Stages: the double solve (``method``, ``tol``, ``max_iter``, :data:`DOUBLE_SETTINGS` unless
+    ``options`` say otherwise), Algorithm 1 in double-double
     (``extended_max_iter`` iterations at most, Newton back end ``backend``), and — only when
     that ends without a proof, on a problem of at most ``WIDE_MAX_DOFS`` dofs whose dof-space
     factor costs at most ``WIDE_MAX_FACTOR_OPS`` — Algorithm 1
@@ -225,7 +234,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                                    fix="use method='auto' (default) or an Algorithm 1 form")
     say = progress or (lambda msg: None)
     t0 = time.perf_counter()
-    double = solve(problem, method=method, tol=tol, max_iter=max_iter, **options)
+    double = solve(problem, method=method, tol=tol, max_iter=max_iter, **{**DOUBLE_SETTINGS, **options})
     t_double = time.perf_counter() - t0
     say(f"double solve ({double.method}{' by auto' if method == 'auto' else ''}): {double.status} in "
         f"{double.nit} iterations, {t_double:.2f} s")

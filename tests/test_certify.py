@@ -157,3 +157,32 @@ def test_high_precision_residuals_of_a_ten_digit_solution_are_tiny():
     ten = rfverify.solve_to_digits(problem, digits=10)
     res = high_precision_residuals(problem, ten.v, ten.u, ten.r, dps=40)
     assert res["dynamics"] < 1e-14 and res["velocity"] < 1e-14
+
+
+def test_the_k_digit_path_continues_a_centred_double_solve(monkeypatch):
+    """The double solve that the k-digit path and certify's polishing continue uses
+    digits.DOUBLE_SETTINGS (the paper's centring rule: measured, from the default hybrid
+    rule's iterate the Lattice 474's double-double phase stalled 22 orders of μ earlier); a
+    caller's own option still wins."""
+    from rfverify import certification, digits, solver
+
+    seen = {"digits": [], "certify": []}
+    real = solver.solve
+
+    def recording(path):
+        def solve(problem, *args, **kwargs):
+            seen[path].append(kwargs.get("sigma_rule"))
+            return real(problem, *args, **kwargs)
+        return solve
+
+    problem = rfverify.load("bundled:cube")
+    assert digits.DOUBLE_SETTINGS["sigma_rule"] == "paper"
+    monkeypatch.setattr(digits, "solve", recording("digits"))
+    assert rfverify.solve_to_digits(problem, digits=10).certificate.certified
+    assert rfverify.solve_to_digits(problem, digits=10, sigma_rule="hybrid").certificate.certified
+    assert seen["digits"] == ["paper", "hybrid"]
+    res = real(problem)
+    monkeypatch.setattr(solver, "solve", recording("certify"))  # certify imports it when called
+    cert = certification.certify(problem, res.v, res.u, res.r, digits=10)
+    # (a double candidate is not 10 digits accurate, so it is not certified; the path is what counts)
+    assert seen["certify"][:1] == ["paper"] and not cert.certified
