@@ -95,7 +95,9 @@ class ProductCone:
         """Q_p as a reusable operator (det p computed once; see :class:`QuadOperator`).  The
         operators of the last few arrays are kept: an iteration asks for Q_p and Q_{p⁻¹} of
         the same arrays in the driver and in the KKT form.  The key is the array object
-        itself (held, so its identity cannot be reused), never its contents."""
+        itself (held, so its identity cannot be reused), never its contents: an array must
+        not be changed in place once an operator was built from it (the solver's never are;
+        each iteration's NT point is a fresh array)."""
         for held, op in self._quad_cache:
             if held is p:
                 return op

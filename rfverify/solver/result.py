@@ -70,10 +70,10 @@ class Settings:
     start : {"velocity_scaled", "paper", "least_squares"}
         ``paper``: v = 0, r̃ = 1 on the normal rows (Jᵀr̃ = e), z = e.  ``velocity_scaled``
         (default): the same with z = θ·e, θ = max(1, rms(w̃)), so that z starts on the scale
-        of the free velocities w̃ that the primal equation H̃v + w̃ = Jz asks it to match.  ``least_squares``: the
-        Newton step at identity scaling from the origin (a least-squares point of the primal
-        and dual equations, CVXOPT's and Clarabel's start), each cone part shifted by
-        (1 + its most negative λ2)·e where it is not interior.
+        of the free velocities w̃ that the primal equation H̃v + w̃ = Jz asks it to match.
+        ``least_squares``: the Newton step at identity scaling from the origin (a
+        least-squares point of the primal and dual equations, CVXOPT's and Clarabel's start),
+        each cone part shifted by (1 + its most negative λ2)·e where it is not interior.
     extended_jordan : bool
         Jordan operations, NT scaling and step lengths in numpy.longdouble.
     extended_residuals : bool
