@@ -290,19 +290,18 @@ class KKTSystem:
         """‖A‖∞ of the unreduced three-block operator at this point (exact row sums)."""
         return max(self.block_norms)
 
-    # float64 copies for the factorised solves, built on first use (each form needs one).
+    # float64 copies for the factorised solves, built on first use (each form needs one; for
+    # a float64 point, quad_operator hands back Q_p itself).
     @property
     def Qp64(self):
         if self._Qp64 is None:
-            self._Qp64 = self.Qp if self.p.dtype == np.float64 else \
-                self.cones.quad_operator(np.asarray(self.p, dtype=np.float64))
+            self._Qp64 = self.cones.quad_operator(np.asarray(self.p, dtype=np.float64))
         return self._Qp64
 
     @property
     def Qp_inv64(self):
         if self._Qp_inv64 is None:
-            self._Qp_inv64 = self.Qp_inv if self.p_inv.dtype == np.float64 else \
-                self.cones.quad_operator(np.asarray(self.p_inv, dtype=np.float64))
+            self._Qp_inv64 = self.cones.quad_operator(np.asarray(self.p_inv, dtype=np.float64))
         return self._Qp_inv64
 
     def apply(self, x):
