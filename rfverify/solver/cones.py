@@ -15,14 +15,22 @@ from __future__ import annotations
 import numpy as np
 
 from .. import jordan
+from . import kernels
 
 
 class ProductCone:
-    """Operations on flat vectors of L3^{n3} × L1^{n1} (L3 cones first)."""
+    """Operations on flat vectors of L3^{n3} × L1^{n1} (L3 cones first).
 
-    def __init__(self, n3: int, n1: int):
+    ``compiled`` (default True): float64 vectors of ordinary magnitude go through the
+    compiled kernels of :mod:`rfverify.solver.kernels` (bit for bit the numpy formulas, one
+    pass instead of dozens); other dtypes, extreme rows and domain errors take the numpy
+    route of :mod:`rfverify.jordan`.  False forces the numpy route (tests compare the two).
+    """
+
+    def __init__(self, n3: int, n1: int, compiled: bool = True):
         self.n3 = n3
         self.n1 = n1
+        self.compiled = compiled
         self.nz = 3 * n3 + n1
         self.n_cones = n3 + n1
         self._quad_cache = []  # [(array, QuadOperator)], most recent first (quad_operator)
@@ -69,6 +77,12 @@ class ProductCone:
             return r.reshape(-1)
         return np.concatenate((r[: self.n3].reshape(-1), r[self.n3:, 0]))
 
+    def _compiled(self, *args) -> bool:
+        """True when the compiled kernels may take these flat vectors: float64, and no row
+        needing the rescaling only the numpy route does (:func:`rfverify.jordan.moderate`)."""
+        return (self.compiled and all(isinstance(a, np.ndarray) and a.dtype == np.float64 for a in args)
+                and jordan.moderate(*args))
+
     def _call(self, fn, *args, op: str):
         """``fn(*rows, op=op, scale=...)`` on the flat vectors ``args`` in their common dtype.
         One test of the flat vectors (:func:`rfverify.jordan.moderate`) spares the row
@@ -80,10 +94,18 @@ class ProductCone:
 
     # ------------------------------------------------------------------ algebra
     def product(self, x, y):
+        if self._compiled(x, y):
+            out = np.empty(self.nz)
+            kernels.product(self.n3, x, y, out)
+            return out
         return self.flat(self._call(jordan.product_rows, x, y, op="jordan_product"))
 
     def arrow_solve(self, x, y):
         """Solve x ∘ d = y for d (Arw(x)⁻¹ y)."""
+        if self._compiled(x, y):
+            out = np.empty(self.nz)
+            if kernels.arrow_solve(self.n3, x, y, out) < 0:
+                return out
         return self.flat(self._call(jordan.arrow_solve_rows, x, y, op="arrow_solve"))
 
     def quad_apply(self, p, y):
@@ -122,6 +144,10 @@ class ProductCone:
 
     def quad_blocks(self, p) -> np.ndarray:
         """Values of the block-diagonal Q_p in the order of (bd_rows, bd_cols), float64."""
+        if self._compiled(p):
+            out = np.empty(9 * self.n3 + self.n1)
+            kernels.quad_blocks(self.n3, p, out)
+            return out
         return self._blocks(jordan.quad_matrix_rows, p, "quad_matrix")
 
     def arrow_blocks(self, x) -> np.ndarray:
@@ -130,6 +156,10 @@ class ProductCone:
 
     def nt_scaling(self, z, s):
         """NT scaling of the pair, flat: (p, p⁻¹, λ = Q_p z = Q_{p⁻¹} s, cond(Q_p) per cone)."""
+        if self._compiled(z, s):
+            p, p_inv, lam, cond = np.empty(self.nz), np.empty(self.nz), np.empty(self.nz), np.empty(self.n_cones)
+            if kernels.nt_scaling(self.n3, z, s, p, p_inv, lam, cond) < 0:
+                return p, p_inv, lam, cond
         r = self._call(jordan.nt_rows, z, s, op="nt_scaling")
         return self.flat(r.p), self.flat(r.p_inv), self.flat(r.lam), np.asarray(r.cond, dtype=np.float64)
 
@@ -137,6 +167,9 @@ class ProductCone:
     def _min_lambda2_along(self, point, dx):
         """min over cones of λ2(Q_{x^{-1/2}} dx) for a point of step_point_rows (+inf for no
         cones)."""
+        point, w = point
+        if w is not None and self._compiled(dx):
+            return kernels.min_ray_lambda2(self.n3, w, point.det, dx)
         l2 = self._call(lambda d, **kw: jordan.ray_lambda2_rows(point, d, **kw), dx, op="step_to_boundary")
         return np.min(l2, initial=np.inf)
 
@@ -148,8 +181,8 @@ class ProductCone:
         """A function (dz, ds) ↦ max_step_pair(z, dz, s, ds) for this (z, s), which keeps what
         depends on the point only (x^{-1/2} of each cone) for the next direction; ds = None
         measures dz alone."""
-        pz = self._call(jordan.step_point_rows, z, op="step_to_boundary")
-        ps = pz if s is z else self._call(jordan.step_point_rows, s, op="step_to_boundary")
+        pz = self._step_point(z)
+        ps = pz if s is z else self._step_point(s)
 
         def max_step(dz, ds):
             # α = −1/λ2(y) decreases with −λ2(y): the smallest step belongs to the most negative
@@ -160,6 +193,15 @@ class ProductCone:
             return float(jordan.step_from_lambda2(np.asarray(lo)))
 
         return max_step
+
+    def _step_point(self, x):
+        """(Q_{x^{-1/2}} of an interior x as :func:`rfverify.jordan.step_point_rows` returns
+        it, the flat x^{-1/2} for the compiled ray test or None)."""
+        if self._compiled(x):
+            w, det = np.empty(self.nz), np.empty(self.n_cones)
+            if kernels.step_point(self.n3, x, w, det) < 0:
+                return jordan.QuadRows(self.rows(w), det, 0), w
+        return self._call(jordan.step_point_rows, x, op="step_to_boundary"), None
 
     def max_step_pair(self, z, dz, s, ds) -> float:
         """min(max_step(z, dz), max_step(s, ds))."""
@@ -173,6 +215,10 @@ class ProductCone:
         return float(lam[k]), k
 
     def lambda2(self, x) -> np.ndarray:
+        if self._compiled(x):
+            out = np.empty(self.n_cones)
+            kernels.lambda2(self.n3, x, out)
+            return out
         return self._call(jordan.spectral_rows, x, op="spectral_values")[1]
 
 
@@ -193,7 +239,19 @@ class QuadOperator:
     def __init__(self, cones: ProductCone, p):
         self.cones = cones
         self.p = p
-        prepared = cones._call(jordan.quad_rows, p, op="quad_apply")
+        self._families = None
+        self._det = None  # det p per cone, for the compiled kernel (float64 p of ordinary size)
+        if cones._compiled(p):
+            self._det = np.empty(cones.n_cones)
+            kernels.quad_det(cones.n3, p, self._det)
+            self._dtype = p.dtype
+        else:
+            self._prepare()
+
+    def _prepare(self):
+        """p as row families for :func:`rfverify.jordan.quad_apply_rows` (numpy route)."""
+        cones = self.cones
+        prepared = cones._call(jordan.quad_rows, self.p, op="quad_apply")
         self._dtype = prepared.xs.dtype
         self._families = []
         for lo, hi, k, first in ((0, 3 * cones.n3, 3, 0), (3 * cones.n3, cones.nz, 1, cones.n3)):
@@ -205,6 +263,12 @@ class QuadOperator:
 
     def __call__(self, y):
         y = np.asarray(y)
+        if self._det is not None and y.dtype == np.float64:
+            out = np.empty(y.shape[0])
+            kernels.quad_apply(self.cones.n3, self.p, self._det, y, out)
+            return out
+        if self._families is None:
+            self._prepare()
         out = np.empty(y.shape[0], dtype=np.result_type(y, self._dtype))
         with np.errstate(all="ignore"):
             for fam, lo, hi, k in self._families:
