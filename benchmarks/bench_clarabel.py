@@ -6,8 +6,9 @@ For each problem with at least ``--min-contacts`` contacts: both methods solve a
 median wall time kept; each answer is judged by rfverify's one criterion
 (:func:`rfverify.measures.measures`, recomputed in longdouble from the returned (v, u, r)),
 never by the solver's word.  Prints the per-problem ratio jqinv/Clarabel (over problems both
-verified) and its median.  Not a test: compare ratios measured in one run on this shared
-machine.
+verified) and its median.  Numba's once-per-process start-up of the compiled cone kernels
+(~0.3 s) is paid before the first timed run, as Clarabel's library load is paid at import.
+Not a test: compare ratios measured in one run on this shared machine.
 
     python benchmarks/bench_clarabel.py                    # the generated collections at published size + 2 more
     python benchmarks/bench_clarabel.py --files A.hdf5 ... # your own problems
@@ -66,6 +67,9 @@ def main(argv=None):
     args = ap.parse_args(argv)
     options = {k: _value(v) for k, v in (kv.split("=", 1) for kv in args.options.split(",") if kv)}
     methods = args.methods.split(",")
+    from rfverify.solver import kernels
+
+    kernels.warm_up()
     print(f"{'problem':<16} {'n':>5} " + " ".join(f"{m + ' s':>12} {'crit':>8} {'it':>3}" for m in methods)
           + "   ratio")
     ratios = {m: [] for m in methods if m != "clarabel"}

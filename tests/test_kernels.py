@@ -148,3 +148,21 @@ def test_warm_up_compiles_every_kernel():
     compiled = [name for name in dir(kernels)
                 if hasattr(getattr(kernels, name), "signatures") and not name.startswith("_")]  # _lam is inlined
     assert compiled and all(getattr(kernels, name).signatures for name in compiled)
+
+
+@pytest.mark.parametrize("method", ["jqinv", "noscaling"])
+@pytest.mark.parametrize("case", ["bundled:chute", "random"])
+def test_whole_solves_are_bitwise_the_same_with_and_without_the_kernels(case, method):
+    """compiled_kernels=False is the numpy route throughout: every iterate, hence the answer
+    and the iteration count, must be identical (at 1e-10 the run also passes through its
+    longdouble phase, which the kernels leave to numpy)."""
+    import rfverify
+    from rfverify.random_problems import random_problem
+
+    problem = rfverify.load(case) if case != "random" else random_problem(70, 130, seed=20261202, free_bodies=2)
+    fast = rfverify.solve(problem, method=method, tol=1e-10)
+    slow = rfverify.solve(problem, method=method, tol=1e-10, compiled_kernels=False)
+    assert fast.nit == slow.nit and fast.status == slow.status
+    for name in ("v", "u", "r"):
+        assert np.array_equal(getattr(fast, name), getattr(slow, name))
+    assert np.array_equal(fast.trace["alpha"], slow.trace["alpha"], equal_nan=True)

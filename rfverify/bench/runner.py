@@ -444,6 +444,10 @@ def _run_local(run_dir: Path, todo: list, jobs: int, time_limit: float, bar) -> 
     """The local process pool: each task in a fresh (forked) process, ``jobs`` at a time, killed
     after ``time_limit`` seconds.  Returns the number of timeouts."""
     ctx = _context()
+    if any(t["kind"] != "digits" for t in todo):
+        from ..solver import kernels
+
+        kernels.warm_up()  # once here: forked tasks inherit the loaded kernels
     running = {}
     timeouts = 0
     pending = list(todo)

@@ -109,7 +109,7 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     runs = []
     for index, (dofs, rows, zidx, cone_ids, n_c) in enumerate(groups):
         n3_c = int(np.sum(cone_ids < lp.n3))
-        cones = ProductCone(n3_c, cone_ids.size - n3_c)
+        cones = ProductCone(n3_c, cone_ids.size - n3_c, compiled=settings.compiled_kernels)
 
         def describe(k, cone_ids=cone_ids):
             g = cone_ids[k]

@@ -117,7 +117,15 @@ class SparseAssembler:
         cols = np.asarray(cols, dtype=np.int64)
         self.shape = shape
         key = cols * shape[0] + rows
-        uniq, self.slot = np.unique(key, return_inverse=True)
+        # np.unique(key, return_inverse=True), with a stable sort: the key is a concatenation
+        # of sorted runs (one per block), which timsort merges ten times faster than quicksort.
+        order = np.argsort(key, kind="stable")
+        sorted_key = key[order]
+        first = np.ones(key.size, dtype=bool)
+        first[1:] = sorted_key[1:] != sorted_key[:-1]
+        uniq = sorted_key[first]
+        self.slot = np.empty(key.size, dtype=np.int64)
+        self.slot[order] = np.cumsum(first) - 1
         self.indices = (uniq % shape[0]).astype(np.int32)
         col_of = uniq // shape[0]
         self.indptr = np.searchsorted(col_of, np.arange(shape[1] + 1)).astype(np.int32)

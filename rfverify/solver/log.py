@@ -37,7 +37,7 @@ def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
         + ("from the start" if st.extended_below is None else
            f"once the criterion is ≤ {st.extended_below:g} or a float64 solve falls short"),
         f"          static_reg = {st.static_reg:g}, adaptive_reg = {st.adaptive_reg}, "
-        f"stall_iterations = {st.stall_iterations}",
+        f"stall_iterations = {st.stall_iterations}, compiled_kernels = {st.compiled_kernels}",
         f"presolve: reduce_cones = {st.reduce_cones}, drop_free_bodies = {st.drop_free_bodies}, "
         f"split_components = {st.split_components}",
     ]
