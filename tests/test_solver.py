@@ -625,3 +625,48 @@ def test_slow_refinement_takes_the_factorisation_without_delta(name, monkeypatch
 def test_sigma_rule_and_start_are_checked(option, bad):
     with pytest.raises(ValueError, match=option):
         solve(rfverify.load("bundled:cube"), **{option: bad})
+
+
+def test_a_float64_solve_short_only_in_negligible_blocks_keeps_float64(monkeypatch):
+    """The switch to the extended arithmetic after a float64 solve that fell short
+    (ipm._adequate): near the solution the dual and primal right-hand sides are ~1e-10 of
+    their terms, and a solve that resolves them to 1e-2 of tol × those terms, though not to
+    1e-4 of themselves, gives the iteration what it needs.  On this 240-contact chute (a fresh
+    seed, data/hard/README.md) at 1e-8 the run then stays in float64 and ends at the same
+    answer; with the old rule (TOL_MARGIN = 0) it switched at iteration 14.  The lattice whose
+    float64 solves leave its primal block unresolved still switches early, and is Solved."""
+    from rfverify.solver import ipm
+
+    chute = rfverify.load(HARD_DIR / "Chute-ndof-1200-nc-240-3.hdf5")
+    lattice = rfverify.load(HARD_DIR / "Lattice-ndof-360-nc-274-1.hdf5")
+    res = solve(chute, method="jqinv", tol=1e-8)
+    lat = solve(lattice, method="jqinv", tol=1e-8)
+    monkeypatch.setattr(ipm, "TOL_MARGIN", 0.0)
+    old = solve(chute, method="jqinv", tol=1e-8)
+    assert res.success and old.success and res.criterion <= 1e-8
+    assert res.extras["extended_from"] == [None] and old.extras["extended_from"] != [None]
+    assert res.nit == old.nit
+    assert np.max(np.abs(res.r - old.r)) <= 1e-8 * np.max(np.abs(old.r))
+    (k,) = lat.extras["extended_from"]
+    assert lat.success and k is not None and lat.trace["criterion"][k] > lat.settings.extended_below
+
+
+def test_adequate_solve_rule():
+    from rfverify.solver.ipm import REFINE_FORCING, TOL_MARGIN, _adequate
+    from rfverify.solver.kkt import SolveInfo
+
+    def info(residuals, converged=False):
+        return SolveInfo(np.zeros(1), np.zeros(1), np.zeros(1), 1e-12, 5, converged=converged,
+                         block_residuals=residuals, rhs_norms=(1e-10, 1e-9, 1e-3))
+
+    scales = (10.0, 30.0, 0.0)
+    tol = 1e-8
+    assert _adequate(info((1e-9, 1e-9, 1.0), converged=True), tol, scales)
+    # Dual and primal blocks: within TOL_MARGIN·tol·scale (1e-9, 3e-9) although above 1e-4 of
+    # their right-hand sides; complementarity within 1e-4 of its own.
+    assert _adequate(info((0.9 * TOL_MARGIN * tol * 10, 0.9 * TOL_MARGIN * tol * 30, 0.9e-7)), tol, scales)
+    assert not _adequate(info((1.1 * TOL_MARGIN * tol * 10, 1e-14, 1e-8)), tol, scales)
+    assert not _adequate(info((1e-14, 1.1 * TOL_MARGIN * tol * 30, 1e-8)), tol, scales)
+    # The complementarity block has no absolute floor: only its own right-hand side counts.
+    assert not _adequate(info((1e-14, 1e-14, 1.1 * REFINE_FORCING * 1e-3)), tol, scales)
+    assert not _adequate(info(()), tol, scales)  # no residuals recorded (a NaN solve)

@@ -35,6 +35,16 @@ def _lam(x0, x1, x2):
     return x0 + n, x0 - n
 
 
+@numba.njit(cache=True, inline="always")
+def _quad3(x0, x1, x2, y0, y1, y2, d):
+    """Q_x y of one L3 cone with det x = d given: 2(xᵀy)x − d R y."""
+    h = x0 * y0
+    h += x1 * y1
+    h += x2 * y2
+    h *= 2
+    return h * x0 - d * y0, h * x1 + d * y1, h * x2 + d * y2
+
+
 @njit
 def quad_det(n3, x, det):
     """det x per cone (λ1·λ2; x0·x0 for L1 cones) into ``det`` (n_cones,)."""
@@ -52,14 +62,7 @@ def quad_apply(n3, x, det, y, out):
     """Q_x y = 2(xᵀy)x − det(x) R y cone by cone into ``out`` (det from :func:`quad_det`)."""
     for c in range(n3):
         i = 3 * c
-        h = x[i] * y[i]
-        h += x[i + 1] * y[i + 1]
-        h += x[i + 2] * y[i + 2]
-        h *= 2
-        d = det[c]
-        out[i] = h * x[i] - d * y[i]
-        out[i + 1] = h * x[i + 1] + d * y[i + 1]
-        out[i + 2] = h * x[i + 2] + d * y[i + 2]
+        out[i], out[i + 1], out[i + 2] = _quad3(x[i], x[i + 1], x[i + 2], y[i], y[i + 1], y[i + 2], det[c])
     for k in range(x.size - 3 * n3):
         i = 3 * n3 + k
         h = x[i] * y[i]
@@ -179,13 +182,8 @@ def min_ray_lambda2(n3, w, det, d):
     lo = math.inf
     for c in range(n3):
         i = 3 * c
-        h = w[i] * d[i]
-        h += w[i + 1] * d[i + 1]
-        h += w[i + 2] * d[i + 2]
-        h *= 2
-        dt = det[c]
-        head = h * w[i] - dt * d[i]
-        l2 = head - math.hypot(h * w[i + 1] + dt * d[i + 1], h * w[i + 2] + dt * d[i + 2])
+        head, b1, b2 = _quad3(w[i], w[i + 1], w[i + 2], d[i], d[i + 1], d[i + 2], det[c])
+        l2 = head - math.hypot(b1, b2)
         if l2 < lo:
             lo = l2
     for k in range(w.size - 3 * n3):

@@ -73,6 +73,10 @@ class SolveInfo:
     forced: bool = False
     # Ended by that test or at the refinement target (not by the step limit or a stall).
     converged: bool = False
+    # ‖residual‖∞ of the returned direction and ‖rhs‖∞, per block row (dual, primal,
+    # complementarity).
+    block_residuals: tuple = ()
+    rhs_norms: tuple = ()
 
 
 class KKTSolver(Protocol):
@@ -384,6 +388,7 @@ class KKTSystem:
         cuts = ((0, m), (m, mk), (mk, rhs.size))
         rhs_norms = [_amax(rhs[i:j]) for i, j in cuts]
         best_rel, best_x, prev = np.inf, x, np.inf
+        best_res = ()
         steps = 0
         forced = False
         tiny = np.finfo(float).tiny
@@ -398,7 +403,7 @@ class KKTSystem:
             # A step that gains less than 20% ends refinement (LAPACK's 0.5 lost the last
             # digits on a hyperstatic lattice; see docs/DECISIONS.md, "Speed").
             if rel < best_rel:
-                best_rel, best_x = rel, x
+                best_rel, best_x, best_res = rel, x, block_res
             # Inexact Newton: a direction whose every block residual is a small fraction of
             # that block's right-hand side (here the iteration's own residuals) is as good
             # for the iteration as an exact one; relative to the rhs, not to ‖A‖‖x‖, so a
@@ -410,7 +415,8 @@ class KKTSystem:
             prev = rel
             x = x + self.solve_once(r)
         return SolveInfo(best_x[:m], best_x[m:mk], best_x[mk:], float(best_rel), steps, forced=forced,
-                         converged=forced or best_rel <= self.refine_target)
+                         converged=forced or best_rel <= self.refine_target,
+                         block_residuals=tuple(best_res), rhs_norms=tuple(rhs_norms))
 
 
 class JQinvSystem(KKTSystem):

@@ -83,8 +83,10 @@ class Settings:
         iteration (also when the data have entries above 2^128 in magnitude).  A number
         (default 1e-9): the run starts in float64 throughout and switches for good at the
         first iterate whose criterion is at most this, or after an iteration whose float64
-        linear solve ended short of what the iteration needs (neither the inexact-Newton test
-        nor the refinement target met).  Iterations above that criterion do not need the extra
+        linear solve ended short of what the iteration needs: neither the inexact-Newton test
+        nor the refinement target met, and some block residual above both 1e-4 of its
+        right-hand side and 1e-2·tol of the size of its terms (dual and primal blocks;
+        ``rfverify.solver.ipm._adequate``).  Iterations above that criterion do not need the extra
         bits, which cost about five times as much: at the default tol = 1e-10 the last one or
         two iterations run extended, at tol = 1e-8 usually none (the robustness sweep at 1e-10
         verified the same problems with 1e-9 as with 1e-6 and with None; docs/DECISIONS.md).
