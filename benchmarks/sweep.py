@@ -9,7 +9,7 @@ problem and the counts verified, iterations and seconds of A and B.  Not a test:
 deciding defaults.  It counts verified answers only: forward accuracy at the same criterion
 (which the tests of the FE sticking block and of ``certify`` watch) is not in it.
 
-The problem set (76 problems, rebuilt deterministically and cached under ``--cache``): the
+The problem set (77 problems, rebuilt deterministically and cached under ``--cache``): the
 bundled problems, ``tests/data`` (hard instances, scene samples, the elastic block), the example
 report's scenes, every rigid scene family at seeds 11 and 7 (sizes 80 and 40), two ElasticBlock
 problems, Lattices of 176/274/474 contacts, random problems of 100/400/900 contacts, the lifted

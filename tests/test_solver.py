@@ -670,3 +670,38 @@ def test_adequate_solve_rule():
     # The complementarity block has no absolute floor: only its own right-hand side counts.
     assert not _adequate(info((1e-14, 1e-14, 1.1 * REFINE_FORCING * 1e-3)), tol, scales)
     assert not _adequate(info(()), tol, scales)  # no residuals recorded (a NaN solve)
+
+
+def test_a_failed_factorisation_without_delta_is_not_repeated_at_the_same_matrix(monkeypatch):
+    """When an iteration's factorisation without δ fails (wrong inertia or a zero pivot) and its
+    predictor solve then refines badly, the δ fallback must not try the same matrix without δ
+    again: it fails the same way, at the price of two factorisations.  On this 240-contact
+    chute at 1e-10 that happens once (on fresh 1000/1370-contact chutes, 2–6 factorisations a
+    solve); the answer is unchanged."""
+    from rfverify.solver import kkt
+
+    attempts, fallbacks = [], []
+    real_try, real_update = kkt.KKTSystem._try_unregularised, kkt.KKTSystem.update
+    real_refactor = kkt.KKTSystem.refactor_unregularised
+
+    def update(self, point):
+        attempts.append([])  # this matrix's attempts without δ, True where kept
+        return real_update(self, point)
+
+    def try_unregularised(self):
+        ok = real_try(self)
+        attempts[-1].append(ok)
+        return ok
+
+    def refactor_unregularised(self):
+        fallbacks.append(self.regularised)
+        return real_refactor(self)
+
+    monkeypatch.setattr(kkt.KKTSystem, "update", update)
+    monkeypatch.setattr(kkt.KKTSystem, "_try_unregularised", try_unregularised)
+    monkeypatch.setattr(kkt.KKTSystem, "refactor_unregularised", refactor_unregularised)
+    res = solve(rfverify.load(HARD_DIR / "Chute-ndof-1200-nc-240-3.hdf5"), method="jqinv")
+    assert res.success
+    assert any(fallbacks)  # the fallback ran with δ in place
+    assert any(False in a for a in attempts)  # and some attempt without δ failed
+    assert all(False not in a[:-1] for a in attempts)  # never tried again after failing

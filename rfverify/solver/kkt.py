@@ -168,6 +168,7 @@ class KKTSystem:
         # Set by the driver when the previous iteration needed the factorisation without δ:
         # this one then tries it first instead of paying for the regularised one as well.
         self.prefer_unregularised = False
+        self._unregularised_failed = False
         # Exact operator in the refinement precision: one sparse matrix maps (dv, dr̃, dz) to
         # (a, b, Jᵀdr̃) — one matvec per refinement step instead of five — and c is completed
         # with the cone operators, never formed.
@@ -221,6 +222,7 @@ class KKTSystem:
         self._fixed_vals = np.concatenate((Mdata, Hdata, *varying))
         diag_scale = max(np.abs(Mdata).max(initial=1.0), *(np.abs(v).max(initial=1.0) for v in varying), 1.0)
         self._reg_diag = np.full(self.nk, -self.static_reg * diag_scale)
+        self._unregularised_failed = False  # at this matrix (see refactor_unregularised)
         if self.prefer_unregularised and self._try_unregularised():
             return
         self.refactor_regularised()
@@ -243,13 +245,16 @@ class KKTSystem:
                 return True
         except (RuntimeError, ValueError):  # QDLDL refuses a zero pivot by raising
             self._solver = None
+        self._unregularised_failed = True
         return False
 
     def refactor_unregularised(self) -> bool:
         """Factor this iteration's matrix again without δ and keep that factorisation if it is
         trustworthy (see :meth:`_try_unregularised`); otherwise restore the regularised one.
-        Returns whether the factorisation without δ was kept (see :meth:`solve` for why)."""
-        if not self.regularised:
+        Returns whether the factorisation without δ was kept (see :meth:`solve` for why).
+        If it already failed at this matrix (the iteration tried it first), the regularised
+        factorisation in place stays: the same matrix fails the same way."""
+        if not self.regularised or self._unregularised_failed:
             return False
         if self._try_unregularised():
             return True
