@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import ConeDomainError
 from .cones import ProductCone
-from .kkt import FORMS, ScalingPoint
+from .kkt import FORMS, ScalingPoint, _amax
 from .result import TRACE_FIELDS, IterationInfo, Outcome, Settings, Status
 from .termination import Termination, Verdict
 
@@ -305,10 +305,6 @@ def _least_squares_start(system, cones, f, w_t, JT, v, r_t, z, jd, work):
 # Settings.refine_tol = "adaptive": the forcing term of the inexact-Newton test that may end
 # refinement early (KKTSystem.refined).
 REFINE_FORCING = 1e-4
-
-
-def _amax(x) -> float:
-    return float(np.max(np.abs(x), initial=0.0))
 
 
 # A dual or primal block residual of a float64 solve within TOL_MARGIN·tol of the size of
