@@ -109,10 +109,9 @@ class Settings:
         product, arrow solve) through the numba kernels of :mod:`rfverify.solver.kernels`
         (default), which give bit for bit the results of the numpy formulas in a fraction of
         the time (1368-contact chute at 1e-8: 0.28 s against 0.33 s, ~2 ms less per
-        iteration).  The first use in a
-        process pays numba's start-up once (~0.3 s, loading the kernels from its disk cache;
-        a few seconds the very first time, compiling them).  False: numpy only — the same
-        iterates, slower per iteration, no start-up.
+        iteration).  The first use in a process pays numba's start-up once (~0.3 s, loading
+        the kernels from its disk cache; a few seconds the very first time, compiling them).
+        False: numpy only — the same iterates, slower per iteration, no start-up.
     static_reg : float
         Static regularisation δ (relative to the largest diagonal entry of the KKT matrix)
         added on the dr̃ diagonal with the sign that keeps the symmetric forms
