@@ -165,8 +165,8 @@ class ProductCone:
 
     # ------------------------------------------------------------------ step lengths
     def _min_lambda2_along(self, point, dx):
-        """min over cones of λ2(Q_{x^{-1/2}} dx) for a point of step_point_rows (+inf for no
-        cones)."""
+        """min over cones of λ2(Q_{x^{-1/2}} dx) for a point of :meth:`_step_point` (+inf for
+        no cones)."""
         point, w = point
         if w is not None and self._compiled(dx):
             return kernels.min_ray_lambda2(self.n3, w, point.det, dx)
