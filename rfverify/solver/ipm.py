@@ -111,8 +111,10 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
             dinf = _norm(r_d) / max(_norm(Mv), _norm(f_x), _norm(HTr), _TINY)
             gap = float(z @ s)
             mu = gap / n_contacts
-            # The sizes of the terms of the dual and primal residuals (see _adequate).
-            term_scales = (max(_amax(Mv), _amax(f_x), _amax(HTr)), max(_amax(Hv), _amax(w_x), _amax(Jz)), 0.0)
+            # The sizes of the terms of the dual and primal residuals (see _adequate; only the
+            # float64 phase asks).
+            term_scales = None if extended else (max(_amax(Mv), _amax(f_x), _amax(HTr)),
+                                                 max(_amax(Hv), _amax(w_x), _amax(Jz)), 0.0)
             judged = judge(v, r_t)
             lam2_z, cz = cones.min_lambda2(z)
             lam2_s, cs = cones.min_lambda2(s)
