@@ -91,17 +91,32 @@ class Certificate:
 
 def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict | None = None,
                            seconds: float = 0.0) -> Certificate:
+    """The certificate of a proof, with a verdict that claims exactly what was proven: "proven to
+    K digits" only when every quantity has K relative digits; a quantity proven zero at the
+    data scale is stated as "zero within e" (DESIGN §6.3), never as digits."""
     req = proof.requested
     if not proof.valid:
         verdict = f"not certified: {proof.failure}"
     elif proof.certified:
-        verdict = f"proven to {req} digits ({proof.summary()})"
+        if any(q.mode == "absolute" for q in proof.quantities.values()):
+            verdict = f"certified ({req} digits requested; zero quantities bounded absolutely): {proof.summary()}"
+        else:
+            verdict = f"proven to {req} digits ({proof.summary()})"
     else:
         worst = proof.weakest()
         q = proof.quantities[worst]
         have = "no relative digits" if q.digits is None else f"{q.digits:.1f} proven digits"
-        verdict = f"not proven to {req} digits: {worst} has {have} ({proof.summary()})"
+        why = f"; {q.note}" if q.digits is None and q.note else ""
+        verdict = f"not proven to {req} digits: {worst} has {have} ({proof.summary()}){why}"
     return Certificate(req, proof.certified, verdict, proof, point, None, dict(extra or {}), seconds)
+
+
+def local_velocity(problem: Problem, r) -> np.ndarray:
+    """u = (W + Wᵀ)/2 r + q of a local problem, rounded once to nearest from the exact value."""
+    from .proof.dyadic import Dyadic
+    from .proof.local import LocalExact
+
+    return LocalExact(problem).u_of(Dyadic.from_float(r)).nearest()
 
 
 def _solution_arrays(problem: Problem, v, u, r):
@@ -119,7 +134,7 @@ def _solution_arrays(problem: Problem, v, u, r):
                                                 f"{SPACEDIM * problem.n_contacts}",
                                   fix="certify a solution of this problem")
     if u is None:
-        u = problem.H.T @ v + problem.w
+        u = local_velocity(problem, r) if problem.local is not None else problem.H.T @ v + problem.w
     u = np.asarray(u, dtype=np.float64).ravel()
     if u.size != SPACEDIM * problem.n_contacts:
         raise InvalidProblemError("solution.u", f"has {u.size} entries, the problem needs "
@@ -130,7 +145,7 @@ def _solution_arrays(problem: Problem, v, u, r):
 
 def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Point | None = None,
             cross_check: bool = False, dps: int = 50, polish_max_iter: int = 60,
-            progress=None) -> Certificate:
+            relative: bool = False, progress=None) -> Certificate:
     """Prove how many significant digits of the float64 solution are correct.
 
     Parameters
@@ -146,6 +161,13 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
         one, else a warm polish from the candidate).
     cross_check : bool
         Also run the independent reference at ``dps`` digits and report agreement.
+    relative : bool
+        Demand relative digits for every quantity: a quantity whose exact value may be zero is
+        then not certified (instead of being bounded against its data scale, DESIGN §6.3).
+
+    Without ``point``, the candidate itself is tried first as the proof point (exact or
+    near-exact answers certify at O(nnz) cost, DESIGN §6.6); only if that does not certify is
+    an extended-precision point computed.
 
     Returns
     -------
@@ -163,11 +185,17 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     ctx = ProofContext(problem)
     extra = {}
     if point is not None:
-        proof = ctx.prove(point, v, u, r, digits)
+        proof = ctx.prove(point, v, u, r, digits, relative=relative)
         extra["point_source"] = "given"
     else:
-        proof, point, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say)
-        extra.update(info)
+        own = candidate_point(v, r)
+        proof = ctx.prove(own, v, u, r, digits, relative=relative)
+        say(f"the candidate itself as the proof point: {proof.summary()}")
+        if proof.certified or not ctx.hypotheses_proven:
+            point, extra["point_source"] = own, "the candidate itself"
+        else:
+            proof, point, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative)
+            extra.update(info)
     cert = certificate_from_proof(proof, point, extra)
     if cross_check:
         say(f"cross-check: independent reference at {dps} digits")
@@ -176,7 +204,14 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     return cert
 
 
-def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say):
+def candidate_point(v, r) -> Point:
+    """The float64 candidate (v, r) as an exact proof point (no low parts)."""
+    v = np.asarray(v, dtype=np.float64).copy()
+    r = np.asarray(r, dtype=np.float64).copy()
+    return Point(v, np.zeros_like(v), r, np.zeros_like(r))
+
+
+def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=False):
     """Find an extended-precision point near the solution set and carry its bound to the
     candidate.  The point comes from the k-digit machinery — a double solve, then Algorithm 1
     in double-double — not from the candidate itself: a rounded candidate sits on (or just
@@ -190,7 +225,7 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say):
     double = solve(problem, method="auto", tol=1e-10, **DOUBLE_SETTINGS)
     data = ExtendedData(problem)
     system = choose_backend(data)
-    driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say)
+    driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say, relative=relative)
     say(f"extended point: double solve {double.status} in {double.nit} iterations, then double-double "
         f"({system.name})")
     out = extend(data, _start_from(data, double), driver, system, max_iter=max_iter, say=say)

@@ -71,6 +71,9 @@ def point_from_iterate(data: ExtendedData, v, r_t) -> Point:
     vmul_d(lp.scale, r_t.h, r_t.l, th, tl)
     rh, rl = np.zeros(n5), np.zeros(n5)
     rh[lp.keep], rl[lp.keep] = th, tl
+    if data.local:  # no dofs in the local form: v of the lifting (M = I, f = 0) is H r, information only
+        vh = np.asarray(data.problem.H @ rh, dtype=np.float64)
+        return Point(vh, np.zeros_like(vh), rh, rl)
     return Point(v.h.copy(), v.l.copy(), rh, rl)
 
 
@@ -111,8 +114,9 @@ class ProofDriver:
     has stalled for ``stall`` iterations."""
 
     def __init__(self, ctx: ProofContext, data: ExtendedData, requested: int, target=None, stall: int = 4,
-                 progress=None):
+                 progress=None, relative: bool = False):
         self.ctx, self.data, self.requested = ctx, data, requested
+        self.relative = relative
         self.target = target  # (v, u, r) to certify; None: the rounding of each point
         self.best: tuple | None = None  # (score, proof, point, (v, u, r))
         self.proof_seconds = 0.0
@@ -159,7 +163,9 @@ class ProofDriver:
         """True when v's or u's bound is uncertified and its point part (√(M⁻¹)_jj·ε or
         √W_kk·ε, the part more iterations shrink) is below 1e-3 of it: the rest is the fixed
         distance from the point to the candidate."""
-        own = {"v": proof.terms["max_sqrt_Minv_jj"] * proof.eps_M, "u": proof.terms["max_sqrt_W_kk"] * proof.eps_M}
+        own = {"u": proof.terms["max_sqrt_W_kk"] * proof.eps_M}
+        if not proof.local:
+            own["v"] = proof.terms["max_sqrt_Minv_jj"] * proof.eps_M
         return any(not q.certified and own[name] < 1e-3 * q.abs_bound
                    for name, q in proof.quantities.items() if name in own and q.mode != "information")
 
@@ -176,13 +182,16 @@ class ProofDriver:
             gap, point, v_inf, u_inf = it.describe()
             key = ("wide", it.k)
         else:
-            u_t = ext.V(*data.Ht.matvec(it.v.h, it.v.l)) + ext.V(*data.w_t)
+            u_t = ext.V(*data.velocity(it.v.h, it.v.l, it.r_t.h, it.r_t.l))
             gap = abs(it.r_t.dot(u_t))
             point = point_from_iterate(data, it.v, it.r_t)
             v_inf = float(np.max(np.abs(it.v.h), initial=0.0))
-            u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
+            if data.local:
+                u_inf = float(np.max(np.abs(data.problem.local.W @ point.r_hi + data.problem.local.q), initial=0.0))
+            else:
+                u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
             key = ("dd", it.k)
-        eps_lower = math.sqrt(2 * gap)
+        eps_lower = self.ctx.eps_lower(gap)
         if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested):
             return False
         if key in self.proven_at:
@@ -190,7 +199,7 @@ class ProofDriver:
         self.proven_at.add(key)
         t0 = time.perf_counter()
         sol = self.target if self.target is not None else self.ctx.rounded(point)
-        proof = self.ctx.prove(point, *sol, requested=self.requested)
+        proof = self.ctx.prove(point, *sol, requested=self.requested, relative=self.relative)
         self.proof_seconds += time.perf_counter() - t0
         self.attempts += 1
         sc = self.score(proof)
@@ -216,7 +225,7 @@ class ProofDriver:
 def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", tol: float = 1e-10,
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
-                    progress=None, **options) -> DigitsSolution:
+                    relative: bool = False, progress=None, **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; see :mod:`rfverify.proof.bound` for what "digits" means when a
     quantity is zero).  ``progress(message)`` receives one line per stage.
@@ -227,7 +236,16 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     that ends without a proof, on a problem of at most ``WIDE_MAX_DOFS`` dofs whose dof-space
     factor costs at most ``WIDE_MAX_FACTOR_OPS`` — Algorithm 1
     in ``wide_bits``-bit arithmetic (``wide_max_iter`` iterations at most; ``wide_tail=False``
-    switches it off).  Each stage stops as soon as the proof succeeds."""
+    switches it off).  Each stage stops as soon as the proof succeeds.  ``relative=True``
+    demands relative digits of every quantity (a quantity that may be zero is then not
+    certified; DESIGN §6.3).
+
+    For a problem read from a local file (``problem.local``) the quantities are u and r of the
+    file's own local problem (DESIGN §6.1b): the double solve runs on the lifting, the
+    double-double phase on the file's W, and the proof on W exactly.  When a hypothesis of the
+    theorem fails on the data themselves (M not proven positive definite, W not positive
+    semidefinite as stored) no point can be proven: the path stops after the double solve
+    and says why."""
     digits = validate_digits(digits)
     if method == "clarabel":
         raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
@@ -240,12 +258,25 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         f"{double.nit} iterations, {t_double:.2f} s")
     t1 = time.perf_counter()
     ctx = ProofContext(problem)
+    if not ctx.hypotheses_proven:
+        from .certification import candidate_point
+
+        point = candidate_point(double.v, double.r)
+        v, u, r = ctx.rounded(point)
+        proof = ctx.prove(point, v, u, r, requested=digits, relative=relative)
+        say(f"no proof is possible: {proof.failure}")
+        cert = certificate_from_proof(proof, point, extra={"point_source": "the double solve (no proof possible)"})
+        t_setup = time.perf_counter() - t1
+        return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
+                              extended=ext.ExtendedResult(None, None, None, "NotRun", proof.failure, 0),
+                              timings={"double": t_double, "setup": t_setup, "extended": 0.0, "wide": 0.0,
+                                       "proof": proof.seconds, "total": time.perf_counter() - t0})
     data = ExtendedData(problem)
     system = choose_backend(data, backend)
     t_setup = time.perf_counter() - t1
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
     start = _start_from(data, double)
-    driver = ProofDriver(ctx, data, digits, progress=say)
+    driver = ProofDriver(ctx, data, digits, progress=say, relative=relative)
     ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
                      wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
     _, proof, point, (v, u, r) = driver.best
@@ -308,6 +339,8 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             note = "not run (switched off)"
         elif driver.hopeless:
             note = "not run (the candidate is farther from the point than any tail could fix)"
+        elif data.local:
+            note = "not run (the tail works in the dofs of a global problem; a local problem has none)"
         elif data.m > WIDE_MAX_DOFS:
             note = f"not run ({data.m} dofs > {WIDE_MAX_DOFS}: its dense matrix would not fit)"
         elif (ordering := wide.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:
@@ -343,6 +376,16 @@ def _start_from(data: ExtendedData, double: SolveResult) -> dict:
     interior from its (v, r)."""
     z = double.extras.get("z")
     r_t = double.extras.get("r_t")
+    if data.local:  # the double solve's v belongs to the lifting; the local form has no dofs
+        if z is not None and r_t is not None and len(z) == data.nz and len(r_t) == data.nk:
+            from .extended import cones as C
+            from .extended.dd import from_longdouble
+
+            zh, zl = from_longdouble(z)
+            sh, sl = data.JT.matvec(*from_longdouble(r_t))
+            if C.min_lambda2(data.n3, zh, zl)[0] > 0 and C.min_lambda2(data.n3, sh, sl)[0] > 0:
+                return {"v": np.zeros(0, dtype=np.longdouble), "r_t": r_t, "z": z}
+        return ext.interior_start(data, np.zeros(0), double.r)
     if z is not None and r_t is not None and len(z) == data.nz and len(r_t) == data.nk:
         from .extended import cones as C
         from .extended.dd import from_longdouble

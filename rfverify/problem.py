@@ -49,6 +49,40 @@ DENSE_BLOCK_LIMIT = 400
 eigenvalues; larger blocks by a symmetric-ordering LDLᵀ (sparse LU without pivoting)."""
 
 
+@dataclass(frozen=True, eq=False)
+class LocalForm:
+    """The local problem a file states, kept beside its global lifting (DESIGN §1.1, §6.1b).
+
+    ``u = W r + q``, ``K* ∋ u ⊥ r ∈ K`` with W (5n × 5n, CSR, every entry exactly the float64
+    the file holds, repeated entries summed exactly; a 3-D ``/fclib_local`` W embedded in the
+    rolling layout with zero rolling rows and columns) and q (5n,).  The solver works on the
+    lifted global problem (M = I, HᵀH ≈ (W + Wᵀ)/2: a solver device); certificates are about
+    this problem, with W := (W + Wᵀ)/2 exactly.  ``significant_digits`` is the print precision
+    of the source (None: full double); the printed numbers are the data, exactly.
+    """
+
+    W: sp.csr_matrix
+    q: np.ndarray
+    significant_digits: int | None = None
+
+    @property
+    def n_rows(self) -> int:
+        return int(self.W.shape[0])
+
+
+def make_local_form(W, q, significant_digits: int | None = None) -> LocalForm:
+    """A frozen :class:`LocalForm` from W (5n × 5n, dense or sparse) and q (5n,)."""
+    Wc = sp.csr_matrix(W, dtype=np.float64, copy=True)
+    Wc.sum_duplicates()  # readers sum repeated entries exactly before this point
+    Wc.eliminate_zeros()
+    Wc.sort_indices()
+    qf = np.array(q, dtype=np.float64, copy=True)
+    if Wc.shape != (qf.size, qf.size):
+        raise InvalidProblemError("W", f"has shape {Wc.shape}, expected ({qf.size}, {qf.size}) from q",
+                                  fix="W has one row and one column per entry of q")
+    return LocalForm(W=_freeze_sparse(Wc), q=_freeze(qf), significant_digits=significant_digits)
+
+
 @dataclass(frozen=True)
 class StoredSolution:
     """A solution (or guess) stored in a problem file: v (m,), u (5n,), r (5n,); any may be None."""
@@ -191,6 +225,10 @@ class Problem:
         Data of the source file that the internal rolling layout cannot give back exactly
         (the raw W and q of an ``/fclib_local`` problem), so that the problem is written back
         as it was read; None for problems in the rolling layout.
+    local : LocalForm or None
+        For a problem read from a *local* file (Siconos local ``.dat``, ``/fclib_local``): the
+        file's own W and q.  M, H, f, w are then its lifting (a solver device); what is proven
+        is the local problem (DESIGN §6).  None for global problems.
     """
 
     M: sp.csc_matrix
@@ -210,6 +248,7 @@ class Problem:
     source: str = ""
     provenance: dict = field(default_factory=dict)
     native: object = field(default=None, repr=False)
+    local: LocalForm | None = field(default=None, repr=False)
 
     # ------------------------------------------------------------------ construction
     @classmethod

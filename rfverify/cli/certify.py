@@ -33,6 +33,10 @@ def add_parser(sub) -> None:
                            "agreement (a second opinion; slow beyond a few hundred contacts)")
     cert.add_argument("--dps", type=positive_int, default=50, metavar="D",
                       help="accuracy of the --cross-check reference in decimal digits (default: %(default)s)")
+    cert.add_argument("--relative", action="store_true",
+                      help="demand K relative (significant) digits of every quantity; a quantity whose exact "
+                           "value may be zero is then not certified, instead of being proven zero within "
+                           "10^-K of its data scale (DESIGN §6.3)")
     cert.add_argument("--json", action="store_true", help="print the certificate as JSON")
     cert.add_argument("--out", metavar="CERT.h5", type=out_path,
                       help="write the problem, the given solution and /certificate (the point, "
@@ -77,9 +81,9 @@ def cmd_certify(args) -> int:
     if point is not None and (point.v_hi.size != problem.n_dofs or point.r_hi.size != 5 * problem.n_contacts):
         raise ProblemFileError(where, "/certificate/point does not match the problem's sizes",
                                location="/certificate/point", fix="certify the solution file written for this problem")
-    u = sol.u if sol.u is not None else problem.H.T @ sol.v + problem.w
-    cert = certify(problem, sol.v, u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
-                   dps=args.dps, progress=progress_printer(args))
+    cert = certify(problem, sol.v, sol.u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
+                   dps=args.dps, relative=args.relative, progress=progress_printer(args))
+    u = sol.u if sol.u is not None else _velocity(problem, sol)
     if args.out:
         _write_certificate(args, problem, sol, u, cert)
     if args.json:
@@ -96,6 +100,13 @@ def cmd_certify(args) -> int:
             print(f"cross-check against the mpmath reference ({cc.get('reference_status')}): "
                   f"agreement {shown or cc.get('note', '')}")
     return EXIT_OK if cert.certified else EXIT_NOT_SOLVED
+
+
+def _velocity(problem, sol):
+    """u of a stored (v, r) when the file has none: W r + q (local problem) or Hᵀv + w."""
+    from ..certification import local_velocity
+
+    return local_velocity(problem, sol.r) if problem.local is not None else problem.H.T @ sol.v + problem.w
 
 
 def _resolve(spec):

@@ -61,6 +61,10 @@ def add_parser(sub) -> None:
                           "(and r where it is unique); exit code 0 only when proven. With --out the "
                           "file also gets /certificate (the point and the bound, to recheck with "
                           "'rfverify certify')")
+    sol.add_argument("--relative", action="store_true",
+                     help="with --digits: demand K relative (significant) digits of every quantity; a "
+                          "quantity whose exact value may be zero is then not certified, instead of being "
+                          "proven zero within 10^-K of its data scale (DESIGN §6.3)")
     sol.add_argument("--no-presolve", action="store_true",
                      help="switch off the presolve reductions (cone reduction for mu = 0 / "
                           "mu_r = 0 requires them; such problems are refused)")
@@ -144,7 +148,7 @@ def _solve_digits(args, problem, options) -> int:
     say = progress_printer(args)
     t0 = time.perf_counter()
     out = solve_to_digits(problem, digits=args.digits, method=args.method, tol=args.tol,
-                          max_iter=args.max_iter, progress=say, **options)
+                          max_iter=args.max_iter, relative=args.relative, progress=say, **options)
     wall = time.perf_counter() - t0
     cert = out.certificate
     if args.out:

@@ -148,6 +148,15 @@ def interior_start(data: ExtendedData, v, r, u=None, margin_rel: float = 1e-8) -
     each pushed inside by ``margin_rel`` times the iterate's scale."""
     lp = data.lp
     problem = data.problem
+    if data.local:  # no dofs; u = W r + q of the file's W
+        v = np.zeros(0, dtype=np.longdouble)
+        if u is None:
+            C = problem.local.W.tocoo()
+            r_ld = np.asarray(r, dtype=np.longdouble)
+            u = np.zeros(r_ld.size, dtype=np.longdouble)
+            np.add.at(u, C.row, 0.5 * C.data.astype(np.longdouble) * r_ld[C.col])
+            np.add.at(u, C.col, 0.5 * C.data.astype(np.longdouble) * r_ld[C.row])
+            u += problem.local.q
     v = np.asarray(v, dtype=np.longdouble)
     u = (problem.H.T.astype(np.longdouble) @ v + problem.w) if u is None else np.asarray(u, dtype=np.longdouble)
     r_t = np.asarray(r, dtype=np.longdouble)[lp.keep] / lp.scale
@@ -218,6 +227,8 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
         s = mv(data.JT, r_t)
         Mv, HtTr, Hv, Jz = mv(data.M, v), mv(data.HtT, r_t), mv(data.Ht, v), mv(data.J, z)
         r_d = Mv - HtTr - f
+        if data.local:  # ũ = W̃r̃ + q̃ of the file's W (no dofs)
+            Hv = mv(data.Wt, r_t)
         r_p = Hv + w_t - Jz
         mu = z.dot(s) / n
         pinf = r_p.norm() / max(Jz.norm(), Hv.norm(), w_t.norm(), 1e-300)
@@ -265,8 +276,8 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
             return dv, dr, dz
 
         def residual(a, b, c, dv, dr, dz):
-            return (a - mv(data.M, dv) + mv(data.HtT, dr), b - mv(data.Ht, dv) + mv(data.J, dz),
-                    c - Qp(1, dz) - Qp(-1, mv(data.JT, dr)))
+            second = b - (mv(data.Wt, dr) if data.local else mv(data.Ht, dv)) + mv(data.J, dz)
+            return (a - mv(data.M, dv) + mv(data.HtT, dr), second, c - Qp(1, dz) - Qp(-1, mv(data.JT, dr)))
 
         def newton(a, b, c):
             return refined_newton(core, residual, a, b, c, inf=V.inf, refine_max=refine_max, floor=1e-31)

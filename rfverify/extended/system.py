@@ -94,22 +94,63 @@ class DDMatrix:
         return oh, ol
 
 
+def _exact_symmetric(A: sp.spmatrix, n: int):
+    """(A + Aᵀ)/2 of a float matrix exactly as double-double: (CSR pattern, hi, lo).  Each entry
+    is the double-double sum of at most two floats (plus repeated triplets), halved exactly."""
+    Ac = sp.coo_matrix(A)
+    rows = np.concatenate((Ac.row, Ac.col))
+    cols = np.concatenate((Ac.col, Ac.row))
+    vals = np.concatenate((Ac.data, Ac.data)).astype(np.float64)
+    key = rows.astype(np.int64) * n + cols
+    order = np.argsort(key, kind="stable")
+    key, vals = key[order], vals[order]
+    uniq, first = np.unique(key, return_index=True)
+    last = np.append(first[1:], key.size)
+    sh = np.zeros(uniq.size)
+    sl = np.zeros(uniq.size)
+    for k in range(int(np.max(last - first, initial=0))):
+        take = first + k < last
+        idx = first[take] + k
+        h2, l2 = _two_sum_np(sh[take], vals[idx])
+        sh[take], sl[take] = h2, sl[take] + l2
+    sh, sl = _two_sum_np(sh, sl)
+    pattern = sp.csr_matrix((np.ones(uniq.size), (uniq // n, uniq % n)), shape=(n, n))
+    pattern.sort_indices()  # csr of the unique keys is in key order already
+    return pattern, sh * 0.5, sl * 0.5
+
+
+def _dd_times(h, l, a):
+    """(h + l)·a for float a, rounded once to double-double (vectorised)."""
+    p, e = _two_prod_np(h, a)
+    return _two_sum_np(p, e + l * a)
+
+
 class ExtendedData:
     """The lifted problem (DESIGN §2) with exact double-double data.
 
     H̃ = P Hᵀ and w̃ = P w are formed with exact products (μ·h is a double-double), and
     M = (M + Mᵀ)/2 with exact sums, so the extended phase converges to the solution of the
     problem in the file, not of a rounded copy.
+
+    A problem read from a local file (``problem.local``) is run in its **local form**: no
+    dofs (m = 0), and the contact-space operator W̃ = P (W + Wᵀ)/2 P of the file's own W
+    (``Wt``, double-double, one rounding of the exact product), so that ũ = W̃ r̃ + q̃ — the
+    lifting's HᵀH ≈ W plays no part beyond the double solve's start.
     """
 
     def __init__(self, problem: Problem):
         self.problem = problem
         lp = lift(problem, reduce_cones=True)
         self.lp = lp
-        self.m, self.nk, self.nz = problem.n_dofs, lp.nk, lp.nz
+        self.local = problem.local is not None
+        self.m = 0 if self.local else problem.n_dofs
+        self.nk, self.nz = lp.nk, lp.nz
         self.n3, self.n1 = lp.n3, lp.n1
         self.n = problem.n_contacts
-        HT = problem.H.T.tocsr()[lp.keep]  # rows = kept components, exact entries
+        if self.local:
+            HT = sp.csr_matrix((lp.nk, 0))
+        else:
+            HT = problem.H.T.tocsr()[lp.keep]  # rows = kept components, exact entries
         HT.sort_indices()
         scale_rows = np.repeat(lp.scale, np.diff(HT.indptr))
         hi, lo = _two_prod_np(scale_rows, HT.data)
@@ -117,31 +158,20 @@ class ExtendedData:
         self.HtT = self.Ht.transpose()
         wh, wl = _two_prod_np(lp.scale, problem.w[lp.keep])
         self.w_t = (wh, wl)
-        self.f = (problem.f.astype(np.float64).copy(), np.zeros(self.m))
-        # M_sym = (M + Mᵀ)/2 exactly: each entry is the double-double sum of two doubles, halved.
-        Mc = sp.coo_matrix(problem.M)
-        rows = np.concatenate((Mc.row, Mc.col))
-        cols = np.concatenate((Mc.col, Mc.row))
-        vals = np.concatenate((Mc.data, Mc.data)).astype(np.float64)
-        key = rows.astype(np.int64) * self.m + cols
-        order = np.argsort(key, kind="stable")
-        key, vals = key[order], vals[order]
-        uniq, first = np.unique(key, return_index=True)
-        last = np.append(first[1:], key.size)
-        sh = np.zeros(uniq.size)
-        sl = np.zeros(uniq.size)
-        # at most two terms per entry (M_ij and M_ji), plus duplicates of the triplet form
-        for k in range(int(np.max(last - first, initial=0))):
-            take = first + k < last
-            idx = first[take] + k
-            h2, l2 = _two_sum_np(sh[take], vals[idx])
-            sh[take], sl[take] = h2, sl[take] + l2
-        sh, sl = _two_sum_np(sh, sl)
-        Msym = sp.csr_matrix((np.ones(uniq.size), (uniq // self.m, uniq % self.m)), shape=(self.m, self.m))
-        Msym.sort_indices()
-        # csr of the unique keys is in key order already
-        self.M = DDMatrix((self.m, self.m), Msym.indptr, Msym.indices, sh * 0.5, sl * 0.5)
+        self.f = (np.zeros(self.m), np.zeros(self.m)) if self.local else \
+            (problem.f.astype(np.float64).copy(), np.zeros(self.m))
+        Msrc = sp.csr_matrix((0, 0)) if self.local else problem.M
+        Msym, sh, sl = _exact_symmetric(Msrc, self.m)
+        self.M = DDMatrix((self.m, self.m), Msym.indptr, Msym.indices, sh, sl)
         self.M_pattern = Msym
+        self.Wt = None
+        if self.local:
+            Wk = sp.csr_matrix(problem.local.W)[lp.keep][:, lp.keep]
+            Wp, wh_, wl_ = _exact_symmetric(Wk, lp.nk)
+            rows = np.repeat(np.arange(lp.nk), np.diff(Wp.indptr))
+            wh_, wl_ = _dd_times(wh_, wl_, lp.scale[rows])
+            wh_, wl_ = _dd_times(wh_, wl_, lp.scale[Wp.indices])
+            self.Wt = DDMatrix((lp.nk, lp.nk), Wp.indptr, Wp.indices, wh_, wl_)
         self.J = DDMatrix.from_scipy(lp.J)
         self.JT = DDMatrix.from_scipy(lp.J.T)
         # contact structure: kept rows of contact c are contiguous, starting at row_start[c]
@@ -161,6 +191,16 @@ class ExtendedData:
     # ---- residual-level operators (double-double)
     def M_apply(self, vh, vl):
         return self.M.matvec(vh, vl)
+
+    def velocity(self, vh, vl, rh, rl):
+        """ũ = H̃v + w̃ (global) or W̃r̃ + q̃ (local), double-double (hi, lo)."""
+        if self.local:
+            ah, al = self.Wt.matvec(rh, rl)
+        else:
+            ah, al = self.Ht.matvec(vh, vl)
+        oh, ol = np.empty(self.nk), np.empty(self.nk)
+        dd.vadd(ah, al, self.w_t[0], self.w_t[1], oh, ol)
+        return oh, ol
 
 
 # ---------------------------------------------------------------------- per-contact blocks
@@ -455,8 +495,10 @@ class DofSpace(_Backend):
         return self.chol.factor(Sh, Sl) < 0
 
     def solve(self, a, t):
-        """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t."""
+        """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t (local form: (W̃ + G) dr̃ = t)."""
         d = self.data
+        if d.local:
+            return (np.zeros(0), np.zeros(0)), self._S_solve(np.ascontiguousarray(t[0]), np.ascontiguousarray(t[1]))
         gh, gl = np.empty(d.nk), np.empty(d.nk)
         contact_block_apply(d.n, d.row_start, d.row_count, self.Gih, self.Gil, t[0], t[1], gh, gl)
         yh, yl = d.HtT.matvec(gh, gl)
@@ -622,24 +664,32 @@ class ContactSpace(_Backend):
         how = {"mixed": "float64 factor refined in double-double",
                "double-double": "double-double factor"}[getattr(self.chol, "precision", "double-double")]
         reason = getattr(self.chol, "fallback_reason", "")
-        return f"contact-space, scaled (I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ), {how}" + (f" ({reason})" if reason else "")
+        form = "I + F⁻¹W̃F⁻ᵀ, W̃ = P W P of the local file" if self.data.local else "I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ"
+        return f"contact-space, scaled ({form}), {how}" + (f" ({reason})" if reason else "")
 
     def __init__(self, data: ExtendedData, mixed: bool = True):
         from scipy.sparse.csgraph import connected_components
 
         self.data = data
         m, nk, n = data.m, data.nk, data.n
-        Mp = sp.csr_matrix((np.ones_like(data.M.hi), data.M.indices, data.M.indptr), shape=(m, m))
-        self.Mchol = DDCholesky(Mp)
-        nb, labels = connected_components(Mp, directed=False)
-        self.n_blocks, self.labels = nb, labels
-        Ht = sp.csr_matrix((np.ones_like(data.Ht.hi), data.Ht.indices, data.Ht.indptr), shape=data.Ht.shape)
-        B = sp.csr_matrix((np.ones(m), (np.arange(m), labels)), shape=(m, nb))
         self.contact_of_row = np.repeat(np.arange(n), data.row_count)
         C = sp.csr_matrix((np.ones(nk), (self.contact_of_row, np.arange(nk))), shape=(n, nk))
-        CB = (C @ Ht @ B).tocsr()
-        CB.data[:] = 1
-        CC = sp.triu(CB @ CB.T + sp.identity(n), format="coo")
+        if data.local:  # W̃ is given: contacts are coupled where it has entries
+            self.Mchol = None
+            Wp = sp.csr_matrix((np.ones_like(data.Wt.hi), data.Wt.indices, data.Wt.indptr), shape=(nk, nk))
+            CW = (C @ Wp @ C.T).tocsr()
+            CW.data[:] = 1
+            CC = sp.triu(CW + sp.identity(n), format="coo")
+        else:
+            Mp = sp.csr_matrix((np.ones_like(data.M.hi), data.M.indices, data.M.indptr), shape=(m, m))
+            self.Mchol = DDCholesky(Mp)
+            nb, labels = connected_components(Mp, directed=False)
+            self.n_blocks, self.labels = nb, labels
+            Ht = sp.csr_matrix((np.ones_like(data.Ht.hi), data.Ht.indices, data.Ht.indptr), shape=data.Ht.shape)
+            B = sp.csr_matrix((np.ones(m), (np.arange(m), labels)), shape=(m, nb))
+            CB = (C @ Ht @ B).tocsr()
+            CB.data[:] = 1
+            CC = sp.triu(CB @ CB.T + sp.identity(n), format="coo")
         order = np.lexsort((CC.col, CC.row))
         self.pc = CC.row[order].astype(np.int64)
         self.pd = CC.col[order].astype(np.int64)
@@ -666,11 +716,30 @@ class ContactSpace(_Backend):
     def _pair_index(self, c, d):
         return np.searchsorted(self._pair_keys, c * self.data.n + d)
 
+    def _build_W_local(self):
+        """W̃ of a local problem, copied into pair blocks from the file's (scaled) W."""
+        d = self.data
+        Wh = np.zeros((self.pc.size, 5, 5))
+        Wl = np.zeros((self.pc.size, 5, 5))
+        rows = np.repeat(np.arange(d.nk), np.diff(d.Wt.indptr))
+        cols = d.Wt.indices
+        ci, cj = self.contact_of_row[rows], self.contact_of_row[cols]
+        keep = ci <= cj
+        pidx = self._pair_index(ci[keep], cj[keep])
+        a = (rows - d.row_start[ci])[keep]
+        b = (cols - d.row_start[cj])[keep]
+        Wh[pidx, a, b] = d.Wt.hi[keep]
+        Wl[pidx, a, b] = d.Wt.lo[keep]
+        self._W = (Wh, Wl)
+
     def _build_W(self):
         """W̃ = H̃ M⁻¹ H̃ᵀ in pair blocks, block by block of M: W̃ += H_b M_b⁻¹ H_bᵀ over the
         rows touching block b (dense double-double Cholesky of M_b up to DENSE_BLOCK dofs,
         the sparse factor of M above)."""
         d = self.data
+        if d.local:
+            self._build_W_local()
+            return
         mr, mc, mh, ml = d.M.coo()
         Wh = np.zeros((self.pc.size, 5, 5))
         Wl = np.zeros((self.pc.size, 5, 5))
@@ -771,7 +840,7 @@ class ContactSpace(_Backend):
     def update(self, ph, pl, pih, pil, spec) -> bool:
         d = self.data
         if self._W is None:
-            if self.Mchol.factor(*self._M_upper()) >= 0:
+            if self.Mchol is not None and self.Mchol.factor(*self._M_upper()) >= 0:
                 raise ArithmeticError("M is not positive definite in double-double")
             self._build_W()
         if contact_factor_inverse(d.n, d.kinds, d.fric_cone, d.roll_cone, d.normal_cone, spec,
@@ -794,8 +863,10 @@ class ContactSpace(_Backend):
         return oh, ol
 
     def solve(self, a, t):
-        """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t."""
+        """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t (local form: (W̃ + G) dr̃ = t)."""
         d = self.data
+        if d.local:
+            return (np.zeros(0), np.zeros(0)), self._S_solve(np.ascontiguousarray(t[0]), np.ascontiguousarray(t[1]))
         yh, yl = self.Mchol.solve(a[0], a[1])
         hh, hl = d.Ht.matvec(yh, yl)
         rh, rl = np.empty(d.nk), np.empty(d.nk)
@@ -861,6 +932,11 @@ def choose_backend(data: ExtendedData, backend: str = "auto"):
     float64 it is as fast as or faster than the dof-space and hybrid forms on every problem
     measured (docs/DECISIONS.md), and its accuracy does not depend on μ.  ``contact-dd`` factors
     in double-double throughout; ``dof`` and ``hybrid`` are the dof-space forms."""
+    if data.local and backend in ("dof", "hybrid"):
+        from ..errors import InvalidArgumentError
+
+        raise InvalidArgumentError("backend", f"{backend!r} works in the dofs of a global problem; a local "
+                                              "problem has none", fix="use backend 'auto', 'contact' or 'contact-dd'")
     if backend == "dof":
         return DofSpace(data, max_local_dofs=10**9)
     if backend in ("auto", "contact"):

@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
-from ..problem import SPACEDIM, Problem, StoredSolution
+from ..problem import SPACEDIM, Problem, StoredSolution, make_local_form
 from .siconos_dat import LOCAL_DENSE_LIMIT, check_finite, factor_delassus
 
 GLOBAL = "fclib_global"
@@ -101,6 +101,14 @@ def embed_columns(A3) -> sp.csc_matrix:
     counts[_slots(n)] = np.diff(A3.indptr)
     indptr = np.concatenate(([0], np.cumsum(counts)))
     return sp.csc_matrix((A3.data.copy(), A3.indices.copy(), indptr), shape=(rows, SPACEDIM * n))
+
+
+def embed_square(W3) -> sp.csr_matrix:
+    """3n × 3n → 5n × 5n with zero rolling rows and columns; entries unchanged (a local W)."""
+    n = sp.csc_matrix(W3).shape[0] // FILE_SPACEDIM
+    slots = _slots(n)
+    C = sp.coo_matrix(W3)
+    return sp.csr_matrix((C.data.copy(), (slots[C.row], slots[C.col])), shape=(SPACEDIM * n, SPACEDIM * n))
 
 
 def extract_columns(A5) -> sp.csc_matrix:
@@ -330,7 +338,8 @@ def _read_local(fh, g, path, max_asymmetry, ignored) -> Problem:
         arr.setflags(write=False)
     qf = q.copy()
     qf.setflags(write=False)
-    return dataclasses.replace(problem, native=LocalData(W=Wf, q=qf, storage=W_fmt))
+    return dataclasses.replace(problem, native=LocalData(W=Wf, q=qf, storage=W_fmt),
+                               local=make_local_form(embed_square(W), embed(q, n)))
 
 
 def _read_solutions(fh, path, *, m: int, n: int, local_H):

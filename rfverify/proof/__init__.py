@@ -8,6 +8,7 @@ several points of one problem are proven at O(nnz) cost each.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -53,36 +54,68 @@ class Point:
 
 
 class ProofContext:
-    """Per-problem pieces of the proof, computed once (``setup_seconds``)."""
+    """Per-problem pieces of the proof, computed once (``setup_seconds``).  For a problem read
+    from a local file (``problem.local``) the pieces are those of the local theorem
+    (:mod:`.local`): the proof is about the file's W and q, never about the lifting."""
 
     def __init__(self, problem: Problem):
         t0 = time.perf_counter()
         self.problem = problem
-        self.exact = ExactData(problem)
-        self.mass: MassBounds = verify_mass_matrix(problem.M, problem.M_sym)
-        self.w_diag = self.mass.quad_upper_columns(problem.H) if self.mass.proven else None
-        self.scales = data_scales(problem)
+        self.is_local = problem.local is not None
+        if self.is_local:
+            from .local import LocalExact, local_data_scales
+
+            self.local = LocalExact(problem)
+            self.scales = local_data_scales(problem)
+            self.w_diag = self.local.facts.w_diag
+        else:
+            self.exact = ExactData(problem)
+            self.mass: MassBounds = verify_mass_matrix(problem.M, problem.M_sym)
+            self.w_diag = self.mass.quad_upper_columns(problem.H) if self.mass.proven else None
+            self.scales = data_scales(problem)
         self.setup_seconds = time.perf_counter() - t0
 
+    @property
+    def hypotheses_proven(self) -> bool:
+        """M ≻ 0 (global) or W ⪰ 0 (local) is proven: proofs can succeed at all."""
+        return self.local.facts.psd if self.is_local else self.mass.proven
+
     def rounded(self, point: Point):
-        """The float64 solution (v, u, r) a point rounds to: v and r to nearest, u = Hᵀv + w of
-        the *point* rounded to nearest (closer to u* than Hᵀ(rounded v) + w)."""
-        pv, _ = point.exact()
-        u = (self.exact.HT.matvec(pv) + self.exact.w).nearest()
+        """The float64 solution (v, u, r) a point rounds to: v and r to nearest, u of the *point*
+        rounded to nearest (Hᵀv + w, or W r + q for a local problem; closer to u* than the
+        same formula applied to rounded vectors)."""
+        pv, pr = point.exact()
+        if self.is_local:
+            u = self.local.u_of(pr).nearest()
+        else:
+            u = (self.exact.HT.matvec(pv) + self.exact.w).nearest()
         return point.v_hi.copy(), u, point.r_hi.copy()
 
-    def prove(self, point: Point, v, u, r, requested: int) -> Proof:
+    def prove(self, point: Point, v, u, r, requested: int, relative: bool = False) -> Proof:
         pv, pr = point.exact()
+        if self.is_local:
+            from .local import prove_local
+
+            return prove_local(self.problem, pr, u, r, requested=requested, exact=self.local, scales=self.scales,
+                               relative=relative)
         return _prove(self.problem, pv, pr, v, u, r, requested=requested, mass=self.mass, exact=self.exact,
-                      scales=self.scales, w_diag=self.w_diag)
+                      scales=self.scales, w_diag=self.w_diag, relative=relative)
+
+    def eps_lower(self, gap: float) -> float:
+        """The smallest ε a point with duality gap rᵀu = ``gap`` can give (√(2 gap) globally,
+        √gap for the local theorem)."""
+        return math.sqrt(max(gap, 0.0) * (1.0 if self.is_local else 2.0))
 
     def may_certify(self, eps_lower: float, v_inf: float, u_inf: float, requested: int) -> bool:
         """Necessary condition, cheap: with ε ≥ ``eps_lower`` the bounds on v and u are at least
-        √((M⁻¹)_jj)·ε and √(W_kk)·ε, which must fit 10⁻ᵏ of the larger of the vector's norm and
-        its data scale.  False means no proof of this point can certify ``requested`` digits."""
-        if not self.mass.proven:
+        √((M⁻¹)_jj)·ε and √(W_kk)·ε (√(W_kk)·ε on u for a local problem), which must fit 10⁻ᵏ
+        of the larger of the vector's norm and its data scale.  False means no proof of this
+        point can certify ``requested`` digits."""
+        if not self.hypotheses_proven:
             return True  # let the proof say why
         tol = 10.0 ** (-requested)
-        ev = float(np.sqrt(np.max(self.mass.minv_diag_upper, initial=0.0))) * eps_lower
         eu = float(np.sqrt(np.max(self.w_diag, initial=0.0))) * eps_lower
+        if self.is_local:
+            return eu <= tol * max(u_inf, self.scales["u"]) * 1.01
+        ev = float(np.sqrt(np.max(self.mass.minv_diag_upper, initial=0.0))) * eps_lower
         return ev <= tol * max(v_inf, self.scales["v"]) * 1.01 and eu <= tol * max(u_inf, self.scales["u"]) * 1.01

@@ -54,6 +54,11 @@ FLOAT64_DIGITS = 53 * math.log10(2)  # ≈ 15.95: what a float64 can carry relat
 MAX_CERTIFIABLE_DIGITS = 15
 QUANTITIES = ("v", "u", "Hr", "r")
 DATA_SCALE_NAMES = {"v": "‖M⁻¹f‖∞", "u": "‖HᵀM⁻¹f + w‖∞", "Hr": "‖f‖∞", "r": "‖f‖∞ / max_k ‖h_k‖₂"}
+DATA_SCALE_NAMES_LOCAL = {"u": "‖q‖∞", "r": "‖q‖∞ / max_k W_kk"}
+THEOREM_GLOBAL = ("Global problem, M = (M+M^T)/2 positive definite: for any v with u(v) = H^T v + w in K* and any "
+                  "r in K, with g = Mv - Hr - f: ||v - v*||_M^2 <= g^T M^-1 g + 2 r^T u(v) (strong convexity and "
+                  "weak duality of the convex relaxation); per-component bounds by Cauchy-Schwarz in the M inner "
+                  "product, carried to the stored solution by the triangle inequality (DESIGN 6.1).")
 
 
 def _up(x):
@@ -86,15 +91,40 @@ class QuantityBound:
     certified: bool
     note: str = ""
 
+    @property
+    def zero_within(self) -> float:
+        """Proven upper bound of ‖x*‖∞ (‖x‖∞ + abs_bound, rounded up)."""
+        return float(_up(self.norm + self.abs_bound)) if math.isfinite(self.abs_bound) else math.inf
+
+    @property
+    def scale_digits(self) -> float | None:
+        """−log10(zero_within / data_scale): how far below its data scale x* is proven to be
+        (the absolute mode's measure; not significant digits of x*)."""
+        z = max(self.zero_within, self.abs_bound)
+        if not (self.data_scale > 0 and math.isfinite(z)):
+            return None
+        return FLOAT64_DIGITS if z == 0 else -math.log10(z / self.data_scale)
+
+    def short(self) -> str:
+        """One phrase that claims exactly what was proven: relative digits, or "zero within"."""
+        if self.mode == "information":
+            return f"{self.name} not unique"
+        if self.mode == "absolute":
+            return (f"{self.name} zero within {self.zero_within:.1e} ({self.scale_digits:.1f} digits of "
+                    f"{self.data_scale_name})")
+        return f"{self.name} {self.digits:.1f} digits" if self.digits is not None else f"{self.name} no relative digits"
+
     def describe(self) -> str:
         if self.mode == "information":
             return f"{self.name}: not unique ({self.note}); error bound not available"
         if self.mode == "absolute":
-            return (f"{self.name}: |error| ≤ {self.abs_bound:.2e} absolute ({self.name}* is zero at this "
-                    f"accuracy: ‖{self.name}‖∞ = {self.norm:.2e}; data scale {self.data_scale_name} = "
-                    f"{self.data_scale:.2e})")
+            return (f"{self.name}: zero within {self.zero_within:.2e} (‖{self.name}*‖∞ ≤ {self.zero_within:.2e} = "
+                    f"{self.scale_digits:.1f} digits below the data scale {self.data_scale_name} = "
+                    f"{self.data_scale:.2e}; |error| ≤ {self.abs_bound:.2e}; no significant digits are claimed)")
         d = "no relative digits" if self.digits is None else f"{self.digits:.1f} digits"
-        return f"{self.name}: {d} (|error| ≤ {self.abs_bound:.2e}, ‖{self.name}*‖∞ ≥ {self.own_scale:.2e})"
+        extra = f"; {self.note}" if self.note and not self.certified and self.digits is None else ""
+        return (f"{self.name}: {d} (|error| ≤ {self.abs_bound:.2e}, ‖{self.name}*‖∞ ≥ {self.own_scale:.2e})"
+                + extra)
 
     def as_dict(self) -> dict:
         return {"abs_bound": self.abs_bound, "norm": self.norm, "own_scale": self.own_scale,
@@ -104,10 +134,12 @@ class QuantityBound:
 
 @dataclass
 class Proof:
-    """Outcome of :func:`prove`.  ``valid`` is False when a hypothesis of the theorem could not
-    be verified (point outside a cone, M not proven positive definite); then ``failure`` says
-    which and no quantity is certified.  ``eps_M`` ≥ ‖v_p − v*‖_M; ``terms`` keeps every
-    intermediate norm (for the certificate file)."""
+    """Outcome of :func:`prove` (or :func:`rfverify.proof.local.prove_local`).  ``valid`` is False
+    when a hypothesis of the theorem could not be verified (point outside a cone, M not proven
+    positive definite, W not proven semidefinite); then ``failure`` says which and no quantity
+    is certified.  ``eps_M`` ≥ ‖v_p − v*‖_M (for a local problem: ≥ ‖r_p − r*‖_W); ``terms``
+    keeps every intermediate norm (for the certificate file); ``theorem`` states which
+    theorem, on which problem, was evaluated."""
 
     valid: bool
     requested: int
@@ -118,10 +150,16 @@ class Proof:
     seconds: float = 0.0
     arithmetic: str = ("exact dyadic rationals (Python integers) for the point's residuals; "
                        "verified float64 with a-priori rounding-error bounds for M and H norms")
+    theorem: str = THEOREM_GLOBAL
 
     @property
     def certified(self) -> bool:
         return self.valid and all(q.certified for q in self.quantities.values() if q.mode != "information")
+
+    @property
+    def local(self) -> bool:
+        """True when this is the local theorem (quantities u and r of the file's local problem)."""
+        return self.theorem != THEOREM_GLOBAL
 
     def weakest(self) -> str | None:
         bad = [q for q in self.quantities.values() if q.mode != "information" and not q.certified]
@@ -130,15 +168,7 @@ class Proof:
     def summary(self) -> str:
         if not self.valid:
             return f"no proof: {self.failure}"
-        parts = []
-        for q in self.quantities.values():
-            if q.mode == "information":
-                parts.append(f"{q.name} not unique")
-            elif q.mode == "absolute":
-                parts.append(f"{q.name} ≈ 0, |err| ≤ {q.abs_bound:.1e}")
-            else:
-                parts.append(f"{q.name} {q.digits:.1f}" if q.digits is not None else f"{q.name} –")
-        return ", ".join(parts)
+        return ", ".join(q.short() for q in self.quantities.values())
 
 
 class ExactData:
@@ -201,10 +231,11 @@ def data_scales(problem: Problem) -> dict:
 
 def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, requested: int = 10,
           mass: MassBounds | None = None, exact: ExactData | None = None,
-          scales: dict | None = None, w_diag: np.ndarray | None = None) -> Proof:
+          scales: dict | None = None, w_diag: np.ndarray | None = None, relative: bool = False) -> Proof:
     """Evaluate the bound for the point (point_v, point_r) and carry it to the returned float64
     solution (v (m,), u (5n,), r (5n,)).  Reusable pieces (``mass``, ``exact``, ``scales``,
-    ``w_diag``) can be passed in when proving several points of one problem."""
+    ``w_diag``) can be passed in when proving several points of one problem.  ``relative``:
+    accept only relative digits (no "zero at the data scale" mode)."""
     t0 = time.perf_counter()
     requested = validate_digits(requested)
     m, n = problem.n_dofs, problem.n_contacts
@@ -261,10 +292,10 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
              "max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)),
              "M_blocks_dense": mass.dense_blocks, "M_blocks_sparse": mass.sparse_blocks}
     q = {}
-    q["v"] = _quantity("v", e_v, v, scales, requested)
-    q["u"] = _quantity("u", e_u, u, scales, requested)
+    q["v"] = _quantity("v", e_v, v, scales, requested, relative=relative)
+    q["u"] = _quantity("u", e_u, u, scales, requested, relative=relative)
     Hr_float = Hr_ret.nearest()
-    q["Hr"] = _quantity("Hr", e_Hr, Hr_float, scales, requested)
+    q["Hr"] = _quantity("Hr", e_Hr, Hr_float, scales, requested, relative=relative)
 
     # ---- r, where it is unique
     e_r, r_note, r_terms = _r_bound(problem, exact, mass, u_p, sqrtW * eps, point_r, Hr_p, g, eps, r)
@@ -273,7 +304,7 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
         q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
                                DATA_SCALE_NAMES["r"], None, "information", False, r_note)
     else:
-        q["r"] = _quantity("r", e_r, r, scales, requested, note=r_note)
+        q["r"] = _quantity("r", e_r, r, scales, requested, note=r_note, relative=relative)
     return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0)
 
 
@@ -312,11 +343,13 @@ def validate_digits(digits) -> int:
     return digits
 
 
-def _invalid(requested, why, t0) -> Proof:
-    return Proof(False, requested, math.inf, {}, {}, failure=why, seconds=time.perf_counter() - t0)
+def _invalid(requested, why, t0, theorem: str = THEOREM_GLOBAL) -> Proof:
+    return Proof(False, requested, math.inf, {}, {}, failure=why, seconds=time.perf_counter() - t0, theorem=theorem)
 
 
-def _quantity(name, e, x, scales, requested, note="") -> QuantityBound:
+def _quantity(name, e, x, scales, requested, note="", names=DATA_SCALE_NAMES, relative: bool = False) -> QuantityBound:
+    """The record of one quantity.  ``relative=True`` accepts only relative digits: a quantity
+    whose x* may be zero is then not certified (its relative digits are meaningless)."""
     e_inf = float(np.max(e, initial=0.0))
     norm = float(np.max(np.abs(x), initial=0.0))
     own = max(float(_down(norm - e_inf)), 0.0) if math.isfinite(e_inf) else 0.0
@@ -326,29 +359,38 @@ def _quantity(name, e, x, scales, requested, note="") -> QuantityBound:
         digits = min(FLOAT64_DIGITS, -math.log10(e_inf / own)) if e_inf > 0 else FLOAT64_DIGITS
     tol = 10.0 ** (-requested)
     if digits is not None and digits >= requested:
-        return QuantityBound(name, e_inf, norm, own, data, DATA_SCALE_NAMES[name], digits, "relative", True, note)
+        return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", True, note)
+    if relative:
+        if digits is None:
+            note = note or (f"relative digits requested, but ‖{name}*‖∞ may be 0 (‖{name}‖∞ = {norm:.2e} ≤ "
+                            f"error bound {e_inf:.2e}): relative digits are meaningless here")
+        return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)
     # x* may be zero: judge absolutely against the data scale when it is negligible there.
     if data > 0 and float(_up(norm + e_inf)) <= tol * data and e_inf <= tol * data:
-        return QuantityBound(name, e_inf, norm, own, data, DATA_SCALE_NAMES[name], digits, "absolute", True,
-                             note or f"‖{name}*‖∞ ≤ {float(_up(norm + e_inf)):.2e} ≤ 1e-{requested}·{DATA_SCALE_NAMES[name]}")
-    return QuantityBound(name, e_inf, norm, own, data, DATA_SCALE_NAMES[name], digits, "relative", False, note)
+        return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "absolute", True,
+                             note or f"‖{name}*‖∞ ≤ {float(_up(norm + e_inf)):.2e} ≤ 1e-{requested}·{names[name]}")
+    return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)
+
+
+def proven_open(u_p: Dyadic, u_radius, mu, mur, n: int) -> np.ndarray:
+    """Contacts where u* ∈ int K*_i is proven (so r*_i = 0 for every solution): the whole box
+    u_p ± radius lies inside.  A sufficient test in float64 with every rounding pushed against it."""
+    lo, hi = u_p.lower(), u_p.upper()
+    uc_lo, uc_hi = lo.reshape(n, SPACEDIM), hi.reshape(n, SPACEDIM)
+    rad = np.asarray(u_radius).reshape(n, SPACEDIM)
+    mag_hi = _up(np.maximum(np.abs(uc_lo), np.abs(uc_hi)) + rad)
+    nT = _up(np.hypot(mag_hi[:, 1], mag_hi[:, 2]))
+    nR = _up(np.hypot(mag_hi[:, 3], mag_hi[:, 4]))
+    rhs = inflate(mu * nT + mur * nR, 6)
+    lhs = _down(_down(uc_lo[:, 0] - rad[:, 0]) * (1 - 4 * 2.0 ** -53))
+    return lhs > rhs
 
 
 def _r_bound(problem, exact, mass, u_p: Dyadic, u_radius, point_r, Hr_p, g, eps, r):
     """Per-component bound on r − r* when r* is unique on the loaded contacts, else None."""
     n = problem.n_contacts
     mu, mur = problem.mu, problem.mu_r
-    lo, hi = u_p.lower(), u_p.upper()
-    uc_lo, uc_hi = lo.reshape(n, SPACEDIM), hi.reshape(n, SPACEDIM)
-    rad = np.asarray(u_radius).reshape(n, SPACEDIM)
-    # u* ∈ int K*_i is proven when the whole box u_p ± radius is inside: a sufficient test in
-    # float64 with every rounding pushed against it.
-    mag_hi = _up(np.maximum(np.abs(uc_lo), np.abs(uc_hi)) + rad)
-    nT = _up(np.hypot(mag_hi[:, 1], mag_hi[:, 2]))
-    nR = _up(np.hypot(mag_hi[:, 3], mag_hi[:, 4]))
-    rhs = inflate(mu * nT + mur * nR, 6)
-    lhs = _down(_down(uc_lo[:, 0] - rad[:, 0]) * (1 - 4 * 2.0 ** -53))
-    open_ = lhs > rhs
+    open_ = proven_open(u_p, u_radius, mu, mur, n)
     S = np.flatnonzero(~open_)
     terms = {"contacts_proven_open": int(open_.sum()), "contacts_possibly_loaded": int(S.size)}
     kept = [np.zeros(S.size, dtype=bool) + True, mu[S] > 0, mu[S] > 0, mur[S] > 0, mur[S] > 0]

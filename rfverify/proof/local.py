@@ -1,0 +1,259 @@
+"""The a-posteriori error bound for a *local* problem, on the file's own W and q (DESIGN §6.1b).
+
+A local file (Siconos local ``.dat``, ``/fclib_local``) states ``u = W r + q``,
+``K* ∋ u ⊥ r ∈ K``.  The solver lifts it to a global problem (M = I, HᵀH ≈ W), but that
+lifting is a device: this module proves facts about the file's problem, with
+W := (W + Wᵀ)/2 **exactly** and W positive semidefinite **as stored** (proven below).
+
+Theorem.  For any r ∈ K with u(r) = W r + q ∈ K* (evaluated exactly) and any solution
+(r*, u* = W r* + q),
+
+    ‖r − r*‖²_W = (r − r*)ᵀ(u − u*) = rᵀu − rᵀu* − r*ᵀu + r*ᵀu* ≤ rᵀu,
+
+because r*ᵀu* = 0 and rᵀu*, r*ᵀu ≥ 0 (pairs of K and K*).  So ε := √(rᵀu) ≥ ‖r − r*‖_W, and
+
+* u* is unique and |u_k − u*_k| = |e_kᵀW(r − r*)| ≤ √(W_kk) ε (Cauchy–Schwarz in the W
+  semi-inner product: no λmin needed, W may be singular);
+* where u* is proven to lie in the interior of K*_i (the box u ± √(W_kk) ε inside), r*_i = 0
+  for every solution (set O); on the other contacts S, with d = r − r*,
+  ‖W^½ E_S d_S‖ ≤ ε + ‖W^½ E_O r_O‖, so per block b of W_SS (its connected components)
+  ‖d_b‖₂ ≤ (ε + √(r_Oᵀ W_OO r_O)) / √λmin(W_b) where λmin(W_b) > 0 is verified.  Where it
+  is not, r is reported as information (not unique), never certified.
+
+Hypothesis check.  W ⪰ 0 is needed; it is proven by the verified floating-point bounds of
+:mod:`.massbounds` (W definite on its nonzero rows) or, for blocks up to
+:data:`EXACT_PSD_ROWS` rows where that fails (W singular: a rank-deficient Delassus matrix),
+by an exact rational LDLᵀ with diagonal pivoting.  A W that is indefinite as stored (rounding
+of a singular W usually makes it so) is refused: the problem in the file is then not convex,
+and nothing about it is certified.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..problem import SPACEDIM, LocalForm, Problem
+from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cone_violations,
+                    proven_open, validate_digits)
+from .dyadic import Dyadic, DyadicCSR, fraction_upper_float, sqrt_upper
+from .massbounds import MassBounds, upper_sum, verify_mass_matrix
+
+EXACT_PSD_ROWS = 120
+"""Largest block of W whose positive semidefiniteness is decided in exact rational arithmetic
+when the verified floating-point test cannot prove it (measured: 0.002 s for the 10 × 10 W of
+the bundled cube; the cost grows like rows³ with rationals of growing size)."""
+
+THEOREM_LOCAL = ("Local problem u = Wr + q with W = (W+W^T)/2 positive semidefinite as stored: for any r in K "
+                 "with u = Wr + q in K* (exact), ||r - r*||_W^2 <= r^T u; |u_k - u*_k| <= sqrt(W_kk) ||r - r*||_W; "
+                 "r bounded through verified lambda_min of W on the contacts that may carry load (DESIGN 6.1b).")
+
+
+@dataclass
+class LocalFacts:
+    """What is proven about W once per problem: ``psd`` (True: W ⪰ 0 proven), ``why`` (the
+    reason when not), ``how`` (which test proved it), ``w_diag`` (W_kk, exact floats)."""
+
+    psd: bool
+    why: str
+    how: str
+    w_diag: np.ndarray
+
+
+class LocalExact:
+    """The local data as exact dyadic matrices, and the verified facts about W."""
+
+    def __init__(self, problem: Problem):
+        local: LocalForm = problem.local
+        self.problem = problem
+        self.local = local
+        self.W = DyadicCSR.from_scipy(local.W)
+        self.WT = self.W.transpose()
+        self.q = Dyadic.from_float(local.q)
+        self.mu = Dyadic.from_float(problem.mu)
+        self.mu_r = Dyadic.from_float(problem.mu_r)
+        self.facts = prove_psd(local.W)
+
+    def u_of(self, r: Dyadic) -> Dyadic:
+        """u = (W + Wᵀ)/2 · r + q, exactly."""
+        return (self.W.matvec(r) + self.WT.matvec(r)).scale2(-1) + self.q
+
+    def quad(self, r: Dyadic) -> Fraction:
+        """rᵀ (W + Wᵀ)/2 r = rᵀ W r, exactly."""
+        return r.dot(self.W.matvec(r))
+
+
+def _sym(W: sp.spmatrix) -> sp.csr_matrix:
+    W = sp.csr_matrix(W, dtype=np.float64)
+    return (W * 0.5 + W.T * 0.5).tocsr()
+
+
+def prove_psd(W: sp.spmatrix) -> LocalFacts:
+    """Prove (W + Wᵀ)/2 ⪰ 0 for the stored W, or say why not."""
+    W = sp.csr_matrix(W, dtype=np.float64)
+    diag = W.diagonal()
+    Ws = _sym(W)
+    if np.any(diag < 0):
+        k = int(np.flatnonzero(diag < 0)[0])
+        return LocalFacts(False, f"W has a negative diagonal entry W[{k},{k}] = {diag[k]:.3e}", "", diag)
+    zero = diag == 0
+    if zero.any():
+        # A PSD matrix with W_kk = 0 has a zero row k: check the symmetrised rows exactly
+        # (W_kj + W_jk = 0 in exact arithmetic ⟺ W_kj == −W_jk in floats).
+        Z = sp.csr_matrix(W[zero])
+        ZT = sp.csr_matrix(W.T[zero])
+        S = (Z + ZT).tocoo()  # a float sum is 0 exactly when the exact sum is 0
+        S.eliminate_zeros()
+        if S.nnz:
+            k = int(np.flatnonzero(zero)[S.row[0]])
+            return LocalFacts(False, f"W[{k},{k}] = 0 but row {k} of (W + Wᵀ)/2 is not zero (column "
+                                     f"{int(S.col[0])}): W is not positive semidefinite", "", diag)
+    rows = np.flatnonzero(~zero)
+    if rows.size == 0:
+        return LocalFacts(True, "", "W = 0", diag)
+    A_raw = W[rows][:, rows]
+    mass = verify_mass_matrix(A_raw)
+    if mass.proven:
+        return LocalFacts(True, "", f"verified λmin((W + Wᵀ)/2) ≥ {float(np.nanmin(mass.lam_lower)):.3e} > 0 "
+                                    "on its nonzero rows (floating point with rounding-error bounds)", diag)
+    for fb in mass.failures:
+        idx = np.asarray(fb.dofs)
+        if idx.size > EXACT_PSD_ROWS:
+            return LocalFacts(False, f"W is not proven positive semidefinite: a block of {idx.size} rows "
+                                     f"({fb.reason}); the exact test is limited to {EXACT_PSD_ROWS} rows", "", diag)
+        verdict = exact_psd(A_raw[idx][:, idx])
+        if verdict == "indefinite":
+            return LocalFacts(False, f"W = (W + Wᵀ)/2 as stored is not positive semidefinite (exact rational "
+                                     f"LDLᵀ of its block of rows {rows[idx][:6].tolist()}"
+                                     f"{'…' if idx.size > 6 else ''} has a negative pivot): the local problem "
+                                     "of the file is not convex", "", diag)
+    return LocalFacts(True, "", "(W + Wᵀ)/2 ⪰ 0 proven: verified floating point on its definite blocks, exact "
+                                "rational LDLᵀ on the others", diag)
+
+
+def exact_psd(A: sp.spmatrix) -> str:
+    """"definite", "semidefinite" or "indefinite" for the exact (A + Aᵀ)/2 of a small float
+    matrix: LDLᵀ in rationals with the largest remaining diagonal as pivot (a PSD matrix whose
+    largest remaining diagonal is 0 has a zero remainder)."""
+    D = np.asarray(sp.csr_matrix(A).toarray(), dtype=np.float64)
+    n = D.shape[0]
+    F = [[(Fraction(float(D[i, j])) + Fraction(float(D[j, i]))) / 2 for j in range(n)] for i in range(n)]
+    left = list(range(n))
+    while left:
+        p = max(left, key=lambda i: F[i][i])
+        piv = F[p][p]
+        if piv < 0:
+            return "indefinite"
+        if piv == 0:
+            return "semidefinite" if all(F[i][j] == 0 for i in left for j in left) else "indefinite"
+        left.remove(p)
+        row = F[p]
+        for i in left:
+            if F[i][p] != 0:
+                f = F[i][p] / piv
+                Fi = F[i]
+                for j in left:
+                    if row[j] != 0:
+                        Fi[j] -= f * row[j]
+    return "definite"
+
+
+def local_data_scales(problem: Problem) -> dict:
+    """Non-vanishing data scales of a local problem: ‖q‖∞ for u (u at r = 0), and
+    ‖q‖∞ / max_k W_kk for r (float64, stated with the certificate; not part of a bound)."""
+    q_inf = float(np.max(np.abs(problem.local.q), initial=0.0))
+    wmax = float(np.max(problem.local.W.diagonal(), initial=0.0))
+    shrink = 1 - 1e-10
+    return {"u": q_inf, "r": q_inf / wmax * shrink if wmax > 0 else 0.0}
+
+
+def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10, exact: LocalExact | None = None,
+                scales: dict | None = None, relative: bool = False) -> Proof:
+    """Evaluate the local bound at the point r_p (exact, 5n) and carry it to the returned float64
+    (u (5n,), r (5n,)).  Quantities: u and r (v of the lifting is not a quantity of the file)."""
+    t0 = time.perf_counter()
+    requested = validate_digits(requested)
+    n = problem.n_contacts
+    u, r = (np.asarray(x, dtype=np.float64).ravel() for x in (u, r))
+    for name, arr in (("u", u), ("r", r)):
+        if arr.size != SPACEDIM * n:
+            from ..errors import InvalidProblemError
+
+            raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {SPACEDIM * n}",
+                                      fix="certify a solution of this problem")
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
+        return _invalid(requested, "the solution contains NaN or Inf", t0, theorem=THEOREM_LOCAL)
+    ex = exact or LocalExact(problem)
+    scales = scales or local_data_scales(problem)
+    if not ex.facts.psd:
+        return _invalid(requested, ex.facts.why, t0, theorem=THEOREM_LOCAL)
+    if len(point_r) != SPACEDIM * n:
+        raise ValueError("the point does not match the problem's sizes")
+
+    u_p = ex.u_of(point_r)
+    bad_dual, bad_primal = cone_violations(ex, u_p, point_r)
+    if bad_dual.size or bad_primal.size:
+        what = []
+        if bad_dual.size:
+            what.append(f"u = Wr + q ∉ K* at {bad_dual.size} contact(s), first {int(bad_dual[0])}")
+        if bad_primal.size:
+            what.append(f"r ∉ K at {bad_primal.size} contact(s), first {int(bad_primal[0])}")
+        return _invalid(requested, "the point is not in the cones (" + "; ".join(what) + ")", t0,
+                        theorem=THEOREM_LOCAL)
+    gap = point_r.dot(u_p)  # ≥ 0: pairs of K and K*
+    gap_up = fraction_upper_float(gap)
+    eps = float(_up(math.sqrt(gap_up)))
+    sqrtW = _up(np.sqrt(ex.facts.w_diag))
+    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up(sqrtW * eps))
+    terms = {"eps_W": eps, "gap_rTu": gap_up, "max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)),
+             "W_psd": ex.facts.how}
+    q = {"u": _quantity("u", e_u, u, scales, requested, names=DATA_SCALE_NAMES_LOCAL, relative=relative)}
+    e_r, note, r_terms = _local_r_bound(problem, ex, u_p, sqrtW * eps, point_r, eps, r)
+    terms.update(r_terms)
+    if e_r is None:
+        q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
+                               DATA_SCALE_NAMES_LOCAL["r"], None, "information", False, note)
+    else:
+        q["r"] = _quantity("r", e_r, r, scales, requested, note=note, names=DATA_SCALE_NAMES_LOCAL,
+                           relative=relative)
+    return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, theorem=THEOREM_LOCAL,
+                 arithmetic=("exact dyadic rationals (Python integers) for u = Wr + q, rᵀu and the cones; "
+                             "verified float64 (or exact rationals) for W ⪰ 0 and λmin"))
+
+
+def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyadic, eps: float, r):
+    n = problem.n_contacts
+    mu, mur = problem.mu, problem.mu_r
+    open_ = proven_open(u_p, u_radius, mu, mur, n)
+    S = np.flatnonzero(~open_)
+    terms = {"contacts_proven_open": int(open_.sum()), "contacts_possibly_loaded": int(S.size)}
+    kept = [np.ones(S.size, dtype=bool), mu[S] > 0, mu[S] > 0, mur[S] > 0, mur[S] > 0]
+    cols = np.sort(np.concatenate([SPACEDIM * S[kept[k]] + k for k in range(SPACEDIM)])) if S.size \
+        else np.zeros(0, dtype=np.int64)
+    e = np.abs(r).astype(np.float64)  # off S (r* = 0: open contacts, components K forces to 0)
+    if cols.size == 0:
+        return e, f"unique: all {n} contacts proven open (r* = 0)", terms
+    A = problem.local.W[cols][:, cols]
+    mass: MassBounds = verify_mass_matrix(A)
+    if not mass.proven:
+        fb = mass.failures[0]
+        return None, (f"W on the {S.size} possibly loaded contacts is not proven definite ({fb.reason}): "
+                      "r may not be unique, u is"), terms
+    # r_O: the point's r off the loaded columns (r* = 0 there); its W-norm widens the bound on S.
+    r_O = point_r.ints.copy()
+    r_O[cols] = 0
+    rO = Dyadic(r_O, point_r.exp)
+    t = sqrt_upper(max(ex.quad(rO), Fraction(0)))
+    radius = float(_up(eps + t))
+    lam = mass.lam_lower[mass.labels]  # per column of the loaded set
+    d_r = (Dyadic.from_float(r[cols]) - point_r[cols]).abs_upper()
+    e[cols] = upper_sum(d_r, _up(radius / np.nextafter(np.sqrt(lam) * (1 - 4 * 2.0 ** -53), 0)))
+    terms.update({"lam_min_W_S_lower": float(np.min(lam)), "W_norm_r_open": t})
+    note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), W definite on the other {S.size} "
+            f"(verified λmin ≥ {float(np.min(lam)):.2e})")
+    return e, note, terms
