@@ -16,9 +16,11 @@ Layout::
     /guesses/number_of_guesses, /guesses/1/{v,u,r}, /guesses/2/...      (optional)
 
 Matrix storage is told by ``nz``: ``nz ≥ 0`` triplet with **i = row, p = column** (the comment
-in fclib.h has it backwards; the files and fclib.c agree with this), duplicates summed;
-``nz = −1`` CSC (p = column pointers, i = row indices); ``nz = −2`` CSR (p = row pointers,
-i = column indices).  Index arrays are written as int32 like fclib.c, values as float64.
+in fclib.h has it backwards; the files and fclib.c agree with this); ``nz = −1`` CSC
+(p = column pointers, i = row indices); ``nz = −2`` CSR (p = row pointers, i = column
+indices).  In every storage a repeated (row, col) is summed **exactly**
+(:mod:`rfverify.io._exact`) and refused when its exact sum is not a float64: never rounded.
+Index arrays are written as int32 like fclib.c, values as float64.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
 from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, StoredSolution
+from ._exact import FIX_INEXACT, exact_csc
 from ._paths import read_head
 from .output import OutputTarget, atomic_output, check_output_file
 
@@ -377,6 +380,9 @@ def _read_matrix(meta, path):
     def bad(msg, where=loc):
         return ProblemFileError(path, f"matrix {name}: {msg}", location=where, fix=_FIX_LAYOUT)
 
+    def inexact(k, msg):
+        return ProblemFileError(path, msg, location=f"{loc}/x[{k}]", fix=FIX_INEXACT)
+
     sizes = {k: meta[k].size for k in ("p", "i", "x")}
     if nz >= 0:
         if min(sizes.values()) < nz:
@@ -392,8 +398,7 @@ def _read_matrix(meta, path):
         if nz and (cols.min() < 0 or cols.max() >= n):
             raise bad(f"column index out of range 0..{n - 1} (p holds {cols.min()}..{cols.max()})",
                       f"{loc}/p")
-        A = sp.coo_matrix((vals, (rows, cols)), shape=(m, n)).tocsc()  # sums duplicates
-        return A, "triplet"
+        return exact_csc(rows, cols, vals, (m, n), matrix=name, refuse=inexact), "triplet"
     outer, inner = (n, m) if nz == NZ_CSC else (m, n)
     kind = "csc" if nz == NZ_CSC else "csr"
     if sizes["p"] < outer + 1:
@@ -409,11 +414,9 @@ def _read_matrix(meta, path):
     if nnz and (idx.min() < 0 or idx.max() >= inner):
         raise bad(f"index out of range 0..{inner - 1} in i (holds {idx.min()}..{idx.max()})",
                   f"{loc}/i")
-    cls = sp.csc_matrix if nz == NZ_CSC else sp.csr_matrix
-    A = cls((x, idx, ptr), shape=(m, n))
-    A = sp.csc_matrix(A)
-    A.sum_duplicates()
-    return A, kind
+    outer_of = np.repeat(np.arange(outer, dtype=np.int64), np.diff(ptr))
+    rows, cols = (idx, outer_of) if nz == NZ_CSC else (outer_of, idx)
+    return exact_csc(rows, cols, x, (m, n), matrix=name, refuse=inexact), kind
 
 
 # ---------------------------------------------------------------------- solutions

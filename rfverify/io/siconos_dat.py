@@ -13,7 +13,9 @@ A sparse matrix follows with an integer line (the Siconos sparse origin) and a C
 ``row col : value``) or compressed columns (``m-by-n, nzmax: .. nnz: .., 1-norm: ..`` then
 ``col j : locations a to b`` and ``row : value``).  CSparse prints values with ``%g``: **six
 significant digits**, so such a problem is only known to about 5e-6 relative per entry;
-the reader records this in ``problem.provenance["significant_digits"]``.
+the reader records this in ``problem.provenance["significant_digits"]``.  A (row, col) printed
+more than once is summed exactly (:mod:`rfverify.io._exact`; refused, naming its line, when the
+exact sum of the printed values is not a float64).
 
 The file kind is recognised from the content: after the first matrix, a global file has a
 second matrix header (a line holding one integer); a local file has the vector q (floats).
@@ -31,6 +33,7 @@ import scipy.sparse as sp
 
 from ..errors import InvalidProblemError, ProblemFileError
 from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, SymmetryReport, asymmetry_error
+from ._exact import FIX_INEXACT, exact_csc
 from ._paths import read_head
 
 STORAGE_DENSE = 0
@@ -285,6 +288,7 @@ def _read_cs_triplet(lines, hdr_line, match, rows, cols, what):
     r = np.empty(nnz, dtype=np.int64)
     c = np.empty(nnz, dtype=np.int64)
     x = np.empty(nnz)
+    at = np.empty(nnz, dtype=np.int64)  # line of each entry, to name a refused repeated entry
     for k in range(nnz):
         ln, s = lines.next(f"entry {k + 1} of {nnz} of {what}")
         me = _TRIPLET_ENTRY.match(s)
@@ -293,9 +297,9 @@ def _read_cs_triplet(lines, hdr_line, match, rows, cols, what):
         row, col = int(me.group(1)), int(me.group(2))
         if row >= m or col >= n:
             raise lines.error(ln, f"entry ({row}, {col}) outside {m}×{n} in {what}")
-        r[k], c[k] = row, col
+        r[k], c[k], at[k] = row, col, ln
         x[k] = _float(lines, ln, me.group(3))
-    return sp.coo_matrix((x, (r, c)), shape=(m, n)).tocsc()
+    return _exact_matrix(lines, r, c, x, at, (m, n), what)
 
 
 def _read_cs_csc(lines, hdr_line, match, rows, cols, what):
@@ -303,7 +307,7 @@ def _read_cs_csc(lines, hdr_line, match, rows, cols, what):
     if (m, n) != (rows, cols):
         raise lines.error(hdr_line, f"{what}: CSparse says {m}-by-{n}, header said {rows}×{cols}")
     indptr = np.zeros(n + 1, dtype=np.int64)  # n was bounded by the file's size
-    idx, vals = [], []
+    idx, vals, at = [], [], []
     for j in range(n):
         ln, s = lines.next(f"column {j} of {what}")
         mc = _CSC_COL.match(s)
@@ -322,12 +326,23 @@ def _read_cs_csc(lines, hdr_line, match, rows, cols, what):
                 raise lines.error(ln, f"row {row} outside 0..{m - 1} in {what}")
             idx.append(row)
             vals.append(_float(lines, ln, me.group(2)))
+            at.append(ln)
         indptr[j + 1] = len(idx)
     if len(idx) != nnz:
         raise lines.error(hdr_line, f"{what} lists {len(idx)} entries, header says nnz = {nnz}")
-    A = sp.csc_matrix((np.array(vals), np.array(idx, dtype=np.int64), indptr), shape=(m, n))
-    A.sum_duplicates()
-    return A
+    col_of = np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr))
+    return _exact_matrix(lines, np.array(idx, dtype=np.int64), col_of,
+                         np.array(vals, dtype=np.float64), at, (m, n), what)
+
+
+def _exact_matrix(lines, rows, cols, vals, at, shape, what):
+    """The CSC matrix of the entries, a repeated (row, col) summed exactly (refused, naming the
+    line of its first term, when the exact sum is not a float64)."""
+    def refuse(k, msg):
+        return lines.error(at[k], msg, fix=FIX_INEXACT)
+
+    name = "M (W of a local file)" if what == "first matrix" else what
+    return exact_csc(rows, cols, vals, shape, matrix=name, refuse=refuse)
 
 
 def _float(lines, ln, s):
