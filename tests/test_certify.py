@@ -66,6 +66,32 @@ def test_tampered_solution_in_the_file_is_caught(chute_file, tmp_path, capsys):
     assert "not proven to 10 digits" in out and "v has" in out
 
 
+@pytest.mark.parametrize("key", ["v_decimal", "r_decimal"])
+def test_tampered_decimal_strings_are_refused(chute_file, tmp_path, capsys, key):
+    """The decimal strings must denote the binary point the proof is about: one changed digit
+    is refused (exit 2, one line naming the dataset and the index); the same number written
+    differently is not a disagreement."""
+    bad = tmp_path / "tampered.h5"
+    bad.write_bytes(chute_file.read_bytes())
+    with h5py.File(bad, "a") as fh:
+        ds = fh[f"certificate/point/{key}"]
+        strings = [x.decode() if isinstance(x, bytes) else x for x in ds[()]]
+        k = max(range(len(strings)), key=lambda j: abs(float(strings[j])))  # a non-zero entry
+        digit = strings[k].lstrip("-")[0]
+        ds[k] = strings[k].replace(digit, "1" if digit != "1" else "2", 1)
+    capsys.readouterr()
+    assert main(["certify", "bundled:chute", "--solution", str(bad)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and err.startswith("rfverify certify: error: "), err
+    for text in (str(bad), f"/certificate/point/{key}", f"{key}[{k}]", strings[k], "fix:"):
+        assert text in err, (text, err)
+    with h5py.File(bad, "a") as fh:  # the same number, spelt with an exponent: accepted
+        fh[f"certificate/point/{key}"][k] = strings[k] + "e0"
+    assert main(["certify", "bundled:chute", "--solution", str(bad)]) == 0
+    capsys.readouterr()
+    assert main(["certify", "bundled:chute", "--solution", str(chute_file)]) == 0
+
+
 def test_double_solution_gets_its_proven_digits(tmp_path, capsys):
     sol = tmp_path / "d.h5"
     assert main(["solve", "bundled:chute", "--out", str(sol)]) == 0
@@ -78,15 +104,34 @@ def test_double_solution_gets_its_proven_digits(tmp_path, capsys):
 
 
 def test_cross_check_reports_agreement_with_the_reference(capsys, tmp_path):
-    sol = tmp_path / "cube.h5"
-    assert main(["solve", "bundled:cube", "--digits", "10", "--out", str(sol)]) == 0
+    """A local problem's cross-check runs the reference on the file's own W (not the lifting)."""
+    sol = tmp_path / "diag.h5"
+    src = tmp_path / "diag.dat"
+    src.write_text(_local_dat([1, 1, 1e-6, 1, 1], [-1, 0, 1e-3, 0, 0], 0.5, 0.1))
+    assert main(["solve", str(src), "--digits", "10", "--out", str(sol)]) == 0
     capsys.readouterr()
-    code = main(["certify", "bundled:cube", "--solution", str(sol), "--cross-check", "--dps", "40", "--json"])
+    code = main(["certify", str(src), "--solution", str(sol), "--cross-check", "--dps", "40", "--json"])
     s = json.loads(capsys.readouterr().out)
     cc = s["cross_check"]
-    assert code == 0 and cc["reference_status"] == "Solved"
+    assert code == 0 and cc["reference_status"] == "Solved" and set(s["quantities"]) == {"u", "r"}
     # agreement with the independent reference is at least the proven digits (up to rounding)
-    assert cc["digits_v"] >= s["quantities"]["v"]["digits"] - 0.3
+    assert cc["digits_u"] >= s["quantities"]["u"]["digits"] - 0.3
+    assert cc["digits_r"] >= s["quantities"]["r"]["digits"] - 0.3
+
+
+def test_local_file_with_an_indefinite_W_is_not_certified(capsys):
+    """The bundled cube's W is rank 6 of 10, and its printed rounding is indefinite (exact
+    rational LDLᵀ): its local problem is not convex, so nothing is certified about it."""
+    code = main(["solve", "bundled:cube", "--digits", "10"])
+    out = capsys.readouterr().out
+    assert code == 1 and "not positive semidefinite" in out and "proven" not in out.split("\n")[1]
+
+
+def _local_dat(diag, q, mu, mu_r) -> str:
+    n5 = len(diag)
+    rows = "\n".join(" ".join(repr(float(diag[i])) if i == j else "0" for j in range(n5)) for i in range(n5))
+    return (f"5\n{n5 // 5}\n0\n{n5}\n{n5}\n{n5}\t{n5}\n{rows}\n" + " ".join(repr(float(x)) for x in q)
+            + f"\n{mu!r}\n{mu_r!r}\n")
 
 
 def test_certify_out_writes_point_and_bound(tmp_path, capsys):
@@ -146,7 +191,10 @@ def test_public_api_shapes():
     problem = rfverify.load("bundled:sphere")
     result = rfverify.solve(problem, method="jqinv", tol=1e-10)
     cert = rfverify.certify(problem, result, digits=6)
-    assert cert.certified and set(cert.digits) >= {"v", "u", "Hr"}
+    assert cert.certified and set(cert.digits) == {"u", "r"}  # a local file: its own quantities
+    glob = rfverify.load("bundled:chute")
+    cert = rfverify.certify(glob, rfverify.solve(glob, tol=1e-10), digits=5)
+    assert cert.certified and set(cert.digits) == {"v", "u", "Hr", "r"}
     ten = rfverify.solve_to_digits(problem, digits=10)
     assert ten.success and ten.v.dtype == np.float64 and ten.point is not None
     assert set(ten.timings) >= {"double", "extended", "proof", "total"}
@@ -175,7 +223,7 @@ def test_the_k_digit_path_continues_a_centred_double_solve(monkeypatch):
             return real(problem, *args, **kwargs)
         return solve
 
-    problem = rfverify.load("bundled:cube")
+    problem = rfverify.load("bundled:chute")
     assert digits.DOUBLE_SETTINGS["sigma_rule"] == "paper"
     monkeypatch.setattr(digits, "solve", recording("digits"))
     assert rfverify.solve_to_digits(problem, digits=10).certificate.certified

@@ -126,18 +126,40 @@ _TRUTH = {}
 
 
 def _truth(problem, key):
-    """(v*, u*, r*, unique r?) from the independent reference at 60 digits, as mpf lists."""
+    """(v*, u*, r*, unique r?) from the independent reference at 60 digits, as mpf lists.  For a
+    local file the reference solves the file's own W exactly (:func:`local_as_global`), never
+    the solver's lifting."""
     if key not in _TRUTH:
-        ref = reference.solve(problem, dps=60, tol=1e-50)
+        target = local_as_global(problem) if problem.local is not None else problem
+        ref = reference.solve(target, dps=60, tol=1e-50)
         assert ref.success, ref.message
         _TRUTH[key] = ref
     return _TRUTH[key]
 
 
+def local_as_global(problem):
+    """u = W r + q as the global problem M = W_FF, H = W_F: (F: nonzero diagonal), f = 0, w = q:
+    then v = r_F and u = Hᵀv + w = W r + q with no factorisation of W (needs W_FF ≻ 0 and
+    W exactly symmetric, as the tests generate it)."""
+    import types
+
+    W = sp.csr_matrix(problem.local.W)
+    assert (W != W.T).nnz == 0
+    F = np.flatnonzero(W.diagonal() != 0)
+    return types.SimpleNamespace(M_sym=W[F][:, F].tocsc(), H=W[F].tocsc(), f=np.zeros(F.size),
+                                 w=np.asarray(problem.local.q), mu=problem.mu, mu_r=problem.mu_r)
+
+
 def _true_errors(problem, ref, v, u, r):
-    """max |x − x*| and max |x*| for v, u, Hr and r (80-digit arithmetic on the mpf data)."""
+    """max |x − x*| and max |x*| for v, u, Hr and r (80-digit arithmetic on the mpf data); for a
+    local problem u and r only (its v and H are the solver's lifting, not the file's)."""
     out, norms = {}, {}
     with mpmath.workdps(80):
+        if problem.local is not None:
+            for name, x in (("u", u), ("r", r)):
+                out[name] = max(abs(mpmath.mpf(float(a)) - b) for a, b in zip(x, getattr(ref, name)))
+                norms[name] = max(abs(b) for b in getattr(ref, name))
+            return out, norms
         for name, x in (("v", v), ("u", u), ("r", r)):
             out[name] = max(abs(mpmath.mpf(float(a)) - b) for a, b in zip(x, getattr(ref, name)))
             norms[name] = max(abs(b) for b in getattr(ref, name))
@@ -170,8 +192,8 @@ def assert_sound(problem, key, cert, v, u, r):
 
 SMALL = {
     "chute": lambda: rfverify.load("bundled:chute"),
-    "cube": lambda: rfverify.load("bundled:cube"),
     "sphere": lambda: rfverify.load("bundled:sphere"),
+    "local-diag": lambda: _local_problem(np.diag([1.0, 1.0, 1e-6, 1.0, 1.0]), [-1.0, 0, 1e-3, 0, 0], 0.5, 0.1),
     "random-mixed": lambda: random_problem(6, 9, seed=11, mu_zero_fraction=0.2, mu_r_zero_fraction=0.3),
     "random-massratio": lambda: random_problem(5, 7, seed=4, mass_ratio=1e6),
 }
@@ -188,9 +210,12 @@ def test_ten_digit_path_is_proven_and_true(digits_case):
     assert out.success, out.certificate.verdict
     errs = assert_sound(problem, key, out.certificate, out.v, out.u, out.r)
     # Independently of the proof: the returned v really has ≥ 10 digits.
-    ref = _truth(problem, key)
-    scale = max(abs(x) for x in ref.v)
-    assert float(errs["v"]) <= 1e-10 * float(scale) or float(scale) == 0
+    _, norms = _true_errors(problem, _truth(problem, key), out.v, out.u, out.r)
+    for name, q in out.certificate.quantities.items():
+        if q.mode == "relative":  # ≥ 10 correct significant digits, measured
+            assert float(errs[name]) <= 1e-10 * float(norms[name]), name
+        elif q.mode == "absolute":  # zero within 1e-10 of its data scale, measured
+            assert float(norms[name]) + float(errs[name]) <= 1e-10 * q.data_scale * (1 + 1e-12), name
 
 
 def test_double_solution_bound_is_true_and_not_too_pessimistic(digits_case):
@@ -201,8 +226,9 @@ def test_double_solution_bound_is_true_and_not_too_pessimistic(digits_case):
     res = rfverify.solve(problem, tol=1e-10)
     cert = rfverify.certify(problem, res, digits=5, point=out.point)
     errs = assert_sound(problem, key, cert, res.v, res.u, res.r)
-    q = cert.quantities["v"]
-    assert q.abs_bound <= 100 * float(errs["v"]) + 1.01 * out.certificate.quantities["v"].abs_bound
+    which = "u" if problem.local is not None else "v"
+    q = cert.quantities[which]
+    assert q.abs_bound <= 100 * float(errs[which]) + 1.01 * out.certificate.quantities[which].abs_bound
 
 
 @pytest.mark.parametrize("which", ["v", "u", "r"])
@@ -246,9 +272,22 @@ def test_solution_of_a_similar_problem_is_refused():
     assert_sound(problem, "chute", cert_own, out.v, out.u, out.r)
 
 
+def _local_problem(W, q, mu, mu_r):
+    """A local problem (W 5n × 5n, q) read as rfverify reads a full-precision local file."""
+    from rfverify.io.siconos_dat import LocalProblem, lift_local
+    from rfverify.problem import make_local_form
+    import dataclasses
+
+    n = len(np.atleast_1d(mu))
+    data = LocalProblem(W=np.asarray(W, dtype=float), q=np.asarray(q, dtype=float), mu=np.full(n, mu, dtype=float),
+                        mu_r=np.full(n, mu_r, dtype=float))
+    lifted, _ = lift_local(data)
+    return dataclasses.replace(lifted, local=make_local_form(data.W, data.q))
+
+
 def test_point_outside_the_cones_proves_nothing():
-    problem = rfverify.load("bundled:cube")
-    out = _digits_once("cube", problem)
+    problem = rfverify.load("bundled:sphere")
+    out = _digits_once("sphere", problem)
     bad = Point(out.point.v_hi, out.point.v_lo, -np.abs(out.point.r_hi), out.point.r_lo)
     cert = rfverify.certify(problem, out, digits=3, point=bad)
     assert not cert.certified and not cert.proof.valid and "r ∉ K" in cert.verdict

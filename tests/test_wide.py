@@ -158,7 +158,7 @@ def test_dense_dof_space_solves_the_newton_system_to_working_precision():
 
 def test_the_tail_leaves_the_precision_as_it_found_it():
     before = gmpy2.get_context().precision
-    problem = rfverify.load("bundled:sphere")
+    problem = rfverify.load("bundled:chute")
     out = rfverify.solve_to_digits(problem, digits=10)
     data = ExtendedData(problem)
     it = out.extended

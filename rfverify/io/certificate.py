@@ -15,7 +15,9 @@ beside the problem and its ``/solution``::
                                  multiple-precision tail: further terms, v = v_hi + v_lo + Σ v_more
     /certificate/point/v_decimal, r_decimal
                                  the same numbers as decimal strings (34 significant digits, or
-                                 16 per float64 term when there are more terms)
+                                 16 per float64 term when there are more terms); on reading
+                                 they are recomputed from the float64 terms and a file whose
+                                 strings denote other numbers is refused
     /certificate/quantities/<v|u|Hr|r>
                                  attrs: abs_bound, norm, own_scale, data_scale, data_scale_name,
                                         digits (NaN: none), mode, certified, note
@@ -81,10 +83,8 @@ def write_certificate(fh, certificate) -> None:
             if getattr(point, k) is not None:
                 pg.create_dataset(k, data=np.asarray(getattr(point, k), dtype=np.float64))
         for name in ("v", "r"):
-            parts = [getattr(point, f"{name}_hi"), getattr(point, f"{name}_lo")]
-            more = getattr(point, f"{name}_more")
-            parts += [] if more is None else list(more)
-            pg.create_dataset(f"{name}_decimal", data=np.array(_decimal_strings(parts, max(34, 16 * len(parts))),
+            terms = {k: getattr(point, k) for k in (f"{name}_hi", f"{name}_lo", f"{name}_more")}
+            pg.create_dataset(f"{name}_decimal", data=np.array(_point_decimals(terms, name),
                                                                dtype=h5py.string_dtype()))
 
 
@@ -134,6 +134,7 @@ def read_point(path):
                     "v_more" in arrays and len(arrays["v_more"]) != len(arrays["r_more"])):
                 raise ProblemFileError(path, "v_more and r_more must both be present, with as many terms",
                                        location="/certificate/point", fix="write the certificate again")
+            decimals = {k: _read_decimals(pg, k, path) for k in ("v_decimal", "r_decimal") if k in pg}
     except ProblemFileError:
         raise
     except OSError as exc:
@@ -144,7 +145,63 @@ def read_point(path):
     if not all(np.all(np.isfinite(a)) for a in arrays.values()):
         raise ProblemFileError(path, "the point contains NaN or Inf", location="/certificate/point",
                                fix="write the certificate again")
+    for key, stored in decimals.items():
+        _check_decimals(path, key, stored, arrays)
     return Point(**arrays)
+
+
+_FIX_DECIMALS = ("the file was changed after it was written: write the certificate again "
+                 "(rfverify solve --digits K --out SOL.h5, or rfverify certify ... --out)")
+
+
+def _point_decimals(terms: dict, name: str) -> list:
+    """The decimal strings of ``name`` ("v" or "r") from its float64 terms ``{name}_hi``,
+    ``{name}_lo`` and the rows of ``{name}_more`` (None: absent), as the writer stores them:
+    34 significant digits, or 16 per term when there are more than two terms."""
+    parts = [terms[f"{name}_hi"], terms[f"{name}_lo"]]
+    more = terms.get(f"{name}_more")
+    parts += [] if more is None else list(more)
+    return _decimal_strings(parts, max(34, 16 * len(parts)))
+
+
+def _read_decimals(pg, key: str, path) -> list:
+    """``/certificate/point/<key>`` as a list of str, refused unless it is a 1-D string dataset."""
+    import h5py
+
+    a = pg[key]
+    if not isinstance(a, h5py.Dataset) or a.ndim != 1 or h5py.check_string_dtype(a.dtype) is None:
+        raise ProblemFileError(path, f"{key} must be a 1-D dataset of strings",
+                               location=f"/certificate/point/{key}", fix=_FIX_DECIMALS)
+    try:
+        return [s.decode("utf-8") if isinstance(s, bytes) else str(s) for s in a[()].tolist()]
+    except UnicodeDecodeError:
+        raise ProblemFileError(path, f"{key} holds bytes that are not UTF-8 text",
+                               location=f"/certificate/point/{key}", fix=_FIX_DECIMALS) from None
+
+
+def _check_decimals(path, key: str, stored: list, arrays: dict) -> None:
+    """Refuse decimal strings that disagree with the binary point the proof is about: they
+    are recomputed from the float64 terms exactly as the writer computes them, and a string
+    that differs is accepted only when it denotes the same decimal number (exact comparison)."""
+    from decimal import Decimal, InvalidOperation
+
+    name = key.split("_")[0]
+    expected = _point_decimals(arrays, name)
+    loc = f"/certificate/point/{key}"
+    if len(stored) != len(expected):
+        raise ProblemFileError(path, f"{key} holds {len(stored)} strings, the point has {len(expected)} "
+                                     f"entries", location=loc, fix=_FIX_DECIMALS)
+    terms = " + ".join(t for t in (f"{name}_hi", f"{name}_lo", f"{name}_more") if t in arrays)
+    for k, (s, e) in enumerate(zip(stored, expected)):
+        if s == e:
+            continue
+        try:
+            same = Decimal(s) == Decimal(e)  # exact: the same number written differently passes
+        except InvalidOperation:
+            same = False
+        if not same:
+            raise ProblemFileError(path, f"{key}[{k}] is {s[:60]!r}, but the binary point ({terms}) "
+                                         f"is {e} to these digits", location=loc, fix=_FIX_DECIMALS)
 
 
 def _decimal_strings(parts, digits: int = 34) -> list:
