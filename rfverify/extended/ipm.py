@@ -246,7 +246,10 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
             break
         ph, pl, pih, pil, lh, ll = (np.zeros(nz) for _ in range(6))
         spec = np.zeros((n_cones, 8))
-        bad = C.nt_scaling(n3, z.h, z.l, s.h, s.l, ph, pl, pih, pil, lh, ll, spec)
+        try:
+            bad = C.nt_scaling(n3, z.h, z.l, s.h, s.l, ph, pl, pih, pil, lh, ll, spec)
+        except ZeroDivisionError:  # a cone's determinant is exactly 0: the iterate reached the boundary
+            bad = max(0, min(C.min_lambda2(n3, z.h, z.l), C.min_lambda2(n3, s.h, s.l))[1])
         if bad >= 0:
             status, message = "NumericalError", f"iteration {k}: cone {bad} is not strictly interior"
             break
