@@ -61,7 +61,7 @@ def write_certificate(fh, certificate) -> None:
     grp.attrs["requested_digits"] = certificate.requested
     grp.attrs["certified"] = bool(certificate.certified)
     grp.attrs["verdict"] = certificate.verdict
-    grp.attrs["theorem"] = THEOREM
+    grp.attrs["theorem"] = THEOREM if proof is None else proof.theorem  # global (§6.1) or local (§6.1b)
     grp.attrs["point_source"] = str(certificate.extra.get("point_source", ""))
     if proof is not None:
         grp.attrs["arithmetic"] = proof.arithmetic

@@ -32,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidProblemError, ProblemFileError
-from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, SymmetryReport, asymmetry_error
+from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, SymmetryReport, asymmetry_error, make_local_form
 from ._exact import FIX_INEXACT, exact_csc
 from ._paths import read_head
 
@@ -149,6 +149,7 @@ def read_siconos_dat(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY,
         if kind == "local":
             lifted, report = lift_local(data, rank_tol=rank_tol, max_asymmetry=max_asymmetry)
             provenance["lift"] = report.__dict__
+            lifted = dataclasses.replace(lifted, local=make_local_form(data.W, data.q, digits))
             return _with_provenance(lifted, provenance, str(path))
         M, H, f, w, mu, mu_r, storage = data
         problem = Problem.from_arrays(M, H, f, w, mu, mu_r, storage=storage,
@@ -392,15 +393,18 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
     """Lift a local problem (W, q) to global form: M = I_m, H = Λ^{1/2}Vᵀ (m×5n), f = 0, w = q.
 
     W is symmetrised and factored as W = V Λ Vᵀ (dense symmetric eigendecomposition, fine for
-    the few-thousand-row local problems Siconos prints).  Eigenvalues ≤ ``rank_tol``·‖W‖₂ are
-    dropped (W is often singular; m = the numerical rank), so HᵀH = W up to that tolerance,
-    and then u = HᵀH r + q = W r + q and M v = H r give back the local problem.
+    the few-thousand-row local problems Siconos prints).  Eigenvalues ≤ 100·eps·5n·‖W‖₂ (the
+    eigensolver's rounding) are dropped (W is often singular; m = the numerical rank), so
+    HᵀH = W up to rounding, and u = HᵀH r + q ≈ W r + q.  The lifting is a *solver device*:
+    the extended phase and the proof work on the file's W itself (``Problem.local``,
+    DESIGN §6.1b), never on HᵀH.
 
-    ``rank_tol`` defaults to the data precision.  A print-out rounded to d significant digits
-    perturbs each entry by |E_ij| ≤ ½·10^(1−d)·|W_ij|; the spectral norm is monotone on
-    non-negative matrices, so every eigenvalue moves by at most ½·10^(1−d)·‖|W|‖₂, and
-    eigenvalues below that bound are indistinguishable from 0.  Full-precision data use
-    100·eps·5n (rounding of the eigensolver).  See :func:`factor_delassus`.
+    ``rank_tol`` (default: the data precision) is the refusal threshold: an eigenvalue below
+    −rank_tol·‖W‖ is refused as not PSD.  A print-out rounded to d significant digits perturbs
+    each entry by |E_ij| ≤ ½·10^(1−d)·|W_ij|, so every eigenvalue moves by at most
+    ½·10^(1−d)·‖|W|‖₂: a printed singular W may be that far from PSD and is still read (the
+    certificate then says whether the printed W is PSD).  A ``rank_tol`` given explicitly is
+    also the drop threshold.  See :func:`factor_delassus`.
 
     Raises
     ------
@@ -477,12 +481,16 @@ def factor_delassus(W, *, significant_digits: int | None = None, rank_tol: float
     lam, V = np.linalg.eigh(Ws)
     norm_s = float(max(abs(lam[0]), abs(lam[-1])))
     norm = float(np.ldexp(norm_s, exp))
+    # Two thresholds: an eigenvalue below −psd_tol·‖W‖ is refused (not PSD even allowing for the
+    # print precision); eigenvalues above keep_tol·‖W‖ are kept.  The printed numbers are the
+    # data exactly (DESIGN §6), so keep_tol is the eigensolver's rounding, not the print precision.
+    keep_tol = 100 * np.finfo(float).eps * dim if rank_tol is None else rank_tol
     if rank_tol is None:
         if significant_digits:
             abs_norm_s = float(np.linalg.norm(np.abs(Ws), 2))
             rank_tol = 0.5 * 10.0 ** (1 - significant_digits) * abs_norm_s / max(norm_s, _TINY)
         else:
-            rank_tol = 100 * np.finfo(float).eps * dim
+            rank_tol = keep_tol
     if norm_s == 0.0:
         raise InvalidProblemError("W", "is zero to working precision",
                                   fix="a local problem needs a non-zero Delassus matrix")
@@ -491,12 +499,12 @@ def factor_delassus(W, *, significant_digits: int | None = None, rank_tol: float
             "W", f"is not positive semidefinite: eigenvalue {np.ldexp(lam[0], exp):.3e} < -{rank_tol:.1e}·‖W‖ "
                  f"(‖W‖ = {norm:.3e})",
             fix="a Delassus matrix W = H M⁻¹ Hᵀ is PSD; check the data or pass a larger rank_tol")
-    keep = lam > rank_tol * norm_s
+    keep = lam > keep_tol * norm_s
     lam = np.ldexp(lam, exp)
     H = (V[:, keep] * np.sqrt(lam[keep])).T  # m × dim
     m = H.shape[0]
     report = LiftReport(rank=int(m), dropped=int(dim - m), min_eigenvalue=float(lam[0]),
-                        max_eigenvalue=float(lam[-1]), rank_tol=float(rank_tol),
+                        max_eigenvalue=float(lam[-1]), rank_tol=float(keep_tol),
                         asymmetry=asymmetry, asymmetry_normwise=normwise,
                         asymmetry_at=None if at is None else list(at))
     return H, report
