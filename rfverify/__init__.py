@@ -11,14 +11,15 @@ Public API (this release):
   mpmath reference as an optional cross-check; :func:`diagnose` — lockstep double/reference run.
 - :mod:`rfverify.jordan` — Jordan algebra of Lorentz cones, vectorised, float64/longdouble.
 - Errors: :class:`RfverifyError`, :class:`InvalidProblemError`, :class:`ProblemFileError`,
-  :class:`InvalidArgumentError`, :class:`OutputPathError`, :class:`ConeDomainError`.
+  :class:`InvalidArgumentError`, :class:`OutputPathError`, :class:`ConeDomainError`; the
+  warning :class:`DataWarning` (optional file metadata read with a stated change or skipped).
 """
 
 import functools as _functools
 
 from .check import SolutionCheck, check_solution
-from .errors import (ConeDomainError, InvalidArgumentError, InvalidProblemError, OutputPathError,
-                     ProblemFileError, RfverifyError)
+from .errors import (ConeDomainError, DataWarning, InvalidArgumentError, InvalidProblemError,
+                     OutputPathError, ProblemFileError, RfverifyError)
 from .io import bundled_problems, load, save
 from .problem import Problem, StoredSolution
 from .certification import Certificate, certify
@@ -81,6 +82,7 @@ __all__ = [
     "Problem", "StoredSolution", "load", "save", "bundled_problems", "check_solution",
     "SolutionCheck", "RfverifyError", "InvalidProblemError", "ProblemFileError",
     "InvalidArgumentError", "OutputPathError",
-    "ConeDomainError", "__version__", "solve", "SolveResult", "Settings", "Status", "certify",
+    "ConeDomainError", "DataWarning", "__version__", "solve", "SolveResult", "Settings", "Status",
+    "certify",
     "solve_to_digits", "DigitsSolution", "diagnose", "Certificate",
 ]

@@ -73,6 +73,14 @@ class ProblemFileError(RfverifyError, OSError):
         return self.args[0]
 
 
+class DataWarning(UserWarning):
+    """Something in an input file that does not change the problem (optional metadata such as
+    FCLIB ``info/description``) could not be read as stored, and was read with a stated change
+    (undecodable bytes replaced by U+FFFD) or skipped.  The message names the file, the field
+    and what was done; the problem itself is read exactly.  The CLI prints each one as a
+    one-line ``warning:`` on stderr."""
+
+
 class InvalidArgumentError(RfverifyError, ValueError, TypeError):
     """A function or command was called with an argument of the wrong type or value (the
     ``argument`` is named).  It is both a ValueError and a TypeError so that callers catching

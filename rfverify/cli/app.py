@@ -9,7 +9,7 @@ import sys
 import warnings
 
 from .. import __version__
-from ..errors import RfverifyError
+from ..errors import DataWarning, RfverifyError
 from . import bench, certify, diagnose, generate, info, report, solve
 from .common import EXIT_BAD_INPUT, EXIT_INTERNAL
 
@@ -64,6 +64,7 @@ def main(argv=None) -> int:
                 check(args)
             code = args.func(args)
             sys.stdout.flush()
+        _print_data_warnings(args.command, caught)
         if os.environ.get("RFVERIFY_DEBUG"):
             for w in caught:
                 print(f"rfverify {args.command}: debug: {w.category.__name__}: {w.message} "
@@ -85,6 +86,20 @@ def main(argv=None) -> int:
         print(f"rfverify {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
               "(please report; set RFVERIFY_DEBUG=1 for a traceback)", file=sys.stderr)
         return EXIT_INTERNAL
+
+
+def _print_data_warnings(command: str, caught) -> None:
+    """Each distinct :class:`DataWarning` (something of an input file read with a stated change
+    that leaves the problem as stored, e.g. an info string that is not UTF-8) as one line on
+    stderr: the user must hear about it, unlike the numerical warnings recorded above.  After
+    an error only the error is printed (one line)."""
+    seen = set()
+    for w in caught:
+        if issubclass(w.category, DataWarning):
+            line = _one_line(w.message)
+            if line not in seen:
+                seen.add(line)
+                print(f"rfverify {command}: warning: {line}", file=sys.stderr)
 
 
 def _silence_stdout() -> None:

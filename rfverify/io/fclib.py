@@ -26,12 +26,13 @@ Index arrays are written as int32 like fclib.c, values as float64.
 from __future__ import annotations
 
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
+from ..errors import DataWarning, InvalidArgumentError, InvalidProblemError, ProblemFileError
 from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, StoredSolution
 from ._exact import FIX_INEXACT, exact_csc
 from ._paths import read_head
@@ -149,12 +150,33 @@ def _read_open_file(fh, path, max_asymmetry):
     )
 
 
+INFO_FIELDS = ("title", "description", "math_info")
+
+
 def _read_info(g, path) -> tuple:
-    """(title, description, math_info) of a problem group ("" when absent)."""
+    """(title, description, math_info) of a problem group ("" when absent).
+
+    These strings are optional metadata that never change the problem, so nothing in them
+    refuses the file: bytes that are not UTF-8 are decoded with U+FFFD in their place (a real
+    LMGC90 file has a Latin-1 byte 0xA8 in its description), several strings are joined with
+    newlines, and what is no string at all (numbers, a group, a broken link, an unreadable
+    type) is read as "".  Each change is announced by a :class:`~rfverify.errors.DataWarning`
+    naming the file, the dataset and what was done.
+    """
     if g.get("info", getlink=True) is None:
         return "", "", ""
-    info = _member(g, "info", path, _h5py().Group)
-    return tuple(_read_string(info, name, path) for name in ("title", "description", "math_info"))
+    try:
+        info = _member(g, "info", path, _h5py().Group)
+    except ProblemFileError as exc:
+        _info_warning(path, exc.location or _loc(g, "info"), exc.problem,
+                      "ignored: title, description and math_info read as empty strings")
+        return "", "", ""
+    return tuple(_read_string(info, name, path) for name in INFO_FIELDS)
+
+
+def _info_warning(path, location, problem: str, done: str) -> None:
+    warnings.warn(DataWarning(f"{path}: {location}: {problem}; {done} (optional metadata: the "
+                              "problem itself is read unchanged)"), stacklevel=2)
 
 
 # ---------------------------------------------------------------------- typed access
@@ -307,28 +329,47 @@ def _read_vector(group, name, path) -> np.ndarray:
 
 
 def _read_string(group, name, path) -> str:
+    """One optional info string (see :func:`_read_info`): never an error, at worst a warning."""
     if group.get(name, getlink=True) is None:
         return ""
-    ds = _member(group, name, path, _h5py().Dataset)
-    dt = _dtype(ds, path)
-    if dt.kind not in "SUO":
-        _refuse_kind(dt, ds, path, "a string", "store info strings as UTF-8 text")
-    val = _read(ds, path)
-    if isinstance(val, np.ndarray):
-        if val.size > 1:
-            raise ProblemFileError(path, f"holds {val.size} strings, expected one",
-                                   location=ds.name, fix="store one UTF-8 string")
-        val = val.ravel()[0] if val.size else b""
-    if isinstance(val, np.str_ | str):
-        return str(val)
-    if isinstance(val, bytes | np.bytes_):
-        try:
-            return bytes(val).decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise ProblemFileError(path, f"is not valid UTF-8 (byte {exc.start})",
-                                   location=ds.name, fix="store info strings as UTF-8 text") from None
-    raise ProblemFileError(path, f"holds a {type(val).__name__}, expected a string",
-                           location=ds.name, fix="store info strings as UTF-8 text")
+    loc = _loc(group, name)
+    try:
+        ds = _member(group, name, path, _h5py().Dataset)
+        dt = _dtype(ds, path)
+        if dt.kind not in "SUO":
+            _info_warning(path, loc, f"holds {dt} values, not a string",
+                          "ignored: read as an empty string")
+            return ""
+        if ds.shape is None:  # HDF5 null dataspace: no string at all
+            return ""
+        val = _read(ds, path)
+    except ProblemFileError as exc:
+        _info_warning(path, loc, exc.problem, "ignored: read as an empty string")
+        return ""
+    items = np.atleast_1d(val).ravel().tolist() if isinstance(val, np.ndarray) else [val]
+    if not all(isinstance(v, str | bytes) for v in items):
+        kinds = sorted({type(v).__name__ for v in items if not isinstance(v, str | bytes)})
+        _info_warning(path, loc, f"holds {', '.join(kinds)} objects, not strings",
+                      "ignored: read as an empty string")
+        return ""
+    texts, undecodable = [], []
+    for k, v in enumerate(items):
+        if isinstance(v, bytes):
+            try:
+                v = v.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                undecodable.append(f"byte {exc.start} is 0x{v[exc.start]:02x}"
+                                   + (f" in string {k}" if len(items) > 1 else ""))
+                v = v.decode("utf-8", errors="replace")
+        texts.append(v)
+    if undecodable:
+        more = f", and {len(undecodable) - 1} more string(s)" if len(undecodable) > 1 else ""
+        _info_warning(path, loc, f"is not valid UTF-8 ({undecodable[0]}{more})",
+                      "read with U+FFFD in place of the undecodable bytes")
+    if len(texts) > 1:
+        _info_warning(path, loc, f"holds {len(texts)} strings, expected one",
+                      "read as one string, joined with newlines")
+    return "\n".join(texts)
 
 
 # ---------------------------------------------------------------------- matrices
