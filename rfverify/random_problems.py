@@ -110,10 +110,13 @@ def random_problem(n_bodies: int, n_contacts: int, *, seed: int = 0, mu=0.5, mu_
 
 
 def random_local_problem(n_contacts: int, *, seed: int = 0) -> Problem:
-    """A local problem as Siconos writes them, lifted back to global form (M = I, H = G with
-    W = GᵀG): W = Hᵀ M⁻¹ H and q = Hᵀ M⁻¹ f + w of :func:`random_problem` with ``n_contacts``
-    contacts on n_contacts // 2 bodies — more contact rows than dofs, so W is dense and
-    singular.  Used by ``benchmarks/bench_digits.py`` and the tests of ``method="auto"``."""
+    """The global lifting (M = I, H = G with W ≈ GᵀG) of a local problem as Siconos writes them:
+    W = Hᵀ M⁻¹ H and q = Hᵀ M⁻¹ f + w of :func:`random_problem` with ``n_contacts`` contacts on
+    n_contacts // 2 bodies — more contact rows than dofs, so W is dense and singular.  The
+    result is a *global* problem (``problem.local`` is None): certificates of it are about this
+    lifted problem, which is what it is; a local *file* with such a W is proven on its own W
+    (DESIGN §6.1b), and its rounding usually makes it indefinite, so it is not certified.
+    Used by ``benchmarks/bench_digits.py`` and the tests of ``method="auto"``."""
     from .io.siconos_dat import LocalProblem, lift_local
 
     base = random_problem(n_contacts // 2, n_contacts, seed=seed)

@@ -278,7 +278,10 @@ def verify_lambda_min_sparse(A: sp.csc_matrix, A_err: sp.spmatrix, tau: float | 
         return np.nan, "non-finite entries"
     if tau is None:
         try:
-            est = float(eigsh(A, k=1, sigma=0, which="LM", return_eigenvectors=False, tol=1e-4)[0])
+            if n < 3:  # ARPACK needs k < n - 1: a tiny matrix is solved densely
+                est = float(np.linalg.eigvalsh(A.toarray())[0])
+            else:
+                est = float(eigsh(A, k=1, sigma=0, which="LM", return_eigenvectors=False, tol=1e-4)[0])
         except Exception:  # singular or not converged: fall back to a diagonal-based guess
             est = float(np.min(A.diagonal())) * 1e-3
         if not est > 0:
