@@ -243,3 +243,17 @@ def test_mutation_proving_the_lifting_instead_of_the_file_is_caught(tmp_path):
     ref = file_truth(problem)
     with pytest.raises(AssertionError):  # ... and the soundness check refutes it
         check_claims(problem, out.certificate, out.u, out.r, ref)
+
+
+def test_no_digits_are_claimed_for_a_quantity_bounded_only_absolutely(capsys):
+    """Bundled sphere: every contact sticks, u* = 0.  u is accepted against its data scale, so
+    the output says "zero within", and no line claims "proven to K digits" for it; with
+    --relative it is refused instead."""
+    assert main(["solve", "bundled:sphere", "--digits", "10", "--quiet"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].startswith("certified (10 digits requested") and "proven to" not in lines[1]
+    u_line = next(line for line in lines if line.strip().startswith("u:"))
+    assert "zero within" in u_line and "digits (" not in u_line and "no significant digits" in u_line
+    assert main(["solve", "bundled:sphere", "--digits", "10", "--quiet", "--relative"]) == 1
+    out = capsys.readouterr().out
+    assert "not proven to 10 digits: u has no relative digits" in out and "meaningless" in out
