@@ -77,6 +77,19 @@ class Certificate:
             return None
         return self.proof.quantities["r"].mode != "information"
 
+    @property
+    def status(self) -> str:
+        """"Certified" or "NotCertified"."""
+        return "Certified" if self.certified else "NotCertified"
+
+    @property
+    def message(self) -> str:
+        return self.verdict
+
+    def __repr__(self) -> str:
+        return f"Certificate(status={self.status!r}, requested={self.requested}, seconds={self.seconds:.3g},\n" \
+               f"    {self.verdict!r})"
+
     def as_dict(self) -> dict:
         p = self.proof
         return {"requested_digits": self.requested, "certified": self.certified, "verdict": self.verdict,

@@ -58,8 +58,29 @@ class DigitsSolution:
         return self.certificate.certified
 
     @property
+    def status(self) -> str:
+        """"Certified" or "NotCertified" (what ``solve --digits --json`` prints)."""
+        return "Certified" if self.success else "NotCertified"
+
+    @property
+    def message(self) -> str:
+        """The certificate's verdict: what was proven, or why not."""
+        return self.certificate.verdict
+
+    @property
+    def nit(self) -> int:
+        """Iterations in all: the double solve, the double-double phase and the tail."""
+        ext_nit = getattr(self.extended, "nit", 0) or 0
+        return int(self.double.nit) + int(ext_nit) + (0 if self.wide is None else int(self.wide.nit))
+
+    @property
     def proof(self) -> Proof | None:
         return self.certificate.proof
+
+    def __repr__(self) -> str:
+        total = self.timings.get("total", float("nan"))
+        return (f"DigitsSolution(status={self.status!r}, nit={self.nit}, time={total:.3g} s,\n"
+                f"    {self.message!r})")
 
 
 def point_from_iterate(data: ExtendedData, v, r_t) -> Point:

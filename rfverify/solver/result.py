@@ -25,8 +25,9 @@ METHODS = ALGORITHM1_METHODS + PORTFOLIO_METHODS + PEER_METHODS
 """Every method name rfverify accepts: the one declaration the CLI, bench and report derive from."""
 
 
-class Status(enum.Enum):
-    """Termination status (Clarabel-like)."""
+class Status(str, enum.Enum):
+    """Termination status (Clarabel-like).  A ``str`` enum: a member equals its printed name
+    (``Status.SOLVED == "Solved"``), so results compare with the names users read."""
 
     SOLVED = "Solved"
     ALMOST_SOLVED = "AlmostSolved"
