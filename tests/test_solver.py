@@ -646,7 +646,11 @@ def test_a_float64_solve_short_only_in_negligible_blocks_keeps_float64(monkeypat
     assert res.success and old.success and res.criterion <= 1e-8
     assert res.extras["extended_from"] == [None] and old.extras["extended_from"] != [None]
     assert res.nit == old.nit
-    assert np.max(np.abs(res.r - old.r)) <= 1e-8 * np.max(np.abs(old.r))
+    # the same answer in its unique parts: r is not unique on this chute (its two runs, both
+    # Solved at 1e-8, differ by 4e-8 in r with numpy 2.4.6, by 1e-13 in v and Hr)
+    assert np.max(np.abs(res.v - old.v)) <= 1e-10 * np.max(np.abs(old.v))
+    Hr, Hr_old = chute.H @ res.r, chute.H @ old.r
+    assert np.max(np.abs(Hr - Hr_old)) <= 1e-10 * np.max(np.abs(Hr_old))
     (k,) = lat.extras["extended_from"]
     assert lat.success and k is not None and lat.trace["criterion"][k] > lat.settings.extended_below
 
