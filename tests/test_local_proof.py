@@ -257,3 +257,15 @@ def test_no_digits_are_claimed_for_a_quantity_bounded_only_absolutely(capsys):
     assert main(["solve", "bundled:sphere", "--digits", "10", "--quiet", "--relative"]) == 1
     out = capsys.readouterr().out
     assert "not proven to 10 digits: u has no relative digits" in out and "meaningless" in out
+
+
+def test_solve_judges_a_local_answer_on_the_file_not_on_the_lifting():
+    """bundled:sphere-from-global: its printed W has eigenvalue −2.1e-9 (of 1.8e7); the lifting
+    drops it and is solved to 3e-12, but u = W r + q of the file's own W leaves complementarity
+    at ~1e-6.  The status says so instead of "Solved"; u returned is the file's W r + q."""
+    problem = rfverify.load("bundled:sphere-from-global")
+    res = rfverify.solve(problem)
+    assert res.status != "Solved" and "solved on the lifting" in res.message and "not positive semidefinite" in res.message
+    np.testing.assert_array_equal(res.u, problem.local.velocity(res.r))
+    ok = rfverify.solve(rfverify.load("bundled:sphere"))
+    assert ok.status == "Solved" and ok.criterion <= 1e-10

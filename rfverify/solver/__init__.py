@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -20,6 +21,11 @@ __all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationIn
 def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: int = 100,
           keep_iterates: bool = False, callback=None, **options) -> SolveResult:
     """Solve a rolling-friction problem with Algorithm 1 (or the Clarabel peer).
+
+    For a problem read from a local file (``problem.local``) the iterations run on its lifting
+    (DESIGN §1.1) and the returned answer is then judged on the *file's* problem: u = W r + q
+    of the file, and the criterion of that (v, u, r) decides the status
+    (:func:`judged_on_the_file`).
 
     Parameters
     ----------
@@ -54,6 +60,34 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         v (m,), u = Hᵀv + w (5n,), r (5n,) in the original variables, with status, message,
         trace and timings.
     """
+    result = _solve(problem, method, tol, max_iter, keep_iterates, callback, **options)
+    return judged_on_the_file(problem, result) if problem.local is not None else result
+
+
+def judged_on_the_file(problem: Problem, result: SolveResult) -> SolveResult:
+    """A local file's answer judged on the file: u := W r + q of the file's W (not the
+    lifting's Hᵀv + w), and the criterion of (v, u, r) — whose velocity residual
+    u − (Hᵀv + w) is then the gap between W and its lifting — decides the status.  A run
+    Solved on the lifting but not on the file is downgraded, and the message says why."""
+    u = problem.local.velocity(result.r)
+    final = measures(problem, result.v, u, result.r, "longdouble")
+    tol = result.settings.tol
+    status, message = result.status, result.message
+    lift = problem.provenance.get("lift") or problem.provenance.get("lifted") or {}
+    if status is Status.SOLVED and not final.max <= tol:
+        status = Status.ALMOST_SOLVED if final.max <= result.settings.almost_factor * tol \
+            else Status.INSUFFICIENT_PROGRESS
+        dropped = lift.get("dropped")
+        lam = float(lift.get("min_eigenvalue", 0.0))
+        why = (f"; the lifting dropped {dropped} eigenvalue(s) of W (smallest {lam:.2e}"
+               + ("): W is not positive semidefinite as stored" if lam < 0 else ")")) if dropped else ""
+        message = (f"solved on the lifting (criterion {result.criterion:.2e}), but the file's own problem "
+                   f"u = W r + q has criterion {final.max:.2e} > tol ({final.worst()}){why}")
+    return dataclasses.replace(result, u=u, measures=final, status=status, message=message)
+
+
+def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterates: bool, callback,
+           **options) -> SolveResult:
     if method not in METHODS:
         raise ValueError(f"method {method!r} is not one of {', '.join(METHODS)}")
     unknown = set(options) - set(Settings.names())
@@ -189,8 +223,7 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
             if left <= 0:
                 break
             opts["time_limit"] = left
-        res = solve(problem, method=form, tol=settings.tol, max_iter=settings.max_iter,
-                    keep_iterates=keep_iterates, callback=callback, **opts)
+        res = _solve(problem, form, settings.tol, settings.max_iter, keep_iterates, callback, **opts)
         results.append(res)
         attempts.append({"method": form, "status": str(res.status), "criterion": res.criterion, "nit": res.nit,
                          "seconds": res.timings.get("total", float("nan"))})
