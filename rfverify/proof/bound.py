@@ -260,14 +260,9 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
 
     # ---- exact residuals of the point
     u_p = exact.HT.matvec(point_v) + exact.w
-    bad_dual, bad_primal = cone_violations(exact, u_p, point_r)
-    if bad_dual.size or bad_primal.size:
-        what = []
-        if bad_dual.size:
-            what.append(f"u(v) = Hᵀv + w ∉ K* at {bad_dual.size} contact(s), first {int(bad_dual[0])}")
-        if bad_primal.size:
-            what.append(f"r ∉ K at {bad_primal.size} contact(s), first {int(bad_primal[0])}")
-        return _invalid(requested, "the extended-precision point is not in the cones (" + "; ".join(what) + ")", t0)
+    outside = cones_failure(exact, u_p, point_r, "u(v) = Hᵀv + w")
+    if outside:
+        return _invalid(requested, outside, t0)
     Hr_p = exact.H.matvec(point_r)
     g = exact.M_sym_apply(point_v) - Hr_p - exact.f
     gap = point_r.dot(u_p)  # ≥ 0: a sum of products of cone-dual pairs
@@ -306,6 +301,17 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     else:
         q["r"] = _quantity("r", e_r, r, scales, requested, note=r_note, relative=relative)
     return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0)
+
+
+def cones_failure(data, u_p: Dyadic, point_r: Dyadic, u_name: str) -> str:
+    """"" when u_p ∈ K* and r ∈ K exactly, else the hypothesis that failed, with the contacts."""
+    bad_dual, bad_primal = cone_violations(data, u_p, point_r)
+    what = []
+    if bad_dual.size:
+        what.append(f"{u_name} ∉ K* at {bad_dual.size} contact(s), first {int(bad_dual[0])}")
+    if bad_primal.size:
+        what.append(f"r ∉ K at {bad_primal.size} contact(s), first {int(bad_primal[0])}")
+    return "the point is not in the cones (" + "; ".join(what) + ")" if what else ""
 
 
 def gMinvg_upper(g: Dyadic, mass: MassBounds) -> float:

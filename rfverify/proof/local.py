@@ -39,7 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..problem import SPACEDIM, LocalForm, Problem
-from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cone_violations,
+from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cones_failure,
                     proven_open, validate_digits)
 from .dyadic import Dyadic, DyadicCSR, fraction_upper_float, sqrt_upper
 from .massbounds import MassBounds, upper_sum, verify_mass_matrix
@@ -196,15 +196,9 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         raise ValueError("the point does not match the problem's sizes")
 
     u_p = ex.u_of(point_r)
-    bad_dual, bad_primal = cone_violations(ex, u_p, point_r)
-    if bad_dual.size or bad_primal.size:
-        what = []
-        if bad_dual.size:
-            what.append(f"u = Wr + q ∉ K* at {bad_dual.size} contact(s), first {int(bad_dual[0])}")
-        if bad_primal.size:
-            what.append(f"r ∉ K at {bad_primal.size} contact(s), first {int(bad_primal[0])}")
-        return _invalid(requested, "the point is not in the cones (" + "; ".join(what) + ")", t0,
-                        theorem=THEOREM_LOCAL)
+    outside = cones_failure(ex, u_p, point_r, "u = Wr + q")
+    if outside:
+        return _invalid(requested, outside, t0, theorem=THEOREM_LOCAL)
     gap = point_r.dot(u_p)  # ≥ 0: pairs of K and K*
     gap_up = fraction_upper_float(gap)
     eps = float(_up(math.sqrt(gap_up)))
