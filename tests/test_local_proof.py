@@ -88,7 +88,8 @@ def file_truth(problem, dps=60):
             return None
     target = types.SimpleNamespace(M_sym=sp.csc_matrix(WF), H=W[F].tocsc(), f=np.zeros(F.size),
                                    w=np.asarray(problem.local.q), mu=problem.mu, mu_r=problem.mu_r)
-    ref = reference.solve(target, dps=dps, tol=mpmath.mpf(10) ** (-(dps - 10)))
+    # an open contact (r* = 0) converges slowly in the reference's relative measures: 274 iterations seen
+    ref = reference.solve(target, dps=dps, tol=mpmath.mpf(10) ** (-(dps - 10)), max_iter=800)
     assert ref.success, ref.message
     return ref
 
@@ -208,6 +209,7 @@ def test_generated_6_digit_dat_claims_hold(tmp_path_factory, seed, n, smallest_e
 @given(seed=st.integers(0, 2**31), n=st.integers(1, 3), smallest_exp=st.integers(0, 16),
        rotated=st.booleans(), mu=st.sampled_from([0.3, 0.5, 1.0]))
 @example(seed=5, n=1, smallest_exp=13, rotated=False, mu=0.5)
+@example(seed=17192, n=1, smallest_exp=0, rotated=False, mu=0.3)  # open contact: the oracle needed 274 iterations
 @example(seed=6, n=2, smallest_exp=8, rotated=True, mu=0.3)
 def test_generated_fclib_local_claims_hold(tmp_path_factory, seed, n, smallest_exp, rotated, mu):
     rng = np.random.default_rng(seed)
