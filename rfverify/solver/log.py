@@ -10,7 +10,7 @@ import sys
 COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e}"),
            ("pinfeas", "pinfeas", "{:>9.2e}"), ("dinfeas", "dinfeas", "{:>9.2e}"), ("mu", "mu", "{:>9.2e}"),
            ("sigma", "sigma", "{:>9.2e}"), ("alpha_aff", "alpha_aff", "{:>9.2e}"), ("alpha", "alpha", "{:>9.2e}"),
-           ("min_lam2_z", "min λ2(z)", "{:>10.2e}"), ("min_lam2_s", "min λ2(s)", "{:>10.2e}"),
+           ("min_lam2_z", "min λ2(z)", "{:>10.2e}"), ("min_lam2_s", "λ2(Jᵀr̃)", "{:>10.2e}"),
            ("max_cond_Qp", "cond(Qp)", "{:>9.2e}"), ("solve_residual", "solve res", "{:>9.2e}"),
            ("elapsed", "time [s]", "{:>8.3f}"))
 
@@ -44,16 +44,32 @@ def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
     return "\n".join(lines)
 
 
+def _shown(label: str) -> int:
+    """Display width of a label (combining marks, as in r̃, take no column)."""
+    import unicodedata
+
+    return sum(not unicodedata.combining(ch) for ch in label)
+
+
 def column_header(labelled: bool) -> str:
-    head = " ".join(f"{label:>{len(fmt.format(0 if 'd' in fmt else 0.0))}}" for _, label, fmt in COLUMNS)
+    head = " ".join(" " * max(0, len(fmt.format(0 if "d" in fmt else 0.0)) - _shown(label)) + label
+                    for _, label, fmt in COLUMNS)
     return ("comp " if labelled else "") + head
 
 
 def row(info, labelled: bool) -> str:
+    """One table row; a quantity the final row has no value for (no step was taken: σ, α,
+    cond(Qp), the solve residual) is printed as "-", not "nan"."""
     cells = []
     for name, _, fmt in COLUMNS:
         val = getattr(info, name)
-        cells.append(fmt.format(int(val)) if "d" in fmt else fmt.format(float(val)))
+        width = len(fmt.format(0 if "d" in fmt else 0.0))
+        if "d" in fmt:
+            cells.append(fmt.format(int(val)))
+        elif val is None or val != val:
+            cells.append(f"{'-':>{width}}")
+        else:
+            cells.append(fmt.format(float(val)))
     return (f"{info.component:>4d} " if labelled else "") + " ".join(cells)
 
 
@@ -67,13 +83,13 @@ class IterationPrinter:
         if self.labelled:
             print(f"solved as {components} independent components (column 'comp')", file=self.stream)
         print(column_header(self.labelled), file=self.stream)
-        print("-" * len(column_header(self.labelled)), file=self.stream, flush=True)
+        print("-" * _shown(column_header(self.labelled)), file=self.stream, flush=True)
 
     def __call__(self, info):
         print(row(info, self.labelled), file=self.stream, flush=True)
 
     def summary(self, result):
-        print("-" * len(column_header(self.labelled)), file=self.stream)
+        print("-" * _shown(column_header(self.labelled)), file=self.stream)
         print(f"status {result.status}: {result.message}", file=self.stream)
         print(f"criterion of the returned (v, u, r): {result.criterion:.2e}; "
               f"time {result.timings.get('total', float('nan')):.3f} s", file=self.stream, flush=True)

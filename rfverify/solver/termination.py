@@ -81,7 +81,7 @@ class Termination:
 
     def ask_callback(self, info) -> Verdict | None:
         if self.callback is not None and self.callback(info):
-            return Verdict(Status.STOPPED, f"iteration {info.iteration}: stopped by the callback")
+            return Verdict(Status.STOPPED, f"stopped by the callback at iteration {info.iteration}")
         return None
 
     def final(self, verdict: Verdict, current):
