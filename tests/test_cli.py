@@ -158,3 +158,21 @@ def test_solve_quiet_silences_the_progress_lines(capsys):
     assert main(["solve", "bundled:sphere", "--digits", "6", "--quiet"]) == 0
     quiet = capsys.readouterr()
     assert quiet.err == "" and quiet.out.splitlines()[1].startswith("certified (6 digits requested")
+
+
+def test_every_subcommand_help_states_its_exit_codes(capsys):
+    """Issue 28: `--help` of every command lists its exit codes (0, 2 and 3 at least)."""
+    import pytest
+
+    from rfverify.cli.app import COMMANDS
+
+    for command in COMMANDS:
+        name = command.__name__.rsplit(".", 1)[-1]
+        with pytest.raises(SystemExit):
+            from rfverify.cli import main
+
+            main([name, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        assert "Exit codes: 0 " in text, name
+        codes = text.split("Exit codes: ", 1)[1]
+        assert "; 2 bad input" in codes and "; 3 internal error" in codes, name

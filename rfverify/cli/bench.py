@@ -10,7 +10,7 @@ import sys
 from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
 from ..solver.result import METHODS
 from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
-from .common import EXIT_OK, dumps
+from .common import exit_codes, EXIT_OK, dumps
 
 HELP = "run every method on every problem at every tolerance, verified independently"
 
@@ -30,7 +30,9 @@ per RUN_DIR. Then run `rfverify report RUN_DIR`."""
 
 def add_parser(sub) -> None:
     """The ``bench`` subcommand."""
-    bench = sub.add_parser("bench", help=HELP, description=DESCRIPTION)
+    bench = sub.add_parser("bench", help=HELP, description=DESCRIPTION,
+                           epilog=exit_codes("every task ran (failed solves are results, not errors)",
+                                             extra="143 stopped by SIGTERM (the run directory resumes)"))
     bench.add_argument("inputs", nargs="+", metavar="DIR_OR_FILE",
                        help="problem files, directories of them (the directory name is the "
                             "collection), 'bundled' (every bundled problem) or 'bundled:NAME'")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .argtypes import digit_count, out_path, positive_int
-from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
+from .common import (exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
                      load_problem, print_quantities, progress_printer)
 
 HELP = "prove how many digits of a solution are right (a rigorous error bound)"
@@ -21,7 +21,8 @@ Exit code 0 only when --digits are proven."""
 
 def add_parser(sub) -> None:
     """The ``certify`` subcommand."""
-    cert = sub.add_parser("certify", help=HELP, description=DESCRIPTION)
+    cert = sub.add_parser("certify", help=HELP, description=DESCRIPTION,
+                          epilog=exit_codes("--digits are proven", "they are not (the verdict says which quantity and why)"))
     cert.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     cert.add_argument("--solution", metavar="SOL.h5",
                       help="FCLIB file whose /solution/{v,u,r} is certified (default: the "

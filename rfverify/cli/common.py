@@ -16,6 +16,15 @@ EXIT_NOT_SOLVED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 3
 
+
+def exit_codes(success: str, failure: str | None = None, extra: str = "") -> str:
+    """The ``--help`` epilog of a command: its exit codes, in one sentence."""
+    codes = [f"0 {success}"] + ([f"1 {failure}"] if failure else [])
+    codes += ["2 bad input or arguments (one line on stderr naming the file, field and fix)",
+              "3 internal error (a bug: please report it)", "130 interrupted",
+              "141 stdout closed early (e.g. | head)"]
+    return "Exit codes: " + "; ".join(codes) + (f"; {extra}" if extra else "") + "."
+
 PROBLEM_HELP = ("problem file: FCLIB .hdf5 (fclib_global_rolling) or Siconos .dat (local problems "
                 "are lifted to global form), or bundled:NAME for a problem shipped with rfverify "
                 "(bundled:chute, bundled:chute-dat, bundled:sphere, bundled:cube, "

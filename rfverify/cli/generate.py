@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from .argtypes import nonneg_int, out_path, positive_int, scene_name
-from .common import EXIT_OK, dumps
+from .common import exit_codes, EXIT_OK, dumps
 
 
 def add_parser(sub) -> None:
@@ -28,6 +28,7 @@ def add_parser(sub) -> None:
                     "that changes any result, even in its last bit, changes the later positions and\n"
                     "contacts: the values, and which contacts (hence the nonzeros of H) a problem has.\n\n"
                     "scenes:\n" + "\n".join(f"  {k}: {v.summary}" for k, v in ALL_SCENES.items()),
+        epilog=exit_codes("the files were written (or --list printed)"),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     gen.add_argument("scene", metavar="SCENE", nargs="?", type=scene_name,

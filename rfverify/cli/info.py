@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from .argtypes import tolerance
-from .common import (EXIT_OK, PROBLEM_HELP, add_load_options, dumps, load_problem, print_warnings,
+from .common import (exit_codes, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, load_problem, print_warnings,
                      recorded_warnings, warning_summary)
 
 HELP = "describe a problem: sizes, coefficients, M asymmetry, stored solution"
@@ -20,7 +20,8 @@ eigenvalues)."""
 
 def add_parser(sub) -> None:
     """The ``info`` subcommand."""
-    info = sub.add_parser("info", help=HELP, description=DESCRIPTION)
+    info = sub.add_parser("info", help=HELP, description=DESCRIPTION,
+                          epilog=exit_codes("the problem was read (warnings about optional metadata included)"))
     info.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     info.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     add_load_options(info)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 
 from .argtypes import nonneg_int, positive_int
-from .common import EXIT_OK, dumps
+from .common import exit_codes, EXIT_OK, dumps
 
 HELP = "write RUN_DIR/report.html and RUN_DIR/summary.md from a bench run"
 
@@ -21,7 +21,8 @@ report.html."""
 
 def add_parser(sub) -> None:
     """The ``report`` subcommand."""
-    report = sub.add_parser("report", help=HELP, description=DESCRIPTION)
+    report = sub.add_parser("report", help=HELP, description=DESCRIPTION,
+                            epilog=exit_codes("the report was written"))
     report.add_argument("run_dir", metavar="RUN_DIR")
     report.add_argument("--diagnose", type=nonneg_int, default=3, metavar="N",
                         help="lockstep-diagnose the N worst cases (default: %(default)s; 0 skips)")

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..solver.result import METHODS
 from .argtypes import digit_count, out_path, positive_float, positive_int, tolerance
-from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
+from .common import (exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
                      load_problem, print_quantities, print_warnings, progress_printer,
                      recorded_warnings, warning_summary)
 
@@ -23,7 +23,9 @@ pinfeas, dinfeas and mu are printed beside it."""
 
 def add_parser(sub) -> None:
     """The ``solve`` subcommand."""
-    sol = sub.add_parser("solve", help=HELP, description=DESCRIPTION)
+    sol = sub.add_parser("solve", help=HELP, description=DESCRIPTION,
+                         epilog=exit_codes("Solved (with --digits: certified)",
+                                           "not Solved (with --digits: not certified), the status says why"))
     sol.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     sol.add_argument("--method", choices=METHODS, default="auto",
                      help="linear-system form: jqinv (14), qp2 (11), reduced (15), "
