@@ -271,3 +271,48 @@ def test_solve_judges_a_local_answer_on_the_file_not_on_the_lifting():
     np.testing.assert_array_equal(res.u, problem.local.velocity(res.r))
     ok = rfverify.solve(rfverify.load("bundled:sphere"))
     assert ok.status == "Solved" and ok.criterion <= 1e-10
+
+
+def _sticking_identity_problem():
+    """W = I, q = (−1, 0.1, 0, 0, 0), μ = 0.5, μr = 0.1: the contact sticks, u* = 0 and
+    r* = −q = (1, −0.1, 0, 0, 0) exactly."""
+    from rfverify.io.siconos_dat import LocalProblem, lift_local
+    from rfverify.problem import make_local_form
+
+    W = np.eye(5)
+    data = LocalProblem(W=W, q=np.array([-1.0, 0.1, 0, 0, 0]), mu=np.array([0.5]), mu_r=np.array([0.1]))
+    lifted, _ = lift_local(data)
+    return dataclasses.replace(lifted, local=make_local_form(W, data.q))
+
+
+def test_a_point_just_outside_the_dual_cone_is_proven_through_the_residual_theorem():
+    """r_p = r* − 1e-8 e_N gives u = W r_p + q = (−1e-8, 0, …) ∉ K*.  W is definite (λ = 1), so
+    u is raised into K* by τ = 1e-8 and the residual form of the theorem bounds ‖r_p − r*‖ by
+    δ = ‖e‖/λ: the bound is valid, within 2× of the true error (λ is proven as λmin/2), and ≥ it."""
+    from rfverify.proof import Point
+
+    problem = _sticking_identity_problem()
+    r_p = np.array([1.0 - 1e-8, -0.1, 0, 0, 0])
+    point = Point(problem.H @ r_p, np.zeros(problem.n_dofs), r_p, np.zeros(5))
+    u = np.array([-1e-8, 0, 0, 0, 0])
+    cert = rfverify.certify(problem, point.v_hi, u, r_p, digits=5, point=point)
+    assert cert.proof.valid and "dual_shift_2norm" in cert.proof.terms, cert.verdict
+    true_r, true_u = 1e-8 * (1 - 1e-7), 1e-8 * (1 - 1e-7)  # |r_p − r*|, |u − u*| (up to the float of 1 − 1e-8)
+    assert cert.quantities["r"].abs_bound >= true_r and cert.quantities["u"].abs_bound >= true_u
+    # δ = ‖e‖/λ with the verified λ ≥ λmin/2 (massbounds proves half the eigenvalue): 2e-8
+    assert cert.quantities["r"].abs_bound <= 2.01e-8
+
+
+def test_mutation_ignoring_the_dual_shift_is_caught(monkeypatch):
+    """If the residual e of the shift were left out (‖e‖ = 0), the bound on r would be 0 for a
+    point 1e-8 away from r*: the test above would see it."""
+    from rfverify.proof import Point
+    from rfverify.proof import local as L
+
+    real = L._shift_into_dual_cone
+    monkeypatch.setattr(L, "_shift_into_dual_cone", lambda *a: (lambda out: None if out is None else (out[0], 0.0))(real(*a)))
+    problem = _sticking_identity_problem()
+    r_p = np.array([1.0 - 1e-8, -0.1, 0, 0, 0])
+    point = Point(problem.H @ r_p, np.zeros(problem.n_dofs), r_p, np.zeros(5))
+    cert = rfverify.certify(problem, point.v_hi, np.array([-1e-8, 0, 0, 0, 0]), r_p, digits=5, point=point)
+    assert cert.quantities["r"].abs_bound < 1e-9  # the false claim the real code never makes

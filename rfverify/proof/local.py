@@ -20,6 +20,13 @@ because r*ᵀu* = 0 and rᵀu*, r*ᵀu ≥ 0 (pairs of K and K*).  So ε := √(
   ‖d_b‖₂ ≤ (ε + √(r_Oᵀ W_OO r_O)) / √λmin(W_b) where λmin(W_b) > 0 is verified.  Where it
   is not, r is reported as information (not unique), never certified.
 
+A point slightly outside K* (u = W r + q misses K*_i by rounding of the iterate) is still used
+where W is proven definite with λmin ≥ λ > 0 on every component r may use: u' = u + τ e_N ∈ K*
+(τ ≥ 0 per contact, the normal component raised just enough, verified exactly) and
+e = u' − (W r + q) give dᵀWd ≤ rᵀu' − dᵀe, hence ‖d‖₂ ≤ δ := (‖e‖ + √(‖e‖² + 4λ rᵀu'))/(2λ)
+and ‖d‖²_W ≤ ε² := rᵀu' + ‖e‖δ; then |u_k − u*_k| ≤ √(W_kk) ε for u = W r + q, and
+|r_k − r*_k| ≤ δ.
+
 Hypothesis check.  W ⪰ 0 is needed; it is proven by the verified floating-point bounds of
 :mod:`.massbounds` (W definite on its nonzero rows) or, for blocks up to
 :data:`EXACT_PSD_ROWS` rows where that fails (W singular: a rank-deficient Delassus matrix),
@@ -39,10 +46,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..problem import SPACEDIM, LocalForm, Problem
-from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cones_failure,
+from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cone_violations,
+                    cones_failure,
                     proven_open, validate_digits)
 from .dyadic import Dyadic, DyadicCSR, fraction_upper_float, sqrt_upper
-from .massbounds import MassBounds, upper_sum, verify_mass_matrix
+from .massbounds import MassBounds, inflate, upper_sum, verify_mass_matrix
 
 EXACT_PSD_ROWS = 120
 """Largest block of W whose positive semidefiniteness is decided in exact rational arithmetic
@@ -63,6 +71,10 @@ class LocalFacts:
     why: str
     how: str
     w_diag: np.ndarray
+    lam_lower: float = 0.0
+    """> 0: λmin((W + Wᵀ)/2) ≥ lam_lower on its nonzero rows (verified); 0 when not proven."""
+    nonzero_rows: np.ndarray | None = None
+    """Rows of W with a nonzero diagonal (the rows ``lam_lower`` is about)."""
 
 
 class LocalExact:
@@ -119,8 +131,10 @@ def prove_psd(W: sp.spmatrix) -> LocalFacts:
     A_raw = W[rows][:, rows]
     mass = verify_mass_matrix(A_raw)
     if mass.proven:
-        return LocalFacts(True, "", f"verified λmin((W + Wᵀ)/2) ≥ {float(np.nanmin(mass.lam_lower)):.3e} > 0 "
-                                    "on its nonzero rows (floating point with rounding-error bounds)", diag)
+        lam = float(np.nanmin(mass.lam_lower))
+        return LocalFacts(True, "", f"verified λmin((W + Wᵀ)/2) ≥ {lam:.3e} > 0 "
+                                    "on its nonzero rows (floating point with rounding-error bounds)", diag,
+                          lam_lower=lam, nonzero_rows=rows)
     for fb in mass.failures:
         idx = np.asarray(fb.dofs)
         if idx.size > EXACT_PSD_ROWS:
@@ -197,17 +211,36 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
 
     u_p = ex.u_of(point_r)
     outside = cones_failure(ex, u_p, point_r, "u = Wr + q")
+    shifted = None
     if outside:
-        return _invalid(requested, outside, t0, theorem=THEOREM_LOCAL)
-    gap = point_r.dot(u_p)  # ≥ 0: pairs of K and K*
-    gap_up = fraction_upper_float(gap)
-    eps = float(_up(math.sqrt(gap_up)))
+        shifted = _shift_into_dual_cone(problem, ex, u_p, point_r)
+        if shifted is None:
+            return _invalid(requested, outside, t0, theorem=THEOREM_LOCAL)
     sqrtW = _up(np.sqrt(ex.facts.w_diag))
+    if shifted is None:
+        gap = point_r.dot(u_p)  # ≥ 0: pairs of K and K*
+        gap_up = fraction_upper_float(gap)
+        eps = float(_up(math.sqrt(gap_up)))
+        terms = {"eps_W": eps, "gap_rTu": gap_up}
+    else:
+        u_shift, e_norm = shifted
+        gap_up = fraction_upper_float(point_r.dot(u_shift))
+        lam = ex.facts.lam_lower
+        disc = float(_up(float(_up(e_norm * e_norm)) + float(_up(4 * lam * gap_up))))
+        root = float(_up(math.sqrt(disc)))
+        delta = float(_up(float(_up(e_norm + root)) / float(np.nextafter(2 * lam, 0))))
+        eps = float(_up(math.sqrt(float(_up(gap_up + float(_up(e_norm * delta)))))))
+        terms = {"eps_W": eps, "gap_rTu": gap_up, "dual_shift_2norm": e_norm, "r_dist_2norm_upper": delta,
+                 "lam_min_W_lower": lam}
     e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up(sqrtW * eps))
-    terms = {"eps_W": eps, "gap_rTu": gap_up, "max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)),
-             "W_psd": ex.facts.how}
+    terms.update({"max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)), "W_psd": ex.facts.how})
     q = {"u": _quantity("u", e_u, u, scales, requested, names=DATA_SCALE_NAMES_LOCAL, relative=relative)}
-    e_r, note, r_terms = _local_r_bound(problem, ex, u_p, sqrtW * eps, point_r, eps, r)
+    if shifted is None:
+        e_r, note, r_terms = _local_r_bound(problem, ex, u_p, sqrtW * eps, point_r, eps, r)
+    else:  # ‖r_p − r*‖₂ ≤ δ on every component
+        e_r = upper_sum((Dyadic.from_float(r) - point_r).abs_upper(), np.full(r.size, delta))
+        note, r_terms = (f"unique: W definite (verified λmin ≥ {ex.facts.lam_lower:.2e}); u = Wr + q raised into "
+                         f"K* by ‖e‖₂ ≤ {e_norm:.1e}"), {}
     terms.update(r_terms)
     if e_r is None:
         q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
@@ -218,6 +251,36 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
     return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, theorem=THEOREM_LOCAL,
                  arithmetic=("exact dyadic rationals (Python integers) for u = Wr + q, rᵀu and the cones; "
                              "verified float64 (or exact rationals) for W ⪰ 0 and λmin"))
+
+
+def _shift_into_dual_cone(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic):
+    """(u' = u_p + τ e_N ∈ K* exactly, an upper bound of ‖τ‖₂) when r ∈ K and W is proven
+    definite on every component r may use, else None (the residual theorem does not apply)."""
+    facts = ex.facts
+    n = problem.n_contacts
+    _, bad_primal = cone_violations(ex, u_p, point_r)
+    if bad_primal.size or not facts.lam_lower > 0 or facts.nonzero_rows is None:
+        return None
+    mu, mur = problem.mu, problem.mu_r
+    kept = np.zeros((n, SPACEDIM), dtype=bool)
+    kept[:, 0] = True
+    kept[:, 1:3] = (mu > 0)[:, None]
+    kept[:, 3:5] = (mur > 0)[:, None]
+    in_F = np.zeros(SPACEDIM * n, dtype=bool)
+    in_F[facts.nonzero_rows] = True
+    if not np.all(in_F[kept.ravel()]):
+        return None
+    mag = np.maximum(np.abs(u_p.lower()), np.abs(u_p.upper())).reshape(n, SPACEDIM)
+    need = inflate(mu * _up(np.hypot(mag[:, 1], mag[:, 2])) + mur * _up(np.hypot(mag[:, 3], mag[:, 4])), 6)
+    tau = np.maximum(_up(need - u_p.lower().reshape(n, SPACEDIM)[:, 0]), 0.0)
+    tau = np.where(tau > 0, _up(tau * (1 + 2.0 ** -40)), 0.0)
+    full = np.zeros(SPACEDIM * n)
+    full[0::SPACEDIM] = tau
+    u_shift = u_p + Dyadic.from_float(full)
+    bad_dual, _ = cone_violations(ex, u_shift, point_r)
+    if bad_dual.size:
+        return None
+    return u_shift, float(_up(np.sqrt(float(_up(np.sum(_up(tau * tau)) * (1 + 2.0 ** -40))))))
 
 
 def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyadic, eps: float, r):
