@@ -14,11 +14,15 @@ but factors a different matrix:
 ``reduced`` (15)  [[M, −H̃ᵀ], [−H̃, −J Q_{p⁻²} Jᵀ]],                       unknowns (dv, dr̃)
 ``reduced_factored`` (16)  [[M, −(L⁻¹H̃)ᵀ], [−L⁻¹H̃, −I]], L Lᵀ = J Q_{p⁻²} Jᵀ, unknowns (dv, Lᵀdr̃)
 ``noscaling`` (6) [[M, −H̃ᵀ, 0], [−H̃, 0, J], [0, Arw(z) Jᵀ, Arw(s)]],      unsymmetric
+``schur``   (16) with its identity block eliminated: M + Bᵀ B, B = L⁻¹H̃, SPD, unknowns dv
+            (CHOLMOD supernodal Cholesky; optional extra ``cholmod``; not yet a ``--method``)
 
 The symmetric forms are quasi-definite once a small static regularisation −δI is put on the
 dr̃ block (positive blocks M, I or Q_{p²}; negative block dr̃): they are factored by QDLDL
 (LDLᵀ without pivoting, AMD ordering, symbolic analysis reused through ``update``).  The
-unsymmetric form is factored by SuperLU with partial pivoting.
+unsymmetric form is factored by SuperLU with partial pivoting, the definite ``schur`` form by
+CHOLMOD (docs/DECISIONS.md, "Where the factorisation time goes": QDLDL's entry-by-entry
+factorisation is the wall from a few thousand contacts on).
 
 Iterative refinement runs on the *unreduced, unregularised* three-block system above, with
 its residual evaluated by the exact operator (Q applied by Q_x y = 2(xᵀy)x − det(x)Ry, never
@@ -578,6 +582,7 @@ class ReducedFactoredSystem(KKTSystem):
         self.pad_idx = np.full((self.n_blocks, 5), nk, dtype=np.int64)  # nk = the zero slot
         self.pad_idx[block, local] = np.arange(nk)
         self.pad_mask = self.pad_idx < nk
+        self._unpad = None
         # P = J Q_{p⁻¹} contributions (kept row, z column of the same contact), quad_blocks order,
         # with z columns numbered within their contact (≤ 6: two L3 cones).
         zblock = block[self.rho]
@@ -593,22 +598,36 @@ class ReducedFactoredSystem(KKTSystem):
         # k < 5 kept rows has exactly k cone components), so every padded block has full rank.
         pad_b, pad_l = np.nonzero(self.pad_idx == nk)
         self._pad = (pad_b, pad_l)
-        # B = L⁻¹H̃: each H̃ entry (b, j) feeds rows a of its block, value Linv[a, b]·H̃[b, j].
+        self._set_form_pattern()
+
+    def _b_pattern(self):
+        """B = L⁻¹H̃ as contributions: each H̃ entry (b, j) feeds rows a of its block, value
+        Linv[a, b]·H̃[b, j] (``self._b`` = block, a, b, H̃ value); returns their (row, column)."""
         Hc = self._Hcoo
-        hb = block[Hc.row]
+        hb = self.block[Hc.row]
         la = np.tile(np.arange(5), Hc.nnz)
         rep = np.repeat(np.arange(Hc.nnz), 5)
-        keep = la < sizes[hb[rep]]
+        keep = la < self.sizes[hb[rep]]
         rep, la = rep[keep], la[keep]
-        self._b = (hb[rep], la, local[Hc.row[rep]], Hc.data[rep])
-        b_rows = self.pad_idx[hb[rep], la]
-        b_cols = Hc.col[rep]
+        self._b = (hb[rep], la, self.local[Hc.row[rep]], Hc.data[rep])
+        return self.pad_idx[hb[rep], la], Hc.col[rep]
+
+    def _set_form_pattern(self):
+        """The pattern of [[M, −Bᵀ], [−B, −I]] (upper triangle)."""
+        m, nk = self.m, self.nk
+        b_rows, b_cols = self._b_pattern()
         Mc = self._Mcoo
         rows = [Mc.row, b_cols, m + np.arange(nk)]
         cols = [Mc.col, m + b_rows, m + np.arange(nk)]
         self._set_pattern(rows, cols, m + nk)
 
     def factor(self):
+        self._factor_blocks()
+        hb, la, lb, hv = self._b
+        self._factor_upper(np.concatenate((self._Mcoo.data, -self.Linv[hb, la, lb] * hv, -np.ones(self.nk))))
+
+    def _factor_blocks(self):
+        """Q_{p⁻²} (float64 operator) and L⁻¹ block by block, G = J Q_{p⁻²} Jᵀ = L Lᵀ."""
         p_inv2 = self.cones.power(self.p, -2)
         self.Qp_inv2_64 = self.cones.quad_operator(np.asarray(p_inv2, dtype=np.float64))
         P = np.zeros((self.n_blocks, 5, 6))
@@ -620,15 +639,15 @@ class ReducedFactoredSystem(KKTSystem):
         if not np.all(np.abs(np.diagonal(L, axis1=1, axis2=2)) > 0):
             raise ArithmeticError("a contact block of P = J Q_{p⁻¹} is rank deficient")
         self.Linv = np.linalg.solve(L, np.broadcast_to(np.eye(5), L.shape))
-        hb, la, lb, hv = self._b
-        self._factor_upper(np.concatenate((self._Mcoo.data, -self.Linv[hb, la, lb] * hv, -np.ones(self.nk))))
 
     def _blocks(self, x, transpose=False):
         """Apply L⁻¹ (or L⁻ᵀ) block by block to a kept-row vector."""
         padded = np.append(x, 0.0)[self.pad_idx]
         op = np.swapaxes(self.Linv, 1, 2) if transpose else self.Linv
         out = np.einsum("nij,nj->ni", op, padded)
-        return out[self.pad_mask][np.argsort(self.pad_idx[self.pad_mask])]
+        if self._unpad is None:
+            self._unpad = np.argsort(self.pad_idx[self.pad_mask])
+        return out[self.pad_mask][self._unpad]
 
     def solve_once(self, rhs):
         rhs = np.asarray(rhs, dtype=np.float64)
@@ -640,5 +659,75 @@ class ReducedFactoredSystem(KKTSystem):
         return np.concatenate((x[:m], dr, dz))
 
 
+class SchurSystem(ReducedFactoredSystem):
+    """Form (16) with its identity block eliminated: the dof-space Schur complement
+
+        S = M + Bᵀ B = M + H̃ᵀ G⁻¹ H̃,   B = L⁻¹ H̃,   G = J Q_{p⁻²} Jᵀ = L Lᵀ,
+
+    symmetric positive definite (M is), factored by CHOLMOD's supernodal Cholesky
+    (scikit-sparse, the optional extra ``cholmod``; AMD ordering, symbolic analysis once):
+    dense BLAS-3 kernels on the supernodes, where QDLDL's up-looking LDLᵀ works entry by
+    entry.  S dv = a − Bᵀ L⁻¹ b′ with b′ = b − J Q_{p⁻¹} c, then
+    dr̃ = −L⁻ᵀ (L⁻¹ b′ + B dv) and dz = Q_{p⁻¹}c − Q_{p⁻²}Jᵀdr̃.  S is M + BᵀB (sparse
+    product) put on the fixed pattern of M + |B|ᵀ|B|, so that the ordering and symbolic
+    analysis of the first factorisation hold for every later one.  Needs no δ (S is
+    definite); refinement as for every form, against the unreduced operator.
+    """
+
+    name = "schur"
+
+    def __init__(self, *args, **kw):
+        try:
+            import sksparse.cholmod  # noqa: F401
+        except ImportError:
+            raise ImportError("the schur form needs CHOLMOD through scikit-sparse: "
+                              "pip install 'rfverify[cholmod]' (and libsuitesparse-dev, an optimised "
+                              "BLAS such as libopenblas0, to build and run it)") from None
+        super().__init__(*args, **kw)
+
+    def _set_form_pattern(self):
+        m, nk = self.m, self.nk
+        b_rows, b_cols = self._b_pattern()
+        self._basm = SparseAssembler(b_rows, b_cols, (nk, m))
+        # The lower triangle of S's pattern, from B's and M's (all entries counted: a product
+        # of positive ones cannot cancel), in CSC order = ascending key col·m + row.
+        ones = sp.csc_matrix((np.ones(self._basm.nnz), self._basm.indices, self._basm.indptr), shape=(nk, m))
+        pat = sp.tril(abs(self.M) + (ones.T @ ones), format="csc")
+        pat.sort_indices()
+        self._s_indices, self._s_indptr = pat.indices, pat.indptr
+        self._s_key = np.repeat(np.arange(m, dtype=np.int64), np.diff(pat.indptr)) * m + pat.indices
+        self.N = m
+        self._chol = None
+
+    def factor(self):
+        from sksparse import cholmod
+
+        self._factor_blocks()
+        hb, la, lb, hv = self._b
+        B = self._basm.matrix(self.Linv[hb, la, lb] * hv)
+        C = sp.tril(self.M + (B.T @ B), format="csc")  # a numerical zero may leave C's pattern
+        key = np.repeat(np.arange(self.m, dtype=np.int64), np.diff(C.indptr)) * self.m + C.indices
+        data = np.zeros(self._s_key.size)
+        data[np.searchsorted(self._s_key, key)] = C.data
+        S = sp.csc_matrix((data, self._s_indices, self._s_indptr), shape=(self.m, self.m))
+        try:
+            if self._chol is None:
+                self._chol = cholmod.analyze(S, mode="supernodal", ordering_method="amd")
+            self._chol.cholesky_inplace(S)
+        except cholmod.CholmodError as exc:
+            raise ArithmeticError(f"CHOLMOD: {exc}") from None
+        self.factor_count += 1
+
+    def solve_once(self, rhs):
+        rhs = np.asarray(rhs, dtype=np.float64)
+        m, mk = self.m, self.m + self.nk
+        qc = self.Qp_inv64(rhs[mk:])
+        y = self._blocks(rhs[m:mk] - self.J @ qc)
+        dv = self._chol(rhs[:m] - self.H_t.T @ self._blocks(y, transpose=True))
+        dr = -self._blocks(y + self._blocks(self.H_t @ dv), transpose=True)
+        dz = qc - self.Qp_inv2_64(self.J.T @ dr)
+        return np.concatenate((dv, dr, dz))
+
+
 FORMS = {"jqinv": JQinvSystem, "qp2": QP2System, "reduced": ReducedSystem,
-         "reduced_factored": ReducedFactoredSystem, "noscaling": NoScalingSystem}
+         "reduced_factored": ReducedFactoredSystem, "noscaling": NoScalingSystem, "schur": SchurSystem}
