@@ -257,13 +257,12 @@ def max_step(n3, xh, xl, dxh, dxl):
     return best
 
 
-@njit
 def identity(n3, nz):
+    """The identity element (1, 0, 0) per L3 cone, 1 per L1 cone (numpy: used once per run,
+    not worth a compilation)."""
     eh = np.zeros(nz)
-    for c in range(n3):
-        eh[3 * c] = 1.0
-    for i in range(3 * n3, nz):
-        eh[i] = 1.0
+    eh[0:3 * n3:3] = 1.0
+    eh[3 * n3:] = 1.0
     return eh
 
 

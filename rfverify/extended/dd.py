@@ -21,7 +21,13 @@ import numba
 import numpy as np
 
 _SPLITTER = 134217729.0  # 2^27 + 1
-jit = numba.njit(cache=True, inline="always", nogil=True)
+# Not inline="always": numba's IR-level inlining re-types every inlined copy, and a kernel
+# such as cones.nt_scaling makes a hundred nested calls (20 s of a cold start's 80 s).  As
+# separate compiled functions each is typed once and LLVM still inlines the small ones into
+# the kernels at machine level; without fast-math either way, so the results are identical.
+# The elementwise vector operations below stay compiled: as numpy expressions they cost
+# 10-20 µs a call more, which is most of a small problem's warm double-double phase.
+jit = numba.njit(cache=True, nogil=True)
 
 
 @jit

@@ -35,11 +35,19 @@ def fill_reducing_order(pattern: sp.spmatrix) -> np.ndarray:
     return np.argsort(lu.perm_c).astype(np.int64)  # Pr·A·Pc = A[p][:, p]
 
 
-@numba.njit(cache=True)
+# The kernels below take their work arrays from the caller: allocating inside compiled code
+# compiles numba's np.zeros/np.empty/np.full for each dtype and shape kind, time a cold
+# start pays and a warm one does not save (see docs/DECISIONS.md, "Cold start").
 def _symbolic(n, Ap, Ai):
+    """(elimination tree parent, column pointers Lp of L) of the upper-CSC pattern (Ap, Ai)."""
     parent = np.full(n, -1, dtype=np.int64)
-    flag = np.empty(n, dtype=np.int64)
-    lnz = np.zeros(n, dtype=np.int64)
+    Lp = np.zeros(n + 1, dtype=np.int64)
+    _symbolic_kernel(n, Ap, Ai, parent, np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int64), Lp)
+    return parent, Lp
+
+
+@numba.njit(cache=True)
+def _symbolic_kernel(n, Ap, Ai, parent, flag, lnz, Lp):
     for k in range(n):
         flag[k] = k
         for p in range(Ap[k], Ap[k + 1]):
@@ -51,13 +59,10 @@ def _symbolic(n, Ap, Ai):
                     lnz[i] += 1
                     flag[i] = k
                     i = parent[i]
-    Lp = np.zeros(n + 1, dtype=np.int64)
     for k in range(n):
         Lp[k + 1] = Lp[k] + lnz[k]
-    return parent, Lp
 
 
-@numba.njit(cache=True, inline="always")
 def _workspace(n):
     """flag and pattern for :func:`_row_pattern`; lnz, the entries of each column of L so far."""
     return np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
@@ -87,10 +92,9 @@ def _row_pattern(k, Ap, Ai, parent, flag, pattern, n):
 
 
 @numba.njit(cache=True)
-def _numeric(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl):
-    """Returns -1 on success, else the index of the first non-positive pivot."""
-    yh, yl = np.zeros(n), np.zeros(n)
-    flag, pattern, lnz = _workspace(n)
+def _numeric(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl, yh, yl, flag, pattern, lnz):
+    """Returns -1 on success, else the index of the first non-positive pivot.  Work arrays:
+    yh, yl zero (n,); flag, pattern, lnz from :func:`_workspace`."""
     for k in range(n):
         for p in range(Ap[k], Ap[k + 1]):
             if Ai[p] <= k:
@@ -197,7 +201,7 @@ class DDCholesky:
     def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
         """Numeric factorisation; returns -1 on success, else the first non-positive pivot."""
         bad = _numeric(self.n, self.Ap, self.Ai, Axh, Axl, self.Lp, self.parent, self.Li, self.Lxh,
-                       self.Lxl, self.Dh, self.Dl)
+                       self.Lxl, self.Dh, self.Dl, np.zeros(self.n), np.zeros(self.n), *_workspace(self.n))
         self.factored = bad < 0
         return int(bad)
 
@@ -214,10 +218,8 @@ class DDCholesky:
 
 
 @numba.njit(cache=True)
-def _numeric_double(n, Ap, Ai, Ax, Lp, parent, Li, Lx, D):
-    """:func:`_numeric` in float64 (same algorithm, same symbolic factor)."""
-    y = np.zeros(n)
-    flag, pattern, lnz = _workspace(n)
+def _numeric_double(n, Ap, Ai, Ax, Lp, parent, Li, Lx, D, y, flag, pattern, lnz):
+    """:func:`_numeric` in float64 (same algorithm, same symbolic factor; y zero (n,))."""
     for k in range(n):
         for p in range(Ap[k], Ap[k + 1]):
             if Ai[p] <= k:
@@ -261,12 +263,11 @@ def _solve_double(n, Lp, Li, Lx, D, x):
 
 
 @numba.njit(cache=True)
-def _symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl):
+def _symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl, ax):
     """r = b − A x in double-double, A symmetric given by its upper triangle in CSC; returns
     the componentwise backward error max_i |r_i| / (|A||x| + |b|)_i (Oettli–Prager), which,
     unlike a normwise one, does not let the large rows of a badly scaled matrix hide the
-    error in the small ones."""
-    ax = np.zeros(n)
+    error in the small ones.  ax: zero work array (n,)."""
     for i in range(n):
         rh[i] = bh[i]
         rl[i] = bl[i]
@@ -324,7 +325,7 @@ class MixedCholesky(DDCholesky):
         if self.precision == "double-double":
             return super().factor(*self._A)
         bad = _numeric_double(self.n, self.Ap, self.Ai, self._A[0], self.Lp, self.parent, self.Li, self.Lx,
-                              self.Dh)
+                              self.Dh, np.zeros(self.n), *_workspace(self.n))
         if bad >= 0:
             return self._fall_back(f"non-positive pivot {bad} in the float64 factorisation")
         self.factored = True
@@ -346,7 +347,8 @@ class MixedCholesky(DDCholesky):
             _solve_double(n, self.Lp, self.Li, self.Lx, self.Dh, d)
             nh, nl = np.empty(n), np.empty(n)
             dd.vadd(best_x[0], best_x[1], d, np.zeros(n), nh, nl)
-            backward = _symmetric_residual(n, self.Ap, self.Ai, self._A[0], self._A[1], pbh, pbl, nh, nl, rh, rl)
+            backward = _symmetric_residual(n, self.Ap, self.Ai, self._A[0], self._A[1], pbh, pbl, nh, nl, rh, rl,
+                                           np.zeros(n))
             if not backward < 0.5 * best:  # stalled (or NaN): keep the best solution
                 best = min(best, backward) if backward == backward else best
                 break

@@ -254,9 +254,10 @@ def contact_Ginv(n, kinds, fric, roll, normal, spec, Gh, Gl):
             Gh[c, 0, 0], Gl[c, 0, 0] = dd.mul(t, tl, t, tl)
             continue
         if k == 1 or k == 2:
-            C.quad_pow_matrix(fric[c] if k == 1 else roll[c], 2, spec, Qh, Ql)
-            Gh[c, :3, :3] = Qh
-            Gl[c, :3, :3] = Ql
+            C.quad_pow_matrix(fric[c] if k == 1 else roll[c], np.int64(2), spec, Qh, Ql)
+            for a in range(3):  # entry by entry: see contact_factor_inverse
+                for b in range(3):
+                    Gh[c, a, b], Gl[c, a, b] = Qh[a, b], Ql[a, b]
             continue
         Pa, Pal, ca1, ca1l, ca2, ca2l, Aa = _schur_parts_spectral(spec, fric[c])
         Pb, Pbl, cb1, cb1l, cb2, cb2l, Ab = _schur_parts_spectral(spec, roll[c])
@@ -379,7 +380,12 @@ def _dense_schur(Mh, Ml, Hh, Hl, Wh, Wl):
     Yl = np.zeros((Mh.shape[0], Hh.shape[0]))
     if not _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
         return False
-    _row_gram(np.ascontiguousarray(Yh.T), np.ascontiguousarray(Yl.T), Wh, Wl)
+    YTh = np.zeros((Hh.shape[0], Mh.shape[0]))  # Yᵀ, copied by hand (np.ascontiguousarray
+    YTl = np.zeros((Hh.shape[0], Mh.shape[0]))  # would be one more compilation)
+    for i in range(Mh.shape[0]):
+        for c in range(Hh.shape[0]):
+            YTh[c, i], YTl[c, i] = Yh[i, c], Yl[i, c]
+    _row_gram(YTh, YTl, Wh, Wl)
     return True
 
 
@@ -566,7 +572,12 @@ def contact_factor_inverse(n, kinds, fric, roll, normal, spec, Fh, Fl):
     """F_c⁻¹ for a factor F_c with F_c F_cᵀ = G_c = J_c Q_{p⁻²} J_cᵀ: Q_p for one cone, p for a
     normal ray, and (R⁻¹)ᵀ from a Householder QR of (J_c Q_{p⁻¹})ᵀ for a full contact (never
     G_c itself: its condition number is the square of the factor's).  Returns the first
-    contact whose factor is singular, or -1."""
+    contact whose factor is singular, or -1.
+
+    Compile time (a cold start compiles this on the first solve): blocks are copied entry by
+    entry, since a slice assignment's shape check compiles numba's error-message formatting
+    (seconds), and integer constants passed to compiled helpers are wrapped as np.int64(k),
+    since a bare literal compiles one specialisation of the helper per value."""
     Qh = np.zeros((3, 3))
     Ql = np.zeros((3, 3))
     At_h = np.zeros((6, 5))
@@ -581,25 +592,27 @@ def contact_factor_inverse(n, kinds, fric, roll, normal, spec, Fh, Fl):
             Fh[c, 0, 0], Fl[c, 0, 0] = dd.mul(spec[normal[c], 0], spec[normal[c], 1], spec[normal[c], 0],
                                               spec[normal[c], 1])
         elif k == 1 or k == 2:
-            C.quad_pow_matrix(fric[c] if k == 1 else roll[c], 1, spec, Qh, Ql)
-            Fh[c, :3, :3] = Qh
-            Fl[c, :3, :3] = Ql
+            C.quad_pow_matrix(fric[c] if k == 1 else roll[c], np.int64(1), spec, Qh, Ql)
+            for a in range(3):
+                for b in range(3):
+                    Fh[c, a, b], Fl[c, a, b] = Qh[a, b], Ql[a, b]
         else:
             At_h[:, :] = 0.0
             At_l[:, :] = 0.0
-            C.quad_pow_matrix(fric[c], -1, spec, Qh, Ql)
+            C.quad_pow_matrix(fric[c], np.int64(-1), spec, Qh, Ql)
             for i in range(3):
                 for j in range(3):
                     At_h[i, j], At_l[i, j] = Qh[i, j], Ql[i, j]
-            C.quad_pow_matrix(roll[c], -1, spec, Qh, Ql)
+            C.quad_pow_matrix(roll[c], np.int64(-1), spec, Qh, Ql)
             cols = (0, 3, 4)
             for i in range(3):
                 for j in range(3):
                     At_h[3 + i, cols[j]], At_l[3 + i, cols[j]] = Qh[i, j], Ql[i, j]
-            if not _householder_factor(At_h, At_l, 5, Rh, Rl):
+            if not _householder_factor(At_h, At_l, np.int64(5), Rh, Rl):
                 return c
-            Fh[c, :, :] = Rh
-            Fl[c, :, :] = Rl
+            for a in range(5):
+                for b in range(5):
+                    Fh[c, a, b], Fl[c, a, b] = Rh[a, b], Rl[a, b]
     return -1
 
 
