@@ -27,6 +27,7 @@ from .extended.dd import vmul_d
 from .extended import wide
 from .extended.system import ExtendedData, choose_backend
 from .problem import SPACEDIM, Problem
+from .compilation import compile_seconds
 from .proof import Point, Proof, ProofContext, validate_digits
 from .solver import SolveResult, solve
 
@@ -40,7 +41,8 @@ class DigitsSolution:
     verdict; ``double`` the double solve; ``extended`` the double-double run; ``wide`` the
     multiple-precision tail (None when it did not run); ``timings`` seconds per stage
     (``double``, ``setup``, ``extended``, ``wide``, ``proof``, ``total``; proofs excluded from
-    the others).
+    the others; ``compile``: numba compiling kernels on a cold start, excluded from the stage
+    it happened in, see :mod:`rfverify.compilation`).
     """
 
     v: np.ndarray
@@ -272,9 +274,10 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
                                    fix="use method='auto' (default) or an Algorithm 1 form")
     say = progress or (lambda msg: None)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), compile_seconds()
     double = solve(problem, method=method, tol=tol, max_iter=max_iter, **{**DOUBLE_SETTINGS, **options})
     t_double = time.perf_counter() - t0
+    c1 = compile_seconds()
     say(f"double solve ({double.method}{' by auto' if method == 'auto' else ''}): {double.status} in "
         f"{double.nit} iterations, {t_double:.2f} s")
     t1 = time.perf_counter()
@@ -290,8 +293,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         t_setup = time.perf_counter() - t1
         return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
                               extended=ext.ExtendedResult(None, None, None, "NotRun", proof.failure, 0),
-                              timings={"double": t_double, "setup": t_setup, "extended": 0.0, "wide": 0.0,
-                                       "proof": proof.seconds, "total": time.perf_counter() - t0})
+                              timings={"double": t_double - (c1 - c0), "setup": t_setup - (compile_seconds() - c1),
+                                       "extended": 0.0, "wide": 0.0, "proof": proof.seconds,
+                                       "compile": compile_seconds() - c0, "total": time.perf_counter() - t0})
     from .certification import candidate_point
 
     # The double answer itself first: an exact one (a wedge, an all-open scene) is proven here
@@ -304,21 +308,27 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         cert = certificate_from_proof(proof, point, extra={"point_source": "the double solve's answer itself"})
         return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
                               extended=ext.ExtendedResult(None, None, None, "NotRun", "not needed", 0),
-                              timings={"double": t_double, "setup": time.perf_counter() - t1, "extended": 0.0,
-                                       "wide": 0.0, "proof": proof.seconds, "total": time.perf_counter() - t0})
+                              timings={"double": t_double - (c1 - c0),
+                                       "setup": time.perf_counter() - t1 - (compile_seconds() - c1), "extended": 0.0,
+                                       "wide": 0.0, "proof": proof.seconds, "compile": compile_seconds() - c0,
+                                       "total": time.perf_counter() - t0})
     data = ExtendedData(problem)
     system = choose_backend(data, backend)
     t_setup = time.perf_counter() - t1
+    c2 = compile_seconds()
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
     start = _start_from(data, double)
     driver = ProofDriver(ctx, data, digits, progress=say, relative=relative)
+    c_ext = compile_seconds()  # (what _start_from compiled counts in "compile" only)
     ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
                      wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
     _, proof, point, (v, u, r) = driver.best
     cert = certificate_from_proof(proof, point, extra={"point_source": ext_out.point_source, **ext_out.summary(),
                                                        "proof_attempts": driver.attempts})
-    timings = {"double": t_double, "setup": t_setup, "extended": ext_out.seconds_dd, "wide": ext_out.seconds_wide,
-               "proof": driver.proof_seconds, "total": time.perf_counter() - t0}
+    c3 = compile_seconds()  # in extend(): the double-double kernels (the tail and the proofs compile none)
+    timings = {"double": t_double - (c1 - c0), "setup": t_setup - (c2 - c1), "extended": ext_out.seconds_dd - (c3 - c_ext),
+               "wide": ext_out.seconds_wide, "proof": driver.proof_seconds, "compile": c3 - c0,
+               "total": time.perf_counter() - t0}
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
                           wide=ext_out.wide, timings=timings)
 
