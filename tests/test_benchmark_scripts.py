@@ -31,9 +31,12 @@ def test_sweep_counts_every_committed_problem(capsys):
     sweep.main(["--quick", "--method", "jqinv", "--b", '{"extended_below": null}'])
     out = capsys.readouterr().out
     assert f"{n} problems, jqinv at tol 1e-10" in out
-    # Every committed problem verifies at 1e-10 under both option sets (the claim of DECISIONS).
-    assert f"A {{}}: {n}/{n} verified" in out
-    assert f'B {{"extended_below": null}}: {n}/{n} verified' in out
+    # Every committed problem verifies at 1e-10 under both option sets (the claim of DECISIONS),
+    # except the local file whose printed W is indefinite: its answer is judged on the file's
+    # own W since issue 26, and is not a solution of it.
+    bad = "bundled/rfc3d_sphere_from_grfc3d.dat"
+    assert f"A {{}}: {n - 1}/{n} verified" in out and f"not verified: {bad}\n" in out
+    assert f'B {{"extended_below": null}}: {n - 1}/{n} verified' in out
 
 
 @pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
