@@ -69,17 +69,17 @@ class LocalForm:
     def n_rows(self) -> int:
         return int(self.W.shape[0])
 
-    def velocity(self, r) -> np.ndarray:
-        """u = (W + Wᵀ)/2 · r + q of the file's problem, summed in longdouble and rounded to
-        float64 (what the solver returns and judges for a local file; the proof recomputes it
-        exactly)."""
+    def velocity(self, r, dtype=np.float64) -> np.ndarray:
+        """u = (W + Wᵀ)/2 · r + q of the file's problem, summed in longdouble and returned in
+        ``dtype`` (float64: what the solver returns and judges for a local file; the proof
+        recomputes it exactly)."""
         C = self.W.tocoo()
         r_ld = np.asarray(r, dtype=np.longdouble)
         half = np.longdouble(0.5) * C.data.astype(np.longdouble)
         u = np.zeros(r_ld.size, dtype=np.longdouble)
         np.add.at(u, C.row, half * r_ld[C.col])
         np.add.at(u, C.col, half * r_ld[C.row])
-        return np.asarray(u + self.q.astype(np.longdouble), dtype=np.float64)
+        return np.asarray(u + self.q.astype(np.longdouble), dtype=dtype)
 
 
 def make_local_form(W, q, significant_digits: int | None = None) -> LocalForm:

@@ -151,12 +151,7 @@ def interior_start(data: ExtendedData, v, r, u=None, margin_rel: float = 1e-8) -
     if data.local:  # no dofs; u = W r + q of the file's W
         v = np.zeros(0, dtype=np.longdouble)
         if u is None:
-            C = problem.local.W.tocoo()
-            r_ld = np.asarray(r, dtype=np.longdouble)
-            u = np.zeros(r_ld.size, dtype=np.longdouble)
-            np.add.at(u, C.row, 0.5 * C.data.astype(np.longdouble) * r_ld[C.col])
-            np.add.at(u, C.col, 0.5 * C.data.astype(np.longdouble) * r_ld[C.row])
-            u += problem.local.q
+            u = problem.local.velocity(r, np.longdouble)
     v = np.asarray(v, dtype=np.longdouble)
     u = (problem.H.T.astype(np.longdouble) @ v + problem.w) if u is None else np.asarray(u, dtype=np.longdouble)
     r_t = np.asarray(r, dtype=np.longdouble)[lp.keep] / lp.scale

@@ -100,16 +100,10 @@ class LocalExact:
         return r.dot(self.W.matvec(r))
 
 
-def _sym(W: sp.spmatrix) -> sp.csr_matrix:
-    W = sp.csr_matrix(W, dtype=np.float64)
-    return (W * 0.5 + W.T * 0.5).tocsr()
-
-
 def prove_psd(W: sp.spmatrix) -> LocalFacts:
     """Prove (W + Wᵀ)/2 ⪰ 0 for the stored W, or say why not."""
     W = sp.csr_matrix(W, dtype=np.float64)
     diag = W.diagonal()
-    Ws = _sym(W)
     if np.any(diag < 0):
         k = int(np.flatnonzero(diag < 0)[0])
         return LocalFacts(False, f"W has a negative diagonal entry W[{k},{k}] = {diag[k]:.3e}", "", diag)
