@@ -282,32 +282,24 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         f"{double.nit} iterations, {t_double:.2f} s")
     t1 = time.perf_counter()
     ctx = ProofContext(problem)
-    if not ctx.hypotheses_proven:
-        from .certification import candidate_point
-
-        point = candidate_point(double.v, double.r)
-        v, u, r = ctx.rounded(point)
-        proof = ctx.prove(point, v, u, r, requested=digits, relative=relative)
-        say(f"no proof is possible: {proof.failure}")
-        cert = certificate_from_proof(proof, point, extra={"point_source": "the double solve (no proof possible)"})
-        t_setup = time.perf_counter() - t1
-        return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
-                              extended=ext.ExtendedResult(None, None, None, "NotRun", proof.failure, 0),
-                              timings={"double": t_double - (c1 - c0), "setup": t_setup - (compile_seconds() - c1),
-                                       "extended": 0.0, "wide": 0.0, "proof": proof.seconds,
-                                       "compile": compile_seconds() - c0, "total": time.perf_counter() - t0})
     from .certification import candidate_point
 
     # The double answer itself first: an exact one (a wedge, an all-open scene) is proven here
     # at O(nnz) cost, and where the feasible set has no interior no iterate could do better.
+    # Where a hypothesis fails on the data themselves (M, W) no point can be proven: stop here.
     point = candidate_point(double.v, double.r)
     v, u, r = ctx.rounded(point)
     proof = ctx.prove(point, v, u, r, requested=digits, relative=relative)
-    if proof.certified:
-        say(f"the double solve's answer is proven as it is: {proof.summary()}")
-        cert = certificate_from_proof(proof, point, extra={"point_source": "the double solve's answer itself"})
+    if proof.certified or not ctx.hypotheses_proven:
+        if proof.certified:
+            say(f"the double solve's answer is proven as it is: {proof.summary()}")
+            source, why = "the double solve's answer itself", "not needed"
+        else:
+            say(f"no proof is possible: {proof.failure}")
+            source, why = "the double solve (no proof possible)", proof.failure
+        cert = certificate_from_proof(proof, point, extra={"point_source": source})
         return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
-                              extended=ext.ExtendedResult(None, None, None, "NotRun", "not needed", 0),
+                              extended=ext.ExtendedResult(None, None, None, "NotRun", why, 0),
                               timings={"double": t_double - (c1 - c0),
                                        "setup": time.perf_counter() - t1 - (compile_seconds() - c1), "extended": 0.0,
                                        "wide": 0.0, "proof": proof.seconds, "compile": compile_seconds() - c0,
