@@ -34,14 +34,15 @@ from pathlib import Path
 
 from ..errors import BenchInputError
 from ..progress import Progress
-from ..solver.result import ALGORITHM1_METHODS, METHODS
+from ..solver.result import ALGORITHM1_METHODS, METHODS, method_unavailable
 from . import records
 from .records import FAILED_STATUSES, task_stem, write_json
 from .tasks import base_record, run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
-DEFAULT_METHODS = tuple(m for m in METHODS if m not in ("reduced_factored", "auto"))  # auto: forms in turn
-"""What ``bench`` runs unless told otherwise: every method but (16), the factored twin of (15)."""
+DEFAULT_METHODS = tuple(m for m in METHODS if m not in ("reduced_factored", "schur", "auto"))  # auto: forms in turn
+"""What ``bench`` runs unless told otherwise: every method but (16), the factored twin of (15), and
+schur, form (16)'s iterates by another engine (optional; ``--methods schur`` asks for it)."""
 DEFAULT_TOLS = (1e-8, 1e-9, 1e-10)
 MANIFEST_SCHEMA = 2
 """2: adds ``schema``, ``rfverify_version`` and the planned ``tasks`` (what report expects)."""
@@ -348,6 +349,9 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
         raise BenchInputError(f"unknown method(s) {', '.join(unknown)}; fix: choose from {', '.join(METHODS)}")
     if not methods:
         raise BenchInputError("no methods given; fix: pass --methods jqinv,...")
+    missing = [method_unavailable(m) for m in methods if method_unavailable(m) is not None]
+    if missing:  # refused before any task: every one of its records would be an Error
+        raise BenchInputError(f"--methods: {missing[0]}, or leave it out of --methods")
     if not tols or any(not (isinstance(t, (int, float)) and math.isfinite(t) and t > 0) for t in tols):
         raise BenchInputError(f"tolerances {list(tols)}: must be finite numbers > 0; fix: pass e.g. "
                               "--tol 1e-8,1e-10")

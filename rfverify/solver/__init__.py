@@ -14,9 +14,22 @@ from ..lifting import KIND_NAMES, lift
 from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
 from ..problem import SPACEDIM, Problem
 from .cones import ProductCone
-from .result import AUTO_SEQUENCE, METHODS, IterationInfo, Settings, SolveResult, Status
+from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS, OPTIONAL_METHODS,
+                     IterationInfo, Settings, SolveResult, Status, method_unavailable)
 
-__all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo"]
+__all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence"]
+
+
+def auto_sequence(n_contacts: int, cholmod_available: bool | None = None) -> tuple:
+    """The forms ``method="auto"`` tries, in order, on a problem of ``n_contacts`` contacts:
+    ``AUTO_SEQUENCE_LARGE`` (schur first) from ``AUTO_SCHUR_MIN_CONTACTS`` contacts on when
+    CHOLMOD is available (``cholmod_available=None``: find out by importing it), else
+    ``AUTO_SEQUENCE`` (jqinv first); both declared in :mod:`rfverify.solver.result`."""
+    if n_contacts < AUTO_SCHUR_MIN_CONTACTS:
+        return AUTO_SEQUENCE
+    if cholmod_available is None:
+        cholmod_available = method_unavailable("schur") is None
+    return AUTO_SEQUENCE_LARGE if cholmod_available else AUTO_SEQUENCE
 
 
 def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: int = 100,
@@ -31,9 +44,15 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     Parameters
     ----------
     problem : Problem
-    method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "auto", "clarabel"}
-        Linear-system form (DESIGN §4); ``auto`` (default) runs the forms of
-        :data:`AUTO_SEQUENCE` (jqinv, then reduced, then noscaling), each from the start, while
+    method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur", "auto", "clarabel"}
+        Linear-system form (DESIGN §4); ``schur`` is form (16) with its identity block
+        eliminated, the dof-space matrix M + H̃ᵀG⁻¹H̃ factored by CHOLMOD's supernodal Cholesky
+        — the same iterates as ``reduced_factored``, much faster from a few thousand contacts
+        on; it needs the optional extra ``cholmod`` (``pip install 'rfverify[cholmod]'``, built
+        against libsuitesparse-dev) and raises InvalidArgumentError naming that fix without it.
+        ``auto`` (default) runs the forms of :func:`auto_sequence` — jqinv, then reduced, then
+        noscaling; on a problem of at least ``AUTO_SCHUR_MIN_CONTACTS`` (result.py) contacts with
+        CHOLMOD importable, schur, then jqinv, then noscaling — each from the start, while
         the previous one stalled or broke down, and returns the Solved run or else the answer
         with the smallest criterion — ``extras["attempts"]`` lists every run and ``method``
         names the form returned; ``clarabel`` hands the same convex problem to Clarabel.
@@ -93,6 +112,12 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
            **options) -> SolveResult:
     if method not in METHODS:
         raise ValueError(f"method {method!r} is not one of {', '.join(METHODS)}")
+    missing = method_unavailable(method)
+    if missing is not None:
+        from ..errors import InvalidArgumentError
+
+        raise InvalidArgumentError("method", missing.split("; fix: ")[0],
+                                   fix=f"{OPTIONAL_METHODS[method][1]}, or use method='auto'")
     unknown = set(options) - set(Settings.names())
     if unknown:
         raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}; "
@@ -211,7 +236,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
 
 
 def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> SolveResult:
-    """``method="auto"``: the forms of AUTO_SEQUENCE in turn, each from the standard start,
+    """``method="auto"``: the forms of :func:`auto_sequence` in turn, each from the standard start,
     while the previous one stalled or broke down (InsufficientProgress, NumericalError,
     AlmostSolved); Solved, a user stop, the iteration limit or the time limit end the sequence
     (the limits are the user's budget; the time limit holds for all runs together).  Returns
@@ -219,7 +244,7 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
     a message naming what was tried."""
     t0 = time.perf_counter()
     attempts, results = [], []
-    for form in AUTO_SEQUENCE:
+    for form in auto_sequence(problem.n_contacts):
         opts = dict(options)
         if settings.time_limit is not None:
             left = settings.time_limit - (time.perf_counter() - t0)

@@ -7,13 +7,41 @@ from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
-ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling")
-"""Linear-system forms of Algorithm 1 (DESIGN §4): (14), (11), (15), (16), (6)."""
+ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur")
+"""Linear-system forms of Algorithm 1 (DESIGN §4): (14), (11), (15), (16), (6), and (16) with its
+identity block eliminated, factored by CHOLMOD (``schur``: needs the optional extra ``cholmod``)."""
 
 AUTO_SEQUENCE = ("jqinv", "reduced", "noscaling")
 """The forms ``method="auto"`` tries in turn until one is Solved: jqinv first (fastest and most
 robust on the scene collections), then the reduced and unscaled forms, which solve lifted local
 problems with a singular Delassus operator where jqinv stalls (docs/DECISIONS.md)."""
+
+AUTO_SEQUENCE_LARGE = ("schur", "jqinv", "noscaling")
+"""``auto``'s forms from AUTO_SCHUR_MIN_CONTACTS contacts on when CHOLMOD is importable
+(``rfverify.solver.auto_sequence`` decides): schur, the path of form (16) at CHOLMOD's speed, then
+jqinv (another path), then noscaling."""
+
+AUTO_SCHUR_MIN_CONTACTS = 1500
+"""``auto`` starts with schur instead of jqinv from this many contacts on (docs/DECISIONS.md,
+"Scale (issue 27 items 2, 3, 5)": the measured break-even)."""
+
+OPTIONAL_METHODS = {"schur": ("sksparse.cholmod", "pip install 'rfverify[cholmod]' (scikit-sparse; building it "
+                                                  "needs libsuitesparse-dev, and CHOLMOD is fast only with an "
+                                                  "optimised BLAS such as libopenblas0)")}
+"""Methods that need an optional module: name -> (module to import, how to install it)."""
+
+
+def method_unavailable(method: str) -> str | None:
+    """Why ``method`` cannot run in this environment (its optional module does not import), or
+    None when it can."""
+    if method not in OPTIONAL_METHODS:
+        return None
+    module, install = OPTIONAL_METHODS[method]
+    try:
+        __import__(module)
+    except ImportError as exc:
+        return f"{method!r} needs {module}, which does not import here ({' '.join(str(exc).split())}); fix: {install}"
+    return None
 
 PORTFOLIO_METHODS = ("auto",)
 """Methods that run several Algorithm 1 forms; benches measure the forms themselves."""
