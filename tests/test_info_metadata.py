@@ -1,4 +1,4 @@
-"""Optional metadata never blocks a problem (DESIGN §7.1, rfverify.io.fclib._read_info).
+"""Optional metadata never blocks a problem (DESIGN §7.1, rfverify.io._hdf5.read_info).
 
 ``info/title``, ``info/description`` and ``info/math_info`` do not change the problem.  A real
 LMGC90 FCLIB file has the Latin-1 byte 0xA8 in its description: such a file is read (the bytes

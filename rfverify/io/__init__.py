@@ -8,56 +8,16 @@
 from __future__ import annotations
 
 import numbers
-import os
 from pathlib import Path
 
 from ..errors import InvalidArgumentError, ProblemFileError
 from ..problem import DEFAULT_MAX_ASYMMETRY, Problem
-from ._paths import read_head
+from ._paths import BUNDLED_PREFIX, bundled_problems, read_head, resolve_path
 from .fclib import read_fclib, write_fclib, write_solution_in_place
 from .siconos_dat import LocalProblem, lift_local, parse_siconos_dat, read_siconos_dat
 
-BUNDLED_PREFIX = "bundled:"
-
 __all__ = ["load", "save", "read_fclib", "write_fclib", "write_solution_in_place", "read_siconos_dat", "parse_siconos_dat",
            "lift_local", "LocalProblem", "bundled_problems", "resolve_path", "BUNDLED_PREFIX"]
-
-
-def bundled_problems() -> dict[str, Path]:
-    """Problems shipped inside the package: short name → path.
-
-    ``chute`` is the Siconos Chute FCLIB file (4 contacts, 768 dofs; Apache-2.0, from the
-    Siconos/FCLIB collections); the others are small Siconos ``.dat`` problems.
-    """
-    from .. import data
-
-    root = Path(data.__file__).parent
-    return {
-        "chute": root / "Chute-ndof-768-nc-4-3.hdf5",
-        "chute-dat": root / "GRFC3D_Chute-ndof-768-nc-4-3.dat",
-        "sphere": root / "RFC3D_sphere_1.dat",
-        "cube": root / "RFC3D_cube_1.dat",
-        "sphere-from-global": root / "rfc3d_sphere_from_grfc3d.dat",
-    }
-
-
-def resolve_path(spec) -> Path:
-    """``bundled:NAME`` → the bundled file's path; anything else → ``Path(spec)``."""
-    if isinstance(spec, bytes) or not isinstance(spec, (str, os.PathLike)):
-        raise InvalidArgumentError("path", f"expected a file path or 'bundled:NAME', got "
-                                           f"{type(spec).__name__}",
-                                   fix="pass a str or pathlib.Path naming a problem file")
-    text = str(spec)
-    if text == "":
-        raise InvalidArgumentError("path", "is empty", fix="name a problem file")
-    if text.startswith(BUNDLED_PREFIX):
-        name = text[len(BUNDLED_PREFIX):]
-        table = bundled_problems()
-        if name not in table:
-            raise ProblemFileError(text, f"no bundled problem named {name!r}",
-                                   fix=f"use one of the bundled problems: {', '.join('bundled:' + k for k in sorted(table))}")
-        return table[name]
-    return Path(spec)
 
 
 def load(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem:

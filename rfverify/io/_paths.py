@@ -1,4 +1,5 @@
-"""Opening an input file for reading, with one-line errors for every way it can fail."""
+"""Naming and opening an input file (``bundled:NAME`` included), with one-line errors for every
+way it can fail."""
 
 from __future__ import annotations
 
@@ -6,7 +7,9 @@ import os
 import stat
 from pathlib import Path
 
-from ..errors import ProblemFileError
+from ..errors import InvalidArgumentError, ProblemFileError
+
+BUNDLED_PREFIX = "bundled:"
 
 
 def read_head(path: Path, expected: str, size: int = 8) -> bytes:
@@ -36,3 +39,40 @@ def read_head(path: Path, expected: str, size: int = 8) -> bytes:
     except OSError as exc:
         raise ProblemFileError(path, f"cannot be read ({exc.strerror or type(exc).__name__})",
                                fix=f"check the path (expected {expected})") from None
+
+
+def bundled_problems() -> dict[str, Path]:
+    """Problems shipped inside the package: short name → path.
+
+    ``chute`` is the Siconos Chute FCLIB file (4 contacts, 768 dofs; Apache-2.0, from the
+    Siconos/FCLIB collections); the others are small Siconos ``.dat`` problems.
+    """
+    from .. import data
+
+    root = Path(data.__file__).parent
+    return {
+        "chute": root / "Chute-ndof-768-nc-4-3.hdf5",
+        "chute-dat": root / "GRFC3D_Chute-ndof-768-nc-4-3.dat",
+        "sphere": root / "RFC3D_sphere_1.dat",
+        "cube": root / "RFC3D_cube_1.dat",
+        "sphere-from-global": root / "rfc3d_sphere_from_grfc3d.dat",
+    }
+
+
+def resolve_path(spec) -> Path:
+    """``bundled:NAME`` → the bundled file's path; anything else → ``Path(spec)``."""
+    if isinstance(spec, bytes) or not isinstance(spec, (str, os.PathLike)):
+        raise InvalidArgumentError("path", f"expected a file path or 'bundled:NAME', got "
+                                           f"{type(spec).__name__}",
+                                   fix="pass a str or pathlib.Path naming a problem file")
+    text = str(spec)
+    if text == "":
+        raise InvalidArgumentError("path", "is empty", fix="name a problem file")
+    if text.startswith(BUNDLED_PREFIX):
+        name = text[len(BUNDLED_PREFIX):]
+        table = bundled_problems()
+        if name not in table:
+            raise ProblemFileError(text, f"no bundled problem named {name!r}",
+                                   fix=f"use one of the bundled problems: {', '.join('bundled:' + k for k in sorted(table))}")
+        return table[name]
+    return Path(spec)

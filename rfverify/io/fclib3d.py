@@ -41,6 +41,9 @@ import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
 from ..problem import SPACEDIM, Problem, StoredSolution, make_local_form
+from ._hdf5 import (check_mass_declaration, h5py_module, matrix_meta, member, read_guesses, read_info, read_matrix,
+                    read_scalar_int,
+                    read_solution, read_vector, write_matrix, write_solution_arrays)
 from .siconos_dat import LOCAL_DENSE_LIMIT, check_finite, factor_delassus
 
 GLOBAL = "fclib_global"
@@ -189,9 +192,8 @@ def solution_attributes(problem: Problem) -> dict:
 # ---------------------------------------------------------------------- reading
 def read_group(fh, root: str, path, max_asymmetry: float, ignored: list) -> Problem:
     """Read ``/fclib_global`` or ``/fclib_local`` of the open file ``fh``."""
-    from .fclib import _h5py, _member
 
-    g = _member(fh, root, path, _h5py().Group)
+    g = member(fh, root, path, h5py_module().Group)
     if root == GLOBAL:
         return _read_global(fh, g, path, max_asymmetry, ignored)
     return _read_local(fh, g, path, max_asymmetry, ignored)
@@ -212,10 +214,9 @@ def _refuse(g, names, path, what: str, fix: str):
 
 
 def _spacedim(g, path) -> int:
-    from .fclib import _h5py, _member, _scalar_int
 
-    ds = _member(g, "spacedim", path, _h5py().Dataset)
-    d = _scalar_int(ds, path)
+    ds = member(g, "spacedim", path, h5py_module().Dataset)
+    d = read_scalar_int(ds, path)
     if d == FILE_SPACEDIM:
         return d
     if d == 2:
@@ -242,10 +243,9 @@ def _contact_vector_size(name: str, size: int, n: int, fix: str):
 def _vectors_without(g, group_members, vector_members, path, why, fix, *, mu_r_fix):
     """g/vectors, after refusing the members of g and of g/vectors that rfverify cannot model,
     and a rolling resistance mu_r (a 3-D Coulomb group has none)."""
-    from .fclib import _h5py, _member
 
     _refuse(g, group_members, path, why, fix=fix)
-    vectors = _member(g, "vectors", path, _h5py().Group)
+    vectors = member(g, "vectors", path, h5py_module().Group)
     _refuse(vectors, vector_members, path, why, fix=fix)
     _refuse(vectors, ["mu_r"], path, f"rolling resistance in a 3-D Coulomb problem: {g.name} has no mu_r",
             fix=mu_r_fix)
@@ -253,18 +253,16 @@ def _vectors_without(g, group_members, vector_members, path, why, fix, *, mu_r_f
 
 
 def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
-    from .fclib import (_matrix_meta, _read_info, _read_matrix, _read_vector,
-                        check_mass_declaration)
 
     vectors = _vectors_without(g, ["G"], ["b"], path, "equality constraints (G, b) are not supported by rfverify",
                                "eliminate the constraints (or remove G and b) before passing the problem",
                                mu_r_fix="store a rolling problem as /fclib_global_rolling (spacedim 5), or remove mu_r")
-    f = _read_vector(vectors, "f", path)
-    w = _read_vector(vectors, "w", path)
-    mu = _read_vector(vectors, "mu", path)
+    f = read_vector(vectors, "f", path)
+    w = read_vector(vectors, "w", path)
+    mu = read_vector(vectors, "mu", path)
     _spacedim(g, path)
-    M_meta = _matrix_meta(g, "M", path)
-    H_meta = _matrix_meta(g, "H", path)
+    M_meta = matrix_meta(g, "M", path)
+    H_meta = matrix_meta(g, "H", path)
     m, n = f.size, mu.size
     check_mass_declaration(M_meta, m)
     if H_meta["n"] == SPACEDIM * n and n > 0:
@@ -279,9 +277,9 @@ def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
                                        f"mu ({n} contacts)",
                                   fix="H has one row per dof and 3 columns per contact (N, T1, T2)")
     _contact_vector_size("w", w.size, n, fix="w has 3 entries per contact (N, T1, T2)")
-    M, M_fmt = _read_matrix(M_meta, path)
-    H3, H_fmt = _read_matrix(H_meta, path)
-    title, description, math_info = _read_info(g, path)
+    M, M_fmt = read_matrix(M_meta, path)
+    H3, H_fmt = read_matrix(H_meta, path)
+    title, description, math_info = read_info(g, path)
     solution, guesses = _read_solutions(fh, path, m=m, n=n, local_H=None)
     problem = Problem.from_arrays(
         M, embed_columns(H3), f, embed(w, n), mu, np.zeros(n), title=title, description=description,
@@ -292,17 +290,16 @@ def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
 
 
 def _read_local(fh, g, path, max_asymmetry, ignored) -> Problem:
-    from .fclib import (_matrix_meta, _read_info, _read_matrix, _read_vector)
 
     vectors = _vectors_without(g, ["V", "R"], ["s"], path,
                                "the extra constraints V, R (and s) of a local problem are not supported by rfverify",
                                "eliminate them (or remove V, R and s) before passing the problem",
                                mu_r_fix="lift the local rolling problem to /fclib_global_rolling (spacedim 5), "
                                         "or remove mu_r")
-    q = _read_vector(vectors, "q", path)
-    mu = _read_vector(vectors, "mu", path)
+    q = read_vector(vectors, "q", path)
+    mu = read_vector(vectors, "mu", path)
     _spacedim(g, path)
-    W_meta = _matrix_meta(g, "W", path)
+    W_meta = matrix_meta(g, "W", path)
     n = mu.size
     if W_meta["m"] != W_meta["n"]:
         raise InvalidProblemError("W", f"is declared {W_meta['m']}×{W_meta['n']} (W/m, W/n), must be "
@@ -318,8 +315,8 @@ def _read_local(fh, g, path, max_asymmetry, ignored) -> Problem:
         raise ProblemFileError(path, f"W is {W_meta['m']}×{W_meta['n']}: too large for the dense "
                                      f"lifting of a local problem (limit {LOCAL_DENSE_LIMIT} rows)",
                                location=W_meta["loc"], fix="export the problem in global form (M, H)")
-    W, W_fmt = _read_matrix(W_meta, path)
-    title, description, math_info = _read_info(g, path)
+    W, W_fmt = read_matrix(W_meta, path)
+    title, description, math_info = read_info(g, path)
     check_finite("q", q)
     check_finite("mu", mu)
     H3, report = factor_delassus(W.toarray(), rank_tol=None, max_asymmetry=max_asymmetry)
@@ -345,16 +342,15 @@ def _read_local(fh, g, path, max_asymmetry, ignored) -> Problem:
 def _read_solutions(fh, path, *, m: int, n: int, local_H):
     """``/solution`` and ``/guesses`` in the file's layout (3 per contact; local: u, r), checked
     for size and embedded in the rolling layout.  A local problem's v (not stored) is H r."""
-    from .fclib import _h5py, _member, _read_guesses, _read_solution
 
-    h5py = _h5py()
+    h5py = h5py_module()
     solution, guesses = None, ()
     if fh.get("solution", getlink=True) is not None:
-        grp = _member(fh, "solution", path, h5py.Group)
-        solution = _embed_solution(_read_solution(grp, path), grp.name, path, m, n, local_H)
+        grp = member(fh, "solution", path, h5py.Group)
+        solution = _embed_solution(read_solution(grp, path), grp.name, path, m, n, local_H)
     if fh.get("guesses", getlink=True) is not None:
-        grp = _member(fh, "guesses", path, h5py.Group)
-        raw = _read_guesses(grp, path)
+        grp = member(fh, "guesses", path, h5py.Group)
+        raw = read_guesses(grp, path)
         keys = sorted((k for k in grp.keys() if k.isdigit()), key=int)
         guesses = tuple(_embed_solution(s, f"{grp.name}/{k}", path, m, n, local_H)
                         for s, k in zip(raw, keys))
@@ -385,23 +381,22 @@ def _embed_solution(s: StoredSolution, loc: str, path, m: int, n: int, local_H) 
 def write_group(fh, problem: Problem, fmts: dict) -> None:
     """Write ``problem`` (read from a 3-D file) into the open h5py file ``fh`` as it was read:
     its group, ``/solution`` and ``/guesses`` 3 per contact."""
-    from .fclib import _write_matrix, _write_solution_arrays, write_info_and_solutions
 
     layout = file_layout(problem)
     check_embedded(problem)
     g = fh.create_group(layout)
     vec = g.create_group("vectors")
     if layout == GLOBAL:
-        _write_matrix(g, "M", problem.M, fmts["M"])
-        _write_matrix(g, "H", extract_columns(problem.H), fmts["H"])
+        write_matrix(g, "M", problem.M, fmts["M"])
+        write_matrix(g, "H", extract_columns(problem.H), fmts["H"])
         vec.create_dataset("f", data=np.asarray(problem.f, dtype=np.float64))
         vec.create_dataset("w", data=extract(problem.w))
     else:
-        _write_matrix(g, "W", problem.native.W, fmts["W"])
+        write_matrix(g, "W", problem.native.W, fmts["W"])
         vec.create_dataset("q", data=np.asarray(problem.native.q, dtype=np.float64))
     vec.create_dataset("mu", data=np.asarray(problem.mu, dtype=np.float64))
     g.create_dataset("spacedim", data=np.array([FILE_SPACEDIM], dtype=np.int32))
-    write_info_and_solutions(fh, g, problem, lambda grp, sol: _write_solution_arrays(
+    write_info_and_solutions(fh, g, problem, lambda grp, sol: write_solution_arrays(
         grp, solution_datasets(problem, sol)))
 
 
@@ -428,3 +423,21 @@ __all__ = ["GLOBAL", "LOCAL", "ROLLING", "FILE_SPACEDIM", "LocalData", "embed", 
            "embed_columns", "extract_columns", "file_layout", "solution_datasets", "convert_for_file",
            "detect_layout", "solution_attributes", "symmetrised", "describe_symmetrised", "read_group",
            "write_group"]
+
+
+def write_info_and_solutions(fh, g, problem, write_solution) -> None:
+    """g/info (title, description, math_info), /solution with its attributes, and /guesses;
+    ``write_solution(group, solution)`` writes one solution's datasets."""
+    info = g.create_group("info")
+    for name in ("title", "description", "math_info"):
+        info.create_dataset(name, data=np.bytes_(getattr(problem, name).encode("utf-8")))
+    if problem.solution is not None:
+        sg = fh.create_group("solution")
+        write_solution(sg, problem.solution)
+        for key, val in solution_attributes(problem).items():
+            sg.attrs[key] = val
+    if problem.guesses:
+        gg = fh.create_group("guesses")
+        gg.create_dataset("number_of_guesses", data=np.array([len(problem.guesses)], dtype=np.int32))
+        for k, guess in enumerate(problem.guesses, start=1):
+            write_solution(gg.create_group(str(k)), guess)

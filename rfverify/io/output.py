@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidArgumentError, OutputPathError
+from ._paths import BUNDLED_PREFIX, resolve_path
 
 __all__ = ["OutputTarget", "check_output_file", "check_output_dir", "atomic_output",
            "write_text_atomic", "write_bytes_atomic", "json_safe", "dumps", "tag_floats",
@@ -76,8 +77,6 @@ def _as_path(path, option) -> Path:
 
 def _input_path(spec) -> tuple[Path | None, bool]:
     """The file an input spec names (bundled: resolved) and whether it is a bundled problem."""
-    from . import BUNDLED_PREFIX, resolve_path
-
     text = str(spec)
     try:
         p = resolve_path(text)
