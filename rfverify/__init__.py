@@ -23,7 +23,7 @@ from .errors import (ConeDomainError, DataWarning, InvalidArgumentError, Invalid
 from .io import bundled_problems, load, save
 from .problem import Problem, StoredSolution
 from .certification import Certificate, certify
-from .diagnosis import diagnose
+from .diagnosis import Diagnosis, diagnose
 from .digits import DigitsSolution, solve_to_digits
 from .solver import SolveResult, Settings, Status, solve
 
@@ -84,5 +84,5 @@ __all__ = [
     "InvalidArgumentError", "OutputPathError",
     "ConeDomainError", "DataWarning", "__version__", "solve", "SolveResult", "Settings", "Status",
     "certify",
-    "solve_to_digits", "DigitsSolution", "diagnose", "Certificate",
+    "solve_to_digits", "DigitsSolution", "diagnose", "Diagnosis", "Certificate",
 ]

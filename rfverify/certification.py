@@ -32,10 +32,11 @@ import numpy as np
 from .errors import InvalidProblemError
 from .problem import SPACEDIM, Problem
 from .proof import FLOAT64_DIGITS, Point, Proof, ProofContext, validate_digits
+from .solver.result import ResultAliases
 
 
 @dataclass
-class Certificate:
+class Certificate(ResultAliases):
     """Result of :func:`certify` (and of the k-digit path).
 
     ``certified`` is True only when the proof shows at least ``requested`` digits in v, u, Hr
@@ -43,7 +44,8 @@ class Certificate:
     digits (None where no relative digits exist); ``bounds`` to the proven ∞-norm bound on
     its error; ``quantities`` holds the full per-quantity record (scale used, mode).
     ``proof`` is the :class:`rfverify.proof.Proof`; ``cross_check`` the reference agreement
-    when asked for.
+    when asked for.  ``status``/``success``/``message``/``nit``/``timings`` (and the aliases
+    ``iterations``, ``solve_time``) are the fields every result has (docs/RESULTS.md).
     """
 
     requested: int
@@ -83,8 +85,26 @@ class Certificate:
         return "Certified" if self.certified else "NotCertified"
 
     @property
+    def success(self) -> bool:
+        """``certified`` (SciPy's name)."""
+        return self.certified
+
+    @property
     def message(self) -> str:
         return self.verdict
+
+    @property
+    def nit(self) -> int:
+        """Iterations run to find the proof point: 0 when the given point or the candidate
+        itself was proven, else the double solve's, the double-double phase's and the
+        multiple-precision tail's."""
+        return sum(int(self.extra.get(k) or 0)
+                   for k in ("double_iterations", "extended_iterations", "wide_iterations"))
+
+    @property
+    def timings(self) -> dict:
+        """Seconds: ``total`` (= ``seconds``, the whole of :func:`certify`)."""
+        return {"total": self.seconds}
 
     def __repr__(self) -> str:
         return f"Certificate(status={self.status!r}, requested={self.requested}, seconds={self.seconds:.3g},\n" \
@@ -243,7 +263,8 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
         f"({system.name})")
     out = extend(data, _start_from(data, double), driver, system, max_iter=max_iter, say=say)
     _, proof, point, _ = driver.best
-    return proof, point, {"point_source": "double solve + " + out.point_source, **out.summary(),
+    return proof, point, {"point_source": "double solve + " + out.point_source,
+                          "double_iterations": int(double.nit), **out.summary(),
                           "proof_attempts": driver.attempts}
 
 

@@ -9,17 +9,84 @@ or gone non-positive while the exact one is positive — and, for a failed run, 
 operation and cone where it stopped (the solver's own diagnosed message).  A double iterate that
 is not interior in exact arithmetic has no exact step: its digits and reference λ2 are NaN and
 a flag says why.
+
+The result is a :class:`Diagnosis` (status, message, nit, timings, and the per-iteration
+``steps``); :meth:`Diagnosis.to_dict` is the JSON that ``rfverify diagnose --json`` prints.
 """
 
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from .lifting import lift
 from .problem import Problem
 from .solver import solve
 from .solver.ipm import rule_at
+from .solver.result import ResultAliases, Status
+
+
+@dataclass
+class Diagnosis(ResultAliases):
+    """Result of :func:`diagnose` (docs/RESULTS.md has the fields of every result in one table).
+
+    Attributes
+    ----------
+    method : str              linear-system form of the double run
+    status : Status           the double run's status (a str enum: ``status == "Solved"``)
+    success : bool            status is Solved
+    message : str             the double run's message
+    nit : int                 iterations of the double run (alias ``iterations``)
+    steps : list of dict      one record per iteration k: ``iter``, ``mu``, ``digits_v``,
+                              ``digits_r_t``, ``digits_z`` (digits of agreement of iterate k+1
+                              with the exact step from iterate k; NaN where there is none),
+                              ``max_cond_Qp``, ``min_lam2_z`` and ``min_lam2_s`` (each a dict
+                              ``{"double", "reference"}``: smallest λ2 of z and of Jᵀr̃),
+                              ``flags`` (list of str), ``reference_step``
+    failure : str or None     the message of a run that was not Solved
+    timings : dict            seconds: ``double`` (the double run), ``reference`` (building the
+                              reference), ``steps`` (the exact steps), ``total``
+                              (alias ``solve_time`` = ``timings["total"]``)
+    """
+
+    method: str
+    status: Status
+    message: str
+    nit: int
+    steps: list = field(default_factory=list)
+    failure: str | None = None
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.status == Status.SOLVED
+
+    @property
+    def flagged(self) -> list:
+        """The steps with at least one flag (a λ2 underflow, a sign lost, no exact step)."""
+        return [s for s in self.steps if s["flags"]]
+
+    def __getitem__(self, key):  # OptimizeResult-style access, as SolveResult
+        return getattr(self, key)
+
+    def to_dict(self) -> dict:
+        """The JSON-able dict ``rfverify diagnose --json`` prints: ``method``, ``status`` (its
+        name), ``message``, ``nit``, ``iterations`` (the list of :attr:`steps`), ``failure``,
+        ``timings``."""
+        return {"method": self.method, "status": str(self.status), "message": self.message, "nit": self.nit,
+                "iterations": list(self.steps), "failure": self.failure, "timings": dict(self.timings)}
+
+    def __repr__(self) -> str:
+        flagged = self.flagged
+        first = (f"first flag at iteration {flagged[0]['iter']}: {flagged[0]['flags'][0]}" if flagged
+                 else "no flag")
+        total = self.timings.get("total", float("nan"))
+        return (f"Diagnosis(method={self.method!r}, status={self.status}, nit={self.nit}, "
+                f"steps={len(self.steps)}, flagged={len(flagged)}, time={total:.3g} s,\n"
+                f"    {first},\n    {self.message!r})")
 
 
 def _digits(a, b) -> float:
@@ -31,11 +98,11 @@ def _digits(a, b) -> float:
 
 
 def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter: int = 100,
-             dps: int = 40, progress=None, **options) -> dict:
+             dps: int = 40, progress=None, **options) -> Diagnosis:
     """Run ``method`` in double and the reference in lockstep; see the module docstring.
 
-    Returns a JSON-able dict: ``status``/``message`` of the double run and ``iterations``, a
-    list of per-iteration records.  ``progress(message)`` receives one line per stage and per
+    Returns a :class:`Diagnosis`: ``status``/``message``/``nit`` of the double run, ``steps``
+    (one record per iteration) and ``timings``; ``to_dict()`` is its JSON.  ``progress(message)`` receives one line per stage and per
     exact step (the steps are the slow part: seconds each at a few hundred contacts).
 
     ``options`` are solver settings.  Unless ``refine_tol`` is among them, the double run
@@ -53,6 +120,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     import reference
     from reference import jordan as RJ
 
+    t0 = time.perf_counter()
     res = solve(problem, method=method, tol=tol, max_iter=max_iter, keep_iterates=True, **options)
     lp = lift(problem, reduce_cones=res.settings.reduce_cones)
     order = np.lexsort((lp.cone_part, lp.cone_contact))
@@ -60,7 +128,9 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     iterates = res.extras["iterates"]
     tr = res.trace
     say(f"double run ({method}): {res.status} after {res.nit} iterations; building the reference at {dps} digits")
+    t1 = time.perf_counter()
     exact = reference.Solver(problem, dps=dps)  # one build for every step of the run
+    t2 = time.perf_counter()
     records = []
     for k in range(len(iterates) - 1):
         say(f"exact step {k + 1} of {len(iterates) - 1}")
@@ -111,9 +181,10 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
             "flags": flags,
             "reference_step": "exact step from the double iterate",
         })
-    return {"method": method, "status": str(res.status), "message": res.message, "nit": res.nit,
-            "iterations": records,
-            "failure": None if res.success else res.message}
+    t3 = time.perf_counter()
+    return Diagnosis(method=method, status=Status(res.status), message=res.message, nit=int(res.nit),
+                     steps=records, failure=None if res.success else res.message,
+                     timings={"double": t1 - t0, "reference": t2 - t1, "steps": t3 - t2, "total": t3 - t0})
 
 
 def _reference_layout(lp, order, v, r_t, z) -> tuple:

@@ -13,30 +13,30 @@ from rfverify.diagnosis import diagnose
 
 def test_lockstep_agreement_on_a_healthy_run():
     d = diagnose(rfverify.load("bundled:cube"), tol=1e-10)
-    assert d["status"] == "Solved" and d["failure"] is None
+    assert d.status == "Solved" and d.success and d.failure is None
     # Every double step is the exact step up to rounding (extended precision on).
-    for rec in d["iterations"]:
+    for rec in d.steps:
         assert min(rec["digits_v"], rec["digits_r_t"], rec["digits_z"]) > 12, rec
         assert not rec["flags"]
     # With the solver's default inexact linear solves (residuals ≤ 1e-4 of the right-hand
     # side) the steps differ from the exact ones by more than rounding, but not by much.
     d = diagnose(rfverify.load("bundled:cube"), tol=1e-10, refine_tol="adaptive")
-    assert d["status"] == "Solved"
-    worst = min(min(r["digits_v"], r["digits_r_t"], r["digits_z"]) for r in d["iterations"])
+    assert d.status == "Solved"
+    worst = min(min(r["digits_v"], r["digits_r_t"], r["digits_z"]) for r in d.steps)
     assert 9 < worst < 15
 
 
 def test_forced_failure_names_iteration_and_cause():
     d = diagnose(rfverify.load("bundled:chute"), tol=1e-25, max_iter=40)
-    assert d["status"] != "Solved"
-    assert "iteration" in d["failure"]
-    flagged = [r for r in d["iterations"] if r["flags"]]
+    assert d.status != "Solved"
+    assert "iteration" in d.failure
+    flagged = [r for r in d.steps if r["flags"]]
     assert flagged, "the breakdown must be flagged"
     rec = flagged[0]
     assert "≤ 0 in double while exact is" in rec["flags"][0] or "underflowed" in rec["flags"][0]
     # Before the breakdown the agreement degrades as cond(Q_p) grows.
     assert rec["max_cond_Qp"] > 1e15
-    early = d["iterations"][2]
+    early = d.steps[2]
     assert min(early["digits_v"], early["digits_z"]) > 12
 
 
@@ -72,7 +72,7 @@ def test_lockstep_builds_the_reference_once(monkeypatch):
 
     monkeypatch.setattr(reference, "Solver", Counting)
     d = diagnose(rfverify.load("bundled:sphere"), tol=1e-10)
-    assert len(built) == 1 and len(steps) == len(d["iterations"]) > 3
+    assert len(built) == 1 and len(steps) == len(d.steps) > 3
 
 
 def test_iterate_without_an_exact_step_is_reported(monkeypatch):
@@ -93,7 +93,7 @@ def test_iterate_without_an_exact_step_is_reported(monkeypatch):
 
     monkeypatch.setattr(reference.Solver, "step", step)
     d = diagnose(rfverify.load("bundled:sphere"), tol=1e-10)
-    bad, good = d["iterations"][1], d["iterations"][2]
+    bad, good = d.steps[1], d.steps[2]
     assert all(math.isnan(bad[k]) for k in ("digits_v", "digits_r_t", "digits_z"))
     assert math.isnan(bad["min_lam2_z"]["reference"]) and bad["min_lam2_z"]["double"] > 0
     assert bad["flags"] == ["no exact step from the double iterate: nt_scaling: 'z' not interior"]

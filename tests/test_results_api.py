@@ -25,3 +25,32 @@ def test_digits_solution_and_certificate_are_typed_and_short():
     assert out.nit == out.double.nit + out.extended.nit
     assert _short(repr(out)) and _short(repr(out.certificate))
     assert out.certificate.status == "Certified" and out.certificate.message == out.certificate.verdict
+
+
+def test_aliases_agree_with_the_fields_they_name():
+    """Clarabel's ``iterations``/``solve_time`` and SciPy's ``success`` are the same numbers as
+    ``nit``/``timings["total"]``/the status, on every result that has them (docs/RESULTS.md)."""
+    p = rfverify.load("bundled:chute")
+    res = rfverify.solve(p)
+    cert = rfverify.certify(p, res, digits=6)
+    diag = rfverify.diagnose(rfverify.load("bundled:sphere"), max_iter=3)
+    for obj in (res, cert, diag):
+        assert obj.iterations == obj.nit and isinstance(obj.nit, int)
+        assert obj.solve_time == obj.timings["total"] > 0
+        assert obj.success == (obj.status in ("Solved", "Certified"))
+        assert isinstance(obj.message, str) and obj.message
+        assert _short(repr(obj)), repr(obj)
+    assert res.success and res["nit"] == res.nit
+    assert cert.success is cert.certified
+
+
+def test_diagnosis_is_typed_and_its_dict_is_the_cli_json():
+    import json
+
+    diag = rfverify.diagnose(rfverify.load("bundled:sphere"), max_iter=3)
+    assert diag.status == "MaxIterations" and not diag.success and diag.nit == 3 == len(diag.steps)
+    assert diag.failure == diag.message
+    assert set(diag.timings) == {"double", "reference", "steps", "total"}
+    d = json.loads(json.dumps(diag.to_dict()))
+    assert d["status"] == "MaxIterations" and d["nit"] == 3 and d["iterations"] == diag.steps
+    assert repr(diag).startswith("Diagnosis(method='jqinv', status=MaxIterations, nit=3")

@@ -49,7 +49,7 @@ def cmd_diagnose(args) -> int:
     problem = load_problem(args)
     with recorded_warnings() as caught:
         d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps,
-                     progress=progress_printer(args))
+                     progress=progress_printer(args)).to_dict()
     d["numerical_warnings"] = warning_summary(caught)
     # The exit code is the double run's outcome, so scripts can tell a failing run apart.
     code = EXIT_OK if d["status"] == "Solved" else EXIT_NOT_SOLVED

@@ -56,7 +56,7 @@ def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int 
     """Lockstep diagnosis of the run the bench made (``kind`` "solve": a timed solve, split
     into components as the solver does; "trajectory": one system, as trajectories run).
 
-    Returns the :func:`~rfverify.diagnosis.diagnose` dict with a ``scope`` entry: ``mode``
+    Returns the :meth:`~rfverify.diagnosis.Diagnosis.to_dict` dict with a ``scope`` entry: ``mode``
     ("whole", "component" or "unsplit"), ``text`` (one sentence for the reader), and for a
     component its ``index``, ``count``, ``contacts``, ``n_dofs``, the ``status`` and ``nit``
     it had inside the bench's run and whether the diagnosed run ``reproduced`` them."""
@@ -64,14 +64,14 @@ def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int 
     from ..solver import Status, solve
 
     if kind == "trajectory":
-        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED)
+        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED).to_dict()
         diag["scope"] = {"mode": "whole", "text": "the trajectory run solves the problem as one system "
                                                   "(it keeps every iterate, so it never splits components); "
                                                   "diagnosed the same way"}
         return diag
     split = solve_groups(problem, Settings(tol=tol, max_iter=max_iter))
     if split is None:
-        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED)
+        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED).to_dict()
         diag["scope"] = {"mode": "whole", "text": "the bench solved the problem as one system; so does the "
                                                   "diagnosis"}
         return _compare_status(diag, bench_status)
@@ -80,7 +80,7 @@ def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int 
     comps = rerun.extras.get("component_runs") or []
     bad = [i for i, c in enumerate(comps) if c["status"] is not Status.SOLVED]
     if len(comps) != len(groups) or not bad:
-        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED)
+        diag = diagnose(problem, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED).to_dict()
         why = (f"every one of its {len(groups)} independent components met the tolerance on its own"
                if not bad else f"its {len(groups)} components could not be matched to the solver's runs")
         diag["scope"] = {"mode": "unsplit", "count": len(groups),
@@ -90,7 +90,7 @@ def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int 
         return _compare_status(diag, bench_status, rerun)
     i = bad[0]
     sub, contacts = component_problem(problem, lp, groups[i])
-    diag = diagnose(sub, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED)
+    diag = diagnose(sub, method=method, tol=tol, max_iter=max_iter, dps=dps, **AS_BENCHED).to_dict()
     inside = comps[i]
     reproduced = diag["status"] == str(inside["status"]) and diag["nit"] == inside["nit"]
     shown = ", ".join(map(str, contacts[:12])) + (", …" if contacts.size > 12 else "")

@@ -272,6 +272,23 @@ class IterationInfo:
 
 
 
+class ResultAliases:
+    """Aliases that give every result (:class:`SolveResult`, :class:`rfverify.Certificate`,
+    :class:`rfverify.diagnosis.Diagnosis`) the names of Clarabel's solution where they mean the
+    same thing (docs/RESULTS.md): ``iterations`` is ``nit``, ``solve_time`` is
+    ``timings["total"]`` in seconds (NaN when not recorded)."""
+
+    @property
+    def iterations(self) -> int:
+        """Clarabel's name for ``nit``."""
+        return self.nit
+
+    @property
+    def solve_time(self) -> float:
+        """Clarabel's name for ``timings["total"]`` (seconds)."""
+        return float(self.timings.get("total", float("nan")))
+
+
 @dataclass
 class Outcome:
     """What every run reports: status, message, iterations and the paper's measures of the
@@ -286,7 +303,7 @@ class Outcome:
 
 
 @dataclass
-class SolveResult(Outcome):
+class SolveResult(Outcome, ResultAliases):
     """Result of :func:`rfverify.solve` (scipy ``OptimizeResult``-like).
 
     Attributes
@@ -307,6 +324,7 @@ class SolveResult(Outcome):
     settings : Settings
     presolve : dict           reductions applied (cone kinds, free bodies, components)
     extras : dict             method-specific extras (e.g. Clarabel's own status)
+    iterations, solve_time    Clarabel's names for ``nit`` and ``timings["total"]``
     """
 
     v: np.ndarray
