@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..solver.result import METHODS
 from .data import DIGITS_CAP, RunData, performance_profile
 
 _STYLE = {
@@ -23,6 +24,14 @@ _LINE = {
     "reduced_factored": ((0, (3, 1, 1, 1)), 1.8, 0.9), "noscaling": ((0, (1, 1.2)), 2.4, 1.0),
     "auto": ((0, (2, 2)), 1.4, 1.0), "clarabel": ((0, (6, 2, 1, 2)), 1.6, 1.0),
 }
+
+# A method declared later (a new form or peer) gets a style of its own, not the gray fallback.
+_SPARE = iter(zip(("tab:brown", "tab:pink", "tab:gray", "gold", "teal", "navy"), "<>hp8d"))
+for _m in METHODS:
+    if _m not in _STYLE:
+        _color, _marker = next(_SPARE, ("gray", "."))
+        _STYLE[_m] = (_color, _marker)
+        _LINE[_m] = ((0, (4, 1, 1, 1, 1, 1)), 1.6, 1.0)
 
 
 def _plt():
