@@ -11,10 +11,19 @@ slow phase.
 
 Counted through numba's event API (``numba:compile``, fired only for a real compilation,
 not for a load from the cache); a compilation nested in another one counts once.
+
+On a cold cache, :func:`compile_extended_in_background` starts a child process that compiles
+the double-double kernels in the reverse order of their first use, into the same cache, while
+this process runs the double solve and compiles forward: on two cores the two meet in the
+middle and the cold k-digit path pays about half of its compilation (docs/DECISIONS.md,
+"Cold start").
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import threading
 import time
 
@@ -49,3 +58,111 @@ def compile_seconds() -> float:
         if _state["depth"]:
             total += time.perf_counter() - _state["start"]
         return total
+
+
+EXTENDED_KERNELS = (
+    ("cones", "arrow_solve", "(int64, float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("cones", "product", "(int64, float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("dd", "vscale", "(float64, float64, float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("dd", "vaxpy", "(float64, float64, float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("cones", "max_step", "(int64, float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("ldl", "_symmetric_residual", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("system", "_block_apply", "(int64, int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("ldl", "_solve", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("cones", "quad_pow", "(int64, int64, float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("system", "_scaled_blocks", "(int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[:, :, ::1], float64[::1], float64[::1])"),
+    ("system", "contact_factor_inverse", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1])"),
+    ("system", "_scatter_pairs", "(int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[:, :, ::1], float64[:, :, ::1])"),
+    ("system", "_dense_schur", "(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1])"),
+    ("ldl", "_numeric", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1])"),
+    ("system", "_scatter_add", "(int64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("cones", "nt_scaling", "(int64, float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[:, ::1])"),
+    ("dd", "vmul_d", "(float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("dd", "vnorm2", "(float64[::1], float64[::1])"),
+    ("dd", "vdot", "(float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("dd", "vadd", "(float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("dd", "vsub", "(float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("cones", "min_lambda2", "(int64, float64[::1], float64[::1])"),
+    ("dd", "csr_matvec", "(int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("ldl", "_symbolic_kernel", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], int64[::1], int64[::1])"),
+)
+"""(module of :mod:`rfverify.extended`, kernel, argument types) of the double-double kernels
+the k-digit path calls from Python, in the reverse order of their first use on the bundled
+Chute (a test keeps the list equal to what a run compiles).  The child compiles them in this
+order; the kernels they call are compiled with them."""
+
+BACKGROUND_ENV = "RFVERIFY_BACKGROUND_COMPILE"
+"""Set to ``0`` to never start the background compilation."""
+
+_child: subprocess.Popen | None = None
+
+
+def _dispatcher(module: str, name: str):
+    import importlib
+
+    return getattr(importlib.import_module(f"rfverify.extended.{module}"), name)
+
+
+def extended_cache_is_cold() -> bool:
+    """True when numba's cache holds no compiled version of the most expensive double-double
+    kernel for the current sources (so the k-digit path would compile them all).  Reads
+    numba's cache index, a private interface: any surprise there answers False (no child)."""
+    try:
+        index = _dispatcher("system", "contact_factor_inverse")._cache._cache_file._load_index()
+    except Exception:
+        return False
+    return not index
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def compile_extended_in_background() -> bool:
+    """Start the child that compiles :data:`EXTENDED_KERNELS` into numba's cache, when that
+    cache is cold, the process may use two cores or more, and ``RFVERIFY_BACKGROUND_COMPILE``
+    is not ``0``.  Returns whether a child was started (at most one per process); it is
+    ended when this process exits.  Results never depend on it: a kernel the child has not
+    finished is compiled here as before, and a compiled kernel is the same code either way."""
+    global _child
+    if _child is not None or os.environ.get(BACKGROUND_ENV, "1") == "0" or _cores() < 2:
+        return False
+    if not extended_cache_is_cold():
+        return False
+    try:
+        _child = subprocess.Popen([sys.executable, "-m", "rfverify.compilation"], stdin=subprocess.DEVNULL,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
+    except OSError:
+        return False
+    import atexit
+
+    atexit.register(_end_child)
+    return True
+
+
+def _end_child() -> None:
+    """Stop the child at exit: numba writes each cache file to a temporary name and renames
+    it, so an interrupted child leaves no partial entry."""
+    if _child is not None and _child.poll() is None:
+        _child.terminate()
+        try:
+            _child.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            _child.kill()
+
+
+def compile_extended(kernels=EXTENDED_KERNELS) -> None:
+    """Compile ``kernels`` (with numba's cache on, so they are saved) in the given order."""
+    for module, name, signature in kernels:
+        _dispatcher(module, name).compile(signature)
+
+
+if __name__ == "__main__":  # the background child: lowest priority, so the solve keeps its core
+    try:
+        os.nice(19)
+    except OSError:
+        pass
+    compile_extended()
