@@ -718,13 +718,10 @@ def test_a_failed_factorisation_without_delta_is_not_repeated_at_the_same_matrix
 
 
 # ---------------------------------------------------------------- the CHOLMOD Schur form
-# (kkt.SchurSystem, optional extra "cholmod"; issue 27).  Not yet a --method name: the tests
-# reach it through the solver's method check.
+# (kkt.SchurSystem, optional extra "cholmod"; issue 27).  Its method name, auto's choice of it
+# and the missing-extra error: tests/test_scale.py.
 
 def _schur_solve(problem, monkeypatch, **kw):
-    import rfverify.solver as solver_pkg
-
-    monkeypatch.setattr(solver_pkg, "METHODS", tuple(solver_pkg.METHODS) + ("schur",))
     return solve(problem, method="schur", **kw)
 
 

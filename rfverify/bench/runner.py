@@ -34,15 +34,17 @@ from pathlib import Path
 
 from ..errors import BenchInputError
 from ..progress import Progress
-from ..solver.result import ALGORITHM1_METHODS, METHODS, method_unavailable
+from ..solver.result import ALGORITHM1_METHODS, METHODS, OPTIONAL_METHODS, PORTFOLIO_METHODS, method_unavailable
 from . import records
 from .records import FAILED_STATUSES, task_stem, write_json
 from .tasks import base_record, run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
-DEFAULT_METHODS = tuple(m for m in METHODS if m not in ("reduced_factored", "schur", "auto"))  # auto: forms in turn
-"""What ``bench`` runs unless told otherwise: every method but (16), the factored twin of (15), and
-schur, form (16)'s iterates by another engine (optional; ``--methods schur`` asks for it)."""
+DEFAULT_METHODS = tuple(m for m in METHODS if m != "reduced_factored" and m not in PORTFOLIO_METHODS
+                        and m not in OPTIONAL_METHODS)
+"""What ``bench`` runs unless told otherwise: every method but (16), the factored twin of (15),
+auto (it runs the forms in turn) and the methods that need an optional module (schur: form
+(16)'s iterates by CHOLMOD; ``--methods schur`` asks for it)."""
 DEFAULT_TOLS = (1e-8, 1e-9, 1e-10)
 MANIFEST_SCHEMA = 2
 """2: adds ``schema``, ``rfverify_version`` and the planned ``tasks`` (what report expects)."""

@@ -137,6 +137,8 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
     say = progress or (lambda frac, text: None)
     if getattr(sc, "finite_element", False):
         return _generate_finite_element(sc, p, size, count, int(seed), steps, children, say)
+    if getattr(sc, "step_free", False):
+        return _generate_step_free(sc, p, size, count, int(seed), children, say)
     say(0.0, f"{sc.name}: base configuration")
     t0 = time.perf_counter()
     base = sc.prepare(p, size, np.random.default_rng(children[0]))
@@ -213,6 +215,62 @@ def _description(sc: Scene, prov: dict, problem) -> str:
         f"dumped step {p['dumped_step'] + 1} of the stage, t = {p['time']:.6g}",
         f"step solves ({p['solver']['method']}, tol {p['solver']['tol']:g}): {solves}"
         + (f"; {p['failed_solves']} step(s) advanced with the best iterate" if p["failed_solves"] else ""),
+        f"units: {p['units']}",
+        "parameters: " + json.dumps(p["parameters"], sort_keys=True),
+        "stage: " + json.dumps(p["notes"], sort_keys=True, default=float),
+    ]
+    return "\n".join(lines)
+
+
+def _generate_step_free(sc: Scene, p: dict, size: int, count: int, seed: int, children, say) -> list:
+    """:func:`generate` for a scene built without stepping (GranularBed): problem K is the
+    one-step Moreau-Jean problem of stage K's world (contacts, M, H, f = M v + h F, w_N =
+    max(gap, 0)/h, all vectorised), written as it is: no solve, so no step can fail and the
+    arrays do not depend on the solver."""
+    from .. import __version__
+
+    say(0.0, f"{sc.name}: lattice")
+    t0 = time.perf_counter()
+    base = sc.prepare(p, size, np.random.default_rng(children[0]))
+    t_base = time.perf_counter() - t0
+    out = []
+    for K in range(count):
+        phi = K / (count - 1) if count > 1 else 1.0
+        t1 = time.perf_counter()
+        world = sc.stage(base, p, size, phi, np.random.default_rng(children[K + 1]))
+        stepper = MoreauJean(world.bodies, world.statics, h=world.h, gravity=world.gravity,
+                             margin=world.margin, mu_table=world.mu_table, mu_r_table=world.mu_r_table)
+        M, H, f, w, mu, mu_r, contacts = stepper.one_step_arrays()
+        if contacts.count == 0:
+            raise SceneError(f"{sc.name} stage {K} (phi = {phi:.3f}): no contact; nothing to dump")
+        gaps = contacts.gap
+        notes = dict(world.notes, contacts=contacts.count, open_gap_max=float(gaps.max()),
+                     touching=int(np.sum(gaps <= 0)))
+        prov = {
+            "generator": "rfverify.scenes", "generator_version": GENERATOR_VERSION,
+            "rfverify_version": __version__, "scene": sc.name, "seed": seed,
+            "count": count, "trace_index": K, "stage": phi, "size": size,
+            "steps": 0, "dumped_step": 0, "time": 0.0,
+            "parameters": p, "units": sc.units, "notes": notes,
+            "solver": {"method": "none (the first step's problem, built without solving)"},
+            "solves": [], "failed_solves": 0,
+            "timing": {"base_configuration": round(t_base, 3), "stage": round(time.perf_counter() - t1, 3)},
+        }
+        problem = Problem.from_arrays(M, H, f, w, mu, mu_r, title=sc.name, provenance=prov)
+        out.append(replace(problem, description=_step_free_description(sc, prov, problem)))
+        say((K + 1) / count, f"{sc.name} {K + 1}/{count}: {contacts.count} contacts")
+    say(1.0, f"{sc.name}: done")
+    return out
+
+
+def _step_free_description(sc: Scene, prov: dict, problem) -> str:
+    p = prov
+    lines = [
+        *_header_lines(sc, p),
+        f"bodies {problem.n_dofs // 6} (m = {problem.n_dofs} dofs), contacts {problem.n_contacts}",
+        f"time stepping: the first Moreau-Jean step (theta = 1, h = {p['parameters']['h']:g}, e = 0, "
+        f"w_N = max(gap, 0)/h, speculative contacts within margin {p['parameters']['margin']:g}) from "
+        "the configuration below; no step was solved",
         f"units: {p['units']}",
         "parameters: " + json.dumps(p["parameters"], sort_keys=True),
         "stage: " + json.dumps(p["notes"], sort_keys=True, default=float),

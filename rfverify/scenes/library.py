@@ -324,6 +324,90 @@ class Lattice(SpheresPile):
                      notes={"bodies": nb, "layer_width": nx})
 
 
+# ---------------------------------------------------------------------- large beds, no stepping
+class GranularBed(Scene):
+    name = "GranularBed"
+    summary = ("a large bed of equal spheres at rest on the ground (simple cubic or FCC lattice, "
+               "radii shrunk at random so that every lattice contact has a small gap, random "
+               "agitation), written as the problem of its first Moreau-Jean step WITHOUT any solve: "
+               "1e4-1e5 contacts in seconds (simple cubic: 3 nx ny nz - nx nz - ny nz contacts)")
+    configuration = ("lattice sites (packing 0: simple cubic, spacing d; 1: FCC, square nx x ny "
+                     "layers alternating with (nx-1) x (ny-1) in their hollows) filled layer by "
+                     "layer, row by row, rotated about the vertical by a random angle; radius of "
+                     "sphere i = d/2 (1 - gap_jitter U_i), U_i uniform in [0, 1), so lattice "
+                     "neighbours have gaps in [0, gap_jitter d] (all within the margin) and no "
+                     "other pair is within it; velocities N(0, agitation^2) per component, spins "
+                     "N(0, (agitation/r)^2); stage = the first lattice sites (one full bottom layer "
+                     "at the first stage); the dumped problem is the first step's, so 'steps' is "
+                     "not used")
+    defaults = dict(diameter=0.02, density=1300.0, h=1e-3, mu=0.3, mu_r=1e-3, margin=1e-3,
+                    packing=0.0, width=0.0, gap_jitter=1e-3, agitation=0.01, tilt=0.0)
+    default_size = 3375
+    min_size = 1
+    size_unit = "spheres"
+    step_free = True
+    """Built by :func:`rfverify.scenes.generate` without solving: the dumped problem is the
+    one-step problem of :meth:`stage`'s world (:meth:`.stepper.MoreauJean.one_step_arrays`)."""
+
+    def _check(self, p):
+        d = p["diameter"]
+        if p["packing"] not in (0.0, 1.0):
+            raise SceneError(f"{self.name}: parameter packing = {p['packing']!r} must be 0 (simple "
+                             "cubic) or 1 (FCC)")
+        if not 0 <= p["gap_jitter"] < 0.1:
+            raise SceneError(f"{self.name}: parameter gap_jitter = {p['gap_jitter']!r} must be in "
+                             "[0, 0.1) (a fraction of the diameter)")
+        # Lattice neighbours must all be contacts, second neighbours (at sqrt(2) d) none.
+        if not p["gap_jitter"] * d <= p["margin"] < (math.sqrt(2.0) - 1.0) * d:
+            raise SceneError(f"{self.name}: margin = {p['margin']:g} must be at least gap_jitter * "
+                             f"diameter = {p['gap_jitter'] * d:g} and below (sqrt(2) - 1) * diameter = "
+                             f"{(math.sqrt(2.0) - 1.0) * d:g}")
+        for k in ("diameter", "density"):
+            if not p[k] > 0:
+                raise SceneError(f"{self.name}: parameter {k} = {p[k]!r} must be > 0")
+        if not p["agitation"] >= 0:
+            raise SceneError(f"{self.name}: parameter agitation = {p['agitation']!r} must be >= 0")
+
+    def layer_width(self, p, size) -> int:
+        """Spheres along x and y of the bottom layer: ``width``, or a roughly cubic bed."""
+        w = int(p["width"])
+        if w >= 1:
+            return w
+        per_width = 1.0 if p["packing"] == 0 else math.sqrt(2.0)  # sites per d of height, relative
+        return max(1, int(round((size / per_width) ** (1.0 / 3.0))))
+
+    def sites(self, p, size) -> np.ndarray:
+        """Lattice sites (size, 3) before the rotation, filled layer by layer, row by row."""
+        d, nx = p["diameter"], self.layer_width(p, size)
+        if p["packing"] == 1:
+            return fcc_positions(size, d, nx, nx)
+        k = np.arange(size)
+        return d * np.stack((k % nx + 0.5, (k // nx) % nx + 0.5, k // (nx * nx) + 0.5), axis=1)
+
+    def prepare(self, p, size, rng):
+        self._check(p)
+        angle = rng.uniform(0.0, 2 * math.pi)
+        c, s = math.cos(angle), math.sin(angle)
+        pos = self.sites(p, size) @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        radii = 0.5 * p["diameter"] * (1.0 - p["gap_jitter"] * rng.uniform(0.0, 1.0, size))
+        return {"pos": pos, "radii": radii, "angle": angle, "nx": self.layer_width(p, size),
+                "vel": rng.normal(size=(size, 3)), "omega": rng.normal(size=(size, 3))}
+
+    def stage(self, base, p, size, phi, rng):
+        nx = base["nx"]
+        nb = max(1, min(size, _stage_count(min(nx * nx, size), size, phi)))
+        r = base["radii"][:nb]
+        bodies = Bodies.make(r, 0.0, p["density"], base["pos"][:nb])
+        bodies.vel = p["agitation"] * base["vel"][:nb]
+        bodies.omega = p["agitation"] / r[:, None] * base["omega"][:nb]
+        tilt = math.radians(p["tilt"])
+        gravity = G * np.array([math.sin(tilt), 0.0, -math.cos(tilt)])
+        return World(bodies=bodies, statics=Statics.make(planes=[((0, 0, 1), 0.0, 0)]), gravity=gravity,
+                     h=p["h"], margin=p["margin"], mu_table=_table(p["mu"]), mu_r_table=_table(p["mu_r"]),
+                     notes={"bodies": nb, "layer_width": nx, "packing": "fcc" if p["packing"] == 1 else "cubic",
+                            "rotation_deg": math.degrees(base["angle"])})
+
+
 # ---------------------------------------------------------------------- all open
 class AllOpen(Scene):
     name = "AllOpen"
@@ -565,9 +649,11 @@ class ElasticBlock(Scene):
 # ---------------------------------------------------------------------- registry
 SCENES: dict[str, Scene] = {s.name: s for s in (
     SpheresPile(), Chute(), PrimitiveSoup(), MassRatio(), RollingExtremes(), Frictionless(),
-    Lattice(), AllOpen(), AllSticking(), Millimetre())}
+    Lattice(), AllOpen(), AllSticking(), Millimetre(), GranularBed())}
 """All rigid-body scenes by name (the FCLIB-like ones first, then the stiff and extreme
-families): 6 dofs per body, block-diagonal M, stepped by :class:`.stepper.MoreauJean`."""
+families, then the large GranularBed): 6 dofs per body, block-diagonal M, stepped by
+:class:`.stepper.MoreauJean` (GranularBed, ``step_free``: only its first step's problem is built,
+with no solve)."""
 
 FE_SCENES: dict[str, Scene] = {s.name: s for s in (ElasticBlock(),)}
 """Finite-element scenes by name: 3 dofs per node, non-diagonal M (assembled iteration

@@ -1,0 +1,212 @@
+"""Issue 27 at scale: the ``schur`` method (CHOLMOD, optional extra ``cholmod``) as a method
+name, ``auto``'s choice of it, the error without the extra; and the GranularBed scene, the
+large structured problems built without any solve (small sizes here)."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+import pytest
+
+import rfverify
+from rfverify.cli import main
+from rfverify.errors import BenchInputError, InvalidArgumentError
+from rfverify.scenes import SCENES, SceneError, generate
+from rfverify.solver import auto_sequence
+from rfverify.solver.result import (ALGORITHM1_METHODS, AUTO_SCHUR_MIN_CONTACTS, AUTO_SEQUENCE,
+                                    AUTO_SEQUENCE_LARGE, METHODS, method_unavailable)
+
+try:
+    import sksparse.cholmod  # noqa: F401
+
+    HAVE_CHOLMOD = True
+except ImportError:
+    HAVE_CHOLMOD = False
+
+needs_cholmod = pytest.mark.skipif(not HAVE_CHOLMOD, reason="scikit-sparse (extra 'cholmod') not installed")
+
+
+@pytest.fixture
+def without_cholmod(monkeypatch):
+    """scikit-sparse made unimportable for the test (a None entry in sys.modules stops an import)."""
+    monkeypatch.setitem(sys.modules, "sksparse", None)
+    monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
+
+
+# ---------------------------------------------------------------- schur, the method
+def test_schur_is_declared_once_and_left_out_of_the_bench_defaults():
+    from rfverify.bench.runner import DEFAULT_METHODS
+    from rfverify.cli.app import build_parser
+
+    assert "schur" in ALGORITHM1_METHODS and "schur" in METHODS
+    assert "schur" not in DEFAULT_METHODS  # form (16)'s iterates by another engine, optional
+    sol = build_parser()._subparsers._group_actions[0].choices["solve"]
+    method = next(a for a in sol._actions if a.dest == "method")
+    assert "schur" in method.choices and "rfverify[cholmod]" in method.help
+    assert str(AUTO_SCHUR_MIN_CONTACTS) in method.help
+    assert "schur" in rfverify.solve.__doc__
+
+
+def test_auto_sequence_starts_with_schur_only_when_available_and_large():
+    n = AUTO_SCHUR_MIN_CONTACTS
+    assert auto_sequence(n - 1, True) == AUTO_SEQUENCE == auto_sequence(n - 1, False)
+    assert auto_sequence(n, True) == AUTO_SEQUENCE_LARGE and AUTO_SEQUENCE_LARGE[0] == "schur"
+    assert auto_sequence(10 ** 6, False) == AUTO_SEQUENCE and AUTO_SEQUENCE[0] == "jqinv"
+    assert auto_sequence(n, None) == (AUTO_SEQUENCE_LARGE if HAVE_CHOLMOD else AUTO_SEQUENCE)
+
+
+def test_auto_sequence_without_cholmod_is_the_default_one(without_cholmod):
+    assert method_unavailable("schur") is not None and method_unavailable("jqinv") is None
+    assert auto_sequence(10 ** 6) == AUTO_SEQUENCE
+
+
+def test_auto_runs_what_auto_sequence_says(monkeypatch):
+    import rfverify.solver as solver_pkg
+
+    monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_CONTACTS", 1)  # the chute counts as large
+    p = rfverify.load("bundled:chute")
+    res = rfverify.solve(p, tol=1e-8)
+    assert res.success and res.extras["attempts"][0]["method"] == ("schur" if HAVE_CHOLMOD else "jqinv")
+
+
+def test_auto_on_a_large_problem_without_cholmod_runs_jqinv(monkeypatch, without_cholmod):
+    import rfverify.solver as solver_pkg
+
+    monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_CONTACTS", 1)
+    res = rfverify.solve(rfverify.load("bundled:chute"), tol=1e-8)
+    assert res.success and res.method == "jqinv"
+
+
+def test_schur_without_cholmod_names_the_fix(without_cholmod, capsys, tmp_path):
+    why = method_unavailable("schur")
+    assert "sksparse.cholmod" in why and "pip install 'rfverify[cholmod]'" in why
+    with pytest.raises(InvalidArgumentError, match=r"rfverify\[cholmod\].*libsuitesparse-dev"):
+        rfverify.solve(rfverify.load("bundled:chute"), method="schur")
+    assert main(["solve", "bundled:chute", "--method", "schur"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "rfverify solve: error: method:" in err
+    assert "pip install 'rfverify[cholmod]'" in err and "libsuitesparse-dev" in err
+    from rfverify.bench.runner import run_bench
+
+    with pytest.raises(BenchInputError, match="rfverify\\[cholmod\\]"):
+        run_bench(["bundled:chute"], tmp_path / "run", methods=("jqinv", "schur"), quiet=True)
+    assert not (tmp_path / "run" / "runs").exists()  # refused before any task
+
+
+@needs_cholmod
+def test_schur_through_the_cli_and_the_api(capsys):
+    assert main(["solve", "bundled:chute", "--method", "schur", "--tol", "1e-9", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["method"] == "schur" and out["status"] == "Solved" and out["criterion"] <= 1e-9
+    p = rfverify.load("bundled:chute")
+    api = rfverify.solve(p, method="schur", tol=1e-9)
+    ref = rfverify.solve(p, method="reduced_factored", tol=1e-9)
+    assert api.method == "schur" and api.success and api.nit == ref.nit == out["iterations"]
+
+
+# ---------------------------------------------------------------- GranularBed
+def _lattice_contacts(k: np.ndarray, nx: int) -> int:
+    """Contacts of simple cubic sites with flat indices k (filled in order, nx x nx layers),
+    counted on the integer lattice: pairs one step apart along an axis, plus the bottom layer."""
+    ijk = np.stack((k % nx, (k // nx) % nx, k // (nx * nx)), axis=1)
+    occupied = {tuple(t) for t in ijk.tolist()}
+    pairs = sum((i + 1, j, l) in occupied for i, j, l in occupied) + \
+        sum((i, j + 1, l) in occupied for i, j, l in occupied) + \
+        sum((i, j, l + 1) in occupied for i, j, l in occupied)
+    return pairs + int(np.sum(ijk[:, 2] == 0))
+
+
+@pytest.mark.parametrize("size, width", [(27, 0), (32, 4), (20, 3), (1, 0)])
+def test_granular_bed_has_every_lattice_contact_and_no_other(size, width):
+    p = generate("GranularBed", seed=2, size=size, width=width)[0]
+    nx = width or round(size ** (1 / 3))
+    assert p.n_contacts == _lattice_contacts(np.arange(size), nx)
+    if size == nx * nx * (size // (nx * nx)):  # full layers: the closed form of the summary
+        nz = size // (nx * nx)
+        assert p.n_contacts == 3 * nx * nx * nz - 2 * nx * nz
+    assert p.n_dofs == 6 * size and p.provenance["solves"] == [] and p.provenance["steps"] == 0
+
+
+def test_granular_bed_fcc_counts_neighbours_at_one_diameter():
+    size, d = 30, 0.02
+    p = generate("GranularBed", seed=4, size=size, packing=1, width=3)[0]
+    from rfverify.scenes.deposition import fcc_positions
+
+    x = fcc_positions(size, d, 3, 3)
+    dist = np.linalg.norm(x[:, None] - x[None], axis=2)
+    pairs = int(np.sum(np.triu(np.abs(dist - d) < 1e-9 * d, 1)))
+    assert p.n_contacts == pairs + int(np.sum(np.abs(x[:, 2] - d / 2) < 1e-12))
+
+
+def test_granular_bed_is_a_well_posed_problem():
+    p = generate("GranularBed", seed=7, size=45, width=3, agitation=0.02)[0]
+    M = p.M.toarray()
+    assert np.array_equal(M, M.T) and np.linalg.eigvalsh(M).min() > 0
+    # Each contact's (N, T1, T2) is an orthonormal right-handed frame: body A's translational rows.
+    H = p.H.toarray()
+    Hc = p.H.tocsc()
+    a = [Hc.indices[Hc.indptr[5 * c]:Hc.indptr[5 * c + 1]].min() // 6 for c in range(p.n_contacts)]  # A: lower index
+    for c in range(p.n_contacts):
+        E = H[6 * a[c]:6 * a[c] + 3, 5 * c:5 * c + 3]
+        assert np.allclose(E.T @ E, np.eye(3), atol=1e-14) and np.linalg.det(E) > 0
+        assert np.allclose(H[6 * a[c] + 3:6 * a[c] + 6, 5 * c + 3:5 * c + 5], E[:, 1:], atol=1e-14)
+    # Strictly feasible (Slater): a dilation about a point far below the bed separates every
+    # contact faster than friction and rolling resistance allow, so the solution exists.
+    world_x = _centres(p)
+    v = np.zeros(p.n_dofs)
+    v.reshape(-1, 6)[:, :3] = world_x - np.array([world_x[:, 0].mean(), world_x[:, 1].mean(), -10.0])
+    U = (p.H.T @ v + p.w).reshape(-1, 5)
+    assert np.all(U[:, 0] > p.mu * np.linalg.norm(U[:, 1:3], axis=1) + p.mu_r * np.linalg.norm(U[:, 3:], axis=1))
+    assert np.all(p.w[0::5] >= 0) and np.all(p.w[0::5] <= 1e-3 * 0.02 / 1e-3 * (1 + 1e-9))  # gap_jitter·d/h
+
+
+def _centres(p):
+    """Sphere centres rebuilt from the generator (same seed and parameters as the problem)."""
+    from rfverify.scenes.library import SCENES as REG
+
+    sc = REG["GranularBed"]
+    prm = dict(sc.defaults, **{k: float(v) for k, v in p.provenance["parameters"].items()})
+    rng = np.random.default_rng(np.random.SeedSequence(p.provenance["seed"]).spawn(2)[0])
+    return sc.prepare(prm, p.provenance["size"], rng)["pos"]
+
+
+def test_granular_bed_is_reproducible_by_seed():
+    a, b = (generate("GranularBed", seed=11, size=40, count=2) for _ in range(2))
+    c = generate("GranularBed", seed=12, size=40)[0]
+    for x, y in zip(a, b):
+        for name in ("f", "w", "mu", "mu_r"):
+            assert np.array_equal(getattr(x, name), getattr(y, name))
+        assert (x.H != y.H).nnz == 0 and (x.M != y.M).nnz == 0
+    assert a[0].n_contacts < a[1].n_contacts  # stage 0 is the bottom layer
+    assert not np.array_equal(a[1].f, c.f)
+
+
+def test_granular_bed_solves_at_small_size():
+    p = generate("GranularBed", seed=3, size=64)[0]
+    res = rfverify.solve(p, method="jqinv", tol=1e-9)
+    assert res.success, res.message
+    from rfverify.scenes import contact_state_mix
+
+    counts = contact_state_mix(p, res.v, res.u, res.r).counts
+    assert counts["open"] > 0 and counts["sticking"] + counts["sliding"] + counts["rolling"] > 0, counts
+    if HAVE_CHOLMOD:
+        s = rfverify.solve(p, method="schur", tol=1e-9)
+        assert s.success and abs(s.nit - res.nit) <= 1
+
+
+def test_granular_bed_refuses_bad_parameters(capsys, tmp_path):
+    assert "GranularBed" in SCENES
+    with pytest.raises(SceneError, match="packing"):
+        generate("GranularBed", size=8, packing=2)
+    with pytest.raises(SceneError, match="margin"):
+        generate("GranularBed", size=8, margin=1e-6)  # below gap_jitter·d: lattice contacts lost
+    with pytest.raises(SceneError, match="margin"):
+        generate("GranularBed", size=8, margin=0.01)  # second neighbours would be contacts
+    assert main(["generate", "GranularBed", "--size", "8", "--param", "packing=3", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert main(["generate", "GranularBed", "--size", "27", "--out", str(tmp_path / "o"), "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    q = rfverify.load(out["files"][0]["path"])
+    assert q.title == "GranularBed" and q.n_contacts == 63 and "no step was solved" in q.description
