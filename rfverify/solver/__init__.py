@@ -137,6 +137,15 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
         from .clarabel_peer import solve_clarabel
 
         return solve_clarabel(problem, settings)
+    if method == "siconos":
+        if callback is not None:
+            from ..errors import InvalidArgumentError
+
+            raise InvalidArgumentError("callback", "is not available for the Siconos peer",
+                                       fix="use an Algorithm 1 method (jqinv, qp2, ...)")
+        from .siconos_peer import solve_siconos
+
+        return solve_siconos(problem, settings)
 
     lp = lift(problem, reduce_cones=settings.reduce_cones)
     M = problem.M_sym

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import sys
 from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
@@ -27,8 +28,11 @@ AUTO_SCHUR_MIN_CONTACTS = 1500
 
 OPTIONAL_METHODS = {"schur": ("sksparse.cholmod", "pip install 'rfverify[cholmod]' (scikit-sparse; building it "
                                                   "needs libsuitesparse-dev, and CHOLMOD is fast only with an "
-                                                  "optimised BLAS such as libopenblas0)")}
-"""Methods that need an optional module: name -> (module to import, how to install it)."""
+                                                  "optimised BLAS such as libopenblas0)"),
+                    "siconos": ("rfverify.solver.siconos_peer", "bash benchmarks/peers/siconos/build.sh, then "
+                                                                "RFVERIFY_SICONOS=<the prefix it prints>")}
+"""Methods that need an optional module: name -> (module to import, how to install it).  A module
+may also define ``unavailable()`` for what an import cannot tell (the Siconos peer's built driver)."""
 
 
 def method_unavailable(method: str) -> str | None:
@@ -41,13 +45,15 @@ def method_unavailable(method: str) -> str | None:
         __import__(module)
     except ImportError as exc:
         return f"{method!r} needs {module}, which does not import here ({' '.join(str(exc).split())}); fix: {install}"
-    return None
+    probe = getattr(sys.modules[module], "unavailable", None)
+    return probe() if probe is not None else None
 
 PORTFOLIO_METHODS = ("auto",)
 """Methods that run several Algorithm 1 forms; benches measure the forms themselves."""
 
-PEER_METHODS = ("clarabel",)
-"""Other solvers run on the same problem (no Algorithm 1 iterates, traces or lockstep)."""
+PEER_METHODS = ("clarabel", "siconos")
+"""Other solvers run on the same problem (no Algorithm 1 iterates, traces or lockstep): Clarabel, and
+Siconos's GRFC3D_IPM (the paper's own implementation; needs a build, see OPTIONAL_METHODS)."""
 
 METHODS = ALGORITHM1_METHODS + PORTFOLIO_METHODS + PEER_METHODS
 """Every method name rfverify accepts: the one declaration the CLI, bench and report derive from."""

@@ -1,0 +1,169 @@
+/* rfverify's driver of Siconos GRFC3D_IPM (issue 30): read a problem in rfverify's binary exchange
+ * format, call global_rolling_friction_3d_driver with GRFC3D_IPM at a given tolerance and iteration
+ * limit, and write the answer in the original variables.
+ *
+ *   rfverify-siconos-driver IN OUT [--verbose]
+ *
+ * IN (little endian; written by rfverify.solver.siconos_peer):
+ *   char[8] "RFVSIC01"; int64 m, n, nnz(M), nnz(H), max_iter; double tol;
+ *   M  (m x m, CSC): int64 colptr[m+1], int64 rowind[nnz(M)], double val[nnz(M)];
+ *   H  (m x 5n, CSC; u = H^T v + w, M v = H r + f): int64 colptr[5n+1], rowind, val;
+ *   double f[m], w[5n], mu[n], mu_r[n].
+ * OUT: char[8] "RFVSOL01"; int64 info, iterations; double residual (Siconos's own, in its scaled
+ *   variables), projection error, seconds (wall clock of the solver call);
+ *   double v[m], u[5n], r[5n] (original variables: u = P^-1 u_s, r = P r_s with
+ *   P = diag(1, mu, mu, mu_r, mu_r) per contact), u_s[5n], r_s[5n] (as GRFC3D_IPM returned them).
+ *
+ * The matrices are handed over directly, not through Siconos's FCLIB reader (see README.md beside).
+ * Test-only: with RFVERIFY_SICONOS_FAULT=sigsegv in the environment the driver raises SIGSEGV
+ * after reading its input, so that tests can check that a crash is recorded as a failure.
+ * Exit codes: 0 answer written (whatever Siconos's info), 2 bad input/usage, 3 out of memory/IO.
+ */
+#define _POSIX_C_SOURCE 200809L
+#include <signal.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "CSparseMatrix.h"
+#include "GlobalRollingFrictionContactProblem.h"
+#include "NonSmoothDrivers.h"
+#include "NumericsMatrix.h"
+#include "NumericsVerbose.h"
+#include "SolverOptions.h"
+#include "rolling_friction_3d_short_names.h"
+
+static void fail(int code, const char *what, const char *path) {
+  fprintf(stderr, "rfverify-siconos-driver: %s%s%s\n", what, path ? ": " : "", path ? path : "");
+  exit(code);
+}
+
+static void *xmalloc(size_t count, size_t size) {
+  void *p = calloc(count ? count : 1, size);
+  if (!p) fail(3, "out of memory", NULL);
+  return p;
+}
+
+static void read_exact(FILE *f, void *buf, size_t size, size_t count, const char *path) {
+  if (fread(buf, size, count, f) != count) fail(2, "input file truncated", path);
+}
+
+static void write_exact(FILE *f, const void *buf, size_t size, size_t count, const char *path) {
+  if (fwrite(buf, size, count, f) != count) fail(3, "cannot write output", path);
+}
+
+/* A CSC NumericsMatrix (rows x cols) from int64 arrays, indices checked. */
+static NumericsMatrix *read_csc(FILE *f, int64_t rows, int64_t cols, int64_t nnz, const char *path) {
+  int64_t *p = xmalloc((size_t)cols + 1, sizeof(int64_t));
+  int64_t *i = xmalloc((size_t)nnz, sizeof(int64_t));
+  read_exact(f, p, sizeof(int64_t), (size_t)cols + 1, path);
+  read_exact(f, i, sizeof(int64_t), (size_t)nnz, path);
+  if (p[0] != 0 || p[cols] != nnz) fail(2, "bad CSC column pointers", path);
+  for (int64_t k = 0; k < cols; ++k)
+    if (p[k + 1] < p[k]) fail(2, "decreasing CSC column pointers", path);
+  for (int64_t k = 0; k < nnz; ++k)
+    if (i[k] < 0 || i[k] >= rows) fail(2, "CSC row index out of range", path);
+  NumericsMatrix *A = NM_create(NM_SPARSE, (int)rows, (int)cols);
+  NM_csc_alloc(A, (CS_INT)(nnz ? nnz : 1));
+  A->matrix2->origin = NSM_CSC;
+  CSparseMatrix *C = A->matrix2->csc;
+  for (int64_t k = 0; k <= cols; ++k) C->p[k] = (CS_INT)p[k];
+  for (int64_t k = 0; k < nnz; ++k) C->i[k] = (CS_INT)i[k];
+  read_exact(f, C->x, sizeof(double), (size_t)nnz, path);
+  free(p);
+  free(i);
+  return A;
+}
+
+static double wall(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+int main(int argc, char **argv) {
+  if (argc < 3 || argc > 4 || (argc == 4 && strcmp(argv[3], "--verbose") != 0))
+    fail(2, "usage: rfverify-siconos-driver IN OUT [--verbose]", NULL);
+  const char *in = argv[1], *out = argv[2];
+  int verbose = argc == 4;
+
+  FILE *f = fopen(in, "rb");
+  if (!f) fail(2, "cannot open input", in);
+  char magic[8];
+  read_exact(f, magic, 1, 8, in);
+  if (memcmp(magic, "RFVSIC01", 8) != 0) fail(2, "not an rfverify Siconos input (magic)", in);
+  int64_t head[5];
+  double tol;
+  read_exact(f, head, sizeof(int64_t), 5, in);
+  read_exact(f, &tol, sizeof(double), 1, in);
+  int64_t m = head[0], n = head[1], nnzM = head[2], nnzH = head[3], max_iter = head[4];
+  if (m <= 0 || n <= 0 || nnzM < 0 || nnzH < 0 || max_iter < 1 || !(tol > 0) || m > INT32_MAX ||
+      5 * n > INT32_MAX)
+    fail(2, "bad sizes, tolerance or iteration limit", in);
+  int64_t nd = 5 * n;
+
+  GlobalRollingFrictionContactProblem *problem = globalRollingFrictionContactProblem_new();
+  problem->dimension = 5;
+  problem->numberOfContacts = (int)n;
+  problem->M = read_csc(f, m, m, nnzM, in);
+  problem->H = read_csc(f, m, nd, nnzH, in);
+  problem->q = xmalloc((size_t)m, sizeof(double));
+  problem->b = xmalloc((size_t)nd, sizeof(double));
+  problem->mu = xmalloc((size_t)n, sizeof(double));
+  problem->mu_r = xmalloc((size_t)n, sizeof(double));
+  read_exact(f, problem->q, sizeof(double), (size_t)m, in);
+  read_exact(f, problem->b, sizeof(double), (size_t)nd, in);
+  read_exact(f, problem->mu, sizeof(double), (size_t)n, in);
+  read_exact(f, problem->mu_r, sizeof(double), (size_t)n, in);
+  fclose(f);
+  for (int64_t c = 0; c < n; ++c)  /* its change of variables divides by mu and mu_r */
+    if (!(problem->mu[c] > 0) || !(problem->mu_r[c] > 0))
+      fail(2, "GRFC3D_IPM needs mu > 0 and mu_r > 0 on every contact", in);
+
+  const char *fault = getenv("RFVERIFY_SICONOS_FAULT");
+  if (fault && strcmp(fault, "sigsegv") == 0) raise(SIGSEGV); /* test-only, see the header */
+
+  double *v = xmalloc((size_t)m, sizeof(double));
+  double *u_s = xmalloc((size_t)nd, sizeof(double));
+  double *r_s = xmalloc((size_t)nd, sizeof(double));
+
+  SolverOptions *options = solver_options_create(GRFC3D_IPM);
+  options->dparam[SICONOS_DPARAM_TOL] = tol;
+  options->iparam[SICONOS_IPARAM_MAX_ITER] = (int)max_iter;
+  numerics_set_verbose(verbose);
+
+  /* Siconos prints its log on stdout; the answer goes to OUT only. */
+  double t0 = wall();
+  int info = global_rolling_friction_3d_driver(problem, r_s, u_s, v, options);
+  double seconds = wall() - t0;
+  fflush(stdout);
+
+  int64_t tail[2] = {info, options->iparam[SICONOS_IPARAM_ITER_DONE]};
+  /* after the solve GRFC3D_IPM leaves its projection error in solverData (one double) */
+  double projerr = options->solverData ? *(double *)options->solverData : -1.0;
+  double meta[3] = {options->dparam[SICONOS_DPARAM_RESIDU], projerr, seconds};
+
+  double *u = xmalloc((size_t)nd, sizeof(double));
+  double *r = xmalloc((size_t)nd, sizeof(double));
+  for (int64_t k = 0; k < nd; ++k) {
+    int64_t c = k / 5, j = k % 5;
+    double p = j == 0 ? 1.0 : (j < 3 ? problem->mu[c] : problem->mu_r[c]);
+    u[k] = u_s[k] / p;
+    r[k] = r_s[k] * p;
+  }
+
+  FILE *o = fopen(out, "wb");
+  if (!o) fail(3, "cannot open output", out);
+  write_exact(o, "RFVSOL01", 1, 8, out);
+  write_exact(o, tail, sizeof(int64_t), 2, out);
+  write_exact(o, meta, sizeof(double), 3, out);
+  write_exact(o, v, sizeof(double), (size_t)m, out);
+  write_exact(o, u, sizeof(double), (size_t)nd, out);
+  write_exact(o, r, sizeof(double), (size_t)nd, out);
+  write_exact(o, u_s, sizeof(double), (size_t)nd, out);
+  write_exact(o, r_s, sizeof(double), (size_t)nd, out);
+  if (fclose(o) != 0) fail(3, "cannot write output", out);
+  return 0;
+}

@@ -1,0 +1,15 @@
+# Siconos user options (USER_OPTIONS_FILE) for rfverify's peer: the C numerics component only,
+# linked with FCLIB; no C++, Fortran, tests, Python wrapper or optional sparse solvers.
+set(COMPONENTS externals numerics CACHE INTERNAL "List of siconos components to build and install")
+option(WITH_PYB11_WRAPPER "Build and install python bindings" OFF)
+set(WARNINGS_LEVEL 0 CACHE INTERNAL "Set compiler diagnostics level.")
+option(WITH_TESTING "Enable 'make test' target" OFF)
+option(WITH_DOCUMENTATION "Build Documentation" OFF)
+option(WITH_BULLET "compilation with Bullet Bindings" OFF)
+option(WITH_OpenCASCADE "compilation with OpenCascade Bindings" OFF)
+option(WITH_MUMPS "Compilation with the MUMPS solver" OFF)
+option(WITH_UMFPACK "Compilation with the UMFPACK solver" OFF)
+option(WITH_SUPERLU "Compilation with the SuperLU solver" OFF)
+option(WITH_SUPERLU_MT "Compilation with the SuperLU solver, multithreaded version" OFF)
+option(WITH_FCLIB "link with fclib when this mode is enable" ON)
+option(WITH_SYSTEM_INFO "Verbose mode to get some system/arch details." OFF)

@@ -1,0 +1,202 @@
+"""The Siconos peer: the paper's own GRFC3D_IPM (Siconos numerics, C), run on the same problem.
+
+The library and a small driver (``benchmarks/peers/siconos/driver.c``) are built by
+``benchmarks/peers/siconos/build.sh`` into a prefix; rfverify finds the driver at
+``$RFVERIFY_SICONOS/bin/rfverify-siconos-driver`` or, with the variable unset, in the build
+script's default cache (``${XDG_CACHE_HOME:-~/.cache}/rfverify/siconos-*``, newest first).
+
+Each solve runs the driver in a child process on a binary copy of the problem's M (symmetrised,
+as every rfverify solver uses it), H, f, w, μ, μr — not through Siconos's FCLIB reader — so that a
+crash of GRFC3D_IPM (a zero pivot in its LDLᵀ is not checked, and the next triangular solve
+segfaults) is a recorded failure (``NumericalError``, "siconos crashed (signal 11) …"), never
+the death of the caller, and ``Settings.time_limit`` kills it (``MaxTime``).
+
+GRFC3D_IPM works in scaled variables r_s = P⁻¹r, u_s = P u with P = diag(1, μ, μ, μr, μr) per
+contact and returns them so (the conversion back is commented out in its source); the driver
+returns v, u = P⁻¹u_s, r = P r_s.  The answer (v, u, r) — Siconos's own u, not Hᵀv + w — is judged
+by rfverify's criterion (:mod:`rfverify.measures`) exactly like Algorithm 1's and Clarabel's;
+Siconos's own verdict is kept in ``extras``: ``siconos_status`` ("Solved" when its info is 0,
+i.e. it met tol on its own scaled measure), ``siconos_info``, ``siconos_residual`` (its
+max(pinfeas, dinfeas, min(uᵀr, projection error)) in its scaled variables),
+``siconos_projerr``, ``siconos_seconds`` (its solve alone), and the scaled ``u_s``, ``r_s``.
+Only Siconos's defaults besides ``tol`` and ``max_iter`` are used (JQinv linear system,
+Cholesky, convex case); GRFC3D_IPM needs μ > 0 and μr > 0 on every contact (it divides by them).
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import signal
+import struct
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..measures import measures
+from ..problem import Problem
+from .result import Settings, SolveResult, Status
+
+ENV_PREFIX = "RFVERIFY_SICONOS"
+"""Environment variable naming the prefix ``build.sh`` installed into."""
+
+DRIVER = Path("bin") / "rfverify-siconos-driver"
+BUILD_FIX = ("bash benchmarks/peers/siconos/build.sh (builds it from ../shared/peers/siconos, or --siconos SRC), "
+             f"then {ENV_PREFIX}=<the prefix it prints>")
+
+
+def default_prefixes() -> list[Path]:
+    """The build script's default cache prefixes that hold a driver, newest first."""
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rfverify"
+    found = [Path(p).parent.parent for p in glob.glob(str(cache / "siconos-*" / DRIVER))]
+    return sorted(found, key=lambda p: (p / DRIVER).stat().st_mtime, reverse=True)
+
+
+def driver_path() -> Path | None:
+    """The driver executable rfverify will run, or None when there is none."""
+    prefix = os.environ.get(ENV_PREFIX)
+    if prefix:
+        exe = Path(prefix) / DRIVER
+        return exe if exe.is_file() and os.access(exe, os.X_OK) else None
+    found = default_prefixes()
+    return found[0] / DRIVER if found else None
+
+
+def unavailable() -> str | None:
+    """Why the ``siconos`` method cannot run here (no driver found), or None when it can.
+    Phrased like :func:`rfverify.solver.result.method_unavailable` ("…; fix: …")."""
+    if driver_path() is not None:
+        return None
+    prefix = os.environ.get(ENV_PREFIX)
+    where = (f"{ENV_PREFIX}={prefix} has no executable {DRIVER}" if prefix
+             else f"{ENV_PREFIX} is not set and the default cache holds no build")
+    return f"'siconos' needs the Siconos peer driver ({where}); fix: {BUILD_FIX}"
+
+
+# ---------------------------------------------------------------------- exchange format
+def write_input(path, problem: Problem, tol: float, max_iter: int) -> None:
+    """The driver's input (format in driver.c): sizes, tol, M_sym and H as CSC, f, w, μ, μr."""
+    M = problem.M_sym.tocsc()
+    M.sort_indices()
+    H = problem.H.tocsc()
+    H.sort_indices()
+    m, n = problem.n_dofs, problem.n_contacts
+    with open(path, "wb") as fh:
+        fh.write(b"RFVSIC01")
+        fh.write(struct.pack("<5qd", m, n, M.nnz, H.nnz, int(max_iter), float(tol)))
+        for A in (M, H):
+            fh.write(np.ascontiguousarray(A.indptr, dtype="<i8").tobytes())
+            fh.write(np.ascontiguousarray(A.indices, dtype="<i8").tobytes())
+            fh.write(np.ascontiguousarray(A.data, dtype="<f8").tobytes())
+        for x in (problem.f, problem.w, problem.mu, problem.mu_r):
+            fh.write(np.ascontiguousarray(x, dtype="<f8").tobytes())
+
+
+def read_output(path, m: int, n: int) -> dict:
+    """The driver's answer: info, iterations, its residual, projection error, seconds, and
+    v (m,), u, r (5n,) in the original variables, u_s, r_s (5n,) as GRFC3D_IPM returned them."""
+    raw = Path(path).read_bytes()
+    nd = 5 * n
+    size = 8 + 16 + 24 + 8 * (m + 4 * nd)
+    if len(raw) != size or raw[:8] != b"RFVSOL01":
+        raise RuntimeError(f"the Siconos driver's output {path} is malformed ({len(raw)} bytes, expected {size})")
+    info, nit = struct.unpack_from("<2q", raw, 8)
+    residual, projerr, seconds = struct.unpack_from("<3d", raw, 24)
+    arrays = np.frombuffer(raw, dtype="<f8", offset=48).astype(np.float64)
+    bounds = np.cumsum([0, m, nd, nd, nd, nd])
+    v, u, r, u_s, r_s = (arrays[bounds[k]:bounds[k + 1]] for k in range(5))
+    return {"info": int(info), "nit": int(nit), "residual": residual, "projerr": projerr, "seconds": seconds,
+            "v": v, "u": u, "r": r, "u_s": u_s, "r_s": r_s}
+
+
+# ---------------------------------------------------------------------- the peer
+def solve_siconos(problem: Problem, settings: Settings) -> SolveResult:
+    """Run GRFC3D_IPM on ``problem`` at ``settings.tol`` / ``settings.max_iter`` in a child
+    process and judge its answer by rfverify's criterion (module docstring).  Raises
+    RuntimeError naming the fix when no driver is found (``solve`` checks that first)."""
+    t0 = time.perf_counter()
+    exe = driver_path()
+    if exe is None:
+        raise RuntimeError(unavailable())
+    m, n = problem.n_dofs, problem.n_contacts
+    bad = np.flatnonzero(~((problem.mu > 0) & (problem.mu_r > 0)))
+    if bad.size:
+        return _no_answer(problem, settings, t0, Status.INVALID_INPUT,
+                          f"GRFC3D_IPM needs μ > 0 and μr > 0 on every contact (its change of variables divides "
+                          f"by them); contact {bad[0]} has μ = {problem.mu[bad[0]]:g}, μr = {problem.mu_r[bad[0]]:g}"
+                          f" ({bad.size} such contacts)", {"siconos_status": "NotRun"})
+    with tempfile.TemporaryDirectory(prefix="rfverify-siconos-") as tmp:
+        inp, out = Path(tmp) / "problem.bin", Path(tmp) / "answer.bin"
+        write_input(inp, problem, settings.tol, settings.max_iter)
+        t_setup = time.perf_counter() - t0
+        cmd = [str(exe), str(inp), str(out)] + (["--verbose"] if settings.verbose else [])
+        try:
+            # Siconos prints to stdout: shown with verbose, else kept out of the caller's output.
+            proc = subprocess.run(cmd, stdout=None if settings.verbose else subprocess.DEVNULL,
+                                  stderr=subprocess.PIPE, timeout=settings.time_limit, check=False)
+        except subprocess.TimeoutExpired:
+            return _no_answer(problem, settings, t0, Status.MAX_TIME,
+                              f"siconos exceeded the time limit of {settings.time_limit:g} s (killed); no answer",
+                              {"siconos_status": "MaxTime"})
+        stderr = " ".join(proc.stderr.decode(errors="replace").split())[-400:]
+        if proc.returncode < 0:
+            sig = -proc.returncode
+            try:
+                name = signal.Signals(sig).name
+            except ValueError:
+                name = "unknown signal"
+            return _no_answer(problem, settings, t0, Status.NUMERICAL_ERROR,
+                              f"siconos crashed (signal {sig}) ({name}) in GRFC3D_IPM; no answer"
+                              + (f"; stderr: {stderr}" if stderr else ""),
+                              {"siconos_status": f"Crashed (signal {sig})", "siconos_signal": sig})
+        if proc.returncode != 0:
+            return _no_answer(problem, settings, t0, Status.NUMERICAL_ERROR,
+                              f"the Siconos driver failed (exit {proc.returncode}): {stderr or 'no message'}",
+                              {"siconos_status": f"DriverError (exit {proc.returncode})"})
+        ans = read_output(out, m, n)
+    v, u, r = ans["v"], ans["u"], ans["r"]
+    judged = measures(problem, v, u, r, "longdouble")
+    merit = judged.max
+    info, nit = ans["info"], ans["nit"]
+    own = "Solved" if info == 0 else f"NotConverged (info {info})"
+    if merit <= settings.tol:
+        status = Status.SOLVED
+    elif merit <= settings.almost_factor * settings.tol:
+        status = Status.ALMOST_SOLVED
+    elif info == 0:
+        status = Status.INSUFFICIENT_PROGRESS  # it claims tol on its own measure; ours says no
+    elif nit >= settings.max_iter:
+        status = Status.MAX_ITERATIONS
+    else:
+        status = Status.NUMERICAL_ERROR
+    message = (f"Siconos GRFC3D_IPM info {info} ({'met tol on its own scaled measure' if info == 0 else 'not converged'}"
+               f", its residual {ans['residual']:.2e}, {nit} iterations); rfverify criterion {merit:.2e} "
+               f"({'≤' if merit <= settings.tol else '>'} tol = {settings.tol:g}, worst: {judged.worst()})")
+    total = time.perf_counter() - t0
+    return SolveResult(
+        v=v, u=u, r=r, status=status, message=message, nit=nit, measures=judged,
+        pinfeas=float("nan"), dinfeas=float(judged.paper_dinfeas), mu=float(judged.paper_mu), trace={},
+        timings={"total": total, "setup": t_setup, "siconos_solve": float(ans["seconds"])},
+        method="siconos", settings=settings,
+        extras={"siconos_status": own, "siconos_info": info, "siconos_residual": float(ans["residual"]),
+                "siconos_projerr": float(ans["projerr"]), "siconos_seconds": float(ans["seconds"]),
+                "u_s": ans["u_s"], "r_s": ans["r_s"], "driver": str(exe)},
+    )
+
+
+def _no_answer(problem: Problem, settings: Settings, t0: float, status: Status, message: str,
+               extras: dict) -> SolveResult:
+    """A run that returned nothing (crash, time limit, refused input): the zero point
+    (v = 0, u = w, r = 0), judged so that its criterion is on record, with ``status``."""
+    v = np.zeros(problem.n_dofs)
+    r = np.zeros(5 * problem.n_contacts)
+    u = np.array(problem.w, dtype=np.float64)
+    judged = measures(problem, v, u, r, "longdouble")
+    return SolveResult(
+        v=v, u=u, r=r, status=status, message=message, nit=0, measures=judged, pinfeas=float("nan"),
+        dinfeas=float(judged.paper_dinfeas), mu=float(judged.paper_mu), trace={},
+        timings={"total": time.perf_counter() - t0}, method="siconos", settings=settings,
+        extras={"no_answer": True, **extras})
