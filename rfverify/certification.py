@@ -335,38 +335,3 @@ def _agreement(err, scale):
     if err == 0:
         return FLOAT64_DIGITS
     return min(FLOAT64_DIGITS, -math.log10(err / scale))
-
-
-def high_precision_residuals(problem: Problem, v, u, r, dps: int = 40) -> dict:
-    """Relative residuals of (v, u, r) in ``dps``-digit arithmetic (information only; the
-    certificate is the proof).  Inside ``mpmath.workdps`` so the global precision is kept."""
-    with mpmath.workdps(dps):
-        mpf = mpmath.mpf
-        V = [mpf(float(x)) for x in v]
-        U = [mpf(float(x)) for x in u]
-        R = [mpf(float(x)) for x in r]
-        M = problem.M_sym.tocoo()
-        H = problem.H.tocoo()
-        Mv = [mpf(0)] * problem.n_dofs
-        for i, j, x in zip(M.row, M.col, M.data):
-            Mv[i] += mpf(float(x)) * V[j]
-        Hr = [mpf(0)] * problem.n_dofs
-        HTv = [mpf(0)] * (SPACEDIM * problem.n_contacts)
-        for i, j, x in zip(H.row, H.col, H.data):
-            Hr[i] += mpf(float(x)) * R[j]
-            HTv[j] += mpf(float(x)) * V[i]
-        f = [mpf(float(x)) for x in problem.f]
-        w = [mpf(float(x)) for x in problem.w]
-        tiny = mpf(10) ** (-300)
-
-        def amax(a):
-            return max((abs(x) for x in a), default=mpf(0))
-
-        dyn = amax([a - b - c for a, b, c in zip(Mv, Hr, f)]) / max(amax(Mv), amax(Hr), amax(f), tiny)
-        u_scale = max(amax(U), amax(HTv), amax(w), tiny)
-        vel = amax([a - b - c for a, b, c in zip(U, HTv, w)]) / u_scale
-        r_scale = max(amax(R), tiny)
-        comp = abs(mpmath.fsum(a * b for a, b in zip(U, R))) / (r_scale * u_scale * problem.n_contacts)
-        out = {"dynamics": float(dyn), "velocity": float(vel), "complementarity": float(comp)}
-    out["max"] = max(out.values())
-    return out

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import rfverify
-from rfverify.certification import high_precision_residuals
+from rfverify.measures import measures
 from rfverify.cli import main
 from rfverify.io.certificate import read_point
 
@@ -200,11 +200,11 @@ def test_public_api_shapes():
     assert set(ten.timings) >= {"double", "extended", "proof", "total"}
 
 
-def test_high_precision_residuals_of_a_ten_digit_solution_are_tiny():
+def test_the_criterion_at_40_digits_of_a_ten_digit_solution_is_tiny():
     problem = rfverify.load("bundled:chute")
     ten = rfverify.solve_to_digits(problem, digits=10)
-    res = high_precision_residuals(problem, ten.v, ten.u, ten.r, dps=40)
-    assert res["dynamics"] < 1e-14 and res["velocity"] < 1e-14
+    res = measures(problem, ten.v, ten.u, ten.r, 40)
+    assert res.dynamics < 1e-14 and res.velocity < 1e-14
 
 
 def test_the_k_digit_path_continues_a_centred_double_solve(monkeypatch):
