@@ -129,9 +129,10 @@ def solver_claim(res, tol: float):
     """What the solver itself claims, in its own words: (own status verbatim, claim, the
     tolerance the claim asserts).  Algorithm 1 claims Solved at ``tol`` and AlmostSolved at
     ``almost_factor·tol``; Clarabel claims its own status, AlmostSolved meaning its reduced
-    tolerances (kept in ``extras["clarabel_almost_tol"]``).  A claim is refuted when the
+    tolerances (kept in ``extras["clarabel_almost_tol"]``); Siconos claims Solved when its info is 0
+    (``extras["siconos_status"]``).  A claim is refuted when the
     independent recheck's criterion exceeds the claimed tolerance."""
-    own = str(res.extras.get("clarabel_status", res.status))
+    own = str(res.extras.get("clarabel_status", res.extras.get("siconos_status", res.status)))
     if own == "Solved":
         return own, "Solved", float(tol)
     if own == "AlmostSolved":
