@@ -109,13 +109,15 @@ def test_flat_operations_equal_jordan(dtype, case):
 
 def _spy_on_rescaling(monkeypatch):
     calls = []
-    real = jordan._scale_exponents
+    from rfverify.jordan import _checks
+
+    real = _checks._scale_exponents
 
     def spy(x):
         calls.append(x.shape)
         return real(x)
 
-    monkeypatch.setattr(jordan, "_scale_exponents", spy)
+    monkeypatch.setattr(_checks, "_scale_exponents", spy)
     return calls
 
 

@@ -94,7 +94,7 @@ def quad_blocks(n3, x, out):
 @njit
 def nt_scaling(n3, z, s, p, p_inv, lam, cond):
     """NT scaling of an interior pair, cone by cone, into p, p⁻¹, λ (flat) and cond(Q_p)
-    (n_cones,): the closed forms of :func:`rfverify.jordan._nt`.  Returns the first cone
+    (n_cones,): the closed forms of :func:`rfverify.jordan._formulas._nt`.  Returns the first cone
     where z or s is not strictly interior, or -1."""
     for c in range(n3 + z.size - 3 * n3):
         if c < n3:
