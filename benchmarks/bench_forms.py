@@ -15,6 +15,7 @@ machine are noisy, so compare the ratios measured within one run.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 import statistics
 import time
@@ -26,6 +27,9 @@ from rfverify.bench.runner import BenchInputError, discover_problems
 from rfverify.measures import measures
 from rfverify.random_problems import random_problem
 from rfverify.solver import METHODS, solve
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _results import recording  # noqa: E402  (stamped results file)
 
 TOLS = [1e-8, 1e-9, 1e-10]
 
@@ -43,7 +47,7 @@ def problems(sizes, seeds, files=()):
                                   free_bodies=nb // 10))
 
 
-def main():
+def _main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="50,200,500,1000", help="contact counts of generated problems")
     ap.add_argument("--seeds", type=int, default=2, help="problems per size")
@@ -51,7 +55,7 @@ def main():
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--files", nargs="*", default=[],
                     help="problem files, directories of them or bundled:NAME (added to the bundled and generated problems)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     try:  # the bench's own discovery: files, directories of them, bundled:NAME
         files = [Path(e.path) for e in discover_problems(args.files)] if args.files else []
     except BenchInputError as exc:
@@ -88,6 +92,12 @@ def main():
                     ratios.append(mine[0][3] / peer[0][3])
             if ratios:
                 print(f"{method:10s} {statistics.median(ratios):6.2f}x  ({len(ratios)} problems)")
+
+
+def main(argv=None):
+    """Run, printing the table and writing it to benchmarks/results/bench_forms.md (stamped)."""
+    with recording("bench_forms", argv):
+        return _main(argv)
 
 
 if __name__ == "__main__":

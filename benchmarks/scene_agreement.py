@@ -18,6 +18,7 @@ printed as well.  Not a test: it takes about a minute on the example collection.
 from __future__ import annotations
 
 import argparse
+import sys
 import math
 from pathlib import Path
 
@@ -29,6 +30,9 @@ from rfverify.bench.runner import BenchInputError, discover_problems
 from rfverify.check import criterion
 from rfverify.scenes.analysis import contact_state_mix, free_velocity
 
+sys.path.insert(0, str(Path(__file__).parent))
+from _results import recording  # noqa: E402  (stamped results file)
+
 DEFAULT = Path(__file__).resolve().parent.parent / "reports" / "example" / "problems" / "scenes"
 
 
@@ -37,12 +41,12 @@ def digits(x, x_ref, scale) -> float:
     return math.inf if err == 0 else -math.log10(err / scale)
 
 
-def main():
+def _main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("paths", nargs="*", default=[str(DEFAULT)], help="problem files, directories of them or bundled:NAME")
     ap.add_argument("--tol", type=float, default=1e-10)
     ap.add_argument("--max-contacts", type=int, default=60, help="largest problem given to the reference")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     try:  # the bench's own discovery: files, directories of them, bundled:NAME
         files = [Path(e.path) for e in discover_problems(args.paths)] if args.paths else []
     except BenchInputError as exc:
@@ -74,6 +78,12 @@ def main():
               f"{d['clarabel']:5.1f} | {agree:5.1f} | {mix}", flush=True)
     print("\ncrit = recomputed criterion (≤ tol means verified solved); dig = correct digits of v against "
           "the reference, scaled by max(|v_ref|, |M⁻¹f|); agree = digits of agreement jqinv vs clarabel, same scale")
+
+
+def main(argv=None):
+    """Run, printing the table and writing it to benchmarks/results/scene_agreement.md (stamped)."""
+    with recording("scene_agreement", argv):
+        return _main(argv)
 
 
 if __name__ == "__main__":

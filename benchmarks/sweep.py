@@ -35,6 +35,7 @@ from rfverify.measures import measures
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).parent))
+from _results import recording  # noqa: E402  (stamped results file)
 from bench_digits import scene_file  # noqa: E402  (the same cached scene files)
 
 
@@ -92,7 +93,7 @@ def problem_set(args):
         yield from generated_problems(Path(args.cache))
 
 
-def main(argv=None):
+def _main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--a", default="{}", help="options of run A (JSON)")
     ap.add_argument("--b", default="{}", help="options of run B (JSON)")
@@ -125,6 +126,12 @@ def main(argv=None):
     for name, options, tot in zip("AB", runs, totals):
         print(f"{name} {json.dumps(options)}: {tot['verified']}/{count} verified, {tot['iterations']} iterations, "
               f"{tot['seconds']:.1f} s" + (f"; not verified: {', '.join(tot['lost'])}" if tot["lost"] else ""))
+
+
+def main(argv=None):
+    """Run, printing the table and writing it to benchmarks/results/sweep.md (stamped)."""
+    with recording("sweep", argv):
+        return _main(argv)
 
 
 if __name__ == "__main__":

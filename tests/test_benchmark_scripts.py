@@ -23,6 +23,13 @@ def _load(name):
         sys.path.remove(str(BENCH))
 
 
+@pytest.fixture(autouse=True)
+def _results_elsewhere(tmp_path, monkeypatch):
+    """A test run of a script must not replace the committed results files."""
+    monkeypatch.setenv("RFVERIFY_BENCH_RESULTS", str(tmp_path / "results"))
+    return tmp_path / "results"
+
+
 @pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
 def test_sweep_counts_every_committed_problem(capsys):
     sweep = _load("sweep")
@@ -47,3 +54,40 @@ def test_bench_clarabel_parses_option_literals(capsys):
     bench.main(["--files", str(data), "--min-contacts", "0", "--repeat", "1", "--options", "extended_below=None"])
     out = capsys.readouterr().out
     assert "median jqinv/clarabel" in out or "not both verified" in out
+
+
+@pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
+def test_scripts_write_stamped_results(capsys, _results_elsewhere):
+    """What a script prints is also its results file, stamped with commit, date and machine, so
+    figures in the docs can link to their run instead of being pasted (issue 28 item 4)."""
+    import re
+
+    bench = _load("bench_forms")
+    bench.main(["--sizes", "", "--repeat", "1", "--methods", "jqinv", "--files", "bundled:cube"])
+    printed = capsys.readouterr().out
+    text = (_results_elsewhere / "bench_forms.md").read_text(encoding="utf-8")
+    assert re.search(r"^- commit: [0-9a-f]{12}(\+dirty)?$", text, re.M), text
+    assert re.search(r"^- date: \d{4}-\d\d-\d\d \d\d:\d\d UTC$", text, re.M)
+    assert re.search(r"^- machine: .+, \d+ cores, ", text, re.M)
+    assert "- command: `python benchmarks/bench_forms.py --sizes  --repeat 1" in text
+    assert printed.strip() in text  # the table as printed, whole
+    # Every script stamps its results (the helper is the one place that knows how).
+    for script in sorted(BENCH.glob("*.py")):
+        if not script.name.startswith("_"):
+            assert "recording(" in script.read_text(encoding="utf-8"), script.name
+    # A run that fails writes nothing.
+    (_results_elsewhere / "bench_forms.md").unlink()
+    with pytest.raises(SystemExit):
+        bench.main(["--no-such-option"])
+    assert not (_results_elsewhere / "bench_forms.md").exists()
+
+
+@pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
+def test_docs_link_to_results_files_that_exist():
+    """README and docs name benchmark figures by their results file; each linked file exists."""
+    import re
+
+    root = BENCH.parent
+    for doc in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
+        for link in re.findall(r"benchmarks/results/[\w.-]+\.md", doc.read_text(encoding="utf-8")):
+            assert (root / link).is_file(), f"{doc.name} links to {link}, which no run wrote"
