@@ -1,0 +1,137 @@
+"""Siconos GRFC3D_IPM (the paper's own implementation) beside jqinv and Clarabel, judged by proven
+digits (issue 30).
+
+For each problem: every method solves at ``--tol`` (``--repeat`` times alternating, median wall
+time kept), its answer is judged by rfverify's criterion (:func:`rfverify.measures.measures` in
+longdouble, never the solver's word), and then proven: :func:`rfverify.certify` bounds the error
+of each answer (v, u, r) against one extended-precision point per problem (computed once, from
+the first method's answer, and shared so the three are bounded against the same point).
+A Siconos crash (segfault in its unchecked LDLᵀ) is counted, not fatal.  Needs the peer built
+(``bash benchmarks/peers/siconos/build.sh``; RFVERIFY_SICONOS or the default cache).
+Not a test: compare ratios measured in one run on this shared machine.
+
+    python benchmarks/peers/siconos/compare.py                     # bundled + generated FCLIB-size problems
+    python benchmarks/peers/siconos/compare.py --files A.hdf5 ...  # your own problems
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import rfverify
+from rfverify.measures import measures
+
+
+BUNDLED = "chute,cube,sphere"
+SCENES = [("SpheresPile", "SpheresPile", None), ("Chute 888", "Chute", 700), ("Lattice 474", "Lattice", 100),
+          ("MassRatio", "MassRatio", None), ("PrimitiveSoup", "PrimitiveSoup", None)]
+
+
+def scene_file(cache: Path, scene: str, size, count: int, index: int) -> Path:
+    """A generated scene problem, cached as benchmarks/bench_digits.py caches it (same folders)."""
+    from rfverify.scenes import generate, save_collection
+
+    folder = cache / f"{scene}-{size or 'default'}-{count}"
+    files = sorted(folder.glob("*.hdf5")) if folder.is_dir() else []
+    if not files:
+        folder.mkdir(parents=True, exist_ok=True)
+        problems = generate(scene, count=count, seed=0, **({} if size is None else {"size": size}))
+        save_collection(problems, folder)
+        files = sorted(folder.glob("*.hdf5"))
+    return files[min(index, len(files) - 1)]
+
+
+def problem_set(args):
+    if args.files:
+        for f in args.files:
+            yield Path(f).stem, rfverify.load(f)
+        return
+    for name in BUNDLED.split(","):
+        yield f"bundled:{name}", rfverify.load(f"bundled:{name}")
+    for label, scene, size in SCENES:
+        yield label, rfverify.load(scene_file(Path(args.cache), scene, size, 1, 0))
+
+
+def _dig(x) -> str:
+    return "–" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.1f}"
+
+
+def _main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--files", nargs="*", default=[])
+    ap.add_argument("--tol", type=float, default=1e-10)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--methods", default="jqinv,clarabel,siconos")
+    ap.add_argument("--digits", type=int, default=10, help="digits certify is asked to prove (default: 10)")
+    ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "rfverify-bench-digits"))
+    args = ap.parse_args(argv)
+    methods = args.methods.split(",")
+    from rfverify.solver import kernels
+    from rfverify.solver.result import method_unavailable
+
+    for m in methods:
+        why = method_unavailable(m)
+        if why:
+            sys.exit(f"compare.py: {why}")
+    kernels.warm_up()
+    print(f"tol {args.tol:g}; per method: median wall time (s) of {args.repeat} runs, rfverify criterion of the "
+          f"answer, iterations, proven digits of v and u (rfverify.certify, --digits {args.digits}); "
+          "siconos also its own residual and info")
+    head = f"{'problem':<18} {'n':>5} " + " ".join(f"| {m:<8} {'s':>7} {'crit':>8} {'it':>3} {'dv':>4} {'du':>4} "
+                                                   for m in methods)
+    print(head)
+    summary = {m: {"time": [], "digits_v": [], "solved": 0, "runs": 0, "crashed": 0, "refuted": 0} for m in methods}
+    for label, p in problem_set(args):
+        times = {m: [] for m in methods}
+        res = {}
+        for _ in range(args.repeat):
+            for m in methods:
+                t0 = time.perf_counter()
+                res[m] = rfverify.solve(p, method=m, tol=args.tol)
+                times[m].append(time.perf_counter() - t0)
+        point, cells, notes = None, [], []
+        for m in methods:
+            r = res[m]
+            s = summary[m]
+            s["runs"] += 1
+            crit = measures(p, r.v, r.u, r.r, "longdouble").max
+            crashed = bool(r.extras.get("no_answer")) and r.extras.get("siconos_signal") is not None
+            s["crashed"] += crashed
+            dv = du = None
+            if not r.extras.get("no_answer"):
+                cert = rfverify.certify(p, r.v, r.u, r.r, digits=args.digits, point=point)
+                point = point or cert.point
+                dv, du = cert.digits.get("v"), cert.digits.get("u")
+            t = statistics.median(times[m])
+            if crit <= args.tol:
+                s["solved"] += 1
+                s["time"].append(t)
+            if dv is not None:
+                s["digits_v"].append(dv)
+            own = r.extras.get("siconos_status", r.extras.get("clarabel_status", str(r.status)))
+            if own == "Solved" and not crit <= args.tol:
+                s["refuted"] += 1
+            if m == "siconos":
+                notes.append(f"siconos: {r.message}" if r.extras.get("no_answer") else
+                             f"siconos own residual {r.extras['siconos_residual']:.1e} info {r.extras['siconos_info']}"
+                             f" (its solve {r.extras['siconos_seconds']:.3f} s)")
+            cells.append(f"| {'':<8} {t:>7.3f} {crit:>8.1e} {r.nit:>3d} {_dig(dv):>4} {_dig(du):>4} ")
+        print(f"{label:<18} {p.n_contacts:>5} " + " ".join(cells) + ("   " + "; ".join(notes) if notes else ""),
+              flush=True)
+    print()
+    for m, s in summary.items():
+        dig = s["digits_v"]
+        print(f"{m:<9} verified solved {s['solved']}/{s['runs']}, crashed {s['crashed']}, refuted claims {s['refuted']}; "
+              f"proven digits of v: median {_dig(statistics.median(dig) if dig else None)}, "
+              f"range {_dig(min(dig) if dig else None)}–{_dig(max(dig) if dig else None)}; "
+              f"median time over its solved runs {statistics.median(s['time']) if s['time'] else float('nan'):.3f} s")
+
+
+if __name__ == "__main__":
+    _main()
