@@ -176,7 +176,8 @@ def worker_facts(sample: dict) -> dict:
 def _run(client, run_dir: Path, todo: list, time_limit: float, bar, jobs, priority) -> int:
     from distributed import KilledWorker
 
-    from .runner import _outcome, _record_failure, problem_dir, task_label
+    from .execution import outcome, problem_dir, record_failure
+    from .tasks import task_label
 
     pending = list(todo)
     running = {}            # future -> task
@@ -210,13 +211,13 @@ def _run(client, run_dir: Path, todo: list, time_limit: float, bar, jobs, priori
                                f"(KilledWorker: {' '.join(str(exc).split())[:300]})")
                     else:
                         msg = f"the Dask task failed: {type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
-                    _record_failure(run_dir, task, "Crashed", msg)
+                    record_failure(run_dir, task, "Crashed", msg)
                 else:  # cancelled or lost: the connection to the scheduler is gone
                     raise ClusterError("lost the connection to the Dask scheduler (task "
                                        f"{task_label(task)}: {fut.status}); fix: check the "
                                        "scheduler and re-run the same command (finished runs are "
                                        "reused)")
-                bar.advance(f"{task_label(task)}: {_outcome(run_dir, task)}")
+                bar.advance(f"{task_label(task)}: {outcome(run_dir, task)}")
     finally:
         if running:  # interrupted, SIGTERM or an error: the workers kill the subprocesses
             try:
@@ -243,16 +244,16 @@ def _problem_bytes(task: dict) -> bytes:
 def _store(run_dir: Path, task: dict, result: dict, time_limit: float) -> int:
     """Write what the worker returned as a local worker would have written it; returns 1 for a
     timeout, else 0."""
-    from .runner import _record_failure, crash_message, problem_dir, timeout_message
+    from .execution import crash_message, problem_dir, record_failure, timeout_message
     from .records import task_stem
     from .tasks import task_key
 
     where = f" (on worker {result.get('host', '?')})"
     if result.get("outcome") == "timeout":
-        _record_failure(run_dir, task, "Timeout", timeout_message(time_limit) + where)
+        record_failure(run_dir, task, "Timeout", timeout_message(time_limit) + where)
         return 1
     if result.get("outcome") == "refused":
-        _record_failure(run_dir, task, "Error", result.get("message", "refused") + where)
+        record_failure(run_dir, task, "Error", result.get("message", "refused") + where)
         return 0
     files = result.get("files") or {}
     try:
@@ -262,10 +263,10 @@ def _store(run_dir: Path, task: dict, result: dict, time_limit: float) -> int:
     if not isinstance(rec, dict) or rec.get("attempt") != task["attempt"]:
         last = [line for line in str(result.get("stderr") or "").splitlines() if line.strip()]
         said = f"; its last words: {last[-1].strip()[:300]}" if last else ""
-        _record_failure(run_dir, task, "Crashed", crash_message(result.get("exitcode")) + where + said)
+        record_failure(run_dir, task, "Crashed", crash_message(result.get("exitcode")) + where + said)
         return 0
     if rec.get("task_key") != task_key(task):
-        _record_failure(run_dir, task, "Error",
+        record_failure(run_dir, task, "Error",
                         f"the worker{where} computed another task key: its rfverify version or "
                         "solver defaults differ from the bench's; fix: install the same rfverify "
                         "on every worker, then re-run with --retry-failed")
@@ -389,10 +390,10 @@ def _child_main(argv) -> int:
     """``TASK_JSON OUT_DIR PARENT_PID``: the subprocess a Dask task starts; dies with its
     parent, then runs the task exactly as a local worker."""
     spec, out_dir, parent = argv
-    from .runner import _die_with_parent
+    from .execution import die_with_parent
     from .tasks import run_task
 
-    _die_with_parent(int(parent))
+    die_with_parent(int(parent))
     task = json.loads(Path(spec).read_text(encoding="utf-8"))
     run_task(task, out_dir)
     return 0

@@ -28,7 +28,6 @@ import os
 import signal
 import threading
 import time
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,7 +36,9 @@ from ..progress import Progress
 from ..solver.result import ALGORITHM1_METHODS, METHODS, OPTIONAL_METHODS, PORTFOLIO_METHODS, method_unavailable
 from . import records
 from .records import FAILED_STATUSES, task_stem, write_json
-from .tasks import base_record, run_task, task_key, task_label
+from .execution import (crash_message, die_with_parent, npz_intact, outcome, problem_dir, read_record,
+                        record_failure, record_path, timeout_message)
+from .tasks import run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
 DEFAULT_METHODS = tuple(m for m in METHODS if m != "reduced_factored" and m not in PORTFOLIO_METHODS
@@ -140,27 +141,6 @@ def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=Tr
         if digits and reference_max_contacts and n is not None and 0 < n <= reference_max_contacts:
             tasks.append({**base, "kind": "digits", "digits": int(digits)})
     return tasks
-
-
-def problem_dir(run_dir: Path, key: str) -> Path:
-    return run_dir / "runs" / key
-
-
-def record_path(run_dir: Path, task: dict) -> Path:
-    return problem_dir(run_dir, task["problem"]) / f"{task_stem(task)}.json"
-
-
-read_record = records.read_json
-"""A record as a dict, unchecked, or None when it is missing, truncated or not a JSON object."""
-
-
-def npz_intact(path: Path) -> bool:
-    """The arrays of a record are present and every member passes its CRC check."""
-    try:
-        with zipfile.ZipFile(path) as z:
-            return bool(z.namelist()) and z.testzip() is None
-    except (OSError, zipfile.BadZipFile, ValueError, EOFError):
-        return False
 
 
 def is_done(run_dir: Path, task: dict, *, retry_failed: bool = False) -> bool:
@@ -285,30 +265,8 @@ def read_manifest(run_dir: Path, *, required: bool) -> dict:
 # ---------------------------------------------------------------------- workers
 def _worker(task: dict, out_dir: str, parent: int) -> None:
     """Process target: die with the bench (never an orphan), then run the task."""
-    _die_with_parent(parent)
+    die_with_parent(parent)
     run_task(task, out_dir)
-
-
-def _die_with_parent(parent: int) -> None:
-    """Kill this worker when the bench process dies, however it dies (even SIGKILL): Linux's
-    PR_SET_PDEATHSIG where available, and a thread watching the parent id everywhere."""
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):
-        pass
-    if os.getppid() != parent:  # the bench died before prctl took effect
-        os._exit(1)
-
-    def watch():
-        while True:
-            time.sleep(0.5)
-            if os.getppid() != parent:
-                os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="rfverify-parent-watch").start()
 
 
 def _stop(procs) -> None:
@@ -478,25 +436,17 @@ def _run_local(run_dir: Path, todo: list, jobs: int, time_limit: float, bar) -> 
                     proc.kill()
                     proc.join()
                     timeouts += 1
-                    _record_failure(run_dir, task, "Timeout", timeout_message(time_limit))
+                    record_failure(run_dir, task, "Timeout", timeout_message(time_limit))
                 else:
                     proc.join()
                     rec = read_record(record_path(run_dir, task))
                     if rec is None or rec.get("attempt") != task["attempt"]:
-                        _record_failure(run_dir, task, "Crashed", crash_message(proc.exitcode))
+                        record_failure(run_dir, task, "Crashed", crash_message(proc.exitcode))
                 del running[proc]
-                bar.advance(f"{task_label(task)}: {_outcome(run_dir, task)}")
+                bar.advance(f"{task_label(task)}: {outcome(run_dir, task)}")
     finally:
         _stop(list(running))  # interrupted or killed by SIGTERM: no worker outlives the bench
     return timeouts
-
-
-def timeout_message(time_limit: float) -> str:
-    return f"killed after the per-task time limit of {time_limit:g} s"
-
-
-def crash_message(exitcode) -> str:
-    return f"worker process exited with code {exitcode} without a record"
 
 
 def _terminate_on_sigterm():
@@ -527,23 +477,6 @@ def resolve_spec(spec: str, run_dir) -> str:
         return spec
     p = Path(spec)
     return str(p if p.is_absolute() else (Path(run_dir) / p).resolve())
-
-
-def _record_failure(run_dir, task, status, message):
-    rec = {**base_record(task), "status": status, "message": message, "solved": False}
-    write_json(record_path(run_dir, task), rec)
-
-
-def _outcome(run_dir, task) -> str:
-    rec = read_record(record_path(run_dir, task))
-    if rec is None:
-        return "no record"
-    verdict = "verified" if rec.get("solved") is True else "not verified"
-    if task["kind"] == "trajectory":
-        best = rec.get("best_verified_max")
-        verdict = f"best verified {best:.1e}" if isinstance(best, (int, float)) else "no verified iterate"
-    t = rec.get("time")
-    return f"{rec.get('status')} ({verdict}{f', {t:.2f} s' if isinstance(t, (int, float)) else ''})"
 
 
 def _machine() -> dict:
