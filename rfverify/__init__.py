@@ -18,6 +18,7 @@ Public API (this release):
 import functools as _functools
 
 from .check import SolutionCheck, check_solution
+from ._version import __version__
 from .errors import (ConeDomainError, DataWarning, InvalidArgumentError, InvalidProblemError,
                      OutputPathError, ProblemFileError, RfverifyError)
 from .io import bundled_problems, load, save
@@ -34,7 +35,8 @@ def _checked(func, *, tol=False):
     instead of a TypeError/AttributeError from deep inside."""
     import inspect
 
-    from .errors import require_positive_int, require_positive_number, require_problem
+    from .errors import require_positive_int, require_positive_number
+    from .problem import require_problem
 
     signature = inspect.signature(func)
 
@@ -75,8 +77,6 @@ solve_to_digits = _checked(solve_to_digits, tol=True)
 certify = _checked(certify)
 check_solution = _checked(check_solution)
 
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Problem", "StoredSolution", "load", "save", "bundled_problems", "check_solution",

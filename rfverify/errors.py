@@ -145,17 +145,6 @@ def _fmt_index(index) -> str:
 
 
 # ---------------------------------------------------------------------- argument checks
-def require_problem(obj, argument: str = "problem"):
-    """Refuse anything but a :class:`rfverify.Problem` with an :class:`InvalidArgumentError`."""
-    from .problem import Problem
-
-    if not isinstance(obj, Problem):
-        raise InvalidArgumentError(
-            argument, f"expected an rfverify.Problem, got {type(obj).__name__}",
-            fix="pass the result of rfverify.load(path) or rfverify.Problem.from_arrays(...)")
-    return obj
-
-
 def require_positive_number(value, argument: str, *, finite: bool = True) -> float:
     """A real number > 0 (finite unless ``finite=False``): not a string, not a bool."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):

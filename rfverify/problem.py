@@ -26,7 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from .errors import InvalidProblemError
+from .errors import InvalidArgumentError, InvalidProblemError
 
 SPACEDIM = 5
 """Number of components of a rolling-friction contact: (N, T1, T2, R1, R2)."""
@@ -627,3 +627,12 @@ def _freeze_sparse(A: sp.csc_matrix) -> sp.csc_matrix:
     for arr in (A.data, A.indices, A.indptr):
         arr.setflags(write=False)
     return A
+
+
+def require_problem(obj, argument: str = "problem"):
+    """Refuse anything but a :class:`rfverify.Problem` with an :class:`InvalidArgumentError`."""
+    if not isinstance(obj, Problem):
+        raise InvalidArgumentError(
+            argument, f"expected an rfverify.Problem, got {type(obj).__name__}",
+            fix="pass the result of rfverify.load(path) or rfverify.Problem.from_arrays(...)")
+    return obj

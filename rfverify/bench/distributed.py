@@ -154,7 +154,7 @@ def _check_workers(client, scheduler: str, sample: dict) -> None:
             bad.append(f"{addr} on {got.get('host')} computes other task keys (its rfverify "
                        f"{got.get('rfverify')} differs in version or solver defaults)")
     if bad:
-        from .. import __version__
+        from .._version import __version__
 
         raise ClusterError(f"--scheduler {scheduler}: worker(s) {'; '.join(bad)}; this bench runs "
                            f"rfverify {__version__}; fix: install the same rfverify (with the "
@@ -166,7 +166,7 @@ def worker_facts(sample: dict) -> dict:
     """Run on each worker by :func:`_check_workers`: who it is and the task key it computes."""
     import platform
 
-    from .. import __version__
+    from .._version import __version__
     from .tasks import task_key
 
     return {"host": socket.gethostname(), "rfverify": __version__, "python": platform.python_version(),

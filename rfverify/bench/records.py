@@ -173,7 +173,7 @@ def new_record(task: dict, task_key: str) -> dict:
     """The fields every record of ``task`` carries: the format version, rfverify's version, the
     task key and the task's entries (not its absolute path: that is this machine's business;
     the manifest keeps a portable one)."""
-    from .. import __version__
+    from .._version import __version__
 
     return {VERSION_FIELD: FORMAT_VERSION, "rfverify_version": __version__, "task_key": task_key,
             **{k: v for k, v in task.items() if k != "path"}, "complete": True}

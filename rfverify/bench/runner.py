@@ -349,7 +349,7 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
 
 def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit, trajectory_tol,
                 digits, reference_max_contacts, quiet, command, retry_failed, scheduler) -> dict:
-    from .. import __version__
+    from .._version import __version__
 
     old = read_manifest(run_dir, required=False)
     known = {p["key"]: p for p in old.get("problems", [])}

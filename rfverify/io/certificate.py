@@ -49,7 +49,7 @@ def write_certificate(fh, certificate) -> None:
     replacing any previous ``/certificate``."""
     import h5py
 
-    from .. import __version__
+    from .._version import __version__
 
     if "certificate" in fh:
         del fh["certificate"]

@@ -1,11 +1,13 @@
 """``rfverify report RUN_DIR``: ``report.html`` (self-contained page, PNG figures beside it) and
 ``summary.md`` from a bench run directory (:mod:`rfverify.bench`).
 
-The first screen ("At a glance") answers four questions — which method is fastest (Algorithm 1
-form, and overall, each on the problems every compared method solved), which is most robust
-per tolerance, how far double precision gets per form, and what k proven digits cost against
-the double solve — with numbers that are those of the tables below it (one median, one
-shifted geometric mean, the same sets).
+The first screen ("At a glance") has one figure — the proven digits of every answer of every
+method against its time (:mod:`rfverify.report.proven`: the bound of DESIGN §6 at each problem's
+proven point) — and answers which method reaches k proven digits, how fast, where double
+precision breaks (the proven digits of the best double answer, and cond(Q_p) and λ₂ along the
+trajectories) and what the k-digit path costs; then which method is fastest and most robust,
+how far double precision gets per form, and the refuted claims, grouped — with numbers that
+are those of the tables below it (one median, one shifted geometric mean, the same sets).
 
 Counts come from the bench's independent high-precision recheck of each saved solution;
 correct digits from the proven extended-precision point of each problem's k-digit path;
@@ -23,13 +25,14 @@ import warnings
 from datetime import datetime, timezone
 from pathlib import Path
 
-from .. import __version__
+from .._version import __version__
 from ..bench.records import tol_text
 from ..io.output import tag_floats, untag_floats, write_text_atomic
 from . import figures
-from .data import (DIGITS_CAP, SGM_SHIFT, RunData, algorithm1_methods, digits_cost, double_limit,
-                   double_limit_summary, failures, load_run, mixed_precision, refuted_runs, success_table,
-                   worst_cases)
+from .data import (DIGITS_CAP, SGM_SHIFT, RunData, algorithm1_methods, digits_cost, double_breaks, double_limit,
+                   double_limit_summary, failures, hard_per_family, load_run, mixed_precision, proven_by_method,
+                   refuted_groups, refuted_runs, success_table, worst_cases)
+from .proven import prove_runs
 
 __all__ = ["make_report", "load_run", "RunData"]
 
@@ -146,6 +149,7 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
         damage = f" ({len(data.issues)} records missing or damaged, e.g. {first})" if data.issues else ""
         raise BenchInputError(f"{out}: the run directory holds no usable finished solve runs yet"
                               f"{damage}; fix: run or re-run `rfverify bench ... --out {out}`")
+    proven = prove_runs(data, quiet)
     diags = _diagnostics(data, diagnose_count, diagnose_max_contacts, diagnose_dps, quiet)
     table = success_table(data)
 
@@ -163,7 +167,9 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
           "solver's word.", cls="context")
 
     doc.h(2, "At a glance", anchor="glance")
-    doc.bullets(_glance(data, table, diags))
+    _figure(doc, "Proven digits against time: every answer of every method, proven at its problem's proven "
+                 "point (DESIGN §6), and each problem's k-digit path", figures.proven_digits_time, data, out)
+    doc.bullets(_answers(data, proven) + _glance(data, table, diags))
 
     machine = data.manifest.get("machine", {})
     libraries = ", ".join(f"{name} {version}" for name, version in machine.items()
@@ -201,6 +207,7 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
         doc.table(header, [robust_row(r) for r in table if r["collection"] != "all"],
                   fold=f"Per collection ({', '.join(data.collections)})")
 
+    _refuted_section(doc, data)
     _speed_section(doc, data, table)
 
     doc.h(2, "Performance profiles")
@@ -209,7 +216,8 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     _figure(doc, "Dolan–Moré profiles of iterations per tolerance", figures.profiles, data, out, "iterations")
 
     _double_section(doc, data, out)
-    _digits_section(doc, data)
+    _hard_section(doc, data, out)
+    _digits_section(doc, data, proven)
 
     doc.h(2, "Per-iteration diagnostics, double against reference", anchor="lockstep")
     doc.p("Lockstep (DESIGN §5): from each double iterate the reference takes the exact step; digits of "
@@ -230,6 +238,8 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     doc.h(2, "Failures and their diagnosed causes", anchor="failures")
     fails = failures(data)
     diag_by = {(c["problem"], c["method"], c["tol"]): d for c, d in diags if c["kind"] == "solve"}
+    doc.p("Runs not verified solved whose solver did not claim they were (refuted claims are in 'Refuted "
+          "claims', once).")
     doc.table(["problem", "method", "tol", "status", "claim refuted", "cause"],
               [[f["problem"], f["method"], f"{f['tol']:g}", f["status"], f["refuted"],
                 f["cause"] + (f" — lockstep: {_diag_summary(diag_by[(f['problem'], f['method'], f['tol'])])}"
@@ -313,7 +323,39 @@ def _double_section(doc: _Doc, data: RunData, out: Path) -> None:
               fold=f"Per problem and form ({len(rows)} trajectories)")
 
 
-def _digits_section(doc: _Doc, data: RunData) -> None:
+def _refuted_section(doc: _Doc, data: RunData) -> None:
+    groups = refuted_groups(data)
+    doc.h(2, "Refuted claims", anchor="refuted")
+    doc.p(f"{sum(g['n'] for g in groups)} run(s) whose solver said Solved or AlmostSolved (by its own definition) "
+          "and whose criterion, recomputed in 30-digit arithmetic from the saved answer, exceeds the tolerance "
+          "that claim asserts. Grouped by method, claim and the measure that refuted it; each run is counted "
+          "once, here, and not again among the failures.")
+    doc.table(["method", "shown as", "runs", "problems", "tolerances", "examples"],
+              [[g["method"], g["label"], g["n"], len(g["problems"]), ", ".join(f"{t:g}" for t in g["tols"]),
+                "; ".join(f"{p} at {t:g}: {lab}" for p, t, lab in g["examples"])] for g in groups])
+
+
+def _hard_section(doc: _Doc, data: RunData, out: Path) -> None:
+    picks = hard_per_family(data)
+    doc.h(2, "cond(Q_p) and λ2 per iteration, one hard problem per family", anchor="hard")
+    doc.p("For each family of problems (a generated scene, else the collection), the problem whose jqinv "
+          "trajectory reached the largest cond(Q_p); every iterate of that trajectory, solved or not. "
+          "cond(Q_p) ≥ 1e15 leaves a double-precision step no correct digit; a λ2 at or below 1e-300 has "
+          "underflowed (or lost its sign) in double while the exact one is positive.")
+    if not picks:
+        doc.p("No jqinv trajectory in this run (trajectories disabled, or jqinv not benched).")
+        return
+    _figure(doc, "cond(Q_p) and the smallest λ2 per iteration, one representative hard problem per family",
+            figures.hard_iterations, picks, out)
+    doc.table(["family", "problem", "contacts", "iterations", "end status", "max cond(Q_p)", "min λ2"],
+              [[p["family"], p["problem"], data.problems[p["problem"]]["n_contacts"],
+                len(p["trajectory"]["iterates"]), p["trajectory"].get("status"), _fmt(p["max_cond"], ".1e"),
+                _fmt(min((x for it in p["trajectory"]["iterates"] for x in (it.get("min_lam2_z"),
+                                                                             it.get("min_lam2_s"))
+                          if x is not None), default=None), ".1e")] for p in picks])
+
+
+def _digits_section(doc: _Doc, data: RunData, proven: dict | None = None) -> None:
     cost = digits_cost(data)
     k = cost["digits"]
     doc.h(2, f"What {k} proven digits cost", anchor="digits")
@@ -328,6 +370,17 @@ def _digits_section(doc: _Doc, data: RunData) -> None:
           f"path time / {base}, per problem. Proven digits are lower bounds; "
           "'abs.' = x* ≈ 0, proven in the absolute sense against a data scale (DESIGN §6.3); 'info' = r is not "
           "unique, so not certified (information only).")
+    if proven is not None:
+        doc.h(3, "Proven digits of every answer")
+        doc.p(f"Proven digits of every answer (DESIGN §6, evaluated exactly at the problem's proven point and "
+              f"carried to the answer, as certify does with a stored point): {proven['n_proven']} of "
+              f"{proven['n_runs']} saved answers, {_sec(proven['seconds'])} s of proofs in all"
+              + (f"; no proven point (k-digit path not certified or not run) on {len(proven['no_point'])} "
+                 f"problem(s): {', '.join(proven['no_point'][:8])}" if proven["no_point"] else "") + ".")
+        doc.table(["method", "answers", "with proven digits", f"≥ {k} digits", "median proven digits",
+                   "best", f"median time of those ≥ {k} (s)"],
+                  [[r["method"], r["runs"], r["n_proven"], r["reach"], _dig(r["median_digits"]),
+                    _dig(r["best_digits"]), _sec(r["median_time_reach"])] for r in proven_by_method(data)])
     rows = mixed_precision(data)
     if cost["n_certified"]:
         doc.p(f"Median over the {cost['n_certified']} of {cost['n']} problems proven to {k} digits: path time "
@@ -368,6 +421,35 @@ def _short(text, n=110):
 
 def _names(methods) -> str:
     return ", ".join(methods)
+
+
+def _answers(data: RunData, proven: dict) -> list:
+    """The first screen's four answers, from the proven digits of every answer (the figure above
+    them and the tables 'What k proven digits cost' and 'cond(Q_p) and λ2 per iteration')."""
+    rows = proven_by_method(data)
+    k = int(data.manifest.get("digits") or 10)
+    items = []
+    reach = [f"{r['method']} {r['reach']}/{r['runs']}" + (" problems" if r["method"].endswith("path") else "")
+             for r in rows]
+    items.append((f"Which method reaches {k} proven digits:", f"answers proven to ≥ {k} digits of v, u and Hr: "
+                  + ", ".join(reach) + f" ({proven['n_proven']} of {proven['n_runs']} answers have proven digits; "
+                                       "table 'Proven digits of every answer')"))
+    fast = [r for r in rows if r["median_time_reach"] is not None]
+    if fast:
+        items.append(("How fast:", "; ".join(f"{r['method']} {_sec(r['median_time_reach'])} s" for r in fast)
+                      + f" (median wall time of the runs that reached {k} proven digits)"))
+    br = double_breaks(data)
+    if br["n"]:
+        text = (f"the best double answer of each problem (any method, any tolerance) is proven to a median of "
+                f"{_dig(br['median_best'])} digits (at most {_dig(br['max_best'])}; {br['reach']} of {br['n']} "
+                f"problems reach {k})")
+        if br["n_traj"]:
+            text += (f"; along the jqinv trajectories to {_fmt(br['traj_tol'], 'g')}, the largest cond(Q_p) has a "
+                     f"median of {_fmt(br['median_max_cond'], '.1e')} ({br['n_cond15']} of {br['n_traj']} reach "
+                     f"1e15) and the smallest λ2 a median of {_fmt(br['median_min_lam2'], '.1e')} ({br['n_underflow']}"
+                     f" below 1e-300); figure 'cond(Q_p) and λ2 per iteration'")
+        items.append(("Where double precision breaks:", text))
+    return items
 
 
 def _glance(data: RunData, table, diags) -> list:
@@ -452,9 +534,11 @@ def _glance(data: RunData, table, diags) -> list:
         by[r["method"]] = by.get(r["method"], 0) + 1
     items.append(("Refuted claims:", f"{len(refuted)} run(s) whose solver said Solved or AlmostSolved failed the "
                                      "independent recheck at the tolerance claimed"
-                  + (f" ({', '.join(f'{m} {n}' for m, n in by.items())})" if by else "")))
+                  + (f" ({', '.join(f'{m} {n}' for m, n in by.items())})" if by else "") + "; table 'Refuted claims'",
+                  [f"{g['method']}: {g['n']} × {g['label']}" for g in refuted_groups(data)]))
     fails = [r for r in data.solves if not r.get("solved")]
-    text = f"{len(fails)} of {len(data.solves)} counted runs not solved (table 'Failures')"
+    text = (f"{len(fails)} of {len(data.solves)} counted runs not solved, {len(refuted)} of them refuted claims "
+            "(tables 'Refuted claims' and 'Failures')")
     if diags:
         text += (f"; {len(diags)} diagnosed in lockstep: "
                  + ", ".join(f"{c['problem']} {c['method']} at {c['tol']:g} ({c['why']})" for c, _ in diags))

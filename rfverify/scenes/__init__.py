@@ -125,7 +125,7 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
         title = scene name; description = human-readable scene, parameters, seed, stage and
         step, generator version; ``provenance`` holds the same as a dict plus the sizes.
     """
-    from .. import __version__
+    from .._version import __version__
 
     sc, p, size = scene_parameters(scene, size, **params)
     if int(count) < 1:
@@ -227,7 +227,7 @@ def _generate_step_free(sc: Scene, p: dict, size: int, count: int, seed: int, ch
     one-step Moreau-Jean problem of stage K's world (contacts, M, H, f = M v + h F, w_N =
     max(gap, 0)/h, all vectorised), written as it is: no solve, so no step can fail and the
     arrays do not depend on the solver."""
-    from .. import __version__
+    from .._version import __version__
 
     say(0.0, f"{sc.name}: lattice")
     t0 = time.perf_counter()
@@ -284,7 +284,7 @@ def _generate_finite_element(sc: Scene, p: dict, size: int, count: int, seed: in
     :class:`.fem.ElasticMoreauJean` from rest; problem K is the problem of step (K+1)·steps
     (1-based) of that run, written with its known solution (the clamped solve, every contact
     checked strictly inside its cone) as ``/solution``.  No interior-point solve is made."""
-    from .. import __version__
+    from .._version import __version__
     from ..problem import StoredSolution
     from .fem import entry_range
 

@@ -17,7 +17,7 @@ COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e
 
 def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
     """The settings block printed before the iterations (also used by the CLI)."""
-    from .. import __version__
+    from .._version import __version__
 
     st = settings
     lines = [
