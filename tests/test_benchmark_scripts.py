@@ -91,3 +91,29 @@ def test_docs_link_to_results_files_that_exist():
     for doc in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
         for link in re.findall(r"benchmarks/results/[\w.-]+\.md", doc.read_text(encoding="utf-8")):
             assert (root / link).is_file(), f"{doc.name} links to {link}, which no run wrote"
+
+
+@pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
+def test_bench_scale_at_a_tiny_size(capsys, _results_elsewhere):
+    """The growth benchmark (issue 27) runs end to end at a tiny size: rows for each kind and
+    method (schur skipped, saying why, without scikit-sparse), its table, JSON and plot, and one
+    run in a child process with its peak memory."""
+    import json
+
+    from rfverify.solver.result import method_unavailable
+
+    bench = _load("bench_scale")
+    assert bench.bed_side(9675) == 15 and bench.bed_side(96256) == 32 and bench.bed_side(1) == 1
+    bench.main(["--sizes", "30", "--kinds", "bed,random", "--no-memory"])
+    out = capsys.readouterr().out
+    ran = [m for m in ("jqinv", "schur", "clarabel") if method_unavailable(m) is None]
+    rows = json.loads((_results_elsewhere / "bench_scale.json").read_text())["rows"]
+    assert [(r["kind"], r["method"]) for r in rows] == [(k, m) for k in ("bed", "random") for m in ran]
+    assert all(r["status"] == "Solved" and r["verified"] for r in rows if r["method"] != "clarabel"), rows
+    assert "| bed | 16 | 48 | jqinv | Solved |" in out  # 2 x 2 x 2 spheres: 3·2³ − 2·2² contacts
+    assert ("skipped schur:" in out) == ("schur" not in ran)
+    assert (_results_elsewhere / "bench_scale.png").stat().st_size > 0
+    assert "tol 1e-08" in (_results_elsewhere / "bench_scale.md").read_text()
+    child = bench.run_child("bed", 30, 5, "jqinv", 1e-8, 120.0)
+    assert child["status"] == "Solved" and child["contacts"] == 16 and child["solve_rss"] >= 0
+    assert child["peak_rss"] > child["solve_rss"]
