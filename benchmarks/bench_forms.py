@@ -27,6 +27,7 @@ from rfverify.bench.runner import BenchInputError, discover_problems
 from rfverify.measures import measures
 from rfverify.random_problems import random_problem
 from rfverify.solver import METHODS, solve
+from rfverify.solver.result import method_unavailable
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import recording  # noqa: E402  (stamped results file)
@@ -62,6 +63,9 @@ def _main(argv=None):
         ap.error(f"--files: {exc}")
     sizes = [int(s) for s in args.sizes.split(",") if s]
     methods = args.methods.split(",")
+    for method in [m for m in methods if method_unavailable(m) is not None]:
+        print(f"skipped {method}: {method_unavailable(method)}")  # an optional method this machine lacks
+        methods.remove(method)
     rows = []
     print(f"{'problem':40s} {'n':>5s} {'method':10s} {'status':22s} {'nit':>4s} {'time[s]':>8s} {'verified':>9s}")
     for name, prob in problems(sizes, args.seeds, files):
