@@ -122,3 +122,81 @@ def test_method_names_are_declared_once():
     where = [p.relative_to(ROOT).as_posix() for d in ("rfverify", "benchmarks")
              for p in sorted((ROOT / d).rglob("*.py")) if listing.search(p.read_text(encoding="utf-8"))]
     assert where == ["rfverify/solver/result.py"]
+
+
+ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
+
+LAYER_EXCEPTIONS = {("rfverify.io.certificate", "rfverify.proof"), ("rfverify.extended.wide", "rfverify.proof")}
+"""Upward imports docs/ARCHITECTURE.md names: function-local imports of the ``proof.Point`` type."""
+
+
+def architecture_layers(text: str) -> list[tuple[str, list[str]]]:
+    """(layer, module names) of the table under "## Layers": `x.py` is rfverify.x, `p/` the
+    package rfverify.p, and names in parentheses after a package its modules."""
+    section = text.split("## Layers", 1)[1].split("\n## ", 1)[0]
+    layers = []
+    for row in re.findall(r"^\| ([a-z ]+) \| (.+?) \| .+ \|$", section, re.M):
+        name, cell = row
+        if name.strip() == "layer":
+            continue
+        mods, last, inside = [], None, None
+        for token in re.findall(r"`[^`]+`|\(|\)", cell):
+            if token == "(":
+                inside = last  # names in parentheses right after a package are its modules
+                continue
+            if token == ")":
+                inside = None
+                continue
+            token = token.strip("`")
+            if token.endswith("/"):
+                last = f"rfverify.{token[:-1]}"
+                mods.append(last)
+            elif token.endswith(".py"):
+                stem = token[:-3]
+                mods.append(f"{inside}.{stem}" if inside else f"rfverify.{stem}")
+                last = None
+            else:
+                last = None
+        layers.append((name.strip(), mods))
+    return layers
+
+
+def _layer_of(module: str, layers) -> int | None:
+    best, depth = None, -1
+    for i, (_, mods) in enumerate(layers):
+        for m in mods:
+            if (module == m or module.startswith(m + ".")) and m.count(".") > depth:
+                best, depth = i, m.count(".")
+    return best
+
+
+def test_architecture_names_modules_that_exist_and_every_module_has_a_layer():
+    """docs/ARCHITECTURE.md describes the code as it is: a module it names that disappears, or a
+    module it does not place, fails here."""
+    layers = architecture_layers(ARCHITECTURE.read_text(encoding="utf-8"))
+    assert [n for n, _ in layers][:2] == ["data", "algebra"] and layers[-1][0] == "front end"
+    for _, mods in layers:
+        for m in mods:
+            path = ROOT / Path(*m.split("."))
+            assert path.with_suffix(".py").is_file() or (path / "__init__.py").is_file(), \
+                f"docs/ARCHITECTURE.md names {m}, which does not exist"
+    for path in sorted(PACKAGE.rglob("*.py")):
+        module, _ = _module_name(path, ROOT)
+        if module != "rfverify":
+            assert _layer_of(module, layers) is not None, f"{module} is in no layer of docs/ARCHITECTURE.md"
+
+
+def test_imports_go_only_to_the_same_or_a_higher_layer():
+    layers = architecture_layers(ARCHITECTURE.read_text(encoding="utf-8"))
+    bad = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        module, _ = _module_name(path, ROOT)
+        own = _layer_of(module, layers)
+        if module == "rfverify" or own is None:
+            continue
+        for line, name in imported_modules(path, ROOT):
+            other = _layer_of(name, layers) if name.startswith("rfverify.") else None
+            if other is not None and other > own and not any(
+                    module.startswith(a) and name.startswith(b) for a, b in LAYER_EXCEPTIONS):
+                bad.append(f"{path.relative_to(ROOT)}:{line} ({layers[own][0]}) imports {name} ({layers[other][0]})")
+    assert not bad, "imports against the layers of docs/ARCHITECTURE.md:\n" + "\n".join(sorted(set(bad)))

@@ -11,7 +11,7 @@ import warnings
 from .. import __version__
 from ..errors import DataWarning, RfverifyError
 from . import bench, certify, diagnose, generate, info, report, solve
-from .common import EXIT_BAD_INPUT, EXIT_INTERNAL
+from .common import DOCS_DIR, EXIT_BAD_INPUT, EXIT_INTERNAL
 
 COMMANDS = (info, solve, certify, diagnose, bench, report, generate)
 """Command modules in the order ``rfverify --help`` lists them; each has ``add_parser(sub)``."""
@@ -30,12 +30,13 @@ def build_parser() -> argparse.ArgumentParser:
         description="Verification-focused toolkit for rolling-friction contact problems "
                     "(FCLIB conventions: M v = H r + f, u = Hᵀ v + w, K* ∋ u ⊥ r ∈ K). "
                     "Conventions, cones, the algorithm, the stopping criterion and what a "
-                    "certificate proves: docs/DESIGN.md in the source repository; a walk-through "
-                    "with your own file: docs/TUTORIAL.md.",
+                    "certificate proves: DESIGN.md; a walk-through with your own file: "
+                    "TUTORIAL.md; every option, exit code and file rule: REFERENCE.md; the "
+                    f"result objects: RESULTS.md — installed with rfverify in {DOCS_DIR}.",
         epilog="Exit codes: 0 success, 1 tolerance not reached (solve) or not certified "
                "(solve --digits, certify), 2 bad input or arguments, 3 internal error, 130 "
                "interrupted, 141 stdout closed early (e.g. | head), 143 bench stopped by SIGTERM "
-               "(per command: README, 'Guarantees'). "
+               "(per command: REFERENCE.md, 'Guarantees', and each command's --help). "
                "--json output is strict JSON: non-finite numbers are null.",
     )
     parser.add_argument("--version", action="version", version=f"rfverify {__version__}")

@@ -10,7 +10,7 @@ import sys
 from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
 from ..solver.result import METHODS
 from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
-from .common import exit_codes, EXIT_OK, dumps
+from .common import DOCS_NOTE, exit_codes, EXIT_OK, dumps
 
 HELP = "run every method on every problem at every tolerance, verified independently"
 
@@ -32,7 +32,8 @@ def add_parser(sub) -> None:
     """The ``bench`` subcommand."""
     bench = sub.add_parser("bench", help=HELP, description=DESCRIPTION,
                            epilog=exit_codes("every task ran (failed solves are results, not errors)",
-                                             extra="143 stopped by SIGTERM (the run directory resumes)"))
+                                             extra="143 stopped by SIGTERM (the run directory resumes)")
+                           + " " + DOCS_NOTE)
     bench.add_argument("inputs", nargs="+", metavar="DIR_OR_FILE",
                        help="problem files, directories of them (the directory name is the "
                             "collection), 'bundled' (every bundled problem) or 'bundled:NAME'")
@@ -66,7 +67,7 @@ def add_parser(sub) -> None:
                             "here and on every worker). Each run executes in a subprocess on a "
                             "worker, killed there at --time-limit; problem files are sent with the "
                             "tasks (no shared filesystem needed); this process writes the records, "
-                            "the same as a local run's. See docs/DISTRIBUTED.md")
+                            "the same as a local run's. See DISTRIBUTED.md")
     bench.add_argument("--retry-failed", action="store_true",
                        help="also re-run runs recorded as Timeout, Crashed or Error (e.g. with a "
                             "longer --time-limit); other finished runs are reused as usual")

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 from .argtypes import digit_count, out_path, positive_int
-from .common import (exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
+from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
                      load_problem, print_quantities, progress_printer)
 
 HELP = "prove how many digits of a solution are right (a rigorous error bound)"
 
 DESCRIPTION = """\
 Prove a lower bound on the correct significant digits of a solution (v, u, r) of the convex
-relaxation (docs/DESIGN.md §6): an extended-precision point near the solution set (stored in
+relaxation (DESIGN §6): an extended-precision point near the solution set (stored in
 the solution file by 'solve --digits --out', or computed by a double solve and double-double
 iterations, continued in 320-bit arithmetic where double-double stalls) is evaluated in exact
 arithmetic, and the bound ||v - v*||_M <= sqrt(g'M^-1 g + 2 r'u) is carried to the solution.
@@ -22,7 +22,8 @@ Exit code 0 only when --digits are proven."""
 def add_parser(sub) -> None:
     """The ``certify`` subcommand."""
     cert = sub.add_parser("certify", help=HELP, description=DESCRIPTION,
-                          epilog=exit_codes("--digits are proven", "they are not (the verdict says which quantity and why)"))
+                          epilog=exit_codes("--digits are proven", "they are not (the verdict says which quantity and why)")
+                          + " " + DOCS_NOTE)
     cert.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     cert.add_argument("--solution", metavar="SOL.h5",
                       help="FCLIB file whose /solution/{v,u,r} is certified (default: the "

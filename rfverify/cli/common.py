@@ -4,6 +4,7 @@ strict JSON output, progress lines and recorded warnings."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import contextlib
 import sys
 import warnings
@@ -15,6 +16,13 @@ EXIT_OK = 0
 EXIT_NOT_SOLVED = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 3
+
+
+DOCS_DIR = Path(__file__).resolve().parent.parent / "docs"
+"""The documents ``--help`` cites (DESIGN.md, TUTORIAL.md, REFERENCE.md, ...), installed with the
+package (package data: ``rfverify/docs`` is the repository's ``docs/``)."""
+
+DOCS_NOTE = f"DESIGN §k and the other documents named here are installed with rfverify in {DOCS_DIR}."
 
 
 def exit_codes(success: str, failure: str | None = None, extra: str = "") -> str:

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, METHODS
 from .argtypes import digit_count, out_path, positive_float, positive_int, tolerance
-from .common import (exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
+from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
                      load_problem, print_quantities, print_warnings, progress_printer,
                      recorded_warnings, warning_summary)
 
@@ -15,8 +15,8 @@ HELP = "solve a problem with Algorithm 1 (or the Clarabel peer)"
 
 DESCRIPTION = """\
 Solve the convex relaxation of a rolling-friction problem with the mixed-precision
-interior-point method (Algorithm 1, docs/DESIGN.md §4). Exit code 0 only when the criterion
-(docs/DESIGN.md §4.5: residuals of the returned v, u, r scaled by their terms and by the data)
+interior-point method (Algorithm 1, DESIGN §4). Exit code 0 only when the criterion
+(DESIGN §4.5: residuals of the returned v, u, r scaled by their terms and by the data)
 is <= --tol; 1 when the solver stopped without reaching it (the status says why). The paper's
 pinfeas, dinfeas and mu are printed beside it."""
 
@@ -25,7 +25,8 @@ def add_parser(sub) -> None:
     """The ``solve`` subcommand."""
     sol = sub.add_parser("solve", help=HELP, description=DESCRIPTION,
                          epilog=exit_codes("Solved (with --digits: certified)",
-                                           "not Solved (with --digits: not certified), the status says why"))
+                                           "not Solved (with --digits: not certified), the status says why")
+                         + " " + DOCS_NOTE)
     sol.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     sol.add_argument("--method", choices=METHODS, default="auto",
                      help="linear-system form: jqinv (14), qp2 (11), reduced (15), "
@@ -38,7 +39,7 @@ def add_parser(sub) -> None:
                           "what was tried); or clarabel, the same problem handed to Clarabel "
                           "(default: %(default)s)")
     sol.add_argument("--tol", type=tolerance, default=1e-10, metavar="T",
-                     help="stop when the criterion of docs/DESIGN.md §4.5 is <= T (default: "
+                     help="stop when the criterion of DESIGN §4.5 is <= T (default: "
                           "%(default)g)")
     sol.add_argument("--max-iter", type=positive_int, default=100, metavar="K",
                      help="iteration limit (default: %(default)s)")
@@ -63,7 +64,7 @@ def add_parser(sub) -> None:
                           "stalls short of a proof on a problem of at most 3000 dofs whose factor "
                           "costs at most 2e7 operations, in 320-bit "
                           "arithmetic) until the "
-                          "rigorous error bound of docs/DESIGN.md §6 proves K digits of v, u and Hr "
+                          "rigorous error bound of DESIGN §6 proves K digits of v, u and Hr "
                           "(and r where it is unique); exit code 0 only when proven. With --out the "
                           "file also gets /certificate (the point and the bound, to recheck with "
                           "'rfverify certify')")

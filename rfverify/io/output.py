@@ -1,6 +1,6 @@
 """Safe output: what every command that writes a file goes through.
 
-Guarantees (README, "Guarantees"):
+Guarantees (docs/REFERENCE.md, "Guarantees"):
 
 - an output path that is also an input of the same command is refused, unless the caller
   declares the write *in place* (``solve in.hdf5 --out in.hdf5`` adds ``/solution`` to the
