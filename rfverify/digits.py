@@ -25,7 +25,8 @@ from .errors import InvalidArgumentError
 from .extended import ipm as ext
 from .extended.dd import vmul_d
 from .extended import wide
-from .extended.system import ExtendedData, choose_backend
+from .extended.ldl import cholmod_available
+from .extended.system import ENGINES, ExtendedData, choose_backend
 from .problem import SPACEDIM, Problem
 from .compilation import compile_seconds
 from .proof import Point, Proof, ProofContext, validate_digits
@@ -112,14 +113,14 @@ RECENT = 8
 """Iterates the driver keeps: candidates for the wide tail's start, and the last three are
 proven when no proof succeeded."""
 
-WIDE_MAX_DOFS = 3000
-"""Largest problem (dofs) given the multiple-precision tail: its dense m × m matrix of mpfr
-references (8 bytes each, 72 MB at the limit) is copied at every factorisation."""
-
 WIDE_MAX_FACTOR_OPS = 2e7
 """Largest factorisation given the tail, in multiply-subtract pairs (Σ c_j² over the column
 counts of L in its minimum-degree order): measured ~0.26 µs each at 320 bits (the whole
-iteration ~2× its factorisation), so about 5 s per factorisation at the limit (a 274-contact Lattice: 1.0e6, a 769-contact SpheresPile: 1.5e7)."""
+iteration ~2× its factorisation), so about 5 s per factorisation at the limit (a 274-contact
+Lattice: 1.0e6, a 769-contact SpheresPile: 1.5e7).  This is the tail's only limit: its factor
+is sparse (:class:`.extended.wide.SparseDofSpace`, memory O(nnz(L))), so the number of dofs
+does not matter, only the fill (the 9675-contact GranularBed: 1.3e10, about 56 min per factorisation;
+docs/DECISIONS.md, "The 10-digit path at scale")."""
 
 
 WIDE_SECONDS_PER_OP = 0.26e-6
@@ -248,16 +249,18 @@ class ProofDriver:
 def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", tol: float = 1e-10,
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
-                    relative: bool = False, progress=None, **options) -> DigitsSolution:
+                    relative: bool = False, progress=None, factor_engine: str = "auto", **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; see :mod:`rfverify.proof.bound` for what "digits" means when a
     quantity is zero).  ``progress(message)`` receives one line per stage.
 
     Stages: the double solve (``method``, ``tol``, ``max_iter``, :data:`DOUBLE_SETTINGS` unless
     ``options`` say otherwise), Algorithm 1 in double-double
-    (``extended_max_iter`` iterations at most, Newton back end ``backend``), and — only when
-    that ends without a proof, on a problem of at most ``WIDE_MAX_DOFS`` dofs whose dof-space
-    factor costs at most ``WIDE_MAX_FACTOR_OPS`` — Algorithm 1
+    (``extended_max_iter`` iterations at most, Newton back end ``backend``, whose float64
+    factorisation is ``factor_engine``: "auto" (CHOLMOD where scikit-sparse is installed, see
+    :func:`.extended.system.resolve_engine`), "cholmod" or "ldl"), and — only when
+    that ends without a proof, on a problem whose sparse dof-space factor costs at most
+    ``WIDE_MAX_FACTOR_OPS`` — Algorithm 1
     in ``wide_bits``-bit arithmetic (``wide_max_iter`` iterations at most; ``wide_tail=False``
     switches it off).  Each stage stops as soon as the proof succeeds.  ``relative=True``
     demands relative digits of every quantity (a quantity that may be zero is then not
@@ -270,6 +273,12 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     semidefinite as stored) no point can be proven: the path stops after the double solve
     and says why."""
     digits = validate_digits(digits)
+    if factor_engine not in ENGINES:
+        raise InvalidArgumentError("factor_engine", f"{factor_engine!r} is not one of {', '.join(ENGINES)}",
+                                   fix="use 'auto' (CHOLMOD where installed), 'cholmod' or 'ldl'")
+    if factor_engine == "cholmod" and not cholmod_available():
+        raise InvalidArgumentError("factor_engine", "'cholmod' needs scikit-sparse, which is not installed",
+                                   fix="pip install 'rfverify[cholmod]', or use factor_engine='auto'")
     if method == "clarabel":
         raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
                                    fix="use method='auto' (default) or an Algorithm 1 form")
@@ -305,7 +314,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                                        "wide": 0.0, "proof": proof.seconds, "compile": compile_seconds() - c0,
                                        "total": time.perf_counter() - t0})
     data = ExtendedData(problem)
-    system = choose_backend(data, backend)
+    system = choose_backend(data, backend, engine=factor_engine)
     t_setup = time.perf_counter() - t1
     c2 = compile_seconds()
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
@@ -356,7 +365,7 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
            wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40, say=None,
            verbose: bool = False) -> Extension:
     """Algorithm 1 in double-double from ``start`` until ``driver`` accepts a proof or the run
-    stalls; then, if no proof succeeded and the problem is within ``WIDE_MAX_DOFS`` and
+    stalls; then, if no proof succeeded and the tail's factor is within
     ``WIDE_MAX_FACTOR_OPS``, the multiple-precision tail (:mod:`.extended.wide`) from the latest healthy double-double
     iterate.  At the end, if nothing was certified, the last iterates are proven so that the
     driver's best proof reports the best digits reached."""
@@ -378,8 +387,6 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             note = "not run (the candidate is farther from the point than any tail could fix)"
         elif data.local:
             note = "not run (the tail works in the dofs of a global problem; a local problem has none)"
-        elif data.m > WIDE_MAX_DOFS:
-            note = f"not run ({data.m} dofs > {WIDE_MAX_DOFS}: its dense matrix would not fit)"
         elif (ordering := wide.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:
             ops = ordering[1]
             note = (f"not run (its factorisation would take {ops:.1e} multiply-subtract pairs > "
@@ -390,7 +397,7 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
                 note = "not run (no interior, centred double-double iterate to start from)"
             else:
                 hand_k = it.k
-                say(f"multiple-precision tail: {wide_bits}-bit mpfr, dense dof-space factor, from extended "
+                say(f"multiple-precision tail: {wide_bits}-bit mpfr, sparse dof-space factor, from extended "
                     f"iteration {it.k} (μ = {it.mu:.2e})")
                 driver.restart(invalid_limit=WIDE_GIVE_UP)
                 t1 = time.perf_counter()

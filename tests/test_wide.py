@@ -260,12 +260,12 @@ def test_a_malformed_tail_point_in_the_file_is_refused(lattice, tmp_path):
         rfverify.io.certificate.read_point(sol)
 
 
-def test_the_tail_is_skipped_above_its_size_limit_and_says_why(lattice, monkeypatch):
-    problem, _ = lattice
-    monkeypatch.setattr(D, "WIDE_MAX_DOFS", 100)
-    out = rfverify.solve_to_digits(problem, digits=10)
-    assert not out.success and out.wide is None
-    assert "120 dofs > 100" in out.certificate.extra["wide_tail"]
+def test_the_tail_factors_sparsely_and_has_no_limit_in_dofs(lattice):
+    """Issue 27: the tail's factor is sparse (memory O(nnz(L))); only its predicted cost
+    limits it, so the old 3000-dof limit is gone."""
+    _, out = lattice
+    assert out.wide is not None and out.wide.backend == wide.SparseDofSpace.name
+    assert not hasattr(D, "WIDE_MAX_DOFS")
 
 
 def test_handover_skips_iterates_outside_the_cones(lattice):
@@ -292,7 +292,7 @@ def test_help_states_the_tails_limits(capsys):
     with pytest.raises(SystemExit):
         main(["solve", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert f"at most {D.WIDE_MAX_DOFS} dofs" in text and f"{wide.DEFAULT_BITS}-bit" in text
+    assert f"{wide.DEFAULT_BITS}-bit" in text
     assert f"at most {D.WIDE_MAX_FACTOR_OPS:.0e}".replace("e+0", "e") in text
 
 

@@ -98,7 +98,8 @@ class Iterate:
 class ExtendedResult:
     """Outcome of :func:`run`: the last iterate (v, r̃, z as double-double), status
     ("Stopped" when ``until`` accepted an iterate, "MaxIterations", "NumericalError"),
-    per-iteration trace and timings."""
+    per-iteration trace and timings; ``stats``: the back end's factorisation statistics
+    (:meth:`.system._Backend.stats`)."""
 
     v: V
     r_t: V
@@ -110,6 +111,7 @@ class ExtendedResult:
     backend: str = ""
     seconds: float = 0.0
     factor_seconds: float = 0.0
+    stats: dict = field(default_factory=dict)
 
 
 def sigma_rule(mu: float, mu_a: float, alpha_a: float) -> float:
@@ -308,4 +310,12 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
         v, r_t, z = v.axpy(alpha, dv), r_t.axpy(alpha, dr), z.axpy(alpha, dz)
         gamma = min(gamma_max, 0.9 + (gamma_max - 0.9) * alpha)
     return ExtendedResult(v, r_t, z, status, message, k, trace, backend.name,
-                          time.perf_counter() - t0, factor_time)
+                          time.perf_counter() - t0, factor_time, _stats(backend))
+
+
+def _stats(backend) -> dict:
+    """The back end's factorisation statistics (benchmarks); {} where it has none."""
+    try:
+        return backend.stats() if hasattr(backend, "stats") else {}
+    except AttributeError:  # a back end without a single factor (the hybrid)
+        return {}

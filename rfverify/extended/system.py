@@ -26,7 +26,7 @@ from ..lifting import KIND_COULOMB, KIND_FULL, KIND_NORMAL, KIND_ROLLING, lift
 from ..problem import SPACEDIM, Problem
 from . import cones as C
 from . import dd
-from .ldl import DDCholesky, MixedCholesky
+from .ldl import CholmodMixed, DDCholesky, MixedCholesky, cholmod_available
 
 njit = numba.njit(cache=True)
 DENSE_BLOCK = 200  # blocks of M up to this size are inverted densely when forming W̃
@@ -416,6 +416,17 @@ class _Backend:
         cc = np.diff(self.chol.Lp).astype(float)
         return float(np.sum(cc * cc) + self.chol.nnz_upper)
 
+    def stats(self) -> dict:
+        """What the factorisation costs (for benchmarks): order, stored upper entries, nnz(L)
+        and Σ c_j² (column counts of L in the engine's order), factorisations, solves and
+        refinement steps of the float64 engines."""
+        ch = self.chol
+        cc = np.diff(ch.Lp).astype(float)
+        return {"engine": getattr(self, "engine", "ldl"), "precision": getattr(ch, "precision", "double-double"),
+                "order": int(ch.n), "nnz_upper": int(ch.nnz_upper), "nnz_L": int(cc.sum()),
+                "sum_c2": float(np.sum(cc * cc)), "factorisations": int(self.factorisations),
+                "solves": int(getattr(ch, "solves", 0)), "refinement_steps": int(getattr(ch, "refinement_steps", 0))}
+
 
 def contact_dof_pattern(data: ExtendedData) -> sp.csr_matrix:
     """(n × m) pattern of the dofs each contact's kept rows of H̃ touch, sorted per row."""
@@ -676,11 +687,13 @@ class ContactSpace(_Backend):
     def name(self) -> str:
         how = {"mixed": "float64 factor refined in double-double",
                "double-double": "double-double factor"}[getattr(self.chol, "precision", "double-double")]
+        if isinstance(self.chol, CholmodMixed) and self.chol.precision == "mixed":
+            how = "float64 CHOLMOD factor refined in double-double"
         reason = getattr(self.chol, "fallback_reason", "")
         form = "I + F⁻¹W̃F⁻ᵀ, W̃ = P W P of the local file" if self.data.local else "I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ"
         return f"contact-space, scaled ({form}), {how}" + (f" ({reason})" if reason else "")
 
-    def __init__(self, data: ExtendedData, mixed: bool = True):
+    def __init__(self, data: ExtendedData, mixed: bool = True, engine: str = "auto"):
         from scipy.sparse.csgraph import connected_components
 
         self.data = data
@@ -717,7 +730,13 @@ class ContactSpace(_Backend):
         same = (self.pc == self.pd)[:, None, None]
         take = valid & (~same | (ii[None] <= jj[None]))
         pattern = sp.coo_matrix((np.ones(int(take.sum())), (gi[take], gj[take])), shape=(nk, nk))
-        self.chol = MixedCholesky(pattern) if mixed else DDCholesky(pattern)
+        self.engine = resolve_engine(engine, nk) if mixed else "ldl"
+        if not mixed:
+            self.chol = DDCholesky(pattern)
+        elif self.engine == "cholmod":
+            self.chol = CholmodMixed(pattern)
+        else:
+            self.chol = MixedCholesky(pattern)
         self.pos = np.full(valid.shape, -1, dtype=np.int64)
         self.pos[take] = self.chol.positions(gi[take], gj[take])
         self._W = None
@@ -939,7 +958,31 @@ class Hybrid(_Backend):
         return self.current.solve(a, t)
 
 
-def choose_backend(data: ExtendedData, backend: str = "auto"):
+ENGINES = ("auto", "ldl", "cholmod")
+CHOLMOD_MIN_ROWS = 0
+"""Smallest contact-space matrix (kept rows) ``engine="auto"`` factors with CHOLMOD when it is
+installed (measured, docs/DECISIONS.md "The 10-digit path at scale")."""
+
+
+def resolve_engine(engine: str, rows: int) -> str:
+    """"cholmod" or "ldl": the float64 factorisation engine of the contact-space form.
+    ``auto`` takes CHOLMOD (scikit-sparse, optional extra ``cholmod``) when it is importable and
+    the matrix has at least :data:`CHOLMOD_MIN_ROWS` rows, else the compiled up-looking LDLᵀ;
+    ``cholmod`` demands it (ImportError, saying what to install, when absent)."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine {engine!r} is not one of {', '.join(ENGINES)}")
+    if engine == "ldl":
+        return "ldl"
+    if engine == "cholmod":
+        if not cholmod_available():
+            raise ImportError("the cholmod engine needs CHOLMOD through scikit-sparse: pip install "
+                              "'rfverify[cholmod]' (and libsuitesparse-dev, an optimised BLAS such as "
+                              "libopenblas0, to build and run it)")
+        return "cholmod"
+    return "cholmod" if rows >= CHOLMOD_MIN_ROWS and cholmod_available() else "ldl"
+
+
+def choose_backend(data: ExtendedData, backend: str = "auto", engine: str = "auto"):
     """The back end asked for.  ``auto`` is the scaled contact-space form with a float64
     factorisation refined in double-double (:class:`ContactSpace`): with the factorisation in
     float64 it is as fast as or faster than the dof-space and hybrid forms on every problem
@@ -953,9 +996,9 @@ def choose_backend(data: ExtendedData, backend: str = "auto"):
     if backend == "dof":
         return DofSpace(data, max_local_dofs=10**9)
     if backend in ("auto", "contact"):
-        return ContactSpace(data)
+        return ContactSpace(data, engine=engine)
     if backend == "contact-dd":
         return ContactSpace(data, mixed=False)
     if backend == "hybrid":
-        return Hybrid(data)
+        return Hybrid(data, contact=ContactSpace(data, engine=engine))
     raise ValueError(f"backend {backend!r} is not one of auto, contact, contact-dd, hybrid, dof")

@@ -12,10 +12,10 @@ definiteness near μ = 1e-41 whatever precision the residuals have.
 So everything is wider here: the iterate (v, r̃, z), the residuals, every cone kernel (NT
 scaling, Q_{p^k}, products, step lengths; the formulas of :mod:`.cones`, vectorised over cones
 in numpy object arrays) and the Newton solve — the dof-space matrix M + BᵀB, B = F⁻¹H̃, formed
-and factored densely in ``bits``-bit arithmetic (:class:`DenseDofSpace`), each solve refined
-against the unreduced three-block system.  The cost is O(m³) at worst, so the k-digit path
-runs this tail only where double-double stalled and the factorisation is affordable
-(:mod:`rfverify.digits`).
+and factored sparsely in ``bits``-bit arithmetic in a minimum-degree order
+(:class:`SparseDofSpace`), each solve refined against the unreduced three-block system.  The
+cost is Σ c_j² multiply-subtract pairs (O(m³) at worst), so the k-digit path runs this tail
+only where double-double stalled and the factorisation is affordable (:mod:`rfverify.digits`).
 
 gmpy2's precision is set in a local context for the duration of each call; nothing leaks.
 """
@@ -31,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .ipm import ExtendedResult, refined_newton, sigma_rule
-from .ldl import _symbolic, fill_reducing_order
+from .ldl import _numeric_double, _symbolic, _workspace, fill_reducing_order
 from .system import DDMatrix, ExtendedData, contact_dof_pattern, contact_local_H
 
 DEFAULT_BITS = 320
@@ -328,8 +328,8 @@ class DenseDofSpace:
     """The dof-space Newton matrix S = M + H̃ᵀG⁻¹H̃ = M + BᵀB (B = F⁻¹H̃, per contact) as a
     dense m × m mpfr matrix with a Cholesky factor in its lower triangle, in a minimum-degree
     order that skips exact zeros: Σ c_j² multiply-subtract pairs per factorisation
-    (:func:`dof_space_ordering`), O(m³) at worst — which is why :mod:`rfverify.digits` gives
-    the tail only problems within ``WIDE_MAX_DOFS`` and ``WIDE_MAX_FACTOR_OPS``.
+    (:func:`dof_space_ordering`), O(m³) at worst.  The tail uses :class:`SparseDofSpace`
+    (same order, same arithmetic, memory O(nnz(L))); this dense form is its reference.
 
     Why not the double-double back ends: S and the contact-space S' = I + F⁻¹W̃F⁻ᵀ both have
     condition numbers near 1/μ along redundant sticking contacts (W̃ singular), and near
@@ -420,6 +420,133 @@ class DenseDofSpace:
         return dv, dr
 
 
+def _factor_pattern(pattern: sp.spmatrix, perm: np.ndarray):
+    """The structure of the Cholesky factor of ``pattern`` in the order ``perm``: (Lp, Li) of
+    its strictly lower part in CSC (rows ascending in each column), and the lower triangle of
+    the permuted pattern (CSC, sorted), whose entries the factor reads."""
+    n = pattern.shape[0]
+    P = (abs(pattern) + abs(pattern.T) + sp.identity(n, format="csc")).tocsc()
+    P = P[perm][:, perm].tocsc()
+    U = sp.triu(P, format="csc")
+    U.sort_indices()
+    Ap, Ai = U.indptr.astype(np.int64), U.indices.astype(np.int64)
+    parent, Lp = _symbolic(n, Ap, Ai)
+    # the structure itself from a float64 factorisation of a strictly diagonally dominant
+    # matrix on the pattern (its kernel writes every structural entry; no pivot can fail)
+    vals = np.where(Ai == np.repeat(np.arange(n), np.diff(Ap)), float(n + 1), 1.0)
+    Li, Lx = np.zeros(int(Lp[-1]), dtype=np.int64), np.zeros(int(Lp[-1]))
+    if _numeric_double(n, Ap, Ai, vals, Lp, parent, Li, Lx, np.zeros(n), np.zeros(n), *_workspace(n)) >= 0:
+        raise AssertionError("a diagonally dominant matrix lost a pivot")
+    lower = sp.tril(P, format="csc")
+    lower.sort_indices()
+    return Lp, Li, lower
+
+
+class SparseDofSpace(DenseDofSpace):
+    """:class:`DenseDofSpace` with S = M + BᵀB stored and factored sparsely: the same
+    minimum-degree order, the same multiply-subtract pairs (Σ c_j² over the column counts of
+    L), but memory O(nnz(L)) mpfr numbers instead of a dense m × m array, so the tail has no
+    limit in dofs, only in its predicted cost (:mod:`rfverify.digits`).
+
+    The factorisation is left-looking by columns: column j of L gathers the updates of the
+    columns k that have an entry in row j (one vectorised object-array operation per entry of
+    L, the same count of Python-level steps as the dense version's per-target updates), then
+    is scaled by its pivot √d_j.  A solve is two sweeps over the columns."""
+
+    name = "sparse dof-space (M + H̃ᵀG⁻¹H̃), multiple precision"
+
+    def __init__(self, data: ExtendedData, W: "WideData", perm: np.ndarray | None = None):
+        self.data = data
+        self.W = W
+        m = data.m
+        CD = contact_dof_pattern(data)
+        self.perm = dof_space_ordering(data, CD)[0] if perm is None else np.asarray(perm, dtype=np.int64)
+        self.iperm = np.empty_like(self.perm)
+        self.iperm[self.perm] = np.arange(m)
+        pattern = (abs(data.M_pattern) + abs(CD.T @ CD)).tocsc()
+        self.Lp, self.Li, lower = _factor_pattern(pattern, self.perm)
+        self.S_indptr, self.S_indices = lower.indptr.astype(np.int64), lower.indices.astype(np.int64)
+        keys = np.repeat(np.arange(m, dtype=np.int64), np.diff(self.S_indptr)) * m + self.S_indices
+
+        def where(rows, cols):  # position in the lower CSC of permuted entries (rows ≥ cols)
+            return np.searchsorted(keys, np.asarray(cols, dtype=np.int64) * m + np.asarray(rows, dtype=np.int64))
+
+        loc_dofs, Hh, Hl = contact_local_H(data, CD)
+        valid = loc_dofs >= 0
+        loc = np.where(valid, self.iperm[np.maximum(loc_dofs, 0)], -1)
+        self.Hc = from_dd(Hh, Hl) if Hh.size else np.empty(Hh.shape, dtype=object)  # (n, 5, d)
+        d = loc.shape[1]
+        ii = np.broadcast_to(loc[:, :, None], (data.n, d, d))
+        jj = np.broadcast_to(loc[:, None, :], (data.n, d, d))
+        self.block_take = valid[:, :, None] & valid[:, None, :] & (ii >= jj)  # lower half of each B_cᵀB_c
+        self.block_pos = where(ii[self.block_take], jj[self.block_take])
+        mr, mc, mh, ml = data.M.coo()
+        pr, pc = self.iperm[mr], self.iperm[mc]
+        low = pr >= pc
+        self.M_values = _zeros(keys.size)
+        np.add.at(self.M_values, where(pr[low], pc[low]), from_dd(mh[low], ml[low]))
+        # row j of L: the columns k < j with an entry there, each with the offset of that entry
+        # in column k (the column's entries at rows ≥ j start there: rows ascend)
+        cols_of = np.repeat(np.arange(m, dtype=np.int64), np.diff(self.Lp))
+        order = np.lexsort((cols_of, self.Li))
+        self.row_ptr = np.concatenate(([0], np.cumsum(np.bincount(self.Li, minlength=m)))).astype(np.int64)
+        self.row_cols = cols_of[order]
+        self.row_entry = order.astype(np.int64)  # index into Li / Lx
+        self.Lx = None
+        self.Ld = None
+        self.Finv = None
+
+    @property
+    def ops(self) -> float:
+        """Multiply-subtract pairs per factorisation (Σ c_j² over the columns of L)."""
+        c = np.diff(self.Lp).astype(np.float64) + 1.0
+        return float(np.sum(c * c))
+
+    def update(self, sc: Scaling) -> bool:
+        """Form and factor S at the scaling ``sc``; False if a pivot is not positive."""
+        data, m = self.data, self.data.m
+        self.Finv = contact_factor_inverse(data, sc)
+        B = np.matmul(self.Finv, self.Hc)  # (n, 5, d)
+        blocks = np.matmul(np.transpose(B, (0, 2, 1)), B)  # (n, d, d) = B_cᵀB_c
+        S = self.M_values.copy()
+        np.add.at(S, self.block_pos, blocks[self.block_take])
+        Lp, Li = self.Lp, self.Li
+        Lx = np.empty(Li.size, dtype=object)
+        Ld = np.empty(m, dtype=object)
+        w = _zeros(m)  # the column being built, scattered by row
+        for j in range(m):
+            a, b = self.S_indptr[j], self.S_indptr[j + 1]
+            w[self.S_indices[a:b]] = S[a:b]
+            for t in range(self.row_ptr[j], self.row_ptr[j + 1]):
+                e = self.row_entry[t]  # L[j, k]: the first entry of column k at a row ≥ j
+                end = Lp[self.row_cols[t] + 1]
+                w[Li[e:end]] -= Lx[e:end] * Lx[e]
+            piv = w[j]
+            if not piv > 0:
+                return False
+            piv = gmpy2.sqrt(piv)
+            Ld[j] = piv
+            rows = Li[Lp[j]:Lp[j + 1]]
+            Lx[Lp[j]:Lp[j + 1]] = w[rows] / piv
+            w[j] = gmpy2.mpfr(0)
+            w[rows] = gmpy2.mpfr(0)
+        self.Lx, self.Ld = Lx, Ld
+        return True
+
+    def _chol_solve(self, b):
+        Lp, Li, Lx, Ld, m = self.Lp, self.Li, self.Lx, self.Ld, self.data.m
+        y = b.copy()
+        for j in range(m):
+            y[j] = y[j] / Ld[j]
+            a, e = Lp[j], Lp[j + 1]
+            if e > a:
+                y[Li[a:e]] -= Lx[a:e] * y[j]
+        for j in range(m - 1, -1, -1):
+            a, e = Lp[j], Lp[j + 1]
+            y[j] = (y[j] - dot(Lx[a:e], y[Li[a:e]])) / Ld[j]
+        return y
+
+
 # ---------------------------------------------------------------------- driver
 @dataclass
 class WideIterate:
@@ -501,12 +628,14 @@ class WideData:
 
 
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits: int = DEFAULT_BITS,
-        refine_max: int = 8, gamma_max: float = 0.99, perm=None, progress=None) -> WideResult:
+        refine_max: int = 8, gamma_max: float = 0.99, perm=None, progress=None, sparse: bool = True) -> WideResult:
     """Algorithm 1 in ``bits``-bit arithmetic from ``start`` = {"v", "r_t", "z"}, each a
     (hi, lo) pair of float64 arrays (a double-double iterate) or an mpfr array.
     ``until(WideIterate)`` is called at every iterate; True stops the run ("Stopped").
     Same predictor–corrector, σ rule and step rule as :func:`.ipm.run`.  ``perm``: the
-    factor's ordering from :func:`dof_space_ordering`, if the caller computed it."""
+    factor's ordering from :func:`dof_space_ordering`, if the caller computed it.  ``sparse``:
+    the factor is :class:`SparseDofSpace` (default; memory O(nnz(L))), else
+    :class:`DenseDofSpace` (m × m; kept as the reference the sparse one is tested against)."""
     t0 = time.perf_counter()
     n3, nz, n = data.n3, data.nz, data.n
     n_cones = n3 + data.n1
@@ -515,7 +644,7 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
     status, message = "MaxIterations", f"reached max_iter = {max_iter}"
     with _context(bits):
         W = WideData(data)
-        backend = DenseDofSpace(data, W, perm=perm)
+        backend = (SparseDofSpace if sparse else DenseDofSpace)(data, W, perm=perm)
 
         def lift(x):
             return from_dd(*x) if isinstance(x, tuple) else np.asarray(x, dtype=object) + 0

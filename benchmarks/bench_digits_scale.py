@@ -1,0 +1,112 @@
+"""The 10-digit path at 10³–10⁴ contacts (issue 27 item 4): where its time and memory go.
+
+Each (problem, engine) runs ``solve_to_digits(problem, digits=10, factor_engine=ENGINE)`` in a
+child process of its own, so that its peak resident memory (``ru_maxrss`` of the child) is
+the path's alone.  One row per run:
+
+    contacts, dofs, engine, stage times (double, setup, extended, wide, proof, total),
+    extended iterations, the contact-space matrix (order, nnz of its upper triangle, nnz(L),
+    Σ c_j² of L in the engine's order), factorisations, solves, refinement steps, the update
+    (assembly + factorisation) seconds, peak memory (MB and kB per contact), proven digits.
+
+Not a test: timings on a shared machine are noisy; compare rows of one run.
+
+    python benchmarks/bench_digits_scale.py                               # random 300/1000 and 1000/3000
+    python benchmarks/bench_digits_scale.py --problems random:3000:10000 --engines cholmod
+    python benchmarks/bench_digits_scale.py --problems PILE.hdf5 --engines cholmod ldl
+
+A problem is ``random:NB:NC`` (``random_problem(NB, NC, seed=5)``: random rigid bodies, more
+fill than granular media have) or an FCLIB file (e.g. a pile from ``rfverify generate``).
+Set ``OPENBLAS_NUM_THREADS=1`` on a shared machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+
+
+def load(spec: str):
+    import rfverify
+    from rfverify.random_problems import random_problem
+
+    if spec.startswith("random:"):
+        nb, nc = (int(x) for x in spec.split(":")[1:3])
+        return random_problem(nb, nc, seed=5)
+    return rfverify.load(spec)
+
+
+def one(spec: str, engine: str) -> dict:
+    """Run the path once in this process; the row as a dict."""
+    import rfverify
+
+    problem = load(spec)
+    t0 = time.perf_counter()
+    out = rfverify.solve_to_digits(problem, digits=10, factor_engine=engine)
+    total = time.perf_counter() - t0
+    q = out.certificate.quantities
+    digits = {k: (None if x.digits is None else round(x.digits, 2)) for k, x in q.items() if x.mode != "information"}
+    ext = out.extended
+    rss_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return {"problem": spec, "contacts": problem.n_contacts, "dofs": problem.n_dofs, "engine": engine,
+            "timings": {k: round(v, 2) for k, v in out.timings.items()}, "wall": round(total, 2),
+            "ext_iterations": int(getattr(ext, "nit", 0) or 0),
+            "update_seconds": round(getattr(ext, "factor_seconds", 0.0), 2),
+            "stats": getattr(ext, "stats", {}), "wide": None if out.wide is None else int(out.wide.nit),
+            "wide_note": out.certificate.extra.get("wide_tail", ""), "certified": bool(out.success),
+            "digits": digits, "peak_MB": round(rss_kb / 1024, 1),
+            "peak_kB_per_contact": round(rss_kb / max(problem.n_contacts, 1), 1),
+            "backend": out.certificate.extra.get("backend", "")}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--problems", nargs="*", default=["random:300:1000", "random:1000:3000"])
+    ap.add_argument("--engines", nargs="*", default=["cholmod", "ldl"])
+    ap.add_argument("--one", nargs=2, metavar=("PROBLEM", "ENGINE"), help=argparse.SUPPRESS)
+    ap.add_argument("--timeout", type=float, default=3600.0, help="seconds per run (default 3600)")
+    args = ap.parse_args(argv)
+    if args.one:
+        print(json.dumps(one(*args.one)), flush=True)
+        return 0
+    head = (f"{'problem':<28} {'n':>6} {'m':>6} {'engine':>7} {'double':>7} {'ext':>7} {'mp':>6} {'total':>7} "
+            f"{'it':>3} {'order':>7} {'nnz(L)':>10} {'Σc²':>8} {'solves':>6} {'steps':>6} {'update':>7} "
+            f"{'MB':>7} {'kB/c':>6}  proven")
+    print(head)
+    print("-" * len(head), flush=True)
+    ok = True
+    for spec in args.problems:
+        for engine in args.engines:
+            try:
+                run = subprocess.run([sys.executable, __file__, "--one", spec, engine], capture_output=True,
+                                     text=True, timeout=args.timeout)
+            except subprocess.TimeoutExpired:
+                print(f"{spec:<28} {engine:>7}  did not finish in {args.timeout:.0f} s", flush=True)
+                ok = False
+                continue
+            if run.returncode != 0:
+                print(f"{spec:<28} {engine:>7}  failed:\n{run.stderr[-2000:]}", flush=True)
+                ok = False
+                continue
+            r = json.loads(run.stdout.strip().splitlines()[-1])
+            t, s = r["timings"], r["stats"]
+            mp = "–" if r["wide"] is None else f"{t['wide']:.1f}"
+            dig = "/".join(f"{k} {v}" for k, v in r["digits"].items())
+            print(f"{r['problem'][-28:]:<28} {r['contacts']:>6} {r['dofs']:>6} {engine:>7} {t['double']:>7.1f} "
+                  f"{t['setup'] + t['extended']:>7.1f} {mp:>6} {t['total']:>7.1f} {r['ext_iterations']:>3} "
+                  f"{s.get('order', 0):>7} {s.get('nnz_L', 0):>10} {s.get('sum_c2', 0):>8.1e} "
+                  f"{s.get('solves', 0):>6} {s.get('refinement_steps', 0):>6} {r['update_seconds']:>7.1f} "
+                  f"{r['peak_MB']:>7.0f} {r['peak_kB_per_contact']:>6.1f}  "
+                  f"{'yes' if r['certified'] else 'NO'} {dig}", flush=True)
+            if not r["certified"]:
+                print(f"    tail: {r['wide_note']}", flush=True)
+            ok = ok and r["certified"]
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

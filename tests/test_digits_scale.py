@@ -1,0 +1,286 @@
+"""The 10-digit path at scale (issue 27 item 4): the CHOLMOD float64 engine of the contact-space
+form refined in double-double, the path without scikit-sparse, and the sparse multiple-precision
+tail against the dense one.  Small problems only; the timings are in
+benchmarks/bench_digits_scale.py."""
+
+from __future__ import annotations
+
+import sys
+
+import gmpy2
+import mpmath
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
+
+import rfverify
+from rfverify.extended import cones as C
+from rfverify.extended import dd, wide
+from rfverify.extended.ldl import CholmodMixed, DDCholesky, MixedCholesky, cholmod_available
+from rfverify.extended.system import ContactSpace, ExtendedData, choose_backend, resolve_engine
+from rfverify.random_problems import random_problem
+
+needs_cholmod = pytest.mark.skipif(not cholmod_available(), reason="scikit-sparse (extra 'cholmod') not installed")
+
+
+def _upper_values(chol, A):
+    """(hi, lo) of A's entries aligned with chol's upper storage (lo = 0)."""
+    U = sp.triu(sp.coo_matrix(A))
+    hi = np.zeros(chol.nnz_upper)
+    hi[chol.positions(U.row, U.col)] = U.data
+    return hi, np.zeros_like(hi)
+
+
+def _residual_mp(A, xh, xl, b):
+    """max_i |(A x − b)_i| in 60 digits, and ‖A‖∞‖x‖∞."""
+    A = sp.csr_matrix(A)
+    with mpmath.workdps(60):
+        x = [mpmath.mpf(float(h)) + mpmath.mpf(float(lo)) for h, lo in zip(xh, xl)]
+        res = max(abs(mpmath.fsum(mpmath.mpf(float(v)) * x[j] for v, j in
+                                  zip(A.data[A.indptr[i]:A.indptr[i + 1]], A.indices[A.indptr[i]:A.indptr[i + 1]]))
+                      - b[i]) for i in range(A.shape[0]))
+        return float(res), float(abs(A).sum(axis=1).max()) * float(max(abs(t) for t in x))
+
+
+def _scaled_spd(seed: int, spread: float, n: int = 60):
+    """D B D, B sparse SPD and well conditioned, D spanning 10^±spread (condition ~10^(4·spread)
+    at most): the contact-space matrices' kind of ill-conditioning, which refinement removes."""
+    rng = np.random.default_rng(seed)
+    B = sp.random(n, n, density=0.06, random_state=seed)
+    B = (B @ B.T + sp.identity(n)).tocsc()
+    D = sp.diags(10.0 ** rng.uniform(-spread, spread, size=n))
+    A = sp.triu(D @ B @ D)  # exactly symmetric: D B D rounds its two triangles differently
+    return (A + sp.triu(A, 1).T).tocsc(), rng
+
+
+# ---------------------------------------------------------------------- the CHOLMOD engine
+@needs_cholmod
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 10**6), spread=st.floats(0.0, 12.0))
+@example(seed=3, spread=12.0)  # condition ~1e24 and more: far beyond float64
+@example(seed=0, spread=0.0)  # well conditioned: one step solves it
+def test_cholmod_engine_solves_to_double_double_accuracy_like_the_ldl_engine(seed, spread):
+    A, rng = _scaled_spd(seed, spread)
+    n = A.shape[0]
+    b = rng.normal(size=n) * 10.0 ** rng.uniform(-6, 6, size=n)
+    out = []
+    for chol in (CholmodMixed(A), MixedCholesky(A)):
+        assert chol.factor(*_upper_values(chol, A)) == -1
+        xh, xl = chol.solve(b, np.zeros(n))
+        assert chol.precision == "mixed" and chol.last_backward_error <= chol.backward_target
+        res, scale = _residual_mp(A, xh, xl, b)
+        assert res <= 1e-28 * scale
+        out.append(dd.to_longdouble(xh, xl))
+    d = sp.csc_matrix(A).diagonal() ** 0.5  # compare in the matrix's own scaling
+    assert np.max(np.abs(d * (out[0] - out[1]))) <= 1e-14 * np.max(np.abs(d * out[1]))
+
+
+@needs_cholmod
+def test_cholmod_engine_falls_back_to_double_double_when_float64_sees_a_singular_matrix():
+    """[[1, 1], [1, 1 + 2⁻⁶⁰]] blocks: the float64 part is singular, the exact matrix SPD."""
+    n = 40
+    chol = CholmodMixed(sp.identity(n, format="csc") + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))
+    hi, lo = np.zeros(chol.nnz_upper), np.zeros(chol.nnz_upper)
+    rows, cols = np.arange(0, n, 2), np.arange(1, n, 2)
+    hi[chol.positions(np.arange(n), np.arange(n))] = 1.0
+    lo[chol.positions(cols, cols)] = 2.0 ** -60
+    hi[chol.positions(rows, cols)] = 1.0
+    assert chol.factor(hi, lo) == -1
+    assert chol.precision == "double-double" and "CHOLMOD" in chol.fallback_reason
+    b = np.arange(1.0, n + 1)
+    xh, xl = chol.solve(b, np.zeros(n))
+    x1 = (b[1::2] - b[0::2]) * 2.0 ** 60
+    assert np.allclose(np.asarray(dd.to_longdouble(xh, xl)[1::2], dtype=float), x1, rtol=1e-12)
+
+
+@needs_cholmod
+def test_cholmod_engine_falls_back_when_refinement_stalls():
+    """Condition 1e17 in a random basis: CHOLMOD's float64 factor exists but cannot refine;
+    the solve is redone in double-double, and later factorisations stay there."""
+    from rfverify.proof.local import exact_psd
+
+    n = 60
+    for seed in range(4, 40):
+        # rounding Q Λ Qᵀ moves the 1e-17 eigenvalue by ~1e-16: the first seed whose stored
+        # matrix is definite in exact arithmetic and whose float64 factor exists
+        rng = np.random.default_rng(seed)
+        Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+        A = sp.triu(sp.csc_matrix((Q * np.logspace(0, -17, n)) @ Q.T))
+        A = (A + sp.triu(A, 1).T).tocsc()
+        chol = CholmodMixed(A)
+        if exact_psd(A) == "definite" and chol.factor(*_upper_values(chol, A)) == -1 and chol.precision == "mixed":
+            break
+    else:
+        pytest.fail("no seed gave a definite matrix with a float64 factor")
+    assert chol.precision == "mixed"
+    b = rng.normal(size=n)
+    xh, xl = chol.solve(b, np.zeros(n))
+    assert chol.precision == "double-double" and "refinement stalled" in chol.fallback_reason
+    res, scale = _residual_mp(A, xh, xl, b)
+    assert res <= 1e-27 * scale
+    assert chol.factor(*_upper_values(chol, A)) == -1 and chol.precision == "double-double"
+
+
+@needs_cholmod
+def test_newton_solve_refined_against_the_double_double_matrix_at_an_iterate():
+    """At the double solve's last iterate, the contact-space matrix factored by CHOLMOD: each
+    solve reaches the double-double backward error, checked by an independent 60-digit
+    residual of the stored matrix, and agrees with the compiled LDLᵀ engine."""
+    problem = random_problem(12, 24, seed=4)
+    res = rfverify.solve(problem, tol=1e-8)
+    data = ExtendedData(problem)
+    z = dd.from_longdouble(res.extras["z"])
+    s = data.JT.matvec(*dd.from_longdouble(res.extras["r_t"]))
+    ph, pl, pih, pil, lh, ll = (np.zeros(data.nz) for _ in range(6))
+    spec = np.zeros((data.n3 + data.n1, 8))
+    assert C.nt_scaling(data.n3, z[0], z[1], s[0], s[1], ph, pl, pih, pil, lh, ll, spec) == -1
+    rng = np.random.default_rng(2)
+    a = (rng.normal(size=data.m), np.zeros(data.m))
+    t = (rng.normal(size=data.nk), np.zeros(data.nk))
+    sols = {}
+    for engine in ("cholmod", "ldl"):
+        back = ContactSpace(data, engine=engine)
+        assert back.engine == engine
+        assert back.update(ph, pl, pih, pil, spec)
+        sols[engine] = back.solve(a, t)
+    back = ContactSpace(data, engine="cholmod")
+    assert isinstance(back.chol, CholmodMixed) and "CHOLMOD" in back.name
+    assert back.update(ph, pl, pih, pil, spec)
+    rhs = rng.normal(size=data.nk)
+    xh, xl = back.chol.solve(rhs, np.zeros(data.nk))
+    assert back.chol.precision == "mixed" and back.chol.last_backward_error <= 1e-29
+    U = sp.csc_matrix((back.chol._A[0], back.chol.Ai, back.chol.Ap), shape=(data.nk, data.nk))
+    S_hi = (U + sp.triu(U, 1).T).tocsc()
+    with mpmath.workdps(60):  # the matrix's low words matter here: residual of hi + lo exactly
+        Ul = sp.csc_matrix((back.chol._A[1], back.chol.Ai, back.chol.Ap), shape=(data.nk, data.nk))
+        S_lo = (Ul + sp.triu(Ul, 1).T).tocsr()
+        S_hi = S_hi.tocsr()
+        x = [mpmath.mpf(float(h)) + mpmath.mpf(float(lo)) for h, lo in zip(xh, xl)]
+        worst = 0.0
+        for i in range(data.nk):
+            acc = -mpmath.mpf(float(rhs[i]))
+            for M_ in (S_hi, S_lo):
+                for v, j in zip(M_.data[M_.indptr[i]:M_.indptr[i + 1]], M_.indices[M_.indptr[i]:M_.indptr[i + 1]]):
+                    acc += mpmath.mpf(float(v)) * x[j]
+            den = sum(abs(float(v) * float(xh[j])) for v, j in
+                      zip(S_hi.data[S_hi.indptr[i]:S_hi.indptr[i + 1]], S_hi.indices[S_hi.indptr[i]:S_hi.indptr[i + 1]]))
+            worst = max(worst, float(abs(acc)) / (den + abs(rhs[i])))
+    assert worst <= 1e-28
+    (dv1, dr1), (dv2, dr2) = sols["cholmod"], sols["ldl"]
+    v1, v2 = dd.to_longdouble(*dv1), dd.to_longdouble(*dv2)
+    assert np.max(np.abs(v1 - v2)) <= 1e-20 * np.max(np.abs(v2))
+
+
+@needs_cholmod
+@pytest.mark.parametrize("seed", [2, 7])
+def test_both_engines_prove_the_same_digits(seed):
+    problem = random_problem(20 * seed // 2 + 10, 20 * seed + 10, seed=seed)
+    outs = {e: rfverify.solve_to_digits(problem, digits=10, factor_engine=e) for e in ("ldl", "cholmod")}
+    assert "CHOLMOD" in outs["cholmod"].certificate.extra["backend"]
+    assert "CHOLMOD" not in outs["ldl"].certificate.extra["backend"]
+    for out in outs.values():
+        assert out.success, out.certificate.verdict
+    # both proven: each point within its own proven bound of v*, so within the sum of each other
+    qa, qb = outs["ldl"].certificate.quantities["v"], outs["cholmod"].certificate.quantities["v"]
+    assert np.max(np.abs(outs["ldl"].v - outs["cholmod"].v)) <= qa.abs_bound + qb.abs_bound
+
+
+# ---------------------------------------------------------------------- without scikit-sparse
+@pytest.fixture
+def no_sksparse(monkeypatch):
+    """Make ``import sksparse`` fail, as on an install without the extra."""
+    monkeypatch.setitem(sys.modules, "sksparse", None)
+    monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
+
+
+def test_without_scikit_sparse_the_ldl_engine_is_taken(no_sksparse):
+    assert not cholmod_available()
+    assert resolve_engine("auto", 10**6) == "ldl"
+    problem = random_problem(8, 14, seed=1)
+    data = ExtendedData(problem)
+    back = choose_backend(data)
+    assert type(back.chol) is MixedCholesky and back.engine == "ldl" and "CHOLMOD" not in back.name
+    with pytest.raises(ImportError, match="rfverify\\[cholmod\\]"):
+        choose_backend(data, engine="cholmod")
+    with pytest.raises(rfverify.InvalidArgumentError, match="scikit-sparse"):
+        rfverify.solve_to_digits(problem, digits=10, factor_engine="cholmod")
+    out = rfverify.solve_to_digits(problem, digits=10)
+    assert out.success, out.certificate.verdict
+    assert "CHOLMOD" not in out.certificate.extra["backend"]
+
+
+def test_an_unknown_engine_is_refused_before_any_work():
+    problem = random_problem(4, 6, seed=1)
+    with pytest.raises(rfverify.InvalidArgumentError, match="factor_engine"):
+        rfverify.solve_to_digits(problem, digits=10, factor_engine="pardiso")
+    with pytest.raises(ValueError):
+        resolve_engine("pardiso", 10)
+
+
+def test_the_ldl_engine_is_the_compiled_ldl_whatever_is_installed():
+    data = ExtendedData(random_problem(8, 14, seed=1))
+    back = choose_backend(data, engine="ldl")
+    assert type(back.chol) is MixedCholesky
+    assert type(choose_backend(data, "contact-dd").chol) is DDCholesky
+
+
+# ---------------------------------------------------------------------- the sparse tail
+BITS = wide.DEFAULT_BITS
+
+
+def _interior_scaling(problem, gap_exp, seed):
+    """An NT scaling at random interior cones whose λ₂/λ₁ spans 10^-gap_exp."""
+    data = ExtendedData(problem)
+    rng = np.random.default_rng(seed)
+
+    def cones(n3, n1):  # built in the working precision, so λ₂ ≈ 10^-gap_exp λ₁ is exact
+        out = []
+        for _ in range(n3):
+            l1 = gmpy2.mpfr(float(rng.uniform(0.5, 2.0)))
+            l2 = l1 * gmpy2.mpfr(10) ** (-int(rng.integers(0, gap_exp + 1)))
+            th = gmpy2.mpfr(float(rng.uniform(0, 2 * np.pi)))
+            out += [(l1 + l2) / 2, (l1 - l2) / 2 * gmpy2.cos(th), (l1 - l2) / 2 * gmpy2.sin(th)]
+        out += [gmpy2.mpfr(float(rng.uniform(1e-3, 2.0))) for _ in range(n1)]
+        return np.array(out, dtype=object)
+
+    with wide._context(BITS):
+        sc, bad = wide.nt_scaling(data.n3, cones(data.n3, data.n1), cones(data.n3, data.n1))
+    assert bad == -1
+    return data, sc
+
+
+@settings(max_examples=5, deadline=None)
+@given(seed=st.integers(0, 10**4), gap=st.integers(2, 45))
+@example(seed=3, gap=40)  # λ₂/λ₁ ≈ 1e-40: where the double-double factors lost definiteness
+@example(seed=0, gap=2)
+def test_sparse_tail_factor_equals_the_dense_one(seed, gap):
+    """Same order, same operations in the same sequence: the sparse mpfr factor's solve is the
+    dense one's, number for number, and it solves the Newton system to working precision."""
+    problem = random_problem(6, 12, seed=seed % 50, mu_zero_fraction=0.25, mu_r_zero_fraction=0.25)
+    data, sc = _interior_scaling(problem, gap, seed)
+    rng = np.random.default_rng(seed)
+    with wide._context(BITS):
+        W = wide.WideData(data)
+        a, t = wide.from_dd(rng.normal(size=data.m)), wide.from_dd(rng.normal(size=data.nk))
+        dense, sparse = wide.DenseDofSpace(data, W), wide.SparseDofSpace(data, W)
+        assert dense.update(sc) and sparse.update(sc)
+        (dv1, dr1), (dv2, dr2) = dense.solve(a, t), sparse.solve(a, t)
+        assert all(x == y for x, y in zip(dv1, dv2)) and all(x == y for x, y in zip(dr1, dr2))
+        Gdr = W.J @ wide.quad_pow(data.n3, -2, sc, W.JT @ dr2)
+        e1 = W.M @ dv2 - W.HtT @ dr2 - a
+        e2 = W.Ht @ dv2 + Gdr - t
+        scale = max(wide.inf_norm(W.M @ dv2), wide.inf_norm(W.HtT @ dr2), wide.inf_norm(Gdr), 1.0)
+    assert max(wide.inf_norm(e1), wide.inf_norm(e2)) <= 1e-50 * scale
+
+
+def test_sparse_tail_stores_no_dense_matrix():
+    """Its memory is the factor's entries (nnz(L) + m numbers), not m²."""
+    problem = random_problem(30, 60, seed=5)
+    data, sc = _interior_scaling(problem, 20, 1)
+    with wide._context(BITS):
+        back = wide.SparseDofSpace(data, wide.WideData(data))
+        assert back.update(sc)
+    assert back.Lx.size == back.Li.size < data.m * data.m // 4 and back.Ld.size == data.m
+    assert not hasattr(back, "M_dense")
