@@ -94,6 +94,17 @@ def test_a_crash_is_a_recorded_failure(siconos_prefix, monkeypatch):
     assert not res.success and res.nit == 0
 
 
+def test_a_real_zero_pivot_crash_is_a_recorded_failure(siconos_prefix):
+    """A committed Chute (240 contacts) on which GRFC3D_IPM's LDLᵀ meets a zero pivot, ignores the
+    return code and segfaults in the next triangular solve (ldl_l_lsolve, seen in gdb)."""
+    problem = load(str(REPO_ROOT / "tests" / "data" / "hard" / "Chute-ndof-1200-nc-240-3.hdf5"))
+    res = rfverify.solve(problem, method="siconos", tol=1e-10)
+    assert res.status is Status.NUMERICAL_ERROR, res.message
+    assert res.message.startswith("siconos crashed (signal 11)"), res.message
+    # Algorithm 1 solves the same problem (the crash is Siconos's, not the problem's).
+    assert rfverify.solve(problem, method="jqinv", tol=1e-10).status is Status.SOLVED
+
+
 def test_a_crash_in_the_bench_is_a_record_not_the_bench_s_death(siconos_prefix, tmp_path):
     env = {**os.environ, "RFVERIFY_SICONOS_FAULT": "sigsegv", "OPENBLAS_NUM_THREADS": "1"}
     out = tmp_path / "run"
