@@ -29,10 +29,11 @@ from rfverify.measures import measures
 
 
 BUNDLED = "chute,cube,sphere"
-SCENES = [("SpheresPile", "SpheresPile", None, 1, 0), ("SpheresPile 768", "SpheresPile", None, 3, 2),
-          ("Chute 888", "Chute", 700, 1, 0), ("Chute 1368", "Chute", None, 2, 1), ("Lattice 474", "Lattice", 100, 1, 0),
-          ("MassRatio", "MassRatio", None, 1, 0), ("MassRatio 768", "MassRatio", 250, 1, 0),
-          ("Millimetre", "Millimetre", None, 1, 0), ("PrimitiveSoup", "PrimitiveSoup", None, 1, 0)]
+SCENES = [("SpheresPile", None, 1, 0), ("SpheresPile", None, 3, 2), ("Chute", 700, 1, 0), ("Chute", None, 2, 1),
+          ("Lattice", 100, 1, 0), ("MassRatio", None, 1, 0), ("MassRatio", 250, 1, 0), ("Millimetre", None, 1, 0),
+          ("PrimitiveSoup", None, 1, 0)]
+"""(scene, size, count, index) of the generated problems (files sorted by name: index 2 of SpheresPile's 3 is
+its 375-contact stage)."""
 HARD = Path(__file__).resolve().parents[3] / "tests" / "data" / "hard" / "Chute-ndof-1200-nc-240-3.hdf5"
 """A committed Chute on which GRFC3D_IPM crashes (zero pivot in its LDLᵀ)."""
 
@@ -58,10 +59,11 @@ def problem_set(args):
         return
     for name in BUNDLED.split(","):
         yield f"bundled:{name}", rfverify.load(f"bundled:{name}")
-    for label, scene, size, count, index in SCENES:
-        yield label, rfverify.load(scene_file(Path(args.cache), scene, size, count, index))
+    for scene, size, count, index in SCENES:
+        f = scene_file(Path(args.cache), scene, size, count, index)
+        yield f.stem, rfverify.load(f)
     if HARD.is_file():
-        yield "Chute 240 (hard)", rfverify.load(HARD)
+        yield HARD.stem + " (tests/data/hard)", rfverify.load(HARD)
 
 
 def _dig(x) -> str:
@@ -89,7 +91,7 @@ def _main(argv=None):
     print(f"tol {args.tol:g}; per method: median wall time (s) of {args.repeat} runs, rfverify criterion of the "
           f"answer, iterations, proven digits of v and u (rfverify.certify, --digits {args.digits}); "
           "siconos also its own residual and info")
-    head = f"{'problem':<18} {'n':>5} " + " ".join(f"| {m:<8} {'s':>7} {'crit':>8} {'it':>3} {'dv':>4} {'du':>4} "
+    head = f"{'problem':<44} {'n':>5} " + " ".join(f"| {m:<8} {'s':>7} {'crit':>8} {'it':>3} {'dv':>4} {'du':>4} "
                                                    for m in methods)
     print(head)
     summary = {m: {"ratio": [], "digits_v": [], "solved": 0, "runs": 0, "crashed": 0, "refuted": 0} for m in methods}
@@ -131,7 +133,7 @@ def _main(argv=None):
                              f"siconos own residual {r.extras['siconos_residual']:.1e} info {r.extras['siconos_info']}"
                              f" (its solve {r.extras['siconos_seconds']:.3f} s)")
             cells.append(f"| {'':<8} {t:>7.3f} {crit:>8.1e} {r.nit:>3d} {_dig(dv):>4} {_dig(du):>4} ")
-        print(f"{label:<18} {p.n_contacts:>5} " + " ".join(cells) + ("   " + "; ".join(notes) if notes else ""),
+        print(f"{label:<44} {p.n_contacts:>5} " + " ".join(cells) + ("   " + "; ".join(notes) if notes else ""),
               flush=True)
     print()
     for m, s in summary.items():
