@@ -91,19 +91,24 @@ def test_report_files_and_figures(run_dir):
     make_report(path, diagnose_count=1, diagnose_max_contacts=4)
     page = (path / "report.html").read_text()
     images = re.findall(r'<img src="([^"]+)"', page)
-    assert {"profile_time.png", "profile_iterations.png", "work_precision.png"} <= set(images)
+    assert {"profile_time.png", "profile_iterations.png", "work_precision.png", "proven_digits.png",
+            "hard_per_family.png"} <= set(images)
+    # The first screen has one figure: proven digits against time.
+    glance = page.split("id='glance'", 1)[1].split("<h2", 1)[0]
+    assert re.findall(r'<img src="([^"]+)"', glance) == ["proven_digits.png"]
     for name in images:
         png = path / name
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
     summary = (path / "summary.md").read_text()
     for heading in ("At a glance", "Robustness: solved per collection", "Speed on common solved sets",
                     "Performance profiles", "How far double precision gets", "What 10 proven digits cost",
-                    "Per-iteration diagnostics", "Failures and their diagnosed causes"):
+                    "Per-iteration diagnostics", "Failures and their diagnosed causes", "Refuted claims",
+                    "cond(Q_p) and λ2 per iteration, one hard problem per family"):
         assert f"## {heading}" in summary
     # Tables say yes/no/– instead of Python's True/False/None.
     assert not re.search(r"\| (True|False|None) \|", summary)
-    # A Clarabel run that misses the criterion is listed with the measure that failed.
-    assert re.search(r"\| \S+ \| clarabel \| [0-9.e-]+ \| \w+ \| .*recheck: \w+ = ", summary)
+    # A Clarabel claim the recheck refutes is shown with the measure that refuted it.
+    assert re.search(r"\| clarabel \| Solved \(refuted: \w+ [0-9.e+-]+", summary)
     # The lockstep diagnosis is cached.
     assert list((path / "diagnostics").glob("*.json"))
 
@@ -375,5 +380,47 @@ def test_refuted_claims_equal_an_independent_recount_of_the_records(run_dir):
     assert got and int(got[1]) == recount
     rows = [r for r in _table_with(text, "collection", "refuted claims")[1] if r[0] == "all"]
     assert sum(int(r[4]) for r in rows) == recount
-    failures = _table_with(text, "problem", "claim refuted")[1]
-    assert sum(r[4] == "yes" for r in failures) == recount
+    # Grouped, once: the refuted-claims table counts each, the failures table none of them.
+    fail_rows = [r for h, rows in _md_tables(_section(text, "Failures and their diagnosed causes"))
+                 if h[0] == "problem" for r in rows]
+    refuted = {(r["problem"], r["method"], format(r["tol"], "g")) for r in _records(path, "solve") if r["refuted"]}
+    assert not refuted & {tuple(r[:3]) for r in fail_rows}
+    header, groups = _table_with(_section(text, "Refuted claims"), "method", "shown as", "runs")
+    assert sum(int(g[2]) for g in groups) == recount
+    # Each refuted run's label, recomputed from its record: its claim and its worst recheck measure.
+    from rfverify.measures import CRITERION
+
+    examples = " ".join(g[5] for g in groups)
+    for rec in _records(path, "solve"):
+        if rec["refuted"]:
+            ver = rec["verified"]
+            worst = max((k for k in CRITERION if ver.get(k) is not None), key=lambda k: ver[k])
+            label = f"{rec['claim']} (refuted: {worst} {ver[worst]:.1e})"
+            assert f"{rec['problem']} at {rec['tol']:g}: {label}" in examples, (label, examples)
+
+
+def test_every_answer_gets_its_proven_digits_from_the_proof(run_dir):
+    """Every saved answer of every method (the peer included) has proven digits, and they are what
+    certify proves of it at the problem's proven point (saved by the digits task)."""
+    import rfverify
+    from rfverify.proof import Point
+    from rfverify.report.proven import answer_digits, prove_runs
+
+    path, _ = run_dir
+    data = load_run(path)
+    stats = prove_runs(data)
+    assert stats["n_runs"] == len(data.solves) and stats["n_proven"] == stats["n_runs"] and not stats["no_point"]
+    assert {r["method"] for r in data.solves if r["proven"]["answer"] is not None} == {"jqinv", "qp2", "clarabel"}
+    for rec in [r for r in data.solves if r["problem"] == "bundled/chute"][:3]:
+        problem = load(_problem_path(data, rec["problem"]))
+        with np.load(data.digits[rec["problem"]]["_npz"]) as z:
+            point = Point(z["ref_v"], z["point_v_lo"], z["ref_r"], z["point_r_lo"])
+        with np.load(rec["_npz"]) as z:
+            cert = rfverify.certify(problem, z["v"], z["u"], z["r"], point=point, digits=10)
+        modes = {q: x.mode for q, x in cert.quantities.items()}
+        assert rec["proven"]["answer"] == answer_digits(cert.digits, modes)
+        assert rec["proven"]["answer"] < 10 <= data.digits[rec["problem"]]["certified_digits"]["v"]
+    # A second report reads them from the cache.
+    again = load_run(path)
+    assert prove_runs(again)["n_proven"] == stats["n_proven"]
+    assert [r["proven"] for r in again.solves] == [r["proven"] for r in data.solves]

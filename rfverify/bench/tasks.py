@@ -9,8 +9,9 @@ Task kinds
                 verified error against elapsed time (work–precision data) and how far double
                 precision gets.
 ``digits``      the mixed-precision path (:func:`rfverify.digits.solve_to_digits`, timed in
-                its parts) and its certificate; the certificate's independent reference
-                solution is saved and serves as the problem's reference for forward errors.
+                its parts) and its certificate; its proven extended-precision point is saved
+                (every float64 term) and serves as the problem's reference: the report proves
+                every other saved answer's digits at it (:mod:`rfverify.report.proven`).
 
 Each task writes ``<stem>.npz`` (arrays) then ``<stem>.json`` (record, declared in
 :mod:`rfverify.bench.records`); the JSON is written last, atomically, so its presence means the
@@ -211,6 +212,8 @@ def _digits(problem, task, npz_path) -> dict:
         # The proven extended point is the reference that grades every other saved solution.
         arrays.update(ref_v=out.point.v_hi, ref_r=out.point.r_hi, ref_u=out.u,
                       point_v_lo=out.point.v_lo, point_r_lo=out.point.r_lo)
+        if out.point.v_more is not None:  # a multiple-precision point: every term, for the report's proofs
+            arrays.update(point_v_more=out.point.v_more, point_r_more=out.point.r_more)
     np.savez_compressed(npz_path, **arrays)
     verified = HighPrecisionChecker(problem, 40).criterion(out.v, out.u, out.r)
     t = out.timings

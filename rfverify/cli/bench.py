@@ -12,6 +12,9 @@ from ..solver.result import METHODS
 from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
 from .common import DOCS_NOTE, exit_codes, EXIT_OK, dumps
 
+NO_LIMIT = 10**9
+"""--reference-max-contacts when not given: every problem gets the --digits path."""
+
 HELP = "run every method on every problem at every tolerance, verified independently"
 
 DESCRIPTION = """\
@@ -20,9 +23,9 @@ killed after --time-limit seconds; on a Dask cluster with --scheduler), save eve
 trace under RUN_DIR/runs/, and count a run as solved only when an independent 30-digit
 recomputation of the stopping criterion from the saved solution meets the tolerance. Also, per
 problem: a trajectory of each Algorithm 1 method at --trajectory-tol with every iterate
-rechecked (work-precision data, how far double precision gets), and, for problems with at most
---reference-max-contacts contacts, the mixed-precision --digits path with its certificate
-(whose independent reference gives correct digits). Resumable: a finished run is reused only
+rechecked (work-precision data, how far double precision gets), and the mixed-precision
+--digits path with its certificate, whose proven point lets `rfverify report` prove the digits
+of every saved answer of every method (--reference-max-contacts limits it to smaller problems). Resumable: a finished run is reused only
 when the problem file's content, the method, tolerance, settings and rfverify version are
 unchanged (--retry-failed also redoes timed-out, crashed and failed runs); one bench at a time
 per RUN_DIR. Then run `rfverify report RUN_DIR`."""
@@ -57,10 +60,11 @@ def add_parser(sub) -> None:
     bench.add_argument("--no-trajectories", action="store_true", help="skip the trajectory runs")
     bench.add_argument("--digits", type=nonneg_int, default=10, metavar="K",
                        help="digits of the mixed-precision path (0 skips it; default: %(default)s)")
-    bench.add_argument("--reference-max-contacts", type=nonneg_int, default=60, metavar="N",
-                       help="largest problem (contacts) given the mixed-precision path and a "
-                            "reference solution; the reference costs ~1 min at 100 contacts "
-                            "(default: %(default)s)")
+    bench.add_argument("--reference-max-contacts", type=nonneg_int, default=None, metavar="N",
+                       help="largest problem (contacts) given the mixed-precision --digits path, "
+                            "whose proven point gives every answer of that problem its proven "
+                            "digits in the report (default: no limit; its cost is bounded by "
+                            "--time-limit like any run)")
     bench.add_argument("--scheduler", metavar="ADDRESS", default=None,
                        help="run the tasks on a Dask distributed cluster whose scheduler listens "
                             "at ADDRESS (tcp://HOST:8786; needs pip install 'rfverify[distributed]' "
@@ -95,7 +99,8 @@ def cmd_bench(args) -> int:
     out = run_bench(args.inputs, args.out, methods=tuple(args.methods), tols=tuple(args.tol), jobs=args.jobs,
                     time_limit=args.time_limit, trajectory_tol=args.trajectory_tol,
                     trajectories=not args.no_trajectories, digits=args.digits,
-                    reference_max_contacts=args.reference_max_contacts, max_iter=args.max_iter,
+                    reference_max_contacts=NO_LIMIT if args.reference_max_contacts is None
+                    else args.reference_max_contacts, max_iter=args.max_iter,
                     quiet=args.quiet, command=command, retry_failed=args.retry_failed,
                     scheduler=args.scheduler)
     if args.json:

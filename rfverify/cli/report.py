@@ -11,11 +11,15 @@ from .common import exit_codes, EXIT_OK, dumps
 HELP = "write RUN_DIR/report.html and RUN_DIR/summary.md from a bench run"
 
 DESCRIPTION = """\
-Build the report of a bench run directory: Dolan–Moré performance profiles of time and
-iterations per tolerance, verified error against run time, a success table per collection ×
-method × tolerance with shifted geometric mean times, how far double precision gets, the cost
-of the mixed-precision path, per-iteration lockstep diagnostics (double against reference) of
-the worst cases, and every failure with its diagnosed cause. PNG figures are written beside
+Build the report of a bench run directory. Its first screen: one figure, the proven digits of
+every saved answer of every method against its run time (the rigorous bound of DESIGN §6,
+evaluated exactly at each problem's proven point from its --digits path and carried to the
+answer; cached in RUN_DIR/proven/), and the answers to which method reaches K proven digits,
+how fast, where double precision breaks and what the K-digit path costs. Below: robustness and
+refuted solver claims (grouped, each once), speed on common solved sets, Dolan–Moré profiles,
+how far double precision gets, cond(Q_p) and λ2 per iteration for one hard problem per family,
+the proven digits of every method, lockstep diagnostics (double against reference) of the worst
+cases, and every other failure with its diagnosed cause. PNG figures are written beside
 report.html."""
 
 

@@ -376,10 +376,11 @@ def performance_profile(data: RunData, tol: float, measure: str = "time"):
 
 
 def failures(data: RunData) -> list[dict]:
-    """Every counted run that is not verified solved, with its diagnosed cause."""
+    """Every counted run that is not verified solved and whose solver did not claim it was (the
+    refuted claims are grouped apart, :func:`refuted_groups`), with its diagnosed cause."""
     out = []
     for r in sorted(data.solves, key=lambda r: (r["problem"], r["method"], -r["tol"])):
-        if r.get("solved"):
+        if r.get("solved") or _refuted(r):  # a refuted claim is shown once, in refuted_groups
             continue
         out.append({"problem": r["problem"], "method": r["method"], "tol": r["tol"],
                     "status": r.get("status"), "refuted": _refuted(r), "cause": failure_cause(r)})
@@ -537,3 +538,135 @@ def per_problem_counts(data: RunData) -> dict:
         out[r["problem"]][1] += 1
         out[r["problem"]][0] += bool(r.get("solved"))
     return dict(out)
+
+
+# ----------------------------------------------------------------------- refuted claims, grouped
+def worst_measure(rec: dict):
+    """(name, value) of the recheck measure that failed most (largest), or (None, None)."""
+    ver = rec.get("verified") or {}
+    measures = [k for k in CRITERION if _is_num(ver.get(k)) and not math.isnan(ver[k])]
+    if not measures:
+        return None, None
+    worst = max(measures, key=lambda k: ver[k])
+    return worst, float(ver[worst])
+
+
+def refuted_label(rec: dict) -> str:
+    """What a refuted run is shown as: its solver's claim and what refuted it, e.g.
+    "Solved (refuted: complementarity 1.7e-06)"."""
+    name, value = worst_measure(rec)
+    claim = rec.get("claim") or "Solved"
+    if name is None:
+        return f"{claim} (refuted: no finite recheck)"
+    return f"{claim} (refuted: {name} {value:.1e})"
+
+
+def refuted_groups(data: RunData) -> list[dict]:
+    """Refuted claims grouped by (method, claim, measure that refuted it): how many runs, on how
+    many problems, at which tolerances, the smallest and largest refuting value, a few examples
+    (each with its label).  Every refuted run is in exactly one group."""
+    groups = {}
+    for r in refuted_runs(data):
+        name, value = worst_measure(r)
+        g = groups.setdefault((r["method"], r.get("claim") or "Solved", name),
+                              {"method": r["method"], "claim": r.get("claim") or "Solved", "measure": name,
+                               "runs": []})
+        g["runs"].append(r)
+    out = []
+    for g in groups.values():
+        runs = sorted(g["runs"], key=lambda r: -(worst_measure(r)[1] or 0))
+        vals = [worst_measure(r)[1] for r in runs if worst_measure(r)[1] is not None]
+        out.append({**g, "n": len(runs), "problems": sorted({r["problem"] for r in runs}),
+                    "tols": sorted({r["tol"] for r in runs}, reverse=True),
+                    "min": min(vals) if vals else None, "max": max(vals) if vals else None,
+                    "label": (f"{g['claim']} (refuted: {g['measure']} {min(vals):.1e}–{max(vals):.1e})"
+                              if vals and len(vals) > 1 else refuted_label(runs[0])),
+                    "examples": [(r["problem"], r["tol"], refuted_label(r)) for r in runs[:3]]})
+    return sorted(out, key=lambda g: (-g["n"], g["method"]))
+
+
+# ----------------------------------------------------------------------- proven digits of every run
+def proven_by_method(data: RunData) -> list[dict]:
+    """Per method (the k-digit path as "k-digit path" last): answers with proven digits, how many
+    reach the bench's k digits, the median proven digits and the median time of those that do
+    (:mod:`rfverify.report.proven`; an answer's digits = the smallest relative digits of v, u, Hr)."""
+    k = int(data.manifest.get("digits") or 10)
+    rows = []
+    for m in data.methods:
+        recs = [r for r in data.solves if r["method"] == m and not r.get("_placeholder")]
+        proven = [r for r in recs if (r.get("proven") or {}).get("answer") is not None]
+        reach = [r for r in proven if r["proven"]["answer"] >= k - 1e-9]
+        rows.append({"method": m, "runs": len(recs), "n_proven": len(proven), "reach": len(reach),
+                     "median_digits": median([r["proven"]["answer"] for r in proven]),
+                     "best_digits": max((r["proven"]["answer"] for r in proven), default=None),
+                     "median_time_reach": median([r["time"] for r in reach])})
+    paths = [d for d in data.digits.values() if d.get("status") not in ("Timeout", "Crashed", "Error")]
+    cert = [d for d in paths if d.get("certified")]
+    if data.digits:
+        rows.append({"method": f"{k}-digit path", "runs": len(data.digits), "n_proven": len(paths),
+                     "reach": len(cert), "median_digits": median([path_answer_digits(d) for d in paths]),
+                     "best_digits": max((x for x in (path_answer_digits(d) for d in paths) if x is not None),
+                                        default=None),
+                     "median_time_reach": median([d["time"] for d in cert])})
+    return rows
+
+
+def path_answer_digits(d: dict):
+    """A k-digit path's proven digits of its answer, as :func:`rfverify.report.proven.answer_digits`."""
+    from .proven import answer_digits
+
+    digs = d.get("certified_digits") or {}
+    return answer_digits(digs, {q: certified_mode(d, q) for q in digs})
+
+
+def double_breaks(data: RunData) -> dict:
+    """Where double precision breaks: per problem with proven digits, the best proven digits of
+    any double answer (every method and tolerance) — median and largest over problems, and how
+    many reach k — and, along the jqinv trajectories (every iterate kept to the trajectory
+    tolerance), the median over problems of the largest cond(Q_p) and of the smallest λ₂ of z
+    and Jᵀr̃, and how many trajectories had a λ₂ below 1e-300 (underflow) or cond(Q_p) ≥ 1e15."""
+    k = int(data.manifest.get("digits") or 10)
+    best = {}
+    for r in data.solves:
+        d = (r.get("proven") or {}).get("answer")
+        if d is not None:
+            best[r["problem"]] = max(best.get(r["problem"], -math.inf), d)
+    traj = [t for t in data.trajectories if t["method"] == "jqinv" and t.get("iterates")]
+    conds, lams, under, big = [], [], 0, 0
+    for t in traj:
+        c = [it.get("max_cond_Qp") for it in t["iterates"] if it.get("max_cond_Qp") is not None]
+        lz = [min(x for x in (it.get("min_lam2_z"), it.get("min_lam2_s")) if x is not None)
+              for it in t["iterates"] if it.get("min_lam2_z") is not None or it.get("min_lam2_s") is not None]
+        if c:
+            conds.append(max(c))
+            big += max(c) >= 1e15
+        if lz:
+            lams.append(min(lz))
+            under += min(lz) < 1e-300
+    return {"n": len(best), "median_best": median(list(best.values())),
+            "max_best": max(best.values()) if best else None,
+            "reach": sum(v >= k - 1e-9 for v in best.values()), "digits": k,
+            "n_traj": len(traj), "median_max_cond": median(conds), "median_min_lam2": median(lams),
+            "n_underflow": under, "n_cond15": big, "traj_tol": data.manifest.get("trajectory_tol")}
+
+
+def family(key: str) -> str:
+    """The family of a problem: a generated scene's name (before "-ndof"), else its collection."""
+    name = key.rsplit("/", 1)[-1]
+    return name.split("-ndof")[0] if "-ndof" in name else key.split("/", 1)[0]
+
+
+def hard_per_family(data: RunData, method: str = "jqinv") -> list[dict]:
+    """One representative hard problem per family: the one whose ``method`` trajectory reached
+    the largest cond(Q_p) (ties: more contacts), with its per-iteration cond(Q_p) and λ₂."""
+    picks = {}
+    for t in data.trajectories:
+        if t["method"] != method or not t.get("iterates"):
+            continue
+        c = max((it.get("max_cond_Qp") or 0 for it in t["iterates"]), default=0)
+        fam = family(t["problem"])
+        score = (c, data.problems[t["problem"]]["n_contacts"])
+        if fam not in picks or score > picks[fam]["score"]:
+            picks[fam] = {"family": fam, "problem": t["problem"], "score": score, "trajectory": t,
+                          "max_cond": c}
+    return [picks[f] for f in sorted(picks)]

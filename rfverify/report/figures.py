@@ -305,3 +305,91 @@ def diagnostics(diag: dict, key: str, out: Path, index: int, what: str = "") -> 
     path = out / f"diagnostics_{index}.png"
     _save(fig, path)
     return path
+
+
+def proven_digits_time(data: RunData, out: Path) -> Path | None:
+    """The first screen's figure: the proven digits of every answer against its run time, one
+    colour per method, the k-digit path as black stars; a line at the bench's k digits, and per
+    method the median (time, digits) at each tolerance joined by a line."""
+    k = int(data.manifest.get("digits") or 10)
+    pts = {}
+    for r in data.solves:
+        d = (r.get("proven") or {}).get("answer")
+        if d is not None and r.get("time") is not None:
+            pts.setdefault(r["method"], []).append((r["time"], min(d, DIGITS_CAP), r["tol"]))
+    from .data import path_answer_digits
+
+    path_pts = [(d["time"], min(x, DIGITS_CAP)) for d in data.digits.values()
+                if d.get("time") is not None and (x := path_answer_digits(d)) is not None]
+    if not pts and not path_pts:
+        return None
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8.4, 4.9))
+    for m in [m for m in _STYLE if m in pts]:
+        color, marker = _style(m)
+        xs, ys, tols = zip(*pts[m])
+        ax.scatter(np.maximum(xs, 1e-4), ys, color=color, marker=marker, s=16, alpha=0.35, lw=0.8)
+        med = []
+        for tol in sorted(set(tols), reverse=True):
+            at = [(x, y) for x, y, t in pts[m] if t == tol]
+            med.append((float(np.median([x for x, _ in at])), float(np.median([y for _, y in at]))))
+        ax.plot([max(x, 1e-4) for x, _ in med], [y for _, y in med], color=color, marker=marker, ms=7, lw=1.6,
+                label=f"{m} ({len(xs)} answers; line: medians per tolerance)")
+    if path_pts:
+        xs, ys = zip(*path_pts)
+        ax.scatter(xs, ys, color="black", marker="*", s=70, label=f"{k}-digit path ({len(xs)} problems)", zorder=5)
+    ax.axhline(k, color="gray", ls="--", lw=1)
+    ax.text(1.005, k, f"{k} digits", transform=ax.get_yaxis_transform(), va="center", fontsize=8, color="gray")
+    _log_x(ax)
+    ax.set_xlabel("wall time of the run (s)")
+    ax.set_ylabel("proven correct digits (min of v, u, Hr)")
+    ax.set_ylim(bottom=min(0, ax.get_ylim()[0]), top=max(DIGITS_CAP, k + 1))
+    ax.grid(True, which="both", alpha=0.3)
+    ax.set_title("Proven digits against time, every answer of every method (DESIGN §6: a rigorous bound at "
+                 "each problem's proven point)", fontsize=9)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout()
+    path = out / "proven_digits.png"
+    _save(fig, path)
+    return path
+
+
+def hard_iterations(picks: list, out: Path, method: str = "jqinv") -> Path | None:
+    """cond(Q_p) and the smallest λ₂ (of z and Jᵀr̃) per iteration, for one representative hard
+    problem per family (its ``method`` trajectory, every iterate)."""
+    if not picks:
+        return None
+    plt = _plt()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.4))
+    cmap = plt.get_cmap("tab10")
+    for i, p in enumerate(picks):
+        its = p["trajectory"]["iterates"]
+        k = np.arange(len(its))
+        cond = np.array([it.get("max_cond_Qp") or np.nan for it in its], dtype=float)
+        lam = np.array([min((x for x in (it.get("min_lam2_z"), it.get("min_lam2_s")) if x is not None),
+                            default=np.nan) for it in its], dtype=float)
+        label = f"{p['family']}: {p['problem'].rsplit('/', 1)[-1]}"
+        ax1.plot(k, cond, color=cmap(i % 10), marker=".", lw=1.2, label=label)
+        ax2.plot(k, np.where(lam > 0, lam, np.nan), color=cmap(i % 10), marker=".", lw=1.2)
+        bad = np.flatnonzero(~(lam > 1e-300) & np.isfinite(lam))
+        if bad.size:
+            ax2.plot(k[bad], np.full(bad.size, 1e-300), "x", color=cmap(i % 10), ms=8)
+    ax1.axhline(1e15, color="gray", ls="--", lw=1)
+    ax1.set_yscale("log")
+    ax1.set_xlabel("iteration")
+    ax1.set_ylabel("max cond(Q_p) over cones")
+    ax1.set_title(f"cond(Q_p) per iteration ({method}, every iterate kept)", fontsize=9)
+    ax2.axhline(1e-300, color="gray", ls="--", lw=1)
+    ax2.set_yscale("log")
+    ax2.set_xlabel("iteration")
+    ax2.set_ylabel("min λ2 of z and Jᵀr̃ (x: ≤ 1e-300)")
+    ax2.set_title("smallest λ2 per iteration", fontsize=9)
+    for ax in (ax1, ax2):
+        ax.grid(True, which="both", alpha=0.3)
+    fig.legend(*ax1.get_legend_handles_labels(), loc="lower center", ncol=min(len(picks), 3), fontsize=7.5,
+               frameon=False)
+    rows = math.ceil(len(picks) / 3)
+    fig.tight_layout(rect=(0, min(0.45, 0.06 * rows + 0.02), 1, 1))
+    path = out / "hard_per_family.png"
+    _save(fig, path)
+    return path
