@@ -424,3 +424,14 @@ def test_every_answer_gets_its_proven_digits_from_the_proof(run_dir):
     again = load_run(path)
     assert prove_runs(again)["n_proven"] == stats["n_proven"]
     assert [r["proven"] for r in again.solves] == [r["proven"] for r in data.solves]
+
+
+def test_progress_line_shows_a_refuted_claim_as_what_it_claimed(run_dir):
+    """The bench's progress line names a refuted claim by its claim and what refuted it, not by
+    rfverify's own status of the answer (InsufficientProgress, ...)."""
+    from rfverify.bench.execution import outcome
+
+    path, _ = run_dir
+    rec = next(r for r in _records(path, "solve") if r["refuted"])
+    line = outcome(path, {"problem": rec["problem"], "kind": "solve", "method": rec["method"], "tol": rec["tol"]})
+    assert line.startswith(f"{rec['claim']} (refuted: ") and "(not verified" in line, line

@@ -14,7 +14,7 @@ import zipfile
 from pathlib import Path
 
 from . import records
-from .records import task_stem, write_json
+from .records import refuted_label, task_stem, write_json
 from .tasks import base_record
 
 
@@ -61,7 +61,9 @@ def outcome(run_dir, task) -> str:
         best = rec.get("best_verified_max")
         verdict = f"best verified {best:.1e}" if isinstance(best, (int, float)) else "no verified iterate"
     t = rec.get("time")
-    return f"{rec.get('status')} ({verdict}{f', {t:.2f} s' if isinstance(t, (int, float)) else ''})"
+    # A claim the recheck refuted is shown as the claim and what refuted it, not as rfverify's status.
+    status = refuted_label(rec) if rec.get("refuted") else rec.get("status")
+    return f"{status} ({verdict}{f', {t:.2f} s' if isinstance(t, (int, float)) else ''})"
 
 
 def die_with_parent(parent: int) -> None:

@@ -58,6 +58,7 @@ from typing import Callable
 
 from ..errors import BenchInputError
 from ..io.output import dumps
+from ..measures import CRITERION
 
 FORMAT_VERSION = 2
 """Version of the record layout, written as ``"schema"``.  2: strict JSON (null for non-finite
@@ -263,3 +264,23 @@ def is_current(path, task_key: str) -> dict | None:
     if rec.get("complete") is not True or rec.get("task_key") != task_key:
         return None
     return rec
+
+
+def worst_measure(rec: dict):
+    """(name, value) of the recheck measure that failed most (largest), or (None, None)."""
+    ver = rec.get("verified") or {}
+    measures = [k for k in CRITERION if _is_num(ver.get(k)) and not math.isnan(ver[k])]
+    if not measures:
+        return None, None
+    worst = max(measures, key=lambda k: ver[k])
+    return worst, float(ver[worst])
+
+
+def refuted_label(rec: dict) -> str:
+    """What a refuted run is shown as: its solver's claim and what refuted it, e.g.
+    "Solved (refuted: complementarity 1.7e-06)"."""
+    name, value = worst_measure(rec)
+    claim = rec.get("claim") or "Solved"
+    if name is None:
+        return f"{claim} (refuted: no finite recheck)"
+    return f"{claim} (refuted: {name} {value:.1e})"

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bench.records import FIX_RERUN as _FIX_RERUN
+from ..bench.records import refuted_label, worst_measure  # noqa: F401  (the report's labels are the bench's)
 from ..bench.verify import forward_digits
 from ..measures import CRITERION
 from ..solver.result import ALGORITHM1_METHODS, METHODS
@@ -541,26 +542,6 @@ def per_problem_counts(data: RunData) -> dict:
 
 
 # ----------------------------------------------------------------------- refuted claims, grouped
-def worst_measure(rec: dict):
-    """(name, value) of the recheck measure that failed most (largest), or (None, None)."""
-    ver = rec.get("verified") or {}
-    measures = [k for k in CRITERION if _is_num(ver.get(k)) and not math.isnan(ver[k])]
-    if not measures:
-        return None, None
-    worst = max(measures, key=lambda k: ver[k])
-    return worst, float(ver[worst])
-
-
-def refuted_label(rec: dict) -> str:
-    """What a refuted run is shown as: its solver's claim and what refuted it, e.g.
-    "Solved (refuted: complementarity 1.7e-06)"."""
-    name, value = worst_measure(rec)
-    claim = rec.get("claim") or "Solved"
-    if name is None:
-        return f"{claim} (refuted: no finite recheck)"
-    return f"{claim} (refuted: {name} {value:.1e})"
-
-
 def refuted_groups(data: RunData) -> list[dict]:
     """Refuted claims grouped by (method, claim, measure that refuted it): how many runs, on how
     many problems, at which tolerances, the smallest and largest refuting value, a few examples
