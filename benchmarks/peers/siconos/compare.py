@@ -29,7 +29,7 @@ from rfverify.measures import measures
 
 
 BUNDLED = "chute,cube,sphere"
-SCENES = [("SpheresPile", None, 1, 0), ("SpheresPile", None, 3, 2), ("Chute", 700, 1, 0), ("Chute", None, 2, 1),
+SCENES = [("SpheresPile", None, 1, 0), ("SpheresPile", None, 3, 2), ("Chute", 700, 1, 0), ("Chute", None, 2, 0),
           ("Lattice", 100, 1, 0), ("MassRatio", None, 1, 0), ("MassRatio", 250, 1, 0), ("Millimetre", None, 1, 0),
           ("PrimitiveSoup", None, 1, 0)]
 """(scene, size, count, index) of the generated problems (files sorted by name: index 2 of SpheresPile's 3 is
