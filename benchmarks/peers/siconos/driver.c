@@ -99,7 +99,7 @@ int main(int argc, char **argv) {
   read_exact(f, head, sizeof(int64_t), 5, in);
   read_exact(f, &tol, sizeof(double), 1, in);
   int64_t m = head[0], n = head[1], nnzM = head[2], nnzH = head[3], max_iter = head[4];
-  if (m <= 0 || n <= 0 || nnzM < 0 || nnzH < 0 || max_iter < 1 || !(tol > 0) || m > INT32_MAX ||
+  if (m <= 0 || n < 0 || nnzM < 0 || nnzH < 0 || max_iter < 1 || !(tol > 0) || m > INT32_MAX ||
       5 * n > INT32_MAX)
     fail(2, "bad sizes, tolerance or iteration limit", in);
   int64_t nd = 5 * n;
