@@ -15,8 +15,8 @@ from rfverify.cli import main
 from rfverify.errors import BenchInputError, InvalidArgumentError
 from rfverify.scenes import SCENES, SceneError, generate
 from rfverify.solver import auto_sequence
-from rfverify.solver.result import (ALGORITHM1_METHODS, AUTO_SCHUR_MIN_CONTACTS, AUTO_SEQUENCE,
-                                    AUTO_SEQUENCE_LARGE, METHODS, method_unavailable)
+from rfverify.solver.result import (ALGORITHM1_METHODS, AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL,
+                                    AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS, method_unavailable)
 
 try:
     import sksparse.cholmod  # noqa: F401
@@ -45,27 +45,48 @@ def test_schur_is_declared_once_and_left_out_of_the_bench_defaults():
     sol = build_parser()._subparsers._group_actions[0].choices["solve"]
     method = next(a for a in sol._actions if a.dest == "method")
     assert "schur" in method.choices and "rfverify[cholmod]" in method.help
-    assert str(AUTO_SCHUR_MIN_CONTACTS) in method.help
+    assert str(AUTO_SCHUR_MIN_CONTACTS) in method.help and f"{AUTO_SCHUR_MIN_FILL:g}" in method.help
     assert "schur" in rfverify.solve.__doc__
 
 
-def test_auto_sequence_starts_with_schur_only_when_available_and_large():
-    n = AUTO_SCHUR_MIN_CONTACTS
-    assert auto_sequence(n - 1, True) == AUTO_SEQUENCE == auto_sequence(n - 1, False)
-    assert auto_sequence(n, True) == AUTO_SEQUENCE_LARGE and AUTO_SEQUENCE_LARGE[0] == "schur"
-    assert auto_sequence(10 ** 6, False) == AUTO_SEQUENCE and AUTO_SEQUENCE[0] == "jqinv"
-    assert auto_sequence(n, None) == (AUTO_SEQUENCE_LARGE if HAVE_CHOLMOD else AUTO_SEQUENCE)
+def _never():
+    raise AssertionError("the fill is computed only when size and CHOLMOD allow schur")
+
+
+def test_auto_sequence_starts_with_schur_only_when_available_large_and_filling():
+    n, fill = AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL
+    assert auto_sequence(n - 1, _never, True) == AUTO_SEQUENCE and AUTO_SEQUENCE[0] == "jqinv"
+    assert auto_sequence(10 ** 6, _never, False) == AUTO_SEQUENCE
+    assert auto_sequence(n, fill, True) == AUTO_SEQUENCE_LARGE and AUTO_SEQUENCE_LARGE[0] == "schur"
+    assert auto_sequence(n, lambda: fill, True) == AUTO_SEQUENCE_LARGE
+    assert auto_sequence(10 ** 6, 0.99 * fill, True) == AUTO_SEQUENCE  # a thin chute flow: jqinv wins
+    assert auto_sequence(n, fill, None) == (AUTO_SEQUENCE_LARGE if HAVE_CHOLMOD else AUTO_SEQUENCE)
 
 
 def test_auto_sequence_without_cholmod_is_the_default_one(without_cholmod):
     assert method_unavailable("schur") is not None and method_unavailable("jqinv") is None
-    assert auto_sequence(10 ** 6) == AUTO_SEQUENCE
+    assert auto_sequence(10 ** 6, _never) == AUTO_SEQUENCE
+
+
+@needs_cholmod
+def test_body_fill_counts_the_factor_of_the_body_graph():
+    from rfverify.solver import body_fill
+
+    # Two spheres side by side on the ground: 3 contacts, body graph = one edge, L has column
+    # counts 2 and 1: (4 + 1)/3.  One sphere alone: 1 per contact.
+    assert body_fill(generate("GranularBed", seed=1, size=2, width=2)[0]) == pytest.approx(5 / 3)
+    assert body_fill(generate("GranularBed", seed=1, size=1)[0]) == 1.0
+    # A cubic bed fills in (3-D lattice); one layer of the same contact count much less.
+    cube = body_fill(generate("GranularBed", seed=1, size=216)[0])
+    layer = body_fill(generate("GranularBed", seed=1, size=400, width=20)[0])
+    assert cube >= AUTO_SCHUR_MIN_FILL > layer
 
 
 def test_auto_runs_what_auto_sequence_says(monkeypatch):
     import rfverify.solver as solver_pkg
 
     monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_CONTACTS", 1)  # the chute counts as large
+    monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_FILL", 0.0)
     p = rfverify.load("bundled:chute")
     res = rfverify.solve(p, tol=1e-8)
     assert res.success and res.extras["attempts"][0]["method"] == ("schur" if HAVE_CHOLMOD else "jqinv")
@@ -75,6 +96,7 @@ def test_auto_on_a_large_problem_without_cholmod_runs_jqinv(monkeypatch, without
     import rfverify.solver as solver_pkg
 
     monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_CONTACTS", 1)
+    monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_FILL", 0.0)
     res = rfverify.solve(rfverify.load("bundled:chute"), tol=1e-8)
     assert res.success and res.method == "jqinv"
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, METHODS
+from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS
 from .argtypes import digit_count, out_path, positive_float, positive_int, tolerance
 from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
                      load_problem, print_quantities, print_warnings, progress_printer,
@@ -32,9 +32,11 @@ def add_parser(sub) -> None:
                      help="linear-system form: jqinv (14), qp2 (11), reduced (15), "
                           "reduced_factored (16), noscaling (6), schur ((16) reduced to the dofs and "
                           "factored by CHOLMOD: needs pip install 'rfverify[cholmod]' and "
-                          "libsuitesparse-dev; fastest from a few thousand contacts on); auto, jqinv "
-                          "then reduced then noscaling until one is Solved, or from "
-                          f"{AUTO_SCHUR_MIN_CONTACTS} contacts on with CHOLMOD installed schur then "
+                          "libsuitesparse-dev; fastest where the factorisation fills in: large piles, "
+                          "beds, random problems); auto, jqinv then reduced then noscaling until one "
+                          "is Solved, or, with CHOLMOD installed, on a problem of at least "
+                          f"{AUTO_SCHUR_MIN_CONTACTS} contacts whose factor costs at least "
+                          f"{AUTO_SCHUR_MIN_FILL:g} per contact (rfverify.solver.body_fill), schur then "
                           "jqinv then noscaling (the output names the form returned and "
                           "what was tried); or clarabel, the same problem handed to Clarabel "
                           "(default: %(default)s)")

@@ -14,22 +14,55 @@ from ..lifting import KIND_NAMES, lift
 from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
 from ..problem import SPACEDIM, Problem
 from .cones import ProductCone
-from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS, OPTIONAL_METHODS,
-                     IterationInfo, Settings, SolveResult, Status, method_unavailable)
+from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
+                     OPTIONAL_METHODS, IterationInfo, Settings, SolveResult, Status, method_unavailable)
 
-__all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence"]
+__all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence", "body_fill"]
 
 
-def auto_sequence(n_contacts: int, cholmod_available: bool | None = None) -> tuple:
+def auto_sequence(n_contacts: int, fill=None, cholmod_available: bool | None = None) -> tuple:
     """The forms ``method="auto"`` tries, in order, on a problem of ``n_contacts`` contacts:
-    ``AUTO_SEQUENCE_LARGE`` (schur first) from ``AUTO_SCHUR_MIN_CONTACTS`` contacts on when
-    CHOLMOD is available (``cholmod_available=None``: find out by importing it), else
-    ``AUTO_SEQUENCE`` (jqinv first); both declared in :mod:`rfverify.solver.result`."""
+    ``AUTO_SEQUENCE_LARGE`` (schur first) when CHOLMOD is available (``cholmod_available=None``:
+    find out by importing it), ``n_contacts ≥ AUTO_SCHUR_MIN_CONTACTS`` and the factorisation's
+    ``fill`` (:func:`body_fill`; a number, or a callable that computes it, called only when the
+    other two hold) is at least ``AUTO_SCHUR_MIN_FILL``; else ``AUTO_SEQUENCE`` (jqinv first).
+    The names and thresholds are declared in :mod:`rfverify.solver.result`."""
     if n_contacts < AUTO_SCHUR_MIN_CONTACTS:
         return AUTO_SEQUENCE
     if cholmod_available is None:
         cholmod_available = method_unavailable("schur") is None
-    return AUTO_SEQUENCE_LARGE if cholmod_available else AUTO_SEQUENCE
+    if not cholmod_available:
+        return AUTO_SEQUENCE
+    fill = fill() if callable(fill) else fill
+    return AUTO_SEQUENCE_LARGE if fill is not None and fill >= AUTO_SCHUR_MIN_FILL else AUTO_SEQUENCE
+
+
+def body_fill(problem: Problem) -> float:
+    """Σ(column count)² per contact of the Cholesky factor, under CHOLMOD's AMD ordering, of the
+    body graph: one node per body (6 consecutive dofs when every block of M lies in such a group,
+    the rigid-body convention; else one per block of M), an edge per pair of bodies sharing a
+    contact.  Proportional to the flops of factoring any form of the problem (every form's matrix
+    has this graph, blown up by the dofs per body), at a small fraction of their cost (~1 ms at
+    10³ contacts, ~1 s at 10⁵).  Needs scikit-sparse."""
+    from sksparse import cholmod
+
+    m = problem.n_dofs
+    labels = problem.blocks.labels
+    group = np.arange(m) // 6
+    first = np.full(problem.blocks.count, m)
+    np.minimum.at(first, labels, np.arange(m))
+    rigid = m % 6 == 0 and np.all(group == first[labels] // 6)
+    node = group if rigid else labels
+    HT = problem.H.T.tocoo()
+    C = sp.csr_matrix((np.ones(HT.nnz), (HT.row // 5, node[HT.col])), shape=(problem.n_contacts, int(node.max()) + 1))
+    C.data[:] = 1.0
+    A = (C.T @ C).tocsc()
+    used = np.flatnonzero(A.diagonal() > 0)
+    A = A[used][:, used]
+    A = (A + sp.diags(np.asarray(A.sum(axis=1)).ravel() + 1.0)).tocsc()  # diagonally dominant: SPD
+    L = cholmod.cholesky(A, ordering_method="amd").L().tocsc()
+    counts = np.diff(L.indptr).astype(np.float64)
+    return float(np.sum(counts * counts)) / max(problem.n_contacts, 1)
 
 
 def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: int = 100,
@@ -51,8 +84,10 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         on; it needs the optional extra ``cholmod`` (``pip install 'rfverify[cholmod]'``, built
         against libsuitesparse-dev) and raises InvalidArgumentError naming that fix without it.
         ``auto`` (default) runs the forms of :func:`auto_sequence` — jqinv, then reduced, then
-        noscaling; on a problem of at least ``AUTO_SCHUR_MIN_CONTACTS`` (result.py) contacts with
-        CHOLMOD importable, schur, then jqinv, then noscaling — each from the start, while
+        noscaling; with CHOLMOD importable, on a problem of at least ``AUTO_SCHUR_MIN_CONTACTS``
+        contacts whose factorisation fill (:func:`body_fill`) is at least
+        ``AUTO_SCHUR_MIN_FILL`` per contact (result.py), schur, then jqinv, then noscaling (large
+        granular piles and beds: yes; thin chute flows: no) — each from the start, while
         the previous one stalled or broke down, and returns the Solved run or else the answer
         with the smallest criterion — ``extras["attempts"]`` lists every run and ``method``
         names the form returned; ``clarabel`` hands the same convex problem to Clarabel.
@@ -253,7 +288,7 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
     a message naming what was tried."""
     t0 = time.perf_counter()
     attempts, results = [], []
-    for form in auto_sequence(problem.n_contacts):
+    for form in auto_sequence(problem.n_contacts, fill=lambda: body_fill(problem)):
         opts = dict(options)
         if settings.time_limit is not None:
             left = settings.time_limit - (time.perf_counter() - t0)

@@ -18,13 +18,18 @@ robust on the scene collections), then the reduced and unscaled forms, which sol
 problems with a singular Delassus operator where jqinv stalls (docs/DECISIONS.md)."""
 
 AUTO_SEQUENCE_LARGE = ("schur", "jqinv", "noscaling")
-"""``auto``'s forms from AUTO_SCHUR_MIN_CONTACTS contacts on when CHOLMOD is importable
+"""``auto``'s forms on a problem whose factorisation is expensive, when CHOLMOD is importable
 (``rfverify.solver.auto_sequence`` decides): schur, the path of form (16) at CHOLMOD's speed, then
 jqinv (another path), then noscaling."""
 
-AUTO_SCHUR_MIN_CONTACTS = 1500
-"""``auto`` starts with schur instead of jqinv from this many contacts on (docs/DECISIONS.md,
-"Scale (issue 27 items 2, 3, 5)": the measured break-even)."""
+AUTO_SCHUR_MIN_CONTACTS = 500
+AUTO_SCHUR_MIN_FILL = 100.0
+"""``auto`` starts with schur instead of jqinv on a problem of at least AUTO_SCHUR_MIN_CONTACTS
+contacts whose factorisation costs at least AUTO_SCHUR_MIN_FILL per contact, measured as
+Σ(column count)² of the Cholesky factor (AMD) of the body graph (``rfverify.solver.body_fill``):
+fill, not size, decides which engine wins — a 2324-contact chute (8 per contact) runs 2.2× faster
+with jqinv, a 576-contact lattice bed (135) 2.3× faster with schur (docs/DECISIONS.md, "Scale
+(issue 27 items 2, 3, 5)")."""
 
 OPTIONAL_METHODS = {"schur": ("sksparse.cholmod", "pip install 'rfverify[cholmod]' (scikit-sparse; building it "
                                                   "needs libsuitesparse-dev, and CHOLMOD is fast only with an "
