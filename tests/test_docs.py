@@ -212,3 +212,14 @@ def test_tutorial_line_matching_is_tolerant_of_timings_only():
 def test_tutorial_commands_print_what_it_quotes(tmp_path):
     problems = run_tutorial(tmp_path, TUTORIAL.read_text(encoding="utf-8"))
     assert not problems, "docs/TUTORIAL.md disagrees with the program:\n" + "\n".join(problems)
+
+
+def test_solve_help_says_how_3d_and_local_files_are_solved(capsys):
+    from rfverify.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["solve", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for phrase in ("/fclib_global, /fclib_local", "convex relaxation", "mu_r = 0", "DESIGN §7.2", "own W",
+                   "Exit codes: 0 "):
+        assert phrase in text, phrase

@@ -18,7 +18,10 @@ Solve the convex relaxation of a rolling-friction problem with the mixed-precisi
 interior-point method (Algorithm 1, DESIGN §4). Exit code 0 only when the criterion
 (DESIGN §4.5: residuals of the returned v, u, r scaled by their terms and by the data)
 is <= --tol; 1 when the solver stopped without reaching it (the status says why). The paper's
-pinfeas, dinfeas and mu are printed beside it."""
+pinfeas, dinfeas and mu are printed beside it. A 3-D FCLIB file (/fclib_global, /fclib_local)
+is solved as its convex relaxation, exactly the rolling problem with mu_r = 0 and no rolling
+rows (DESIGN §7.2); a local problem (/fclib_local, Siconos local .dat) through its lifting to
+global form, its answer judged and proven on its own W."""
 
 
 def add_parser(sub) -> None:
