@@ -41,7 +41,9 @@ def add_parser(sub) -> None:
                           f"{AUTO_SCHUR_MIN_CONTACTS} contacts whose factor costs at least "
                           f"{AUTO_SCHUR_MIN_FILL:g} per contact (rfverify.solver.body_fill), schur then "
                           "jqinv then noscaling (the output names the form returned and "
-                          "what was tried); or clarabel, the same problem handed to Clarabel "
+                          "what was tried); or clarabel, the same problem handed to Clarabel; or siconos, "
+                          "Siconos's GRFC3D_IPM, the paper's own solver, in a child process (needs a build: "
+                          "bash benchmarks/peers/siconos/build.sh, then RFVERIFY_SICONOS=<its prefix>) "
                           "(default: %(default)s)")
     sol.add_argument("--tol", type=tolerance, default=1e-10, metavar="T",
                      help="stop when the criterion of DESIGN §4.5 is <= T (default: "

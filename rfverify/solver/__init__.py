@@ -77,7 +77,7 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     Parameters
     ----------
     problem : Problem
-    method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur", "auto", "clarabel"}
+    method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur", "auto", "clarabel", "siconos"}
         Linear-system form (DESIGN §4); ``schur`` is form (16) with its identity block
         eliminated, the dof-space matrix M + H̃ᵀG⁻¹H̃ factored by CHOLMOD's supernodal Cholesky
         — the same iterates as ``reduced_factored``, much faster from a few thousand contacts
@@ -90,7 +90,10 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         granular piles and beds: yes; thin chute flows: no) — each from the start, while
         the previous one stalled or broke down, and returns the Solved run or else the answer
         with the smallest criterion — ``extras["attempts"]`` lists every run and ``method``
-        names the form returned; ``clarabel`` hands the same convex problem to Clarabel.
+        names the form returned; ``clarabel`` hands the same convex problem to Clarabel;
+        ``siconos`` runs Siconos's GRFC3D_IPM (the paper's own implementation) in a child process,
+        its answer unscaled and judged by the same criterion (:mod:`rfverify.solver.siconos_peer`;
+        needs ``benchmarks/peers/siconos/build.sh`` and ``RFVERIFY_SICONOS``).
     tol : float
         Stop when the criterion of :mod:`rfverify.measures` on the returned (v, u, r) is at
         most tol; the paper's pinfeas, dinfeas and μ = zᵀJᵀr̃/n (DESIGN §4) are reported
