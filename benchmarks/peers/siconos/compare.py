@@ -12,6 +12,9 @@ Not a test: compare ratios measured in one run on this shared machine.
 
     python benchmarks/peers/siconos/compare.py                     # bundled + generated FCLIB-size problems
     python benchmarks/peers/siconos/compare.py --files A.hdf5 ...  # your own problems
+
+What it prints also goes to benchmarks/results/peers/siconos/compare.md, stamped with the commit,
+date and machine (benchmarks/_results.py).
 """
 
 from __future__ import annotations
@@ -26,6 +29,9 @@ from pathlib import Path
 
 import rfverify
 from rfverify.measures import measures
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from _results import recording  # noqa: E402  (stamped results file, benchmarks/_results.py)
 
 
 BUNDLED = "chute,cube,sphere"
@@ -145,5 +151,11 @@ def _main(argv=None):
               f"{statistics.median(s['ratio']) if s['ratio'] else float('nan'):.2f}")
 
 
+def main(argv=None):
+    """Run, printing the table and writing it to benchmarks/results/peers/siconos/compare.md (stamped)."""
+    with recording("peers/siconos/compare", argv):
+        return _main(argv)
+
+
 if __name__ == "__main__":
-    _main()
+    main()
