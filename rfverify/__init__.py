@@ -23,7 +23,8 @@ from .errors import (ConeDomainError, DataWarning, InvalidArgumentError, Invalid
                      OutputPathError, ProblemFileError, RfverifyError)
 from .io import bundled_problems, load, save
 from .problem import Problem, StoredSolution
-from .certification import Certificate, certify
+from .certificate import Certificate
+from .certification import certify
 from .diagnosis import Diagnosis, diagnose
 from .digits import DigitsSolution, solve_to_digits
 from .solver import SolveResult, Settings, Status, solve

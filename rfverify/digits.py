@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .certification import Certificate, certificate_from_proof
+from .certificate import Certificate, candidate_point, certificate_from_proof
 from .errors import InvalidArgumentError
 from .extended import ipm as ext
 from .extended.dd import vmul_d
@@ -291,7 +291,6 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         f"{double.nit} iterations, {t_double:.2f} s")
     t1 = time.perf_counter()
     ctx = ProofContext(problem)
-    from .certification import candidate_point
 
     # The double answer itself first: an exact one (a wedge, an all-open scene) is proven here
     # at O(nnz) cost, and where the feasible set has no interior no iterate could do better.

@@ -1,0 +1,128 @@
+"""The certificate of a proof: what :func:`rfverify.certify` and the k-digit path return, with a
+verdict that claims exactly what was proven.  Its own module so that both paths import it and
+neither imports the other."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .proof import Point, Proof
+from .solver.result import ResultAliases
+
+
+@dataclass
+class Certificate(ResultAliases):
+    """Result of :func:`certify` (and of the k-digit path).
+
+    ``certified`` is True only when the proof shows at least ``requested`` digits in v, u, Hr
+    and, where r is unique, r.  ``digits`` maps each certified-or-not quantity to its proven
+    digits (None where no relative digits exist); ``bounds`` to the proven ∞-norm bound on
+    its error; ``quantities`` holds the full per-quantity record (scale used, mode).
+    ``proof`` is the :class:`rfverify.proof.Proof`; ``cross_check`` the reference agreement
+    when asked for.  ``status``/``success``/``message``/``nit``/``timings`` (and the aliases
+    ``iterations``, ``solve_time``) are the fields every result has (docs/RESULTS.md).
+    """
+
+    requested: int
+    certified: bool
+    verdict: str
+    proof: Proof | None = None
+    point: Point | None = None
+    cross_check: dict | None = None
+    extra: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def digits(self) -> dict:
+        if self.proof is None:
+            return {}
+        return {k: q.digits for k, q in self.proof.quantities.items() if q.mode != "information"}
+
+    @property
+    def bounds(self) -> dict:
+        if self.proof is None:
+            return {}
+        return {k: q.abs_bound for k, q in self.proof.quantities.items() if q.mode != "information"}
+
+    @property
+    def quantities(self) -> dict:
+        return {} if self.proof is None else self.proof.quantities
+
+    @property
+    def r_unique(self) -> bool | None:
+        if self.proof is None or "r" not in self.proof.quantities:
+            return None
+        return self.proof.quantities["r"].mode != "information"
+
+    @property
+    def status(self) -> str:
+        """"Certified" or "NotCertified"."""
+        return "Certified" if self.certified else "NotCertified"
+
+    @property
+    def success(self) -> bool:
+        """``certified`` (SciPy's name)."""
+        return self.certified
+
+    @property
+    def message(self) -> str:
+        return self.verdict
+
+    @property
+    def nit(self) -> int:
+        """Iterations run to find the proof point: 0 when the given point or the candidate
+        itself was proven, else the double solve's, the double-double phase's and the
+        multiple-precision tail's."""
+        return sum(int(self.extra.get(k) or 0)
+                   for k in ("double_iterations", "extended_iterations", "wide_iterations"))
+
+    @property
+    def timings(self) -> dict:
+        """Seconds: ``total`` (= ``seconds``, the whole of :func:`certify`)."""
+        return {"total": self.seconds}
+
+    def __repr__(self) -> str:
+        return f"Certificate(status={self.status!r}, requested={self.requested}, seconds={self.seconds:.3g},\n" \
+               f"    {self.verdict!r})"
+
+    def as_dict(self) -> dict:
+        p = self.proof
+        return {"requested_digits": self.requested, "certified": self.certified, "verdict": self.verdict,
+                "method": "proof" if p is not None else None,
+                "valid_proof": None if p is None else p.valid,
+                "failure": None if p is None else (p.failure or None),
+                "quantities": {} if p is None else {k: q.as_dict() for k, q in p.quantities.items()},
+                "terms": {} if p is None else p.terms,
+                "arithmetic": None if p is None else p.arithmetic,
+                "cross_check": self.cross_check, "seconds": self.seconds, **self.extra}
+
+
+def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict | None = None,
+                           seconds: float = 0.0) -> Certificate:
+    """The certificate of a proof, with a verdict that claims exactly what was proven: "proven to
+    K digits" only when every quantity has K relative digits; a quantity proven zero at the
+    data scale is stated as "zero within e" (DESIGN §6.3), never as digits."""
+    req = proof.requested
+    if not proof.valid:
+        verdict = f"not certified: {proof.failure}"
+    elif proof.certified:
+        if any(q.mode == "absolute" for q in proof.quantities.values()):
+            verdict = f"certified ({req} digits requested; zero quantities bounded absolutely): {proof.summary()}"
+        else:
+            verdict = f"proven to {req} digits ({proof.summary()})"
+    else:
+        worst = proof.weakest()
+        q = proof.quantities[worst]
+        have = "no relative digits" if q.digits is None else f"{q.digits:.1f} proven digits"
+        why = f"; {q.note}" if q.digits is None and q.note else ""
+        verdict = f"not proven to {req} digits: {worst} has {have} ({proof.summary()}){why}"
+    return Certificate(req, proof.certified, verdict, proof, point, None, dict(extra or {}), seconds)
+
+
+def candidate_point(v, r) -> Point:
+    """The float64 candidate (v, r) as an exact proof point (no low parts)."""
+    v = np.asarray(v, dtype=np.float64).copy()
+    r = np.asarray(r, dtype=np.float64).copy()
+    return Point(v, np.zeros_like(v), r, np.zeros_like(r))
