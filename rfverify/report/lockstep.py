@@ -22,12 +22,12 @@ def solve_groups(problem: Problem, settings):
     """The independent components the solver splits ``problem`` into with ``settings``
     (exactly its own computation), or None when it solves the problem as one system."""
     from ..lifting import lift
-    from ..solver import _components
+    from ..solver.presolve import independent_components
 
     if not settings.split_components:
         return None
     lp = lift(problem, reduce_cones=settings.reduce_cones)
-    groups = _components(problem, lp, problem.contact_free_dofs)
+    groups = independent_components(problem, lp, problem.contact_free_dofs)
     if len(groups) <= 1 or len(groups) > settings.max_components:
         return None
     return lp, groups

@@ -7,13 +7,13 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from ..compilation import compile_seconds
-from ..lifting import KIND_NAMES, lift
+from ..lifting import KIND_NAMES
 from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
 from ..problem import SPACEDIM, Problem
 from .cones import ProductCone
+from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, IterationInfo, Settings, SolveResult, Status, method_unavailable)
 
@@ -185,28 +185,9 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
 
         return solve_siconos(problem, settings)
 
-    lp = lift(problem, reduce_cones=settings.reduce_cones)
+    pre = presolve(problem, settings)
+    lp, groups, v, presolve_info = pre.lifted, pre.groups, pre.v, pre.info
     M = problem.M_sym
-    m = problem.n_dofs
-    presolve = {"cone_kinds": lp.reduction_counts()}
-
-    # Bodies no contact touches decouple: v = M⁻¹ f on their dofs (whole blocks of M).
-    v = np.zeros(m, dtype=np.longdouble)
-    free = problem.contact_free_dofs if (settings.drop_free_bodies or settings.split_components) \
-        else np.empty(0, dtype=np.int64)
-    if free.size:
-        v[free] = splu(M[free][:, free].tocsc()).solve(problem.f[free])
-    presolve["free_dofs"] = int(free.size)
-
-    groups = _components(problem, lp, free) if settings.split_components else None
-    if groups is not None and len(groups) > settings.max_components:
-        presolve["components"] = f"{len(groups)} (> max_components = {settings.max_components}: solved together)"
-        groups = None
-    if groups is None:
-        active = np.setdiff1d(np.arange(m), free)
-        groups = [(active, np.arange(lp.nk), np.arange(lp.nz), np.arange(lp.n_cones), problem.n_contacts)]
-    else:
-        presolve["components"] = len(groups)
     t_pre = time.perf_counter() - t0
 
     from . import ipm
@@ -266,7 +247,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
     result = SolveResult(
         v=v, u=u, r=r, status=status, message=message, nit=max(o.nit for o in runs), measures=final,
         pinfeas=pinf, dinfeas=dinf, mu=mu, trace=max(runs, key=lambda o: o.nit).trace,
-        timings=timings, method=method, settings=settings, presolve=presolve,
+        timings=timings, method=method, settings=settings, presolve=presolve_info,
         extras={"factorisations": sum(o.factorisations for o in runs),
                 "unregularised_factorisations": sum(o.unregularised_factorisations for o in runs),
                 "extended_from": [o.extended_from for o in runs],
@@ -328,49 +309,6 @@ def _combined_status(runs, n_groups):
 
 _SEVERITY = [Status.SOLVED, Status.ALMOST_SOLVED, Status.MAX_ITERATIONS, Status.MAX_TIME, Status.STOPPED,
              Status.INSUFFICIENT_PROGRESS, Status.NUMERICAL_ERROR]
-
-
-def _components(problem, lp, free):
-    """Independent connected components of the body–contact graph (contact-free blocks
-    excluded).  Returns a list of (dofs, kept rows, z indices, cone indices, n_contacts)."""
-    from scipy.sparse.csgraph import connected_components
-
-    n = problem.n_contacts
-    blocks = problem.blocks
-    HT = problem.H.T.tocoo()
-    contact = HT.row // 5
-    block = blocks.labels[HT.col]
-    nb = blocks.count
-    adj = sp.coo_matrix((np.ones(contact.size), (contact, n + block)), shape=(n + nb, n + nb))
-    _, lab = connected_components(adj, directed=False)
-    contact_comp = lab[:n]
-    comps, contact_comp = np.unique(contact_comp, return_inverse=True)
-    dof_lab = lab[n + blocks.labels]
-    dof_comp = np.searchsorted(comps, dof_lab)
-    active = np.ones(problem.n_dofs, dtype=bool)
-    active[free] = False
-    row_comp = contact_comp[lp.keep // 5]
-    cone_comp = contact_comp[lp.cone_contact]
-    cone_ids = np.arange(lp.n_cones)
-    out = []
-    dofs_all = np.flatnonzero(active)
-    by_dof = _group(dof_comp[dofs_all], dofs_all, comps.size)
-    by_row = _group(row_comp, np.arange(lp.nk), comps.size)
-    by_cone = _group(cone_comp, cone_ids, comps.size)
-    by_contact = np.bincount(contact_comp, minlength=comps.size)
-    for c in range(comps.size):
-        cids = by_cone[c]
-        l3 = cids[cids < lp.n3]
-        l1 = cids[cids >= lp.n3]
-        zidx = np.concatenate(((3 * l3[:, None] + np.arange(3)).ravel(), 3 * lp.n3 + (l1 - lp.n3)))
-        out.append((by_dof[c], by_row[c], zidx, cids, int(by_contact[c])))
-    return out
-
-
-def _group(keys, values, count):
-    order = np.argsort(keys, kind="stable")
-    bounds = np.searchsorted(keys[order], np.arange(count + 1))
-    return [values[order[bounds[i]:bounds[i + 1]]] for i in range(count)]
 
 
 def _judge(problem, lp, dofs, rows, settings):
