@@ -284,3 +284,13 @@ def test_sparse_tail_stores_no_dense_matrix():
         assert back.update(sc)
     assert back.Lx.size == back.Li.size < data.m * data.m // 4 and back.Ld.size == data.m
     assert not hasattr(back, "M_dense")
+
+
+@needs_cholmod
+def test_auto_takes_cholmod_where_it_is_installed():
+    data = ExtendedData(random_problem(8, 14, seed=1))
+    assert resolve_engine("auto", 1) == "cholmod"
+    back = choose_backend(data)
+    assert back.engine == "cholmod" and isinstance(back.chol, CholmodMixed)
+    # the hybrid's contact-space half takes the same engine
+    assert isinstance(choose_backend(data, "hybrid").contact.chol, CholmodMixed)
