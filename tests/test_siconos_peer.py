@@ -223,3 +223,21 @@ def test_tutorial_siconos_section_prints_what_it_quotes(siconos_prefix, tmp_path
                 problems.append(f"`{s['cmd'].splitlines()[0]}`: quoted line not printed: {line!r}\n"
                                 f"    printed: {got.get(k)}")
     assert not problems, "docs/TUTORIAL.md (Siconos section) disagrees with the program:\n" + "\n".join(problems)
+
+
+def test_bench_task_key_follows_the_peer_build(monkeypatch, tmp_path):
+    """A rebuilt peer (other sources, patches or driver: another stamp) re-runs its bench tasks;
+    other methods' keys do not depend on it."""
+    from rfverify.bench.tasks import task_key
+
+    exe = tmp_path / "bin" / "rfverify-siconos-driver"
+    exe.parent.mkdir()
+    exe.write_text("#!/bin/sh\nexit 2\n")
+    exe.chmod(0o755)
+    monkeypatch.setenv("RFVERIFY_SICONOS", str(tmp_path))
+    task = {"sha256": "0" * 64, "kind": "solve", "method": "siconos", "tol": 1e-8, "max_iter": 100, "dps": 30}
+    keys = []
+    for stamp in ("aaaa-1111", "bbbb-1111"):
+        (tmp_path / ".rfverify-driver-stamp").write_text(stamp + "\n")
+        keys.append((task_key(task), task_key({**task, "method": "jqinv"})))
+    assert keys[0][0] != keys[1][0] and keys[0][1] == keys[1][1]

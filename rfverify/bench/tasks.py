@@ -37,7 +37,7 @@ def task_key(task: dict) -> str:
     """Hash of everything that determines a task's result: the problem file's content, the
     kind, method, tolerance, iteration limit, recheck precision, digits, every solver setting
     (defaults included: a changed default re-runs the task), rfverify's version and the
-    record schema."""
+    record schema; for the Siconos peer also its build (:func:`rfverify.solver.siconos_peer.build_id`)."""
     from .. import __version__
     from ..solver import Settings
 
@@ -50,6 +50,10 @@ def task_key(task: dict) -> str:
             "tol": None if task.get("tol") is None else tol_text(task["tol"]),
             "max_iter": task.get("max_iter"), "dps": task.get("dps"), "digits": task.get("digits"),
             "settings": settings}
+    if task.get("method") == "siconos":  # a rebuilt peer (other sources, patches, driver) re-runs its tasks
+        from ..solver.siconos_peer import build_id
+
+        what["siconos_build"] = build_id()
     return hashlib.sha256(dumps(what, sort_keys=True).encode()).hexdigest()
 
 

@@ -65,6 +65,17 @@ def driver_path() -> Path | None:
     return found[0] / DRIVER if found else None
 
 
+def build_id() -> str:
+    """What identifies the driver rfverify would run: ``build.sh``'s stamp of its sources, patches,
+    options and driver source (``<prefix>/.rfverify-driver-stamp``), "none" without a driver,
+    "unstamped" for a driver not built by ``build.sh``."""
+    exe = driver_path()
+    if exe is None:
+        return "none"
+    stamp = exe.parent.parent / ".rfverify-driver-stamp"
+    return stamp.read_text().strip() if stamp.is_file() else "unstamped"
+
+
 def unavailable() -> str | None:
     """Why the ``siconos`` method cannot run here (no driver found), or None when it can.
     Phrased like :func:`rfverify.solver.result.method_unavailable` ("…; fix: …")."""
