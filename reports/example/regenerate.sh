@@ -43,7 +43,7 @@ rm -rf run
 py="$(dirname "$(command -v rfverify)")/python"
 [ -x "$py" ] || py=python3
 "$py" -c 'import rfverify
-p = rfverify.load("bundled:sphere")
+p = rfverify.load("bundled:chute")  # a global problem: every back end applies (a local one has no dofs)
 for backend in ("dof", "contact", "hybrid"):
     rfverify.solve_to_digits(p, digits=10, backend=backend)'
 rfverify bench bundled problems/scenes --out run --jobs 2 --quiet
