@@ -28,6 +28,10 @@ import resource
 import subprocess
 import sys
 import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _results import recording  # noqa: E402  (stamped results file)
 
 
 def load(spec: str):
@@ -63,7 +67,7 @@ def one(spec: str, engine: str) -> dict:
             "backend": out.certificate.extra.get("backend", "")}
 
 
-def main(argv=None):
+def _main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--problems", nargs="*", default=["random:300:1000", "random:1000:3000"])
     ap.add_argument("--engines", nargs="*", default=["cholmod", "ldl"])
@@ -106,6 +110,15 @@ def main(argv=None):
                 print(f"    tail: {r['wide_note']}", flush=True)
             ok = ok and r["certified"]
     return 0 if ok else 1
+
+
+def main(argv=None):
+    """Run, printing the table and writing it to benchmarks/results/bench_digits_scale.md (stamped);
+    a child run (--one) prints its JSON row only."""
+    if "--one" in (sys.argv[1:] if argv is None else argv):
+        return _main(argv)
+    with recording("bench_digits_scale", argv):
+        return _main(argv)
 
 
 if __name__ == "__main__":
