@@ -33,6 +33,7 @@ from .digits import DOUBLE_SETTINGS, ProofDriver, _start_from, extend
 from .problem import SPACEDIM, Problem
 from .proof import FLOAT64_DIGITS, Point, ProofContext, validate_digits
 from .certificate import Certificate, candidate_point, certificate_from_proof
+from .compilation import compile_extended_in_background
 
 
 def local_velocity(problem: Problem, r) -> np.ndarray:
@@ -138,6 +139,7 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
     from .extended.system import ExtendedData, choose_backend
     from .solver import solve
 
+    compile_extended_in_background()  # on a cold numba cache: the other core compiles the extended kernels
     double = solve(problem, method="auto", tol=1e-10, **DOUBLE_SETTINGS)
     data = ExtendedData(problem)
     system = choose_backend(data)

@@ -67,9 +67,11 @@ EXTENDED_KERNELS = (
     ("dd", "vaxpy", "(float64, float64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "max_step", "(int64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("ldl", "_symmetric_residual", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("ldl", "_solve_double", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1])"),
     ("system", "_block_apply", "(int64, int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("ldl", "_solve", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "quad_pow", "(int64, int64, float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("ldl", "_numeric_double", "(int64, int64[::1], int64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1])"),
     ("system", "_scaled_blocks", "(int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[:, :, ::1], float64[::1], float64[::1])"),
     ("system", "contact_factor_inverse", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1])"),
     ("system", "_scatter_pairs", "(int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[:, :, ::1], float64[:, :, ::1])"),
@@ -88,7 +90,9 @@ EXTENDED_KERNELS = (
 )
 """(module of :mod:`rfverify.extended`, kernel, argument types) of the double-double kernels
 the k-digit path calls from Python, in the reverse order of their first use on the bundled
-Chute (a test keeps the list equal to what a run compiles).  The child compiles them in this
+Chute with the default install's factorisation engine (``ldl``: where scikit-sparse is
+installed the CHOLMOD engine makes the LDLᵀ kernels unused, and the child compiles them for
+nothing on the other core).  A test keeps the list equal to what such a run compiles.  The child compiles them in this
 order; the kernels they call are compiled with them."""
 
 BACKGROUND_ENV = "RFVERIFY_BACKGROUND_COMPILE"

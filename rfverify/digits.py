@@ -28,7 +28,7 @@ from .extended import wide
 from .extended.ldl import cholmod_available
 from .extended.system import ENGINES, ExtendedData, choose_backend
 from .problem import SPACEDIM, Problem
-from .compilation import compile_seconds
+from .compilation import compile_extended_in_background, compile_seconds
 from .proof import Point, Proof, ProofContext, validate_digits
 from .solver import SolveResult, solve
 
@@ -283,6 +283,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
                                    fix="use method='auto' (default) or an Algorithm 1 form")
     say = progress or (lambda msg: None)
+    compile_extended_in_background()  # on a cold numba cache: the other core compiles the extended kernels
     t0, c0 = time.perf_counter(), compile_seconds()
     double = solve(problem, method=method, tol=tol, max_iter=max_iter, **{**DOUBLE_SETTINGS, **options})
     t_double = time.perf_counter() - t0
