@@ -31,10 +31,11 @@ from .problem import SPACEDIM, Problem
 from .compilation import compile_extended_in_background, compile_seconds
 from .proof import Point, Proof, ProofContext, validate_digits
 from .solver import SolveResult, solve
+from .solver.result import ResultAliases
 
 
 @dataclass
-class DigitsSolution:
+class DigitsSolution(ResultAliases):
     """Result of :func:`solve_to_digits`.
 
     ``v`` (m,), ``u`` (5n,), ``r`` (5n,) are float64 (the extended point rounded to nearest);

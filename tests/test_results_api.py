@@ -34,7 +34,8 @@ def test_aliases_agree_with_the_fields_they_name():
     res = rfverify.solve(p)
     cert = rfverify.certify(p, res, digits=6)
     diag = rfverify.diagnose(rfverify.load("bundled:sphere"), max_iter=3)
-    for obj in (res, cert, diag):
+    ten = rfverify.solve_to_digits(p, digits=10)
+    for obj in (res, cert, diag, ten):
         assert obj.iterations == obj.nit and isinstance(obj.nit, int)
         assert obj.solve_time == obj.timings["total"] > 0
         assert obj.success == (obj.status in ("Solved", "Certified"))
