@@ -15,7 +15,7 @@ but factors a different matrix:
 ``reduced_factored`` (16)  [[M, −(L⁻¹H̃)ᵀ], [−L⁻¹H̃, −I]], L Lᵀ = J Q_{p⁻²} Jᵀ, unknowns (dv, Lᵀdr̃)
 ``noscaling`` (6) [[M, −H̃ᵀ, 0], [−H̃, 0, J], [0, Arw(z) Jᵀ, Arw(s)]],      unsymmetric
 ``schur``   (16) with its identity block eliminated: M + Bᵀ B, B = L⁻¹H̃, SPD, unknowns dv
-            (CHOLMOD supernodal Cholesky; optional extra ``cholmod``; not yet a ``--method``)
+            (CHOLMOD supernodal Cholesky; optional extra ``cholmod``; ``--method schur``)
 
 The symmetric forms are quasi-definite once a small static regularisation −δI is put on the
 dr̃ block (positive blocks M, I or Q_{p²}; negative block dr̃): they are factored by QDLDL
