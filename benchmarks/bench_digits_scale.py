@@ -12,11 +12,15 @@ the path's alone.  One row per run:
 Not a test: timings on a shared machine are noisy; compare rows of one run.
 
     python benchmarks/bench_digits_scale.py                               # random 300/1000 and 1000/3000
+    python benchmarks/bench_digits_scale.py --problems scene:GranularBed:343 scene:GranularBed:1000 \
+        scene:GranularBed:3375 --engines cholmod                          # 931, 2800, 9675 contacts
     python benchmarks/bench_digits_scale.py --problems random:3000:10000 --engines cholmod
     python benchmarks/bench_digits_scale.py --problems PILE.hdf5 --engines cholmod ldl
 
 A problem is ``random:NB:NC`` (``random_problem(NB, NC, seed=5)``: random rigid bodies, more
-fill than granular media have) or an FCLIB file (e.g. a pile from ``rfverify generate``).
+fill than granular media have), ``scene:NAME:SIZE`` (``rfverify generate NAME --size SIZE``,
+seed 0, its first problem: ``scene:GranularBed:3375`` is the 9675-contact bed, built in
+seconds) or an FCLIB file.
 Set ``OPENBLAS_NUM_THREADS=1`` on a shared machine.
 """
 
@@ -41,6 +45,11 @@ def load(spec: str):
     if spec.startswith("random:"):
         nb, nc = (int(x) for x in spec.split(":")[1:3])
         return random_problem(nb, nc, seed=5)
+    if spec.startswith("scene:"):
+        from rfverify.scenes import generate
+
+        _, name, size = spec.split(":")
+        return generate(name, count=1, seed=0, size=int(size))[0]
     return rfverify.load(spec)
 
 
