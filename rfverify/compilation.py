@@ -160,8 +160,13 @@ def _end_child() -> None:
 
 def compile_extended(kernels=EXTENDED_KERNELS) -> None:
     """Compile ``kernels`` (with numba's cache on, so they are saved) in the given order."""
+    from numba.core import sigutils
+
     for module, name, signature in kernels:
-        _dispatcher(module, name).compile(signature)
+        # As a tuple of types, the form a call compiles and keys numba's cache index by: a
+        # signature string would be saved under another key, and never found by a call.
+        args, _ = sigutils.normalize_signature(signature)
+        _dispatcher(module, name).compile(tuple(args))
 
 
 if __name__ == "__main__":  # the background child: lowest priority, so the solve keeps its core
