@@ -68,9 +68,8 @@ def add_parser(sub) -> None:
     sol.add_argument("--digits", type=digit_count, default=None, metavar="K",
                      help="produce a solution proven right to K significant digits (1-15): the "
                           "double solve, then Algorithm 1 continued in double-double (and, if that "
-                          "stalls short of a proof on a problem of at most 3000 dofs whose factor "
-                          "costs at most 2e7 operations, in 320-bit "
-                          "arithmetic) until the "
+                          "stalls short of a proof on a problem whose sparse factor costs at most 2e7 "
+                          "operations, in 320-bit arithmetic) until the "
                           "rigorous error bound of DESIGN §6 proves K digits of v, u and Hr "
                           "(and r where it is unique); exit code 0 only when proven. With --out the "
                           "file also gets /certificate (the point and the bound, to recheck with "
