@@ -289,6 +289,33 @@ def _symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl, ax):
     return worst
 
 
+def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int):
+    """Iterative refinement of A x = b to double-double accuracy with a float64 ``oracle``
+    (``oracle(r)`` ≈ A⁻¹r in float64: a factor of A rounded to double), as in SoPlex's
+    iterative refinement.  ``A`` = (high, low) values of the upper triangle in CSC (``Ap``,
+    ``Ai``); b = (bh, bl).  Stops at a componentwise backward error below 1e-31, after
+    ``max_steps``, or when a step does not halve it (stalled or NaN: the best iterate is kept).
+    Returns (best backward error, (xh, xl), steps taken)."""
+    n = Ap.size - 1
+    pbh = np.ascontiguousarray(bh, dtype=np.float64)
+    pbl = np.ascontiguousarray(bl, dtype=np.float64)
+    rh, rl = pbh.copy(), pbl.copy()
+    best, best_x = math.inf, (np.zeros(n), np.zeros(n))
+    steps = 0
+    for steps in range(1, max_steps + 1):
+        d = oracle(rh)
+        nh, nl = np.empty(n), np.empty(n)
+        dd.vadd(best_x[0], best_x[1], d, np.zeros(n), nh, nl)
+        backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], pbh, pbl, nh, nl, rh, rl, np.zeros(n))
+        if not backward < 0.5 * best:  # stalled (or NaN): keep the best solution
+            best = min(best, backward) if backward == backward else best
+            break
+        best, best_x = backward, (nh, nl)
+        if backward < 1e-31:
+            break
+    return best, best_x, steps
+
+
 class MixedCholesky(DDCholesky):
     """:class:`DDCholesky` whose factorisation is done in float64 and whose solves are refined
     to double-double accuracy (a double "oracle" with double-double residuals, as in SoPlex's
@@ -338,25 +365,14 @@ class MixedCholesky(DDCholesky):
         if self.precision == "double-double":
             return super().solve(bh, bl)
         n = self.n
-        pbh = np.ascontiguousarray(bh[self.perm])
-        pbl = np.ascontiguousarray(bl[self.perm])
-        xh, xl = np.zeros(n), np.zeros(n)
-        rh, rl = pbh.copy(), pbl.copy()
-        best, best_x = math.inf, (xh, xl)
-        steps = 0
-        for steps in range(1, self.max_steps + 1):
+
+        def oracle(rh):
             d = rh.copy()  # the correction's right-hand side to float64: its error is refined away
             _solve_double(n, self.Lp, self.Li, self.Lx, self.Dh, d)
-            nh, nl = np.empty(n), np.empty(n)
-            dd.vadd(best_x[0], best_x[1], d, np.zeros(n), nh, nl)
-            backward = _symmetric_residual(n, self.Ap, self.Ai, self._A[0], self._A[1], pbh, pbl, nh, nl, rh, rl,
-                                           np.zeros(n))
-            if not backward < 0.5 * best:  # stalled (or NaN): keep the best solution
-                best = min(best, backward) if backward == backward else best
-                break
-            best, best_x = backward, (nh, nl)
-            if backward < 1e-31:
-                break
+            return d
+
+        best, best_x, steps = refine_in_double_double(self.Ap, self.Ai, self._A, bh[self.perm], bl[self.perm],
+                                                      oracle, self.max_steps)
         self.last_backward_error, self.last_steps = best, steps
         self.solves += 1
         self.refinement_steps += steps
@@ -499,24 +515,11 @@ class CholmodMixed:
         if self.precision == "double-double":
             return self._dd.solve(bh, bl)
         n = self.n
-        pbh = np.ascontiguousarray(bh, dtype=np.float64)
-        pbl = np.ascontiguousarray(bl, dtype=np.float64)
-        xh, xl = np.zeros(n), np.zeros(n)
-        rh, rl = pbh.copy(), pbl.copy()
-        best, best_x = math.inf, (xh, xl)
-        steps = 0
-        for steps in range(1, self.max_steps + 1):
-            d = np.asarray(self._factor(rh), dtype=np.float64).reshape(n)  # float64 oracle on the residual
-            nh, nl = np.empty(n), np.empty(n)
-            dd.vadd(best_x[0], best_x[1], d, np.zeros(n), nh, nl)
-            backward = _symmetric_residual(n, self.Ap, self.Ai, self._A[0], self._A[1], pbh, pbl, nh, nl, rh, rl,
-                                           np.zeros(n))
-            if not backward < 0.5 * best:  # stalled (or NaN): keep the best solution
-                best = min(best, backward) if backward == backward else best
-                break
-            best, best_x = backward, (nh, nl)
-            if backward < 1e-31:
-                break
+
+        def oracle(rh):  # CHOLMOD's float64 solve on the residual
+            return np.asarray(self._factor(rh), dtype=np.float64).reshape(n)
+
+        best, best_x, steps = refine_in_double_double(self.Ap, self.Ai, self._A, bh, bl, oracle, self.max_steps)
         self.last_backward_error, self.last_steps = best, steps
         self.solves += 1
         self.refinement_steps += steps
