@@ -100,31 +100,36 @@ def test_docs_are_package_data():
 
 # --- TUTORIAL -------------------------------------------------------------------------------
 
+def console_steps(block: str) -> list[dict]:
+    """The ``$ command`` lines of one console block (a here-document runs to its terminator),
+    each with the output lines quoted under it."""
+    lines, steps, i = block.splitlines(), [], 0
+    while i < len(lines):
+        line = lines[i]
+        if not line.startswith("$ "):
+            i += 1
+            continue
+        cmd = [line[2:]]
+        m = re.search(r"<<'?(\w+)'?", line)
+        if m:
+            while lines[i] != m.group(1):
+                i += 1
+                cmd.append(lines[i])
+        i += 1
+        out = []
+        while i < len(lines) and not lines[i].startswith("$ "):
+            out.append(lines[i])
+            i += 1
+        steps.append({"cmd": "\n".join(cmd), "expect": out})
+    return steps
+
+
 def tutorial_steps(text: str) -> list[dict]:
-    """The ``$ command`` lines of the tutorial's ```console blocks (a here-document runs to its
-    terminator) with the output lines quoted under each; then each ```python block with the plain
+    """The steps of the tutorial's ```console blocks; then each ```python block with the plain
     block after "prints"."""
     steps = []
     for block in re.findall(r"```console\n(.*?)```", text, re.S):
-        lines = block.splitlines()
-        i = 0
-        while i < len(lines):
-            line = lines[i]
-            if not line.startswith("$ "):
-                i += 1
-                continue
-            cmd = [line[2:]]
-            m = re.search(r"<<'?(\w+)'?", line)
-            if m:
-                while lines[i] != m.group(1):
-                    i += 1
-                    cmd.append(lines[i])
-            i += 1
-            out = []
-            while i < len(lines) and not lines[i].startswith("$ "):
-                out.append(lines[i])
-                i += 1
-            steps.append({"cmd": "\n".join(cmd), "expect": out})
+        steps += console_steps(block)
     for code, printed in re.findall(r"```python\n(.*?)```\s*\n\s*prints\s*\n\s*```\n(.*?)```", text, re.S):
         steps.append({"cmd": "python - <<'PYEOF'\n" + code + "PYEOF", "expect": printed.splitlines()})
     return steps
@@ -156,18 +161,19 @@ def line_matches(expected: str, got: str) -> bool:
     return all(_numbers_agree(a, b) for a, b in zip(_NUM.findall(e), _NUM.findall(g)))
 
 
-def run_tutorial(workdir: Path, text: str) -> list[str]:
-    """Run the tutorial's commands in one shell in ``workdir``; the mismatches, one per line."""
-    steps = tutorial_steps(text)
+def run_steps(workdir: Path, steps: list[dict], *, env: dict | None = None, timeout: float = 240) -> list[str]:
+    """Run ``steps`` (see :func:`console_steps`) in one shell in ``workdir``, with this Python's
+    scripts first on PATH and ``env`` added; the mismatches with what they quote, one per line
+    ("…" lines and blank ones are not checked; ``echo $?`` checks the previous exit code)."""
     script = ["set +e"]
     for k, s in enumerate(steps):
         if s["cmd"] == "echo $?":
             continue
         script += [f"echo '@@{k}'", "{", s["cmd"], "} 2>&1", f"echo \"@@rc $?\""]
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
-           "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}
+           "PYTHONUNBUFFERED": "1", "COLUMNS": "200", **(env or {})}
     out = subprocess.run(["bash", "-c", "\n".join(script)], cwd=workdir, env=env, capture_output=True,
-                         text=True, timeout=240).stdout
+                         text=True, timeout=timeout).stdout
     got, rc, current = {}, {}, None
     for line in out.splitlines():
         if line.startswith("@@rc "):
@@ -192,6 +198,11 @@ def run_tutorial(workdir: Path, text: str) -> list[str]:
                 problems.append(f"`{s['cmd'].splitlines()[0]}`: quoted line not printed: {line!r}\n"
                                 f"    printed: {got.get(k)}")
     return problems
+
+
+def run_tutorial(workdir: Path, text: str) -> list[str]:
+    """Run the tutorial's commands in one shell in ``workdir``; the mismatches, one per line."""
+    return run_steps(workdir, tutorial_steps(text))
 
 
 def test_tutorial_line_matching_is_tolerant_of_timings_only():

@@ -25,6 +25,7 @@ from rfverify.solver import Status
 from rfverify.solver.result import method_unavailable
 
 from conftest import REPO_ROOT
+from test_docs import console_steps, run_steps
 
 SOURCES = REPO_ROOT.parent / "shared" / "peers" / "siconos"
 BUILD = REPO_ROOT / "benchmarks" / "peers" / "siconos" / "build.sh"
@@ -148,80 +149,12 @@ def test_missing_build_is_one_clear_error(monkeypatch, tmp_path):
 
 # --- the TUTORIAL's Siconos section: its commands print what it quotes ------------------------
 
-_NUM = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:e[-+]?\d+)?")
-
-
-def _session_steps(block: str) -> list[dict]:
-    """``$ command`` lines of an sh-session block (a here-document runs to its terminator) with
-    the output lines quoted under each."""
-    lines, steps, i = block.splitlines(), [], 0
-    while i < len(lines):
-        if not lines[i].startswith("$ "):
-            i += 1
-            continue
-        cmd = [lines[i][2:]]
-        m = re.search(r"<<'?(\w+)'?", lines[i])
-        if m:
-            while lines[i] != m.group(1):
-                i += 1
-                cmd.append(lines[i])
-        i += 1
-        out = []
-        while i < len(lines) and not lines[i].startswith("$ "):
-            out.append(lines[i])
-            i += 1
-        steps.append({"cmd": "\n".join(cmd), "expect": out})
-    return steps
-
-
-def _agree(expected: str, got: str) -> bool:
-    """The same line up to timings ("time … s"), 5% on decimals, rounding-level residuals."""
-    e, g = (re.sub(r"\btime [\d.]+ s\b", "time <T> s", x) for x in (expected, got))
-    if _NUM.sub("#", e) != _NUM.sub("#", g):
-        return False
-    for a, b in zip(_NUM.findall(e), _NUM.findall(g)):
-        x, y = float(a), float(b)
-        if "." not in a and "e" not in a.lower():
-            if x != y:
-                return False
-        elif not ((abs(x) < 1e-13 and abs(y) < 1e-13) or abs(x - y) <= 0.05 * max(abs(x), abs(y))):
-            return False
-    return True
-
-
 def test_tutorial_siconos_section_prints_what_it_quotes(siconos_prefix, tmp_path):
     text = (REPO_ROOT / "docs" / "TUTORIAL.md").read_text(encoding="utf-8")
     section = text[text.index("## Certify a Siconos solution"):]
-    steps = _session_steps(re.search(r"```sh-session\n(.*?)```", section, re.S).group(1))
+    steps = console_steps(re.search(r"```sh-session\n(.*?)```", section, re.S).group(1))
     assert len(steps) >= 6
-    script = ["set +e"]
-    for k, s in enumerate(steps):
-        if s["cmd"] != "echo $?":
-            script += [f"echo '@@{k}'", "{", s["cmd"], "} 2>&1", 'echo "@@rc $?"']
-    env = {**os.environ, "PATH": f"{os.path.dirname(sys.executable)}{os.pathsep}{os.environ.get('PATH', '')}",
-           "COLUMNS": "200", "OPENBLAS_NUM_THREADS": "1"}
-    out = subprocess.run(["bash", "-c", "\n".join(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
-                         timeout=600, check=False).stdout
-    got, rc, current = {}, {}, None
-    for line in out.splitlines():
-        if line.startswith("@@rc "):
-            rc[current] = int(line[5:])
-        elif re.fullmatch(r"@@\d+", line):
-            current = int(line[2:])
-            got[current] = []
-        elif current is not None:
-            got[current].append(line)
-    problems, last = [], None
-    for k, s in enumerate(steps):
-        if s["cmd"] == "echo $?":
-            if rc.get(last) != int(s["expect"][0]):
-                problems.append(f"`{steps[last]['cmd']}`: exit {rc.get(last)}, the tutorial says {s['expect'][0]}")
-            continue
-        last = k
-        for line in s["expect"]:
-            if line.strip() and not any(_agree(line, g) for g in got.get(k, [])):
-                problems.append(f"`{s['cmd'].splitlines()[0]}`: quoted line not printed: {line!r}\n"
-                                f"    printed: {got.get(k)}")
+    problems = run_steps(tmp_path, steps, env={"OPENBLAS_NUM_THREADS": "1"}, timeout=600)
     assert not problems, "docs/TUTORIAL.md (Siconos section) disagrees with the program:\n" + "\n".join(problems)
 
 
