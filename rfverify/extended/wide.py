@@ -339,15 +339,8 @@ class DenseDofSpace:
     name = "dense dof-space (M + H̃ᵀG⁻¹H̃), multiple precision"
 
     def __init__(self, data: ExtendedData, W: "WideData", perm: np.ndarray | None = None):
-        self.data = data
-        self.W = W
         m = data.m
-        CD = contact_dof_pattern(data)
-        # rows and columns in a minimum-degree order (``perm`` if the caller has it already):
-        # the factor keeps M + BᵀB's sparsity, and the elimination below skips the exact zeros
-        self.perm = dof_space_ordering(data, CD)[0] if perm is None else np.asarray(perm, dtype=np.int64)
-        self.iperm = np.empty_like(self.perm)
-        self.iperm[self.perm] = np.arange(m)
+        CD = self._ordered(data, W, perm)
         loc_dofs, Hh, Hl = contact_local_H(data, CD)
         self.valid = loc_dofs >= 0
         self.loc = np.where(self.valid, self.iperm[np.maximum(loc_dofs, 0)], -1)
@@ -358,6 +351,18 @@ class DenseDofSpace:
         self.M_dense = S
         self.L = None
         self.Finv = None
+
+    def _ordered(self, data: ExtendedData, W: "WideData", perm):
+        """Keep the data and put rows and columns in a minimum-degree order (``perm`` if the
+        caller has it already): the factor keeps M + BᵀB's sparsity and the elimination skips
+        the exact zeros.  Returns the contact–dof pattern."""
+        self.data = data
+        self.W = W
+        CD = contact_dof_pattern(data)
+        self.perm = dof_space_ordering(data, CD)[0] if perm is None else np.asarray(perm, dtype=np.int64)
+        self.iperm = np.empty_like(self.perm)
+        self.iperm[self.perm] = np.arange(data.m)
+        return CD
 
     def update(self, sc: Scaling) -> bool:
         """Form and factor S at the scaling ``sc``; False if a pivot is not positive."""
@@ -456,13 +461,8 @@ class SparseDofSpace(DenseDofSpace):
     name = "sparse dof-space (M + H̃ᵀG⁻¹H̃), multiple precision"
 
     def __init__(self, data: ExtendedData, W: "WideData", perm: np.ndarray | None = None):
-        self.data = data
-        self.W = W
         m = data.m
-        CD = contact_dof_pattern(data)
-        self.perm = dof_space_ordering(data, CD)[0] if perm is None else np.asarray(perm, dtype=np.int64)
-        self.iperm = np.empty_like(self.perm)
-        self.iperm[self.perm] = np.arange(m)
+        CD = self._ordered(data, W, perm)
         pattern = (abs(data.M_pattern) + abs(CD.T @ CD)).tocsc()
         self.Lp, self.Li, lower = _factor_pattern(pattern, self.perm)
         self.S_indptr, self.S_indices = lower.indptr.astype(np.int64), lower.indices.astype(np.int64)
