@@ -187,18 +187,25 @@ def test_mixed_ldl_reaches_double_double_accuracy_on_a_badly_scaled_matrix():
     assert np.max(np.abs(d * (dd.to_longdouble(xh, xl) - dd.to_longdouble(yh, yl)))) <= 1e-14 * np.max(np.abs(d * yh))
 
 
+
+def singular_in_float64(factor, n: int):
+    """(high, low) values of [[1, 1], [1, 1 + 2⁻⁶⁰]] blocks chained along the diagonal, in
+    ``factor``'s value order (its ``positions``): the high part singular, the exact matrix SPD."""
+    hi, lo = np.zeros(factor.nnz_upper), np.zeros(factor.nnz_upper)
+    rows, cols = np.arange(0, n, 2), np.arange(1, n, 2)
+    hi[factor.positions(np.arange(n), np.arange(n))] = 1.0
+    lo[factor.positions(cols, cols)] = 2.0 ** -60
+    hi[factor.positions(rows, cols)] = 1.0
+    return hi, lo
+
+
 def test_mixed_ldl_falls_back_to_double_double_where_float64_cannot_see_the_matrix():
     """A matrix whose float64 part is singular (its definiteness is in the low words): the
     float64 factorisation fails, the double-double one is used, and says why."""
     n = 40
     A = sp.identity(n, format="csc")
     mixed = MixedCholesky(A + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))
-    hi, lo = np.zeros(mixed.nnz_upper), np.zeros(mixed.nnz_upper)
-    # [[1, 1], [1, 1 + 2⁻⁶⁰]] blocks chained: hi part singular, exact matrix SPD
-    rows, cols = np.arange(0, n, 2), np.arange(1, n, 2)
-    hi[mixed.positions(np.arange(n), np.arange(n))] = 1.0
-    lo[mixed.positions(cols, cols)] = 2.0 ** -60
-    hi[mixed.positions(rows, cols)] = 1.0
+    hi, lo = singular_in_float64(mixed, n)
     assert mixed.factor(hi, lo) == -1
     assert mixed.precision == "double-double" and "pivot" in mixed.fallback_reason
     b = np.arange(1.0, n + 1)
