@@ -25,7 +25,7 @@ import numpy as np
 from .lifting import lift
 from .problem import Problem
 from .solver import solve
-from .solver.ipm import rule_at
+from .algorithm.rules import rule_at
 from .solver.result import ResultAliases, Status
 
 

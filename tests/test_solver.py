@@ -542,16 +542,16 @@ def test_hybrid_sigma_is_mehrotras_far_and_the_papers_near(monkeypatch):
     """The default σ rule uses Mehrotra's cube, floored at 0.2, while the iterate's criterion is
     above 1e-4 and the paper's rule from there on — decided per iteration from the criterion
     the trace shows — and each phase's σ is that rule's value."""
-    from rfverify.solver import ipm
+    from rfverify.algorithm import rules as ipm
 
     calls = []
-    real = ipm._sigma
+    real = ipm.centring
 
     def recording(rule, mu_aff, mu, alpha_aff):
         calls.append((rule, mu_aff, mu, alpha_aff))
         return real(rule, mu_aff, mu, alpha_aff)
 
-    monkeypatch.setattr(ipm, "_sigma", recording)
+    monkeypatch.setattr(ipm, "centring", recording)
     res = solve(rfverify.load(HARD_DIR / "Millimetre-ndof-72-nc-21-1.hdf5"), method="jqinv", split_components=False)
     assert res.success and res.settings.sigma_rule == "hybrid"
     crit, sigma = res.trace["criterion"][:-1], res.trace["sigma"][:-1]

@@ -18,12 +18,15 @@ contact-space Schur complement, factored in float64 and refined in double-double
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..algorithm.interfaces import Breakdown
+from ..algorithm.loop import Precision, iterate
+from ..algorithm.newton import ReducedNewton
+from ..algorithm.policy import UntilPolicy, extended_trace
 from . import cones as C
 from . import dd
 from .system import ExtendedData, choose_backend
@@ -114,36 +117,6 @@ class ExtendedResult:
     stats: dict = field(default_factory=dict)
 
 
-def sigma_rule(mu: float, mu_a: float, alpha_a: float) -> float:
-    """Mehrotra's centring parameter σ = (μ_a/μ)^e, e = max(1, 3α_a) once μ < 1e-5 (the
-    paper's rule), from the predictor's μ_a and step α_a."""
-    ratio = max(mu_a, 0.0) / mu if mu > 0 else 0.0
-    expo = max(1.0, 3 * alpha_a) if mu < 1e-5 else 1.0
-    return min(1.0, ratio ** expo)
-
-
-def refined_newton(core, residual, a, b, c, *, inf, refine_max: int, floor: float):
-    """(dv, dr̃, dz, steps, relative residual): ``core(a, b, c)`` solves the Newton system
-    (through a reduced form), then each step refines against the unreduced three-block system
-    — ``residual(a, b, c, dv, dr, dz)`` returns its three residual blocks — while the relative
-    residual max‖e‖∞ / max(‖a‖∞, ‖b‖∞, ‖c‖∞) at least halves and is above ``floor``.  Any
-    vector type with +, and a norm ``inf``, works: double-double here, mpfr in :mod:`.wide`."""
-    dv, dr, dz = core(a, b, c)
-    scale = max(inf(a), inf(b), inf(c), 1e-300)
-    best, steps = math.inf, 0
-    for _ in range(refine_max):
-        e1, e2, e3 = residual(a, b, c, dv, dr, dz)
-        res = max(inf(e1), inf(e2), inf(e3)) / scale
-        if not res < 0.5 * best or res < floor:
-            best = min(best, res)
-            break
-        best = res
-        ddv, ddr, ddz = core(e1, e2, e3)
-        dv, dr, dz = dv + ddv, dr + ddr, dz + ddz
-        steps += 1
-    return dv, dr, dz, steps, best
-
-
 def interior_start(data: ExtendedData, v, r, u=None, margin_rel: float = 1e-8) -> dict:
     """A strictly interior lifted point near a candidate solution (v, r) in the original
     variables: r̃ = P⁻¹r and z splitting ũ = P(Hᵀv + w) between the two cones of a contact,
@@ -190,127 +163,134 @@ def interior_start(data: ExtendedData, v, r, u=None, margin_rel: float = 1e-8) -
     return {"v": v, "r_t": r_t, "z": z}
 
 
-def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, backend=None,
-        refine_max: int = 3, gamma_max: float = 0.99, progress=None) -> ExtendedResult:
-    """Algorithm 1 in double-double from ``start`` = {"v", "r_t", "z"} (any float dtype;
-    converted exactly).  ``until(iterate)`` is called at every iterate (before the step);
-    returning True stops the run with status "Stopped".  ``gamma_max`` caps the
-    step-to-boundary fraction γ = 0.9 + 0.09α (the paper's rule) from above."""
-    t0 = time.perf_counter()
-    n3, nz, n = data.n3, data.nz, data.n
-    backend = backend or choose_backend(data)
-    v = V(*dd.from_longdouble(start["v"]))
-    r_t = V(*dd.from_longdouble(start["r_t"]))
-    z = V(*dd.from_longdouble(start["z"]))
-    f = V(*data.f)
-    w_t = V(*data.w_t)
-    e = V(C.identity(n3, nz))
-    n_cones = n3 + data.n1
-    trace = {k: [] for k in ("mu", "pinfeas", "dinfeas", "sigma", "alpha", "refine", "solve_residual", "time")}
-    gamma = 0.9
-    status, message = "MaxIterations", f"reached max_iter = {max_iter}"
-    factor_time = 0.0
-    k = 0
+class _DDOperator:
+    """A :class:`.system.DDMatrix` applied to double-double vectors by ``@``."""
 
-    def mv(A, x):
-        return V(*A.matvec(x.h, x.l))
+    __slots__ = ("A",)
 
-    def cone(fn, x, y):
-        out = V.zeros(nz)
-        fn(n3, x.h, x.l, y.h, y.l, out.h, out.l)
-        return out
+    def __init__(self, A):
+        self.A = A
 
-    for k in range(max_iter + 1):
-        s = mv(data.JT, r_t)
-        Mv, HtTr, Hv, Jz = mv(data.M, v), mv(data.HtT, r_t), mv(data.Ht, v), mv(data.J, z)
-        r_d = Mv - HtTr - f
-        if data.local:  # ũ = W̃r̃ + q̃ of the file's W (no dofs)
-            Hv = mv(data.Wt, r_t)
-        r_p = Hv + w_t - Jz
-        mu = z.dot(s) / n
-        pinf = r_p.norm() / max(Jz.norm(), Hv.norm(), w_t.norm(), 1e-300)
-        dinf = r_d.norm() / max(Mv.norm(), f.norm(), HtTr.norm(), 1e-300)
-        trace["mu"].append(mu)
-        trace["pinfeas"].append(pinf)
-        trace["dinfeas"].append(dinf)
-        trace["time"].append(time.perf_counter() - t0)
-        if progress:
-            progress(k, mu, pinf, dinf)
-        if until is not None and until(Iterate(k, v, r_t, z, mu, pinf, dinf)):
-            status, message = "Stopped", f"accepted at iteration {k} (μ = {mu:.2e})"
-            break
-        if k == max_iter:
-            break
-        ph, pl, pih, pil, lh, ll = (np.zeros(nz) for _ in range(6))
-        spec = np.zeros((n_cones, 8))
+    def __matmul__(self, x: V) -> V:
+        return V(*self.A.matvec(x.h, x.l))
+
+
+class _DDSpace:
+    """The lifted problem in double-double (:class:`~rfverify.algorithm.interfaces.Space`)."""
+
+    tiny = 1e-300
+
+    def __init__(self, data: ExtendedData):
+        self.M, self.H, self.HT = _DDOperator(data.M), _DDOperator(data.Ht), _DDOperator(data.HtT)
+        self.J, self.JT = _DDOperator(data.J), _DDOperator(data.JT)
+        self.W = _DDOperator(data.Wt) if data.local else None  # ũ = W̃r̃ + q̃ of the file's W (no dofs)
+        self.f, self.w = V(*data.f), V(*data.w_t)
+
+    def velocity(self, v, r):
+        return self.W @ r if self.W is not None else self.H @ v
+
+    @staticmethod
+    def dot(x, y):
+        return x.dot(y)
+
+    @staticmethod
+    def norm2(x):
+        return x.norm()
+
+    @staticmethod
+    def axpy(x, a, y):
+        return x.axpy(a, y)
+
+    move = axpy
+
+
+class _DDScaling:
+    """The NT scaling of one double-double iterate (:mod:`.cones`)."""
+
+    def __init__(self, n3: int, nz: int, n_cones: int, e: V, z: V, s: V):
+        self.n3, self.e, self.z, self.s = n3, e, z, s
+        self.ph, self.pl, self.pih, self.pil, lh, ll = (np.zeros(nz) for _ in range(6))
+        self.spec = np.zeros((n_cones, 8))
         try:
-            bad = C.nt_scaling(n3, z.h, z.l, s.h, s.l, ph, pl, pih, pil, lh, ll, spec)
+            bad = C.nt_scaling(n3, z.h, z.l, s.h, s.l, self.ph, self.pl, self.pih, self.pil, lh, ll, self.spec)
         except ZeroDivisionError:  # a cone's determinant is exactly 0: the iterate reached the boundary
             bad = max(0, min(C.min_lambda2(n3, z.h, z.l), C.min_lambda2(n3, s.h, s.l))[1])
         if bad >= 0:
-            status, message = "NumericalError", f"iteration {k}: cone {bad} is not strictly interior"
-            break
-        lam = V(lh, ll)
+            raise Breakdown(f"cone {bad} is not strictly interior")
+        self.lam = V(lh, ll)
 
-        def Qp(k, y):
-            out = V.zeros(nz)
-            C.quad_pow(n3, k, spec, y.h, y.l, out.h, out.l)
-            return out
+    def describe(self) -> dict:
+        return {}
 
+    def _cone(self, fn, x, y):
+        out = V.zeros(x.h.size)
+        fn(self.n3, x.h, x.l, y.h, y.l, out.h, out.l)
+        return out
+
+    def quad(self, k: int, y: V) -> V:
+        out = V.zeros(y.h.size)
+        C.quad_pow(self.n3, k, self.spec, y.h, y.l, out.h, out.l)
+        return out
+
+    def affine_rhs(self):
+        return -self.lam
+
+    def corrector_rhs(self, target, dz_aff, ds_aff):
+        xi = (self.e.scaled(target) - self._cone(C.product, self.lam, self.lam)
+              - self._cone(C.product, self.quad(1, dz_aff), self.quad(-1, ds_aff)))
+        return self._cone(C.arrow_solve, self.lam, xi)
+
+    def max_step(self, dz, ds) -> float:
+        return min(C.max_step(self.n3, self.z.h, self.z.l, dz.h, dz.l),
+                   C.max_step(self.n3, self.s.h, self.s.l, ds.h, ds.l))
+
+
+class _DDCones:
+    def __init__(self, data: ExtendedData):
+        self.n3, self.nz, self.n_cones = data.n3, data.nz, data.n3 + data.n1
+        self.e = V(C.identity(data.n3, data.nz))
+
+    def scaling(self, z, s):
+        return _DDScaling(self.n3, self.nz, self.n_cones, self.e, z, s)
+
+
+class _DDBackend:
+    """A back end of :mod:`.system` seen through double-double vectors."""
+
+    def __init__(self, backend):
+        self.backend = backend
+        self.name = backend.name
         if hasattr(backend, "observe"):
-            backend.observe(k, mu, trace["solve_residual"][-1] if trace["solve_residual"] else None)
-        tf = time.perf_counter()
-        ok = backend.update(ph, pl, pih, pil, spec)
-        factor_time += time.perf_counter() - tf
-        if not ok:
-            status, message = "NumericalError", f"iteration {k}: the {backend.name} matrix lost definiteness"
-            break
+            self.observe = backend.observe
 
-        def core(a, b, c):
-            qc = Qp(-1, c)
-            t = b + mv(data.J, qc)
-            dv, dr = backend.solve((a.h, a.l), (t.h, t.l))
-            dv, dr = V(*dv), V(*dr)
-            w = Qp(-1, mv(data.JT, dr))
-            dz = Qp(-1, c - w)
-            return dv, dr, dz
+    def update(self, sc: _DDScaling) -> bool:
+        return self.backend.update(sc.ph, sc.pl, sc.pih, sc.pil, sc.spec)
 
-        def residual(a, b, c, dv, dr, dz):
-            second = b - (mv(data.Wt, dr) if data.local else mv(data.Ht, dv)) + mv(data.J, dz)
-            return (a - mv(data.M, dv) + mv(data.HtT, dr), second, c - Qp(1, dz) - Qp(-1, mv(data.JT, dr)))
+    def solve(self, a: V, t: V):
+        dv, dr = self.backend.solve((a.h, a.l), (t.h, t.l))
+        return V(*dv), V(*dr)
 
-        def newton(a, b, c):
-            return refined_newton(core, residual, a, b, c, inf=V.inf, refine_max=refine_max, floor=1e-31)
 
-        a, b = -r_d, -r_p
-        dv_a, dr_a, dz_a, st_a, res_a = newton(a, b, -lam)
-        if not math.isfinite(res_a):
-            status, message = "NumericalError", f"iteration {k}: the {backend.name} solve failed"
-            break
-        ds_a = mv(data.JT, dr_a)
-        alpha_a = min(1.0, C.max_step(n3, z.h, z.l, dz_a.h, dz_a.l), C.max_step(n3, s.h, s.l, ds_a.h, ds_a.l))
-        mu_a = z.axpy(alpha_a, dz_a).dot(s.axpy(alpha_a, ds_a)) / n
-        sigma = sigma_rule(mu, mu_a, alpha_a)
-        mu_c = z.dot(s) / n_cones
-        dzs = Qp(1, dz_a)
-        dss = Qp(-1, ds_a)
-        xi = e.scaled(sigma * mu_c) - cone(C.product, lam, lam) - cone(C.product, dzs, dss)
-        c = cone(C.arrow_solve, lam, xi)
-        dv, dr, dz, st, res = newton(a, b, c)
-        if not math.isfinite(res):
-            status, message = "NumericalError", f"iteration {k}: the {backend.name} solve failed"
-            break
-        ds = mv(data.JT, dr)
-        alpha_max = min(C.max_step(n3, z.h, z.l, dz.h, dz.l), C.max_step(n3, s.h, s.l, ds.h, ds.l))
-        alpha = min(1.0, gamma * alpha_max)
-        trace["sigma"].append(sigma)
-        trace["alpha"].append(alpha)
-        trace["refine"].append(st_a + st)
-        trace["solve_residual"].append(max(res_a, res))
-        v, r_t, z = v.axpy(alpha, dv), r_t.axpy(alpha, dr), z.axpy(alpha, dz)
-        gamma = min(gamma_max, 0.9 + (gamma_max - 0.9) * alpha)
-    return ExtendedResult(v, r_t, z, status, message, k, trace, backend.name,
-                          time.perf_counter() - t0, factor_time, _stats(backend))
+def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, backend=None,
+        refine_max: int = 3, gamma_max: float = 0.99, progress=None) -> ExtendedResult:
+    """Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) in double-double from ``start`` =
+    {"v", "r_t", "z"} (any float dtype; converted exactly).  ``until(iterate)`` is called at
+    every iterate (before the step); returning True stops the run with status "Stopped".
+    ``gamma_max`` caps the step-to-boundary fraction γ = 0.9 + 0.09α (the paper's rule) from
+    above."""
+    t0 = time.perf_counter()
+    backend = backend or choose_backend(data)
+    space = _DDSpace(data)
+    newton = ReducedNewton(space, _DDBackend(backend), refine_max=refine_max, floor=1e-31, inf=V.inf)
+    policy = UntilPolicy(until, progress, max_iter,
+                         lambda k, it, res: Iterate(k, *it, res.mu, res.pinfeas, res.dinfeas),
+                         gamma_max, "accepted")
+    begin = tuple(V(*dd.from_longdouble(start[key])) for key in ("v", "r_t", "z"))
+    out = iterate(Precision(space, _DDCones(data), newton), policy, begin, n_contacts=data.n,
+                  n_cones=data.n3 + data.n1, clock_origin=t0)
+    status, message = out.verdict
+    return ExtendedResult(out.v, out.r, out.z, status, message, out.k, extended_trace(out.records), backend.name,
+                          time.perf_counter() - t0, out.timings["factor"], _stats(backend))
 
 
 def _stats(backend) -> dict:

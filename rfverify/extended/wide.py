@@ -30,7 +30,11 @@ import gmpy2
 import numpy as np
 import scipy.sparse as sp
 
-from .ipm import ExtendedResult, refined_newton, sigma_rule
+from ..algorithm.interfaces import Breakdown
+from ..algorithm.loop import Precision, iterate
+from ..algorithm.newton import ReducedNewton
+from ..algorithm.policy import UntilPolicy, extended_trace
+from .ipm import ExtendedResult
 from .ldl import _numeric_double, _symbolic, _workspace, fill_reducing_order
 from .system import DDMatrix, ExtendedData, contact_dof_pattern, contact_local_H
 
@@ -627,102 +631,107 @@ class WideData:
         self.w_t = from_dd(*data.w_t)
 
 
+class _WideSpace:
+    """The lifted problem in ``bits``-bit mpfr (:class:`~rfverify.algorithm.interfaces.Space`):
+    :class:`WideData`'s operators, object arrays as vectors."""
+
+    tiny = 1e-300
+
+    def __init__(self, W: WideData):
+        self.M, self.H, self.HT, self.J, self.JT = W.M, W.Ht, W.HtT, W.J, W.JT
+        self.f, self.w = W.f, W.w_t
+
+    def velocity(self, v, r):
+        return self.H @ v
+
+    dot = staticmethod(dot)
+    norm2 = staticmethod(two_norm)
+
+    @staticmethod
+    def axpy(x, a, y):
+        return x + a * y
+
+    move = axpy
+
+
+class _WideScaling:
+    """The NT scaling of one mpfr iterate and its cone operations."""
+
+    def __init__(self, n3: int, n_cones: int, e, z, s):
+        sc, bad = nt_scaling(n3, z, s)
+        if sc is None:
+            raise Breakdown(f"cone {bad} is not strictly interior")
+        self.n3, self.n_cones, self.e, self.z, self.s, self.sc = n3, n_cones, e, z, s, sc
+
+    def describe(self) -> dict:
+        return {"centrality": centrality(self.n3, self.sc, dot(self.z, self.s) / self.n_cones)}
+
+    def quad(self, k: int, y):
+        return quad_pow(self.n3, k, self.sc, y)
+
+    def affine_rhs(self):
+        return -self.sc.lam
+
+    def corrector_rhs(self, target, dz_aff, ds_aff):
+        n3, lam = self.n3, self.sc.lam
+        xi = target * self.e - product(n3, lam, lam) - product(n3, self.quad(1, dz_aff), self.quad(-1, ds_aff))
+        return arrow_solve(n3, lam, xi)
+
+    def max_step(self, dz, ds) -> float:
+        return min(max_step(self.n3, self.z, dz), max_step(self.n3, self.s, ds))
+
+
+class _WideCones:
+    def __init__(self, n3: int, nz: int, n_cones: int):
+        self.n3, self.n_cones, self.e = n3, n_cones, identity(n3, nz)
+
+    def scaling(self, z, s):
+        return _WideScaling(self.n3, self.n_cones, self.e, z, s)
+
+
+class _WideBackend:
+    """A dof-space factor seen through the Newton interface (it takes the scaling's
+    :class:`Scaling` and mpfr vectors as they are)."""
+
+    def __init__(self, factor):
+        self.factor = factor
+        self.name = factor.name
+
+    def update(self, scaling: _WideScaling) -> bool:
+        return self.factor.update(scaling.sc)
+
+    def solve(self, a, t):
+        return self.factor.solve(a, t)
+
+
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits: int = DEFAULT_BITS,
         refine_max: int = 8, gamma_max: float = 0.99, perm=None, progress=None, sparse: bool = True) -> WideResult:
-    """Algorithm 1 in ``bits``-bit arithmetic from ``start`` = {"v", "r_t", "z"}, each a
-    (hi, lo) pair of float64 arrays (a double-double iterate) or an mpfr array.
-    ``until(WideIterate)`` is called at every iterate; True stops the run ("Stopped").
-    Same predictor–corrector, σ rule and step rule as :func:`.ipm.run`.  ``perm``: the
-    factor's ordering from :func:`dof_space_ordering`, if the caller computed it.  ``sparse``:
-    the factor is :class:`SparseDofSpace` (default; memory O(nnz(L))), else
-    :class:`DenseDofSpace` (m × m; kept as the reference the sparse one is tested against)."""
+    """Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) in ``bits``-bit arithmetic from
+    ``start`` = {"v", "r_t", "z"}, each a (hi, lo) pair of float64 arrays (a double-double
+    iterate) or an mpfr array.  ``until(WideIterate)`` is called at every iterate; True stops
+    the run ("Stopped").  Same policy as :func:`.ipm.run` (the paper's σ rule, the capped step
+    rule).  ``perm``: the factor's ordering from :func:`dof_space_ordering`, if the caller
+    computed it.  ``sparse``: the factor is :class:`SparseDofSpace` (default; memory
+    O(nnz(L))), else :class:`DenseDofSpace` (m × m; kept as the reference the sparse one is
+    tested against)."""
     t0 = time.perf_counter()
-    n3, nz, n = data.n3, data.nz, data.n
-    n_cones = n3 + data.n1
-    trace = {k: [] for k in ("mu", "pinfeas", "dinfeas", "sigma", "alpha", "refine", "solve_residual",
-                             "centrality", "time")}
-    status, message = "MaxIterations", f"reached max_iter = {max_iter}"
+    n_cones = data.n3 + data.n1
     with _context(bits):
         W = WideData(data)
-        backend = (SparseDofSpace if sparse else DenseDofSpace)(data, W, perm=perm)
+        factor = (SparseDofSpace if sparse else DenseDofSpace)(data, W, perm=perm)
+        space = _WideSpace(W)
+        newton = ReducedNewton(space, _WideBackend(factor), refine_max=refine_max, floor=2.0 ** (-bits + 24),
+                               inf=inf_norm)
+        policy = UntilPolicy(until, progress, max_iter,
+                             lambda k, it, res: WideIterate(k, *it, res.mu, res.pinfeas, res.dinfeas, bits, W),
+                             gamma_max, "stopped by the proof driver")
 
         def lift(x):
             return from_dd(*x) if isinstance(x, tuple) else np.asarray(x, dtype=object) + 0
 
-        v, r_t, z = lift(start["v"]), lift(start["r_t"]), lift(start["z"])
-        e = identity(n3, nz)
-        gamma = 0.9
-        tiny = 2.0 ** (-bits + 24)
-        k = 0
-        for k in range(max_iter + 1):
-            s = W.JT @ r_t
-            Mv, HtTr, Hv, Jz = W.M @ v, W.HtT @ r_t, W.Ht @ v, W.J @ z
-            r_d = Mv - HtTr - W.f
-            r_p = Hv + W.w_t - Jz
-            mu_w = dot(z, s) / n
-            mu = float(mu_w)
-            pinf = two_norm(r_p) / max(two_norm(Jz), two_norm(Hv), two_norm(W.w_t), 1e-300)
-            dinf = two_norm(r_d) / max(two_norm(Mv), two_norm(W.f), two_norm(HtTr), 1e-300)
-            trace["mu"].append(mu)
-            trace["pinfeas"].append(pinf)
-            trace["dinfeas"].append(dinf)
-            trace["time"].append(time.perf_counter() - t0)
-            if progress:
-                progress(k, mu, pinf, dinf)
-            if until is not None and until(WideIterate(k, v, r_t, z, mu, pinf, dinf, bits, W)):
-                status, message = "Stopped", f"stopped by the proof driver at iteration {k} (μ = {mu:.2e})"
-                break
-            if k == max_iter:
-                break
-            sc, bad = nt_scaling(n3, z, s)
-            if sc is None:
-                status, message = "NumericalError", f"iteration {k}: cone {bad} is not strictly interior"
-                break
-            trace["centrality"].append(centrality(n3, sc, dot(z, s) / n_cones))
-            try:
-                ok = backend.update(sc)
-            except ArithmeticError as exc:  # a singular contact factor
-                status, message = "NumericalError", f"iteration {k}: {exc}"
-                break
-            if not ok:
-                status, message = "NumericalError", f"iteration {k}: the {backend.name} matrix lost definiteness"
-                break
-
-            def core(a, b, c):
-                dv, dr = backend.solve(a, b + W.J @ quad_pow(n3, -1, sc, c))
-                dz = quad_pow(n3, -1, sc, c - quad_pow(n3, -1, sc, W.JT @ dr))
-                return dv, dr, dz
-
-            def residual(a, b, c, dv, dr, dz):
-                return (a - W.M @ dv + W.HtT @ dr, b - W.Ht @ dv + W.J @ dz,
-                        c - quad_pow(n3, 1, sc, dz) - quad_pow(n3, -1, sc, W.JT @ dr))
-
-            def newton(a, b, c):
-                return refined_newton(core, residual, a, b, c, inf=inf_norm, refine_max=refine_max, floor=tiny)
-
-            a, b = -r_d, -r_p
-            dv_a, dr_a, dz_a, st_a, res_a = newton(a, b, -sc.lam)
-            if not math.isfinite(res_a):
-                status, message = "NumericalError", f"iteration {k}: the {backend.name} solve failed"
-                break
-            ds_a = W.JT @ dr_a
-            alpha_a = min(1.0, max_step(n3, z, dz_a), max_step(n3, s, ds_a))
-            mu_a = float(dot(z + alpha_a * dz_a, s + alpha_a * ds_a) / n)
-            sigma = sigma_rule(mu, mu_a, alpha_a)
-            mu_c = dot(z, s) / n_cones
-            xi = sigma * mu_c * e - product(n3, sc.lam, sc.lam) - product(
-                n3, quad_pow(n3, 1, sc, dz_a), quad_pow(n3, -1, sc, ds_a))
-            c = arrow_solve(n3, sc.lam, xi)
-            dv, dr, dz, st, res = newton(a, b, c)
-            if not math.isfinite(res):
-                status, message = "NumericalError", f"iteration {k}: the {backend.name} solve failed"
-                break
-            ds = W.JT @ dr
-            alpha = min(1.0, gamma * min(max_step(n3, z, dz), max_step(n3, s, ds)))
-            trace["sigma"].append(sigma)
-            trace["alpha"].append(alpha)
-            trace["refine"].append(st_a + st)
-            trace["solve_residual"].append(max(res_a, res))
-            v, r_t, z = v + alpha * dv, r_t + alpha * dr, z + alpha * dz
-            gamma = min(gamma_max, 0.9 + (gamma_max - 0.9) * alpha)
-    return WideResult(v, r_t, z, status, message, k, trace, backend.name, time.perf_counter() - t0, bits=bits)
+        begin = tuple(lift(start[key]) for key in ("v", "r_t", "z"))
+        out = iterate(Precision(space, _WideCones(data.n3, data.nz, n_cones), newton), policy, begin,
+                      n_contacts=data.n, n_cones=n_cones, clock_origin=t0)
+    status, message = out.verdict
+    return WideResult(out.v, out.r, out.z, status, message, out.k, extended_trace(out.records), factor.name,
+                      time.perf_counter() - t0, bits=bits)

@@ -1,14 +1,15 @@
-"""Algorithm 1 (DESIGN §4): Mehrotra predictor–corrector with NT scaling, infeasible start,
-one step length for primal and dual, on the lifted Lorentz-cone form
+"""The double solver's precision and policy for Algorithm 1 (DESIGN §4), whose loop is
+:func:`rfverify.algorithm.loop.iterate`, on the lifted Lorentz-cone form
 
     M v − H̃ᵀ r̃ = f,   H̃ v + w̃ = J z,   z ∘ Jᵀr̃ = 0,   z, Jᵀr̃ ∈ L3^{n3} × L1^{n1}.
 
-The linear-system form is pluggable (:mod:`rfverify.solver.kkt`).  Centring: the central path
-is z ∘ s = τ e cone by cone, which sums to zᵀs = τ·(number of cones) because eᵀe = 1 per
-cone; the corrector therefore targets σ·μ_c·e with μ_c = zᵀs / n_cones.  The stopping test
-is the criterion of :mod:`rfverify.measures` on the (v, u, r) that would be returned — the
-same function every recheck uses; DESIGN's pinfeas, dinfeas and μ = zᵀs / n are computed and
-traced beside it.
+Here the loop's interfaces are: numpy vectors in float64, then in the extended dtypes
+(longdouble where the settings ask) once the criterion is below ``extended_below`` or a
+float64 solve falls short; the product cone of :mod:`.cones` (numba kernels for float64);
+a pluggable linear-system form of :mod:`.kkt` as the Newton solver; and :class:`Termination`
+with the settings' σ rule as the policy.  The stopping test is the criterion of
+:mod:`rfverify.measures` on the (v, u, r) that would be returned — the same function every
+recheck uses; DESIGN's pinfeas, dinfeas and μ = zᵀs / n are computed and traced beside it.
 """
 
 from __future__ import annotations
@@ -18,6 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..algorithm import rules
+from ..algorithm.interfaces import PROMOTE, Breakdown, Direction
+from ..algorithm.loop import Precision, iterate
 from ..errors import ConeDomainError
 from .cones import ProductCone
 from .kkt import FORMS, ScalingPoint, _amax
@@ -54,7 +58,9 @@ class RunResult(Outcome):
 def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, settings: Settings,
         judge, describe_cone=lambda k: f"cone {k}", keep_iterates: bool = False, callback=None,
         component: int = 0, t0: float | None = None, printer=None) -> RunResult:
-    """Run Algorithm 1 on one lifted problem.
+    """Run Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) on one lifted problem in
+    float64, continued in the extended settings (longdouble where asked) once the criterion
+    is below ``settings.extended_below`` or a float64 solve falls short (:func:`_adequate`).
 
     ``judge(v, r̃)`` returns the :class:`rfverify.measures.Measures` of the iterate in the
     original variables (the one definition of "solved"); :class:`Termination` decides from it.
@@ -67,165 +73,231 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     t_run = time.perf_counter()
     arithmetic = _Arithmetic(settings, M, H_t, J, f, w_t)
     extended = settings.extended_below is None or not _float64_safe(M.data, H_t.data, f, w_t)
-    extended_from = 0 if extended else None
     work, jd, ref = arithmetic.dtypes(extended)
     system = FORMS[form](M, H_t, J, cones, dtype_ref=ref,
                          static_reg=settings.static_reg, adaptive_reg=settings.adaptive_reg,
                          refine_max=settings.refine_max,
                          refine_tol=None if settings.refine_tol == "adaptive" else settings.refine_tol,
                          forcing=REFINE_FORCING if settings.refine_tol == "adaptive" else None)
-    term = Termination(settings, callback, t0)
-    Mx, Hx, HTx, Jx, JTx, f_x, w_x = arithmetic.operators(work)
-    m, nk = M.shape[0], H_t.shape[0]
+    precision = _NumpyPrecision(arithmetic, extended, cones, _KKTNewton(system, form), describe_cone)
+    space = precision.space
 
     # Infeasible start: v = 0, r̃ with r̃_N = 1 on every contact (so Jᵀr̃ = e), z = e
     # (or θ·e, see velocity_scale).
-    v = np.zeros(m, dtype=work)
+    v = np.zeros(M.shape[0], dtype=work)
     e = cones.identity(work)
-    r_t = np.zeros(nk, dtype=work)
+    r_t = np.zeros(H_t.shape[0], dtype=work)
     r_t[J.tocsc().indices[np.flatnonzero(e)]] = 1.0  # rows of the cone heads = N components
     z = e.copy()
     if settings.start == "velocity_scaled":
-        z *= velocity_scale(w_x)
+        z *= velocity_scale(space.w)
     if settings.start == "least_squares":
-        v, r_t, z = _least_squares_start(system, cones, f_x, w_x, JTx, v, r_t, z, jd, work)
+        v, r_t, z = _least_squares_start(system, cones, space.f, space.w, space.JT, v, r_t, z, jd, work)
 
-    trace = {k: [] for k in TRACE_FIELDS}
-    timings = {"factor": 0.0, "solve": 0.0}
-    gamma = settings.gamma0
-    record = None
-    iterates = []
-    verdict = None
-    current = None
-    k = 0
-    double_short = False  # a float64 solve fell short of what the iteration needs
-    try:
-        for k in range(settings.max_iter + 1):
-            if keep_iterates:
-                iterates.append((v.copy(), r_t.copy(), z.copy()))
-            s = JTx @ r_t
-            Mv, HTr, Hv, Jz = Mx @ v, HTx @ r_t, Hx @ v, Jx @ z
-            r_d = Mv - HTr - f_x
-            r_p = Hv + w_x - Jz
-            pinf = _norm(r_p) / max(_norm(Jz), _norm(Hv), _norm(w_x), _TINY)
-            dinf = _norm(r_d) / max(_norm(Mv), _norm(f_x), _norm(HTr), _TINY)
-            gap = float(z @ s)
-            mu = gap / n_contacts
-            # The sizes of the terms of the dual and primal residuals (see _adequate; only the
-            # float64 phase asks).
-            term_scales = None if extended else (max(_amax(Mv), _amax(f_x), _amax(HTr)),
-                                                 max(_amax(Hv), _amax(w_x), _amax(Jz)), 0.0)
-            judged = judge(v, r_t)
-            lam2_z, cz = cones.min_lambda2(z)
-            lam2_s, cs = cones.min_lambda2(s)
-            record = dict(iter=k, criterion=judged.max, pinfeas=pinf, dinfeas=dinf, mu=mu, sigma=np.nan,
-                          alpha_aff=np.nan, alpha=np.nan, gamma=np.nan, min_lam2_z=lam2_z, min_lam2_z_cone=cz,
-                          min_lam2_s=lam2_s, min_lam2_s_cone=cs, max_cond_Qp=np.nan,
-                          solve_residual=np.nan, refine_steps=0, time=time.perf_counter() - t0)
-            current = ((v, r_t, z), judged, (pinf, dinf, mu))
-            verdict = term.observe(k, judged, (pinf, dinf, mu), (v.copy(), r_t.copy(), z.copy()))
-            if verdict is not None:
-                break
-            if not extended and (judged.max <= settings.extended_below or double_short):
-                extended, extended_from = True, k
-                work, jd, ref = arithmetic.dtypes(extended)
-                Mx, Hx, HTx, Jx, JTx, f_x, w_x = arithmetic.operators(work)
-                v, r_t, z = v.astype(work), r_t.astype(work), z.astype(work)
-                system.set_refinement_dtype(ref)
-                s = JTx @ r_t
-                r_d = Mx @ v - HTx @ r_t - f_x
-                r_p = Hx @ v + w_x - Jx @ z
-                gap = float(z @ s)
-            if lam2_z <= 0 or lam2_s <= 0:
-                which, c, val = ("z", cz, lam2_z) if lam2_z <= 0 else ("Jᵀr̃", cs, lam2_s)
-                verdict = Verdict(Status.NUMERICAL_ERROR,
-                                  f"iteration {k}: λ2({which}) = {val:.3e} ≤ 0 at {describe_cone(c)}: the "
-                                  "iterate left the cone interior by rounding")
-                break
-
-            # ---- scaling and factorisation
-            zj, sj = z.astype(jd, copy=False), s.astype(jd, copy=False)
-            tf = time.perf_counter()
-            if system.symmetric:
-                p, p_inv, lam, cond = cones.nt_scaling(zj, sj)
-                point = ScalingPoint(p=p, p_inv=p_inv)
-                record["max_cond_Qp"] = float(cond.max(initial=1.0))
-            else:
-                point = ScalingPoint(z=zj, s=sj)
-            if not system.update(point):
-                verdict = Verdict(Status.NUMERICAL_ERROR, f"iteration {k}: {system.failure}")
-                break
-            timings["factor"] += time.perf_counter() - tf
-
-            a = -r_d
-            b = r_p
-            ts = time.perf_counter()
-            # ---- predictor (σ = 0)
-            c_aff = -lam if system.symmetric else -cones.product(zj, sj)
-            pred = system.solve(a, b, c_aff, adapt=True)
-            _check_finite(k, "predictor", form, pred)
-            ds_a = JTx @ pred.dr
-            max_step = cones.stepper(zj, sj)  # predictor and corrector step from the same point
-            alpha_aff = min(1.0, max_step(pred.dz.astype(jd), ds_a.astype(jd)))
-            mu_aff = float((z + alpha_aff * pred.dz) @ (s + alpha_aff * ds_a)) / n_contacts
-            sigma = _sigma(rule_at(settings.sigma_rule, judged.max), mu_aff, mu, alpha_aff)
-
-            # ---- corrector
-            mu_c = gap / cones.n_cones
-            if system.symmetric:
-                dzs = cones.quad_operator(p)(pred.dz.astype(jd))
-                dss = cones.quad_operator(p_inv)(ds_a.astype(jd))
-                xi = sigma * mu_c * cones.identity(jd) - cones.product(lam, lam) - cones.product(dzs, dss)
-                c = cones.arrow_solve(lam, xi)
-            else:
-                c = (sigma * mu_c * cones.identity(jd) - cones.product(zj, sj)
-                     - cones.product(pred.dz.astype(jd), ds_a.astype(jd)))
-            corr = system.solve(a, b, c)
-            _check_finite(k, "corrector", form, corr)
-            ds = JTx @ corr.dr
-            timings["solve"] += time.perf_counter() - ts
-            # In float64 a solve must give the iteration what it needs (_adequate); one that
-            # falls short needs the extended arithmetic from the next iteration.
-            double_short = not extended and not (_adequate(pred, settings.tol, term_scales)
-                                                 and _adequate(corr, settings.tol, term_scales))
-            alpha_max = max_step(corr.dz.astype(jd), ds.astype(jd))
-            alpha = min(1.0, gamma * alpha_max)
-            record.update(sigma=sigma, alpha_aff=alpha_aff, alpha=alpha, gamma=gamma,
-                          solve_residual=max(pred.backward_error, corr.backward_error),
-                          refine_steps=pred.steps + corr.steps)
-            _append(trace, record)
-            info = _info(record, component)
-            record = None
-            if printer is not None:
-                printer(info)
-            verdict = term.ask_callback(info)
-            if verdict is not None:
-                current = None  # the step is computed but not taken: return the best iterate
-                break
-            v = v + alpha * corr.dv.astype(work)
-            r_t = r_t + alpha * corr.dr.astype(work)
-            z = z + alpha * corr.dz.astype(work)
-            gamma = 0.9 + 0.09 * alpha
-            term.after_step(alpha)
-    except _NonFinite as exc:
-        verdict = Verdict(Status.NUMERICAL_ERROR, str(exc))
-    except ConeDomainError as exc:
-        where = describe_cone(exc.cone) if exc.cone is not None else "a cone"
-        verdict = Verdict(Status.NUMERICAL_ERROR, f"iteration {k}: {exc.operation} failed at {where}: {exc}")
-    if record is not None:
-        _append(trace, record)
-        if printer is not None:
-            printer(_info(record, component))
-    if verdict is None:  # unreachable: the loop ends by a verdict; kept for a clear failure
-        verdict = Verdict(Status.NUMERICAL_ERROR, f"iteration {k}: the iteration ended without a verdict")
-    status, message, ((out_v, out_r, out_z), judged_o, (pinf_o, dinf_o, mu_o)) = term.final(verdict, current)
-    timings["total"] = time.perf_counter() - t_run
+    policy = _DoublePolicy(settings, Termination(settings, callback, t0), judge, cones, extended,
+                           keep_iterates, component, printer, describe_cone)
+    out = iterate(precision, policy, (v, r_t, z), n_contacts=n_contacts, n_cones=cones.n_cones, clock_origin=t0)
+    # An iterate whose judging raised never became a trace row (the loop stopped there).
+    records = [rec for rec in out.records if "criterion" in rec]
+    if records and "sigma" not in records[-1] and printer is not None:
+        printer(_info(_with_defaults(records[-1]), component))  # the last iterate, stepped or not
+    trace = {key: np.asarray([_with_defaults(rec)[key] for rec in records]) for key in TRACE_FIELDS}
+    status, message, ((out_v, out_r, out_z), judged_o, (pinf_o, dinf_o, mu_o)) = policy.term.final(out.verdict,
+                                                                                                     policy.current)
+    timings = dict(out.timings, total=time.perf_counter() - t_run)
     return RunResult(v=out_v, r_t=out_r, z=out_z, status=status, message=message,
-                     nit=len(trace["iter"]) - 1 if trace["iter"] else 0,
+                     nit=len(records) - 1 if records else 0,
                      pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o), measures=judged_o,
-                     trace={key: np.asarray(val) for key, val in trace.items()}, timings=timings,
+                     trace=trace, timings=timings,
                      factorisations=system.factor_count, unregularised_factorisations=system.unregularised_count,
-                     tol=settings.tol, iterates=iterates, extended_from=extended_from)
+                     tol=settings.tol, iterates=policy.iterates, extended_from=policy.extended_from)
+
+
+class _NumpySpace:
+    """The lifted problem as scipy/numpy operators in one dtype (float64 or longdouble)."""
+
+    tiny = _TINY
+
+    def __init__(self, operators):
+        self.M, self.H, self.HT, self.J, self.JT, self.f, self.w = operators
+
+    def velocity(self, v, r):
+        return self.H @ v
+
+    @staticmethod
+    def dot(x, y) -> float:
+        return float(x @ y)
+
+    norm2 = staticmethod(_norm)
+
+    @staticmethod
+    def axpy(x, a, y):
+        return x + a * y
+
+    @staticmethod
+    def move(x, a, y):
+        return x + a * y.astype(x.dtype)
+
+
+class _NumpyScaling:
+    """The NT scaling of one iterate (symmetric forms) or the iterate itself (noscaling),
+    with the cone operations of :class:`ProductCone` in the Jordan dtype ``jd``."""
+
+    def __init__(self, cones: ProductCone, jd, z, s, symmetric: bool):
+        self.cones, self.jd, self.symmetric = cones, jd, symmetric
+        self.z, self.s = z.astype(jd, copy=False), s.astype(jd, copy=False)
+        if symmetric:
+            self.p, self.p_inv, self.lam, self.cond = cones.nt_scaling(self.z, self.s)
+            self.point = ScalingPoint(p=self.p, p_inv=self.p_inv)
+        else:
+            self.point = ScalingPoint(z=self.z, s=self.s)
+        self._stepper = None
+
+    def describe(self) -> dict:
+        return {"max_cond_Qp": float(self.cond.max(initial=1.0))} if self.symmetric else {}
+
+    def affine_rhs(self):
+        return -self.lam if self.symmetric else -self.cones.product(self.z, self.s)
+
+    def corrector_rhs(self, target, dz_aff, ds_aff):
+        C, jd = self.cones, self.jd
+        if self.symmetric:
+            dzs = C.quad_operator(self.p)(dz_aff.astype(jd))
+            dss = C.quad_operator(self.p_inv)(ds_aff.astype(jd))
+            xi = target * C.identity(jd) - C.product(self.lam, self.lam) - C.product(dzs, dss)
+            return C.arrow_solve(self.lam, xi)
+        return target * C.identity(jd) - C.product(self.z, self.s) - C.product(dz_aff.astype(jd), ds_aff.astype(jd))
+
+    def max_step(self, dz, ds) -> float:
+        if self._stepper is None:  # the predictor and the corrector step from the same point
+            self._stepper = self.cones.stepper(self.z, self.s)
+        return self._stepper(dz.astype(self.jd), ds.astype(self.jd))
+
+
+class _KKTNewton:
+    """A float64 form of :mod:`.kkt` through the Newton interface: its own regularisation and
+    refinement; its second block row is −H̃ dv + J dz = −b."""
+
+    def __init__(self, system, form: str):
+        self.system, self.form, self.name = system, form, form
+
+    def update(self, scaling: _NumpyScaling, k: int, mu: float) -> None:
+        if not self.system.update(scaling.point):
+            raise Breakdown(self.system.failure)
+
+    def solve(self, a, b, c, phase: str) -> Direction:
+        info = self.system.solve(a, -b, c, adapt=phase == "predictor")
+        for name, vec in (("dv", info.dv), ("dr̃", info.dr), ("dz", info.dz)):
+            if not np.all(np.isfinite(vec)):
+                bad = int(np.flatnonzero(~np.isfinite(vec))[0])
+                raise Breakdown(f"the {phase} solve of the {self.form} system produced a non-finite {name}[{bad}]")
+        return Direction(dv=info.dv, dr=info.dr, dz=info.dz, steps=info.steps, residual=info.backward_error, info=info)
+
+
+class _NumpyPrecision(Precision):
+    """float64 while the policy says so, then the extended dtypes (:class:`_Arithmetic`)."""
+
+    def __init__(self, arithmetic, extended: bool, cones: ProductCone, newton: _KKTNewton, describe_cone):
+        self.arithmetic, self.describe_cone = arithmetic, describe_cone
+        work, self.jd, _ = arithmetic.dtypes(extended)
+        super().__init__(_NumpySpace(arithmetic.operators(work)), _NumpyCones(cones, self), newton)
+
+    def promote(self, v, r, z):
+        work, self.jd, ref = self.arithmetic.dtypes(True)
+        self.space = _NumpySpace(self.arithmetic.operators(work))
+        self.newton.system.set_refinement_dtype(ref)
+        return v.astype(work), r.astype(work), z.astype(work)
+
+    def explain(self, exc):
+        if not isinstance(exc, ConeDomainError):
+            return None
+        where = self.describe_cone(exc.cone) if exc.cone is not None else "a cone"
+        return f"{exc.operation} failed at {where}: {exc}"
+
+
+class _NumpyCones:
+    def __init__(self, cones: ProductCone, precision: _NumpyPrecision):
+        self.cones, self.precision = cones, precision
+
+    def scaling(self, z, s):
+        return _NumpyScaling(self.cones, self.precision.jd, z, s, self.precision.newton.system.symmetric)
+
+
+class _DoublePolicy:
+    """The double solver's policy: :class:`Termination` (criterion, stall, limits, callback,
+    best iterate), the switch to the extended arithmetic, the σ rule of the settings, the
+    paper's γ = 0.9 + 0.09α, the λ₂ check of every iterate, and the trace columns."""
+
+    def __init__(self, settings: Settings, term: Termination, judge, cones: ProductCone, extended: bool,
+                 keep_iterates: bool, component: int, printer, describe_cone):
+        self.settings, self.term, self.judge, self.cones = settings, term, judge, cones
+        self.describe_cone = describe_cone
+        self.extended = extended
+        self.extended_from = 0 if extended else None
+        self.keep_iterates, self.component, self.printer = keep_iterates, component, printer
+        self.gamma0 = settings.gamma0
+        self.iterates = []
+        self.current = None  # (iterate, measures, paper's measures) of the iterate last observed
+        self.double_short = False  # a float64 solve fell short of what the iteration needs
+        self.term_scales = None
+        self.criterion = np.nan
+
+    def observe(self, k, iterate, res, record):
+        v, r_t, z = iterate
+        if self.keep_iterates:
+            self.iterates.append((v.copy(), r_t.copy(), z.copy()))
+        # The sizes of the terms of the dual and primal residuals (see _adequate; only the
+        # float64 phase asks).
+        self.term_scales = None if self.extended else (max(_amax(t) for t in res.dual_terms),
+                                                       max(_amax(t) for t in res.primal_terms), 0.0)
+        judged = self.judge(v, r_t)
+        self.criterion = judged.max
+        lam2_z, cz = self.cones.min_lambda2(z)
+        lam2_s, cs = self.cones.min_lambda2(res.s)
+        record.update(criterion=judged.max, min_lam2_z=lam2_z, min_lam2_z_cone=cz, min_lam2_s=lam2_s,
+                      min_lam2_s_cone=cs)
+        paper = (res.pinfeas, res.dinfeas, res.mu)
+        self.current = ((v, r_t, z), judged, paper)
+        verdict = self.term.observe(k, judged, paper, (v.copy(), r_t.copy(), z.copy()))
+        if verdict is not None:
+            return verdict
+        promote = not self.extended and (judged.max <= self.settings.extended_below or self.double_short)
+        if promote:
+            self.extended, self.extended_from = True, k
+        if lam2_z <= 0 or lam2_s <= 0:
+            which, c, val = ("z", cz, lam2_z) if lam2_z <= 0 else ("Jᵀr̃", cs, lam2_s)
+            return Verdict(Status.NUMERICAL_ERROR, f"iteration {k}: λ2({which}) = {val:.3e} ≤ 0 at "
+                                                   f"{self.describe_cone(c)}: the iterate left the cone interior "
+                                                   "by rounding")
+        return PROMOTE if promote else None
+
+    def sigma(self, mu, mu_aff, alpha_aff):
+        return rules.centring(rules.rule_at(self.settings.sigma_rule, self.criterion), mu_aff, mu, alpha_aff)
+
+    def after_direction(self, k, record, predictor, corrector):
+        # In float64 a solve must give the iteration what it needs (_adequate); one that
+        # falls short needs the extended arithmetic from the next iteration.
+        self.double_short = not self.extended and not (_adequate(predictor.info, self.settings.tol, self.term_scales)
+                                                       and _adequate(corrector.info, self.settings.tol,
+                                                                     self.term_scales))
+        info = _info(_with_defaults(record), self.component)
+        if self.printer is not None:
+            self.printer(info)
+        verdict = self.term.ask_callback(info)
+        if verdict is not None:
+            self.current = None  # the step is computed but not taken: return the best iterate
+        return verdict
+
+    def after_step(self, alpha):
+        self.term.after_step(alpha)
+
+    @staticmethod
+    def next_gamma(alpha):
+        return rules.step_fraction(alpha, 0.09)
+
+    @staticmethod
+    def breakdown(message):
+        return Verdict(Status.NUMERICAL_ERROR, message)
 
 
 # Data entries above this start the run in the extended arithmetic: their products and squares
@@ -340,47 +412,10 @@ def _info(record, component) -> IterationInfo:
                          solve_residual=float(record["solve_residual"]), elapsed=float(record["time"]))
 
 
-# sigma_rule="hybrid": Mehrotra's cubic σ, bounded below by HYBRID_SIGMA_FLOOR, while the
-# iterate's criterion is above HYBRID_SWITCH; the paper's rule below it (Settings.sigma_rule).
-HYBRID_SWITCH = 1e-4
-HYBRID_SIGMA_FLOOR = 0.2
+# The columns of a trace row that only an iterate that computed its step fills.
+_STEP_DEFAULTS = dict(sigma=np.nan, alpha_aff=np.nan, alpha=np.nan, gamma=np.nan, max_cond_Qp=np.nan,
+                      solve_residual=np.nan, refine_steps=0)
 
 
-def rule_at(rule: str, criterion: float) -> str:
-    """The σ rule one iteration uses: ``rule`` itself, or for ``hybrid`` "mehrotra" (the
-    floored cube of :func:`_sigma`) while ``criterion`` (the iterate's, before the step) is
-    above :data:`HYBRID_SWITCH` and "paper" from there on.  The diagnosis's lockstep asks the
-    same question of the double run's trace."""
-    if rule == "hybrid":
-        return "mehrotra" if criterion > HYBRID_SWITCH else "paper"
-    return rule
-
-
-def _sigma(rule: str, mu_aff: float, mu: float, alpha_aff: float) -> float:
-    ratio = max(mu_aff, 0.0) / mu if mu > 0 else 0.0
-    if rule == "paper":
-        expo = max(1.0, 3 * alpha_aff) if mu < 1e-5 else 1.0
-        return min(1.0, ratio ** expo)
-    if rule == "mehrotra":
-        # The floor: with σ far below it the FE sticking blocks ended 1.3–2.8× less accurate
-        # at the same criterion than under the paper's rule (docs/DECISIONS.md, "σ rule").
-        return max(HYBRID_SIGMA_FLOOR, min(1.0, ratio ** 3))
-    expo = max(1.0, 3 * alpha_aff ** 2) if mu > 1e-5 else max(1.0, 3 * alpha_aff)
-    return min(1.0, ratio ** expo) / 5
-
-
-class _NonFinite(Exception):
-    """A linear solve produced NaN or Inf (the message names iteration, phase and entry)."""
-
-
-def _check_finite(k, phase, form, info):
-    for name, vec in (("dv", info.dv), ("dr̃", info.dr), ("dz", info.dz)):
-        if not np.all(np.isfinite(vec)):
-            bad = int(np.flatnonzero(~np.isfinite(vec))[0])
-            raise _NonFinite(f"iteration {k}: the {phase} solve of the {form} system produced a "
-                             f"non-finite {name}[{bad}]")
-
-
-def _append(trace, record):
-    for key in TRACE_FIELDS:
-        trace[key].append(record[key])
+def _with_defaults(record: dict) -> dict:
+    return {**_STEP_DEFAULTS, **record}

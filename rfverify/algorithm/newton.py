@@ -1,0 +1,67 @@
+"""The Newton solve of the extended precisions, written once: dz eliminated through
+Q_{p⁻¹}, the (dv, dr̃) system solved by a back end, every solve refined against the
+unreduced three-block system (:func:`.rules.refined_newton`)."""
+
+from __future__ import annotations
+
+import math
+
+from .interfaces import Breakdown, Direction
+from .rules import refined_newton
+
+
+class ReducedNewton:
+    """:class:`~.interfaces.Newton` for a ``space`` whose ``backend`` solves
+
+        M dv − H̃ᵀ dr̃ = a,   H̃ dv + G dr̃ = t,   G = J Q_{p⁻²} Jᵀ
+
+    (``backend.update(scaling) -> bool``, ``backend.solve(a, t) -> (dv, dr)`` in the space's
+    vectors, ``backend.name``; optionally ``backend.observe(k, mu, last_residual)`` before each
+    update).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
+    dz = Q_{p⁻¹}(c − Q_{p⁻¹} Jᵀ dr̃), and the primal row H̃ dv − J dz = b then reads
+    H̃ dv + G dr̃ = t with t = b + J Q_{p⁻¹} c.  ``scaling.quad(k, y)`` applies Q_{p^k}.  Refinement: at most ``refine_max`` steps, down
+    to the relative residual ``floor`` (about the precision's unit roundoff)."""
+
+    def __init__(self, space, backend, *, refine_max: int, floor: float, inf):
+        self.space = space
+        self.backend = backend
+        self.name = backend.name
+        self.refine_max = refine_max
+        self.floor = floor
+        self.inf = inf
+        self.scaling = None
+        self._last_residual = None  # the largest relative residual of the last iteration's solves
+        self._residual = None
+
+    def update(self, scaling, k: int, mu: float) -> None:
+        if hasattr(self.backend, "observe"):
+            self.backend.observe(k, mu, self._last_residual)
+        self.scaling = scaling
+        try:
+            ok = self.backend.update(scaling)
+        except ArithmeticError as exc:  # a singular contact factor
+            raise Breakdown(str(exc)) from None
+        if not ok:
+            raise Breakdown(f"the {self.name} matrix lost definiteness")
+        self._residual = None
+
+    def _core(self, a, b, c):
+        sp, q = self.space, self.scaling.quad
+        dv, dr = self.backend.solve(a, b + sp.J @ q(-1, c))
+        dz = q(-1, c - q(-1, sp.JT @ dr))
+        return dv, dr, dz
+
+    def _unreduced_residual(self, a, b, c, dv, dr, dz):
+        sp, q = self.space, self.scaling.quad
+        return (a - sp.M @ dv + sp.HT @ dr, b - sp.velocity(dv, dr) + sp.J @ dz,
+                c - q(1, dz) - q(-1, sp.JT @ dr))
+
+    def solve(self, a, b, c, phase: str) -> Direction:
+        dv, dr, dz, steps, res = refined_newton(self._core, self._unreduced_residual, a, b, c, inf=self.inf,
+                                                refine_max=self.refine_max, floor=self.floor)
+        if not math.isfinite(res):
+            raise Breakdown(f"the {self.name} solve failed")
+        self._residual = res if self._residual is None else max(self._residual, res)
+        if phase == "corrector":
+            self._last_residual = self._residual
+        return Direction(dv=dv, dr=dr, dz=dz, steps=steps, residual=res)

@@ -1,0 +1,60 @@
+"""The extended phases' policy (double-double and mpfr runs share it) and the trace format
+of their results."""
+
+from __future__ import annotations
+
+from . import rules
+
+
+class UntilPolicy:
+    """The extended phases' policy: stop when ``until(iterate)`` accepts an iterate (status
+    "Stopped") or at ``max_iter``; the paper's σ rule; γ = min(γ_max, 0.9 + (γ_max − 0.9)α)."""
+
+    gamma0 = 0.9
+
+    def __init__(self, until, progress, max_iter: int, make_iterate, gamma_max: float, stop_words: str):
+        self.until, self.progress, self.max_iter = until, progress, max_iter
+        self.make_iterate, self.gamma_max, self.stop_words = make_iterate, gamma_max, stop_words
+
+    def observe(self, k, iterate, res, record):
+        if self.progress:
+            self.progress(k, res.mu, res.pinfeas, res.dinfeas)
+        if self.until is not None and self.until(self.make_iterate(k, iterate, res)):
+            return ("Stopped", f"{self.stop_words} at iteration {k} (μ = {res.mu:.2e})")
+        if k == self.max_iter:
+            return ("MaxIterations", f"reached max_iter = {self.max_iter}")
+        return None
+
+    @staticmethod
+    def sigma(mu, mu_aff, alpha_aff):
+        return rules.centring("paper", mu_aff, mu, alpha_aff)
+
+    @staticmethod
+    def after_direction(k, record, predictor, corrector):
+        return None
+
+    @staticmethod
+    def after_step(alpha):
+        return None
+
+    def next_gamma(self, alpha):
+        return rules.step_fraction(alpha, self.gamma_max - 0.9, cap=self.gamma_max)
+
+    @staticmethod
+    def breakdown(message):
+        return ("NumericalError", message)
+
+
+def extended_trace(records: list, step_columns=("sigma", "alpha", "refine", "solve_residual")) -> dict:
+    """The extended phases' trace from the loop's records: mu, pinfeas, dinfeas, time per
+    iterate; the step columns per iteration that computed its step (``refine`` is the
+    records' refine_steps); "centrality" per iteration that reached its scaling."""
+    trace = {key: [rec[key] for rec in records] for key in ("mu", "pinfeas", "dinfeas", "time")}
+    stepped = [rec for rec in records if "sigma" in rec]
+    for key in step_columns:
+        trace[key] = [rec["refine_steps" if key == "refine" else key] for rec in stepped]
+    if any("centrality" in rec for rec in records):
+        trace["centrality"] = [rec["centrality"] for rec in records if "centrality" in rec]
+    return trace
+
+
