@@ -136,7 +136,8 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
     outside) the cone boundaries, and an infeasible interior-point run shrinks its primal
     residual and μ at the same rate, so a start pushed into the cones from it never gets its
     residual below the cone margins (measured on the bundled Chute: ratio 5 at every step)."""
-    from .extended.system import ExtendedData, choose_backend
+    from .extended.data import ExtendedData
+    from .extended.system import choose_backend
     from .solver import solve
 
     compile_extended_in_background()  # on a cold numba cache: the other core compiles the extended kernels

@@ -66,18 +66,18 @@ EXTENDED_KERNELS = (
     ("dd", "vscale", "(float64, float64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("dd", "vaxpy", "(float64, float64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "max_step", "(int64, float64[::1], float64[::1], float64[::1], float64[::1])"),
-    ("ldl", "_symmetric_residual", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("mixed", "_symmetric_residual", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("ldl", "_solve_double", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1])"),
-    ("system", "_block_apply", "(int64, int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("blocks", "block_apply", "(int64, int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("ldl", "_solve", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "quad_pow", "(int64, int64, float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("ldl", "_numeric_double", "(int64, int64[::1], int64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1])"),
-    ("system", "_scaled_blocks", "(int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[:, :, ::1], float64[::1], float64[::1])"),
-    ("system", "contact_factor_inverse", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1])"),
-    ("system", "_scatter_pairs", "(int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[:, :, ::1], float64[:, :, ::1])"),
-    ("system", "_dense_schur", "(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1])"),
+    ("contactspace", "_scaled_blocks", "(int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[:, :, ::1], float64[::1], float64[::1])"),
+    ("blocks", "contact_factor_inverse", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1])"),
+    ("contactspace", "_scatter_pairs", "(int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[:, :, ::1], float64[:, :, ::1])"),
+    ("contactspace", "_dense_schur", "(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1])"),
     ("ldl", "_numeric", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1])"),
-    ("system", "_scatter_add", "(int64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("blocks", "scatter_add", "(int64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "nt_scaling", "(int64, float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[:, ::1])"),
     ("dd", "vmul_d", "(float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("dd", "vnorm2", "(float64[::1], float64[::1])"),
@@ -112,7 +112,7 @@ def extended_cache_is_cold() -> bool:
     kernel for the current sources (so the k-digit path would compile them all).  Reads
     numba's cache index, a private interface: any surprise there answers False (no child)."""
     try:
-        index = _dispatcher("system", "contact_factor_inverse")._cache._cache_file._load_index()
+        index = _dispatcher("blocks", "contact_factor_inverse")._cache._cache_file._load_index()
     except Exception:
         return False
     return not index

@@ -25,8 +25,10 @@ from .errors import InvalidArgumentError
 from .extended import ipm as ext
 from .extended.dd import vmul_d
 from .extended import wide
-from .extended.ldl import cholmod_available
-from .extended.system import ENGINES, ExtendedData, choose_backend
+from .extended.contactspace import ENGINES
+from .extended.data import ExtendedData
+from .extended.mixed import cholmod_available
+from .extended.system import choose_backend
 from .problem import SPACEDIM, Problem
 from .compilation import compile_extended_in_background, compile_seconds
 from .proof import Point, Proof, ProofContext, validate_digits

@@ -18,8 +18,11 @@ from hypothesis import strategies as st
 import rfverify
 from rfverify.extended import cones as C
 from rfverify.extended import dd, wide
-from rfverify.extended.ldl import CholmodMixed, DDCholesky, MixedCholesky, cholmod_available
-from rfverify.extended.system import ContactSpace, ExtendedData, choose_backend, resolve_engine
+from rfverify.extended.contactspace import ContactSpace, resolve_engine
+from rfverify.extended.data import ExtendedData
+from rfverify.extended.ldl import DDCholesky
+from rfverify.extended.mixed import CholmodMixed, MixedCholesky, cholmod_available
+from rfverify.extended.system import choose_backend
 from rfverify.random_problems import random_problem
 
 from test_extended import singular_in_float64

@@ -19,8 +19,11 @@ from rfverify.random_problems import random_problem
 from reference import jordan as RJ
 from rfverify.extended import cones as C
 from rfverify.extended import dd
-from rfverify.extended.ldl import DDCholesky, MixedCholesky
-from rfverify.extended.system import ContactSpace, DofSpace, ExtendedData
+from rfverify.extended.contactspace import ContactSpace
+from rfverify.extended.data import ExtendedData
+from rfverify.extended.dofspace import DofSpace
+from rfverify.extended.ldl import DDCholesky
+from rfverify.extended.mixed import MixedCholesky
 
 U_DD = 2.0 ** -104
 

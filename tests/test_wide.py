@@ -18,7 +18,7 @@ import rfverify.io.certificate
 from reference import jordan as RJ
 from rfverify import digits as D
 from rfverify.extended import wide
-from rfverify.extended.system import ExtendedData
+from rfverify.extended.data import ExtendedData
 from rfverify.random_problems import random_problem
 from rfverify.scenes import generate
 

@@ -29,7 +29,8 @@ from ..algorithm.newton import ReducedNewton
 from ..algorithm.policy import UntilPolicy, extended_trace
 from . import cones as C
 from . import dd
-from .system import ExtendedData, choose_backend
+from .data import ExtendedData
+from .system import choose_backend
 
 
 class V:

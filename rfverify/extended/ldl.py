@@ -8,12 +8,12 @@ matrix is read, in CSC form.  Used for symmetric positive definite systems, wher
 without pivoting is backward stable.
 
 The fill-reducing ordering is scipy's multiple minimum degree on AᵀA + A (SuperLU's
-``MMD_AT_PLUS_A``), computed once from the pattern.
+``MMD_AT_PLUS_A``), computed once from the pattern.  The same factorisation and solve in
+float64 (:func:`_numeric_double`, :func:`_solve_double`) serve the float64 factors refined in
+double-double (:mod:`.mixed`) and the multiple-precision tail (:mod:`.wide`).
 """
 
 from __future__ import annotations
-
-import math
 
 import numba
 import numpy as np
@@ -145,6 +145,36 @@ def _solve(n, Lp, Li, Lxh, Lxl, Dh, Dl, xh, xl):
         xl[j] = sl
 
 
+def symmetric_pattern(pattern: sp.spmatrix) -> sp.csc_matrix:
+    """|A| + |Aᵀ| + I of a pattern (CSC, float64): symmetric, with every diagonal entry."""
+    n = pattern.shape[0]
+    P = sp.csc_matrix(pattern, dtype=np.float64)
+    return (abs(P) + abs(P.T) + sp.identity(n, format="csc")).tocsc()
+
+
+def upper_csc(P: sp.spmatrix):
+    """(Ap, Ai, keys) of the upper triangle of the symmetric pattern P in CSC, rows sorted in
+    each column; keys[k] = column·n + row of the k-th stored entry, increasing (what
+    :func:`upper_positions` searches)."""
+    n = P.shape[0]
+    U = sp.triu(P, format="csc")
+    U.sort_indices()
+    Ap = U.indptr.astype(np.int64)
+    Ai = U.indices.astype(np.int64)
+    cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(Ap))
+    return Ap, Ai, cols * n + Ai
+
+
+def upper_positions(keys: np.ndarray, n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Index into an upper-CSC value array with stored ``keys`` (:func:`upper_csc`) of the
+    entries (a[k], b[k]) in its own order, either triangle (the symmetric partner is found)."""
+    wanted = np.maximum(a, b) * n + np.minimum(a, b)
+    pos = np.searchsorted(keys, wanted)
+    if np.any(pos >= keys.size) or np.any(keys[np.minimum(pos, keys.size - 1)] != wanted):
+        raise ValueError("entry outside the sparsity pattern")
+    return pos
+
+
 class DDCholesky:
     """LDLᵀ of symmetric positive definite matrices with a fixed sparsity pattern.
 
@@ -156,16 +186,13 @@ class DDCholesky:
 
     def __init__(self, pattern: sp.spmatrix, perm: np.ndarray | None = None):
         n = pattern.shape[0]
-        P = sp.csc_matrix(pattern, dtype=np.float64)
-        P = (abs(P) + abs(P.T) + sp.identity(n, format="csc")).tocsc()
+        P = symmetric_pattern(pattern)
         self.n = n
         self.perm = fill_reducing_order(P) if perm is None else np.asarray(perm, dtype=np.int64)
         self.iperm = np.empty(n, dtype=np.int64)
         self.iperm[self.perm] = np.arange(n)
-        U = sp.triu(P[self.perm][:, self.perm], format="csc")
-        U.sort_indices()
-        self.Ap = U.indptr.astype(np.int64)
-        self.Ai = U.indices.astype(np.int64)
+        # _keys: col * n + row of each stored upper entry, in permuted coordinates
+        self.Ap, self.Ai, self._keys = upper_csc(P[self.perm][:, self.perm])
         self.parent, self.Lp = _symbolic(n, self.Ap, self.Ai)
         nnz = int(self.Lp[-1])
         self.Li = np.zeros(nnz, dtype=np.int64)
@@ -173,9 +200,6 @@ class DDCholesky:
         self.Lxl = np.zeros(nnz)
         self.Dh = np.zeros(n)
         self.Dl = np.zeros(n)
-        # key of each stored upper entry in permuted coordinates: col * n + row
-        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(self.Ap))
-        self._keys = cols * n + self.Ai
         self.factored = False
 
     @property
@@ -189,14 +213,8 @@ class DDCholesky:
     def positions(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Index into the upper-CSC value array of the original entries (rows[k], cols[k])
         (either triangle: the symmetric partner is found)."""
-        a = self.iperm[np.asarray(rows, dtype=np.int64)]
-        b = self.iperm[np.asarray(cols, dtype=np.int64)]
-        r, c = np.minimum(a, b), np.maximum(a, b)
-        keys = c * self.n + r
-        pos = np.searchsorted(self._keys, keys)
-        if np.any(pos >= self._keys.size) or np.any(self._keys[np.minimum(pos, self._keys.size - 1)] != keys):
-            raise ValueError("entry outside the sparsity pattern")
-        return pos
+        return upper_positions(self._keys, self.n, self.iperm[np.asarray(rows, dtype=np.int64)],
+                                self.iperm[np.asarray(cols, dtype=np.int64)])
 
     def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
         """Numeric factorisation; returns -1 on success, else the first non-positive pivot."""
@@ -260,271 +278,3 @@ def _solve_double(n, Lp, Li, Lx, D, x):
         for p in range(Lp[j], Lp[j + 1]):
             s -= Lx[p] * x[Li[p]]
         x[j] = s
-
-
-@numba.njit(cache=True)
-def _symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl, ax):
-    """r = b − A x in double-double, A symmetric given by its upper triangle in CSC; returns
-    the componentwise backward error max_i |r_i| / (|A||x| + |b|)_i (Oettli–Prager), which,
-    unlike a normwise one, does not let the large rows of a badly scaled matrix hide the
-    error in the small ones.  ax: zero work array (n,)."""
-    for i in range(n):
-        rh[i] = bh[i]
-        rl[i] = bl[i]
-    for j in range(n):
-        for p in range(Ap[j], Ap[j + 1]):
-            i = Ai[p]
-            rh[i], rl[i] = dd.fms_acc(rh[i], rl[i], Axh[p], Axl[p], xh[j], xl[j])
-            ax[i] += abs(Axh[p] * xh[j])
-            if i != j:
-                rh[j], rl[j] = dd.fms_acc(rh[j], rl[j], Axh[p], Axl[p], xh[i], xl[i])
-                ax[j] += abs(Axh[p] * xh[i])
-    worst = 0.0
-    for i in range(n):
-        den = ax[i] + abs(bh[i])
-        if den > 0.0:
-            e = abs(rh[i]) / den
-            if not e <= worst:  # NaN propagates
-                worst = e
-    return worst
-
-
-def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int):
-    """Iterative refinement of A x = b to double-double accuracy with a float64 ``oracle``
-    (``oracle(r)`` ≈ A⁻¹r in float64: a factor of A rounded to double), as in SoPlex's
-    iterative refinement.  ``A`` = (high, low) values of the upper triangle in CSC (``Ap``,
-    ``Ai``); b = (bh, bl).  Stops at a componentwise backward error below 1e-31, after
-    ``max_steps``, or when a step does not halve it (stalled or NaN: the best iterate is kept).
-    Returns (best backward error, (xh, xl), steps taken)."""
-    n = Ap.size - 1
-    pbh = np.ascontiguousarray(bh, dtype=np.float64)
-    pbl = np.ascontiguousarray(bl, dtype=np.float64)
-    rh, rl = pbh.copy(), pbl.copy()
-    best, best_x = math.inf, (np.zeros(n), np.zeros(n))
-    steps = 0
-    for steps in range(1, max_steps + 1):
-        d = oracle(rh)
-        nh, nl = np.empty(n), np.empty(n)
-        dd.vadd(best_x[0], best_x[1], d, np.zeros(n), nh, nl)
-        backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], pbh, pbl, nh, nl, rh, rl, np.zeros(n))
-        if not backward < 0.5 * best:  # stalled (or NaN): keep the best solution
-            best = min(best, backward) if backward == backward else best
-            break
-        best, best_x = backward, (nh, nl)
-        if backward < 1e-31:
-            break
-    return best, best_x, steps
-
-
-class MixedCholesky(DDCholesky):
-    """:class:`DDCholesky` whose factorisation is done in float64 and whose solves are refined
-    to double-double accuracy (a double "oracle" with double-double residuals, as in SoPlex's
-    iterative refinement): 15–20× cheaper per factorisation.
-
-    Refinement converges when the double factor is accurate in the matrix's own scaling, which
-    holds for the scaled contact-space matrix I + F⁻¹W̃F⁻ᵀ while W̃ is well conditioned on the
-    contacts that carry load, however small μ is.  Where it does not (the backward error of a
-    solve stays above ``backward_target``, or the double factorisation meets a non-positive
-    pivot) the matrix is refactored in double-double and every later factorisation stays in
-    double-double: :attr:`precision` says which is in use, :attr:`fallback_reason` why.
-    """
-
-    def __init__(self, pattern: sp.spmatrix, perm: np.ndarray | None = None,
-                 backward_target: float = 1e-29, max_steps: int = 12):
-        super().__init__(pattern, perm)
-        self.Lx = np.zeros(self.nnz_L)
-        self.backward_target = backward_target
-        self.max_steps = max_steps
-        self.precision = "mixed"
-        self.fallback_reason = ""
-        self.last_backward_error = math.nan
-        self.last_steps = 0
-        self.solves = 0  # statistics: solves and refinement steps so far
-        self.refinement_steps = 0
-        self._A = None
-
-    def _fall_back(self, reason: str) -> int:
-        self.precision = "double-double"
-        self.fallback_reason = reason
-        return super().factor(*self._A)
-
-    def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
-        self._A = (np.ascontiguousarray(Axh, dtype=np.float64).copy(),
-                   np.ascontiguousarray(Axl, dtype=np.float64).copy())
-        if self.precision == "double-double":
-            return super().factor(*self._A)
-        bad = _numeric_double(self.n, self.Ap, self.Ai, self._A[0], self.Lp, self.parent, self.Li, self.Lx,
-                              self.Dh, np.zeros(self.n), *_workspace(self.n))
-        if bad >= 0:
-            return self._fall_back(f"non-positive pivot {bad} in the float64 factorisation")
-        self.factored = True
-        return -1
-
-    def solve(self, bh: np.ndarray, bl: np.ndarray):
-        """x = A⁻¹ b to double-double accuracy (b in original ordering)."""
-        if self.precision == "double-double":
-            return super().solve(bh, bl)
-        n = self.n
-
-        def oracle(rh):
-            d = rh.copy()  # the correction's right-hand side to float64: its error is refined away
-            _solve_double(n, self.Lp, self.Li, self.Lx, self.Dh, d)
-            return d
-
-        best, best_x, steps = refine_in_double_double(self.Ap, self.Ai, self._A, bh[self.perm], bl[self.perm],
-                                                      oracle, self.max_steps)
-        self.last_backward_error, self.last_steps = best, steps
-        self.solves += 1
-        self.refinement_steps += steps
-        if not best <= self.backward_target:
-            if self._fall_back(f"refinement stalled at backward error {best:.1e}") >= 0:
-                return np.full(n, np.nan), np.full(n, np.nan)
-            return super().solve(bh, bl)
-        oh, ol = np.empty(n), np.empty(n)
-        oh[self.perm], ol[self.perm] = best_x
-        return oh, ol
-
-
-def cholmod_available() -> bool:
-    """True when CHOLMOD (scikit-sparse, the optional extra ``cholmod``) can be imported."""
-    try:
-        import sksparse.cholmod  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-class CholmodMixed:
-    """The interface of :class:`MixedCholesky` (values aligned with :meth:`positions`,
-    ``factor``, ``solve`` to double-double accuracy) with the float64 factorisation done by
-    CHOLMOD's supernodal Cholesky (scikit-sparse, AMD ordering, symbolic analysis once) and
-    every solve refined against the double-double matrix to a componentwise backward error
-    ≤ ``backward_target`` — the same refinement as :class:`MixedCholesky`, only the float64
-    oracle differs.  CHOLMOD works on dense supernodes with BLAS-3 where the up-looking LDLᵀ
-    works entry by entry (measured 10–30× faster at 10³–10⁴ contacts, docs/DECISIONS.md,
-    "The 10-digit path at scale").
-
-    The values are stored as the upper triangle of the pattern in its own (natural) order, in
-    CSC (:attr:`Ap`, :attr:`Ai`); no fill-reducing order or symbolic LDLᵀ of our own is
-    computed unless refinement stalls or CHOLMOD meets a non-positive pivot: then the matrix is
-    refactored by :class:`DDCholesky` (double-double) and stays so, as in
-    :class:`MixedCholesky` (:attr:`precision`, :attr:`fallback_reason`).
-    """
-
-    def __init__(self, pattern: sp.spmatrix, backward_target: float = 1e-29, max_steps: int = 12):
-        from sksparse import cholmod  # noqa: F401  (fails early, with the import error, when absent)
-
-        n = pattern.shape[0]
-        P = sp.csc_matrix(pattern, dtype=np.float64)
-        P = (abs(P) + abs(P.T) + sp.identity(n, format="csc")).tocsc()
-        U = sp.triu(P, format="csc")
-        U.sort_indices()
-        self.n = n
-        self.pattern = P
-        self.Ap = U.indptr.astype(np.int64)
-        self.Ai = U.indices.astype(np.int64)
-        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(self.Ap))
-        self._keys = cols * n + self.Ai
-        # CHOLMOD reads the lower triangle in CSC: the transpose of U, as a gather map into the values
-        T = sp.csc_matrix((np.arange(1, self.Ai.size + 1, dtype=np.float64), self.Ai, self.Ap), shape=(n, n)).T.tocsc()
-        T.sort_indices()
-        self._lower_map = T.data.astype(np.int64) - 1
-        self._lower_indices, self._lower_indptr = T.indices, T.indptr
-        self.backward_target = backward_target
-        self.max_steps = max_steps
-        self.precision = "mixed"
-        self.fallback_reason = ""
-        self.last_backward_error = math.nan
-        self.last_steps = 0
-        self.solves = 0  # statistics: solves and refinement steps so far
-        self.refinement_steps = 0
-        self.factored = False
-        self._factor = None
-        self._dd = None
-        self._A = None
-
-    @property
-    def nnz_upper(self) -> int:
-        return int(self.Ai.size)
-
-    @property
-    def Lp(self) -> np.ndarray:
-        """Column pointers of L in CHOLMOD's order (computed on demand: statistics only), or
-        of the double-double factor after a fallback."""
-        if self._dd is not None:
-            return self._dd.Lp
-        perm = self._factor.P() if self._factor is not None else np.arange(self.n)
-        U = sp.triu(self.pattern[perm][:, perm], format="csc")
-        U.sort_indices()
-        return _symbolic(self.n, U.indptr.astype(np.int64), U.indices.astype(np.int64))[1]
-
-    @property
-    def nnz_L(self) -> int:
-        return int(self.Lp[-1])
-
-    def positions(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """Index into the upper-CSC value array of the entries (rows[k], cols[k]) (either
-        triangle: the symmetric partner is found)."""
-        a = np.asarray(rows, dtype=np.int64)
-        b = np.asarray(cols, dtype=np.int64)
-        keys = np.maximum(a, b) * self.n + np.minimum(a, b)
-        pos = np.searchsorted(self._keys, keys)
-        if np.any(pos >= self._keys.size) or np.any(self._keys[np.minimum(pos, self._keys.size - 1)] != keys):
-            raise ValueError("entry outside the sparsity pattern")
-        return pos
-
-    def _fall_back(self, reason: str) -> int:
-        self.precision = "double-double"
-        self.fallback_reason = reason
-        self._factor = None  # its memory is not needed any more
-        return self._dd_factor()
-
-    def _dd_factor(self) -> int:
-        if self._dd is None:
-            self._dd = DDCholesky(self.pattern)
-            cols = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.Ap))
-            self._dd_pos = self._dd.positions(self.Ai, cols)
-        h, lo = np.zeros(self._dd.nnz_upper), np.zeros(self._dd.nnz_upper)
-        h[self._dd_pos], lo[self._dd_pos] = self._A
-        bad = self._dd.factor(h, lo)
-        self.factored = bad < 0
-        return bad
-
-    def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
-        """Numeric factorisation; -1 on success, else a non-positive pivot (in double-double,
-        after a fallback)."""
-        from sksparse import cholmod
-
-        self._A = (np.ascontiguousarray(Axh, dtype=np.float64).copy(),
-                   np.ascontiguousarray(Axl, dtype=np.float64).copy())
-        if self.precision == "double-double":
-            return self._dd_factor()
-        A = sp.csc_matrix((self._A[0][self._lower_map], self._lower_indices, self._lower_indptr),
-                          shape=(self.n, self.n))
-        try:
-            if self._factor is None:
-                self._factor = cholmod.analyze(A, mode="supernodal", ordering_method="amd")
-            self._factor.cholesky_inplace(A)
-        except cholmod.CholmodError as exc:
-            return self._fall_back(f"CHOLMOD's float64 factorisation failed ({exc})")
-        self.factored = True
-        return -1
-
-    def solve(self, bh: np.ndarray, bl: np.ndarray):
-        """x = A⁻¹ b to double-double accuracy (b, x in the pattern's order)."""
-        if self.precision == "double-double":
-            return self._dd.solve(bh, bl)
-        n = self.n
-
-        def oracle(rh):  # CHOLMOD's float64 solve on the residual
-            return np.asarray(self._factor(rh), dtype=np.float64).reshape(n)
-
-        best, best_x, steps = refine_in_double_double(self.Ap, self.Ai, self._A, bh, bl, oracle, self.max_steps)
-        self.last_backward_error, self.last_steps = best, steps
-        self.solves += 1
-        self.refinement_steps += steps
-        if not best <= self.backward_target:
-            if self._fall_back(f"refinement stalled at backward error {best:.1e}") >= 0:
-                return np.full(n, np.nan), np.full(n, np.nan)
-            return self._dd.solve(bh, bl)
-        return best_x[0].copy(), best_x[1].copy()

@@ -36,7 +36,7 @@ from ..algorithm.newton import ReducedNewton
 from ..algorithm.policy import UntilPolicy, extended_trace
 from .ipm import ExtendedResult
 from .ldl import _numeric_double, _symbolic, _workspace, fill_reducing_order
-from .system import DDMatrix, ExtendedData, contact_dof_pattern, contact_local_H
+from .data import DDMatrix, ExtendedData, contact_dof_pattern, contact_local_H
 
 DEFAULT_BITS = 320
 """Working precision: 96 decimal digits, enough for cones whose λ₂/λ₁ is 1e-60 with margin."""

@@ -1,0 +1,387 @@
+"""The contact-space back end: S_r = W̃ + G (nk × nk), W̃ = H̃ M⁻¹ H̃ᵀ built once, factored in its
+scaled form I + F⁻¹W̃F⁻ᵀ (F_c F_cᵀ = G_c, :func:`.blocks.contact_factor_inverse`) — the
+default of the extended phase (:func:`.system.choose_backend`).  The factorisation is float64
+refined in double-double (the compiled LDLᵀ or CHOLMOD: :func:`resolve_engine`) or
+double-double throughout (:mod:`.ldl`)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import scipy.sparse as sp
+
+from . import dd
+from .blocks import block_apply, contact_factor_inverse, scatter_add, small_product
+from .data import ExtendedData
+from .factored import FactoredBackend
+from .ldl import DDCholesky
+from .mixed import CholmodMixed, MixedCholesky, cholmod_available
+
+njit = numba.njit(cache=True)
+DENSE_BLOCK = 200  # blocks of M up to this size are inverted densely when forming W̃
+DENSE_Y_ENTRIES = 2e7  # largest m × nk of a dense Y = blockdiag(L_b⁻¹)Hᵀ (2 float64 each: 320 MB)
+
+
+@njit
+def _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
+    """Y = L⁻¹Hᵀ (s × k) for a small dense SPD M = L Lᵀ (double-double Cholesky), so that
+    H M⁻¹ Hᵀ = YᵀY.  Returns False if M is not positive definite."""
+    s = Mh.shape[0]
+    k = Hh.shape[0]
+    Lh = np.zeros((s, s))
+    Ll = np.zeros((s, s))
+    for j in range(s):
+        ah, al = Mh[j, j], Ml[j, j]
+        for q in range(j):
+            ah, al = dd.fms_acc(ah, al, Lh[j, q], Ll[j, q], Lh[j, q], Ll[j, q])
+        if not ah > 0.0:
+            return False
+        dh, dl = dd.sqrt(ah, al)
+        Lh[j, j], Ll[j, j] = dh, dl
+        for i in range(j + 1, s):
+            ah, al = Mh[i, j], Ml[i, j]
+            for q in range(j):
+                ah, al = dd.fms_acc(ah, al, Lh[i, q], Ll[i, q], Lh[j, q], Ll[j, q])
+            Lh[i, j], Ll[i, j] = dd.div(ah, al, dh, dl)
+    for c in range(k):
+        for i in range(s):
+            ah, al = Hh[c, i], Hl[c, i]
+            for q in range(i):
+                ah, al = dd.fms_acc(ah, al, Lh[i, q], Ll[i, q], Yh[q, c], Yl[q, c])
+            Yh[i, c], Yl[i, c] = dd.div(ah, al, Lh[i, i], Ll[i, i])
+    return True
+
+
+@njit
+def _row_gram(Ah, Al, Wh, Wl):
+    """W = A Aᵀ (double-double) over the rows of A, each pair once: rows are contiguous, so
+    this is the cache-friendly form for a tall Y stored transposed."""
+    k = Ah.shape[0]
+    for a in range(k):
+        for b in range(a, k):
+            sh, sl = 0.0, 0.0
+            for i in range(Ah.shape[1]):
+                sh, sl = dd.fma_acc(sh, sl, Ah[a, i], Al[a, i], Ah[b, i], Al[b, i])
+            Wh[a, b], Wl[a, b] = sh, sl
+            Wh[b, a], Wl[b, a] = sh, sl
+
+
+@njit
+def _dense_schur(Mh, Ml, Hh, Hl, Wh, Wl):
+    """W = H M⁻¹ Hᵀ for a small dense SPD M (Y = L⁻¹Hᵀ, W = YᵀY).  Returns False if M is not
+    positive definite."""
+    Yh = np.zeros((Mh.shape[0], Hh.shape[0]))
+    Yl = np.zeros((Mh.shape[0], Hh.shape[0]))
+    if not _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
+        return False
+    YTh = np.zeros((Hh.shape[0], Mh.shape[0]))  # Yᵀ, copied by hand (np.ascontiguousarray
+    YTl = np.zeros((Hh.shape[0], Mh.shape[0]))  # would be one more compilation)
+    for i in range(Mh.shape[0]):
+        for c in range(Hh.shape[0]):
+            YTh[c, i], YTl[c, i] = Yh[i, c], Yl[i, c]
+    _row_gram(YTh, YTl, Wh, Wl)
+    return True
+
+
+@njit
+def _dense_gram(Ah, Al, Bh, Bl, Wh, Wl):
+    """W = A Bᵀ (double-double, rows of A and B)."""
+    for a in range(Ah.shape[0]):
+        for b in range(Bh.shape[0]):
+            sh, sl = 0.0, 0.0
+            for i in range(Ah.shape[1]):
+                sh, sl = dd.fma_acc(sh, sl, Ah[a, i], Al[a, i], Bh[b, i], Bl[b, i])
+            Wh[a, b], Wl[a, b] = sh, sl
+
+
+@njit
+def _scaled_blocks(pc, pd, Wh, Wl, row_count, Fh, Fl, pos, Sh, Sl):
+    """S' = F⁻¹ W̃ F⁻ᵀ + I, block pair by block pair (p: contacts pc[p] ≤ pd[p])."""
+    Th = np.zeros((5, 5))
+    Tl = np.zeros((5, 5))
+    for p in range(pc.size):
+        c = pc[p]
+        d = pd[p]
+        kc = row_count[c]
+        kd = row_count[d]
+        small_product(Fh[c], Fl[c], Wh[p], Wl[p], kc, kd, kc, Th, Tl)  # T = F_c⁻¹ W̃_cd
+        for a in range(kc):
+            for b in range(kd):
+                q_ = pos[p, a, b]
+                if q_ < 0:
+                    continue
+                sh, sl = (1.0, 0.0) if (c == d and a == b) else (0.0, 0.0)
+                for q in range(kd):
+                    sh, sl = dd.fma_acc(sh, sl, Th[a, q], Tl[a, q], Fh[d, b, q], Fl[d, b, q])
+                Sh[q_] = sh
+                Sl[q_] = sl
+
+
+@njit
+def _scatter_pairs(pidx, a, b, vh, vl, Wh, Wl):
+    for k in range(pidx.size):
+        p = pidx[k]
+        Wh[p, a[k], b[k]], Wl[p, a[k], b[k]] = dd.add(Wh[p, a[k], b[k]], Wl[p, a[k], b[k]], vh[k], vl[k])
+
+
+class ContactSpace(FactoredBackend):
+    """The contact-space system S = W̃ + G with W̃ = H̃ M⁻¹ H̃ᵀ (built once), factored in its
+    scaled form S' = F⁻¹ S F⁻ᵀ = F⁻¹ W̃ F⁻ᵀ + I, where F = blockdiag(F_c), F_c F_cᵀ = G_c.
+
+    G's eigenvalues run from about μ to 1/μ inside one contact block (sliding contacts); the
+    Cholesky factor of S then loses definiteness in double-double near μ = 1e-20 (measured
+    on a 1368-contact Chute).  S' has every eigenvalue ≥ 1, and F_c comes from the
+    Jordan-algebra factors without squaring a condition number.
+    """
+
+    @property
+    def name(self) -> str:
+        how = {"mixed": "float64 factor refined in double-double",
+               "double-double": "double-double factor"}[getattr(self.chol, "precision", "double-double")]
+        if isinstance(self.chol, CholmodMixed) and self.chol.precision == "mixed":
+            how = "float64 CHOLMOD factor refined in double-double"
+        reason = getattr(self.chol, "fallback_reason", "")
+        form = "I + F⁻¹W̃F⁻ᵀ, W̃ = P W P of the local file" if self.data.local else "I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ"
+        return f"contact-space, scaled ({form}), {how}" + (f" ({reason})" if reason else "")
+
+    def __init__(self, data: ExtendedData, mixed: bool = True, engine: str = "auto"):
+        from scipy.sparse.csgraph import connected_components
+
+        self.data = data
+        m, nk, n = data.m, data.nk, data.n
+        self.contact_of_row = np.repeat(np.arange(n), data.row_count)
+        C = sp.csr_matrix((np.ones(nk), (self.contact_of_row, np.arange(nk))), shape=(n, nk))
+        if data.local:  # W̃ is given: contacts are coupled where it has entries
+            self.Mchol = None
+            Wp = sp.csr_matrix((np.ones_like(data.Wt.hi), data.Wt.indices, data.Wt.indptr), shape=(nk, nk))
+            CW = (C @ Wp @ C.T).tocsr()
+            CW.data[:] = 1
+            CC = sp.triu(CW + sp.identity(n), format="coo")
+        else:
+            Mp = sp.csr_matrix((np.ones_like(data.M.hi), data.M.indices, data.M.indptr), shape=(m, m))
+            self.Mchol = DDCholesky(Mp)
+            nb, labels = connected_components(Mp, directed=False)
+            self.n_blocks, self.labels = nb, labels
+            Ht = sp.csr_matrix((np.ones_like(data.Ht.hi), data.Ht.indices, data.Ht.indptr), shape=data.Ht.shape)
+            B = sp.csr_matrix((np.ones(m), (np.arange(m), labels)), shape=(m, nb))
+            CB = (C @ Ht @ B).tocsr()
+            CB.data[:] = 1
+            CC = sp.triu(CB @ CB.T + sp.identity(n), format="coo")
+        order = np.lexsort((CC.col, CC.row))
+        self.pc = CC.row[order].astype(np.int64)
+        self.pd = CC.col[order].astype(np.int64)
+        self._pair_keys = self.pc * n + self.pd
+        # kept-row pattern: every pair block is dense
+        ii, jj = np.meshgrid(np.arange(5), np.arange(5), indexing="ij")
+        kc = data.row_count[self.pc][:, None, None]
+        kd = data.row_count[self.pd][:, None, None]
+        valid = (ii[None] < kc) & (jj[None] < kd)
+        gi = np.where(valid, data.row_start[self.pc][:, None, None] + ii[None], 0)
+        gj = np.where(valid, data.row_start[self.pd][:, None, None] + jj[None], 0)
+        same = (self.pc == self.pd)[:, None, None]
+        take = valid & (~same | (ii[None] <= jj[None]))
+        pattern = sp.coo_matrix((np.ones(int(take.sum())), (gi[take], gj[take])), shape=(nk, nk))
+        self.engine = resolve_engine(engine, nk) if mixed else "ldl"
+        if not mixed:
+            self.chol = DDCholesky(pattern)
+        elif self.engine == "cholmod":
+            self.chol = CholmodMixed(pattern)
+        else:
+            self.chol = MixedCholesky(pattern)
+        self.pos = np.full(valid.shape, -1, dtype=np.int64)
+        self.pos[take] = self.chol.positions(gi[take], gj[take])
+        self._W = None
+        self.dense_W = None  # None: choose the construction of W̃ by its cost; True/False: force it
+        self.dense_W_used = None
+        self.Fh = np.zeros((n, 5, 5))
+        self.Fl = np.zeros((n, 5, 5))
+
+    def _pair_index(self, c, d):
+        return np.searchsorted(self._pair_keys, c * self.data.n + d)
+
+    def _build_W_local(self):
+        """W̃ of a local problem, copied into pair blocks from the file's (scaled) W."""
+        d = self.data
+        Wh = np.zeros((self.pc.size, 5, 5))
+        Wl = np.zeros((self.pc.size, 5, 5))
+        rows = np.repeat(np.arange(d.nk), np.diff(d.Wt.indptr))
+        cols = d.Wt.indices
+        ci, cj = self.contact_of_row[rows], self.contact_of_row[cols]
+        keep = ci <= cj
+        pidx = self._pair_index(ci[keep], cj[keep])
+        a = (rows - d.row_start[ci])[keep]
+        b = (cols - d.row_start[cj])[keep]
+        Wh[pidx, a, b] = d.Wt.hi[keep]
+        Wl[pidx, a, b] = d.Wt.lo[keep]
+        self._W = (Wh, Wl)
+
+    def _build_W(self):
+        """W̃ = H̃ M⁻¹ H̃ᵀ in pair blocks, block by block of M: W̃ += H_b M_b⁻¹ H_bᵀ over the
+        rows touching block b (dense double-double Cholesky of M_b up to DENSE_BLOCK dofs,
+        the sparse factor of M above)."""
+        d = self.data
+        if d.local:
+            self._build_W_local()
+            return
+        mr, mc, mh, ml = d.M.coo()
+        Wh = np.zeros((self.pc.size, 5, 5))
+        Wl = np.zeros((self.pc.size, 5, 5))
+        rows_all = np.repeat(np.arange(d.nk), np.diff(d.Ht.indptr))
+        blk_of_nz = self.labels[d.Ht.indices]
+        order = np.lexsort((rows_all, blk_of_nz))
+        bounds = np.searchsorted(blk_of_nz[order], np.arange(self.n_blocks + 1))
+        m_blk = self.labels[mr]
+        m_order = np.argsort(m_blk, kind="stable")
+        m_bounds = np.searchsorted(m_blk[m_order], np.arange(self.n_blocks + 1))
+        dof_order = np.argsort(self.labels, kind="stable")
+        dof_bounds = np.searchsorted(self.labels[dof_order], np.arange(self.n_blocks + 1))
+        local = np.empty(d.m, dtype=np.int64)
+        row_local = np.arange(d.nk) - d.row_start[self.contact_of_row]
+        # rows touching each block: Σ rows_b² is what the block-by-block scatter costs; where a
+        # few blocks touch most rows (a dense H, as in a lifted local problem with M = I), one
+        # dense Y = blockdiag(L_b⁻¹)Hᵀ and W̃ = YᵀY is far cheaper (DECISIONS, "dense W̃")
+        touching = np.unique(blk_of_nz.astype(np.int64) * d.nk + rows_all)
+        rows_per_block = np.bincount(touching // d.nk, minlength=self.n_blocks).astype(np.float64)
+        block_sizes = np.diff(dof_bounds)
+        dense_Y = (float(np.sum(rows_per_block ** 2)) > 4.0 * d.nk * d.nk and d.m * d.nk <= DENSE_Y_ENTRIES
+                   and int(block_sizes.max(initial=0)) <= DENSE_BLOCK)
+        if self.dense_W is not None:  # tests compare both constructions
+            dense_Y = bool(self.dense_W) and int(block_sizes.max(initial=0)) <= DENSE_BLOCK
+        self.dense_W_used = dense_Y
+        if dense_Y:
+            YTh, YTl = np.zeros((d.nk, d.m)), np.zeros((d.nk, d.m))  # Yᵀ: rows = kept rows of H̃
+        for b in range(self.n_blocks):
+            sel = order[bounds[b]:bounds[b + 1]]
+            if sel.size == 0:
+                continue
+            dofs = dof_order[dof_bounds[b]:dof_bounds[b + 1]]
+            s_ = dofs.size
+            local[dofs] = np.arange(s_)
+            rows = np.unique(rows_all[sel])
+            rl = np.searchsorted(rows, rows_all[sel])
+            Hbh = np.zeros((rows.size, s_))
+            Hbl = np.zeros((rows.size, s_))
+            Hbh[rl, local[d.Ht.indices[sel]]] = d.Ht.hi[sel]
+            Hbl[rl, local[d.Ht.indices[sel]]] = d.Ht.lo[sel]
+            if s_ > DENSE_BLOCK:
+                Wbh, Wbl = self._schur_sparse(Hbh, Hbl, dofs)
+            else:
+                ms = m_order[m_bounds[b]:m_bounds[b + 1]]
+                Mbh = np.zeros((s_, s_))
+                Mbl = np.zeros((s_, s_))
+                Mbh[local[mr[ms]], local[mc[ms]]] = mh[ms]
+                Mbl[local[mr[ms]], local[mc[ms]]] = ml[ms]
+                if dense_Y:
+                    Ybh, Ybl = np.zeros((s_, rows.size)), np.zeros((s_, rows.size))
+                    if not _dense_half(Mbh, Mbl, Hbh, Hbl, Ybh, Ybl):
+                        raise ArithmeticError(f"block {b} of M is not positive definite in double-double")
+                    YTh[np.ix_(rows, dofs)], YTl[np.ix_(rows, dofs)] = Ybh.T, Ybl.T
+                    continue
+                Wbh, Wbl = np.zeros((rows.size, rows.size)), np.zeros((rows.size, rows.size))
+                if not _dense_schur(Mbh, Mbl, Hbh, Hbl, Wbh, Wbl):
+                    raise ArithmeticError(f"block {b} of M is not positive definite in double-double")
+            ii, jj = np.meshgrid(np.arange(rows.size), np.arange(rows.size), indexing="ij")
+            ci, cj = self.contact_of_row[rows[ii]], self.contact_of_row[rows[jj]]
+            keep = ci <= cj
+            pidx = self._pair_index(ci[keep], cj[keep])
+            _scatter_pairs(pidx, row_local[rows[ii]][keep], row_local[rows[jj]][keep],
+                           np.ascontiguousarray(Wbh[keep]), np.ascontiguousarray(Wbl[keep]), Wh, Wl)
+        if dense_Y:
+            Gh, Gl = np.zeros((d.nk, d.nk)), np.zeros((d.nk, d.nk))
+            _row_gram(YTh, YTl, Gh, Gl)
+            ii, jj = np.meshgrid(np.arange(5), np.arange(5), indexing="ij")
+            valid = (ii[None] < d.row_count[self.pc][:, None, None]) & (jj[None] < d.row_count[self.pd][:, None, None])
+            gi = d.row_start[self.pc][:, None, None] + ii[None]
+            gj = d.row_start[self.pd][:, None, None] + jj[None]
+            Wh[valid], Wl[valid] = Gh[gi[valid], gj[valid]], Gl[gi[valid], gj[valid]]
+        self._W = (Wh, Wl)
+
+    def _schur_sparse(self, Hbh, Hbl, dofs):
+        """H_b M_b⁻¹ H_bᵀ for a large block through the sparse factor of M (one solve per row)."""
+        m = self.data.m
+        k = Hbh.shape[0]
+        Xh, Xl = np.zeros((k, dofs.size)), np.zeros((k, dofs.size))
+        for a in range(k):
+            bh, bl = np.zeros(m), np.zeros(m)
+            bh[dofs], bl[dofs] = Hbh[a], Hbl[a]
+            xh, xl = self.Mchol.solve(bh, bl)
+            Xh[a], Xl[a] = xh[dofs], xl[dofs]
+        Wh, Wl = np.zeros((k, k)), np.zeros((k, k))
+        _dense_gram(Hbh, Hbl, Xh, Xl, Wh, Wl)
+        return Wh, Wl
+
+    def _M_upper(self):
+        d = self.data
+        mr, mc, mh, ml = d.M.coo()
+        keep = self.Mchol.iperm[mr] <= self.Mchol.iperm[mc]
+        pos = self.Mchol.positions(mr[keep], mc[keep])
+        h = np.zeros(self.Mchol.nnz_upper)
+        lo = np.zeros(self.Mchol.nnz_upper)
+        scatter_add(pos, np.ascontiguousarray(mh[keep]), np.ascontiguousarray(ml[keep]), h, lo)
+        return h, lo
+
+    def update(self, ph, pl, pih, pil, spec) -> bool:
+        d = self.data
+        if self._W is None:
+            if self.Mchol is not None and self.Mchol.factor(*self._M_upper()) >= 0:
+                raise ArithmeticError("M is not positive definite in double-double")
+            self._build_W()
+        if contact_factor_inverse(d.n, d.kinds, d.fric_cone, d.roll_cone, d.normal_cone, spec,
+                                  self.Fh, self.Fl) >= 0:
+            return False
+        Sh = np.zeros(self.chol.nnz_upper)
+        Sl = np.zeros(self.chol.nnz_upper)
+        _scaled_blocks(self.pc, self.pd, self._W[0], self._W[1], d.row_count, self.Fh, self.Fl, self.pos, Sh, Sl)
+        self.factorisations += 1
+        return self.chol.factor(Sh, Sl) < 0
+
+    def _S_solve(self, rh, rl):
+        """S⁻¹ r = F⁻ᵀ S'⁻¹ F⁻¹ r."""
+        d = self.data
+        yh, yl = np.empty(d.nk), np.empty(d.nk)
+        block_apply(d.n, d.row_start, d.row_count, self.Fh, self.Fl, False, rh, rl, yh, yl)
+        xh, xl = self.chol.solve(yh, yl)
+        oh, ol = np.empty(d.nk), np.empty(d.nk)
+        block_apply(d.n, d.row_start, d.row_count, self.Fh, self.Fl, True, xh, xl, oh, ol)
+        return oh, ol
+
+    def solve(self, a, t):
+        """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t (local form: (W̃ + G) dr̃ = t)."""
+        d = self.data
+        if d.local:
+            return (np.zeros(0), np.zeros(0)), self._S_solve(np.ascontiguousarray(t[0]), np.ascontiguousarray(t[1]))
+        yh, yl = self.Mchol.solve(a[0], a[1])
+        hh, hl = d.Ht.matvec(yh, yl)
+        rh, rl = np.empty(d.nk), np.empty(d.nk)
+        dd.vadd(t[0], t[1], -hh, -hl, rh, rl)
+        drh, drl = self._S_solve(rh, rl)
+        gh, gl = d.HtT.matvec(drh, drl)
+        sh, sl = np.empty(d.m), np.empty(d.m)
+        dd.vadd(a[0], a[1], gh, gl, sh, sl)
+        dvh, dvl = self.Mchol.solve(sh, sl)
+        return (dvh, dvl), (drh, drl)
+
+
+ENGINES = ("auto", "ldl", "cholmod")
+CHOLMOD_MIN_ROWS = 0
+"""Smallest contact-space matrix (kept rows) ``engine="auto"`` factors with CHOLMOD when it is
+installed: 0, since no size was measured where the compiled LDLᵀ is faster (164 to 9675
+contacts; docs/DECISIONS.md "The 10-digit path at scale")."""
+
+
+def resolve_engine(engine: str, rows: int) -> str:
+    """"cholmod" or "ldl": the float64 factorisation engine of the contact-space form.
+    ``auto`` takes CHOLMOD (scikit-sparse, optional extra ``cholmod``) when it is importable and
+    the matrix has at least :data:`CHOLMOD_MIN_ROWS` rows, else the compiled up-looking LDLᵀ;
+    ``cholmod`` demands it (ImportError, saying what to install, when absent)."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine {engine!r} is not one of {', '.join(ENGINES)}")
+    if engine == "ldl":
+        return "ldl"
+    if engine == "cholmod":
+        if not cholmod_available():
+            raise ImportError("the cholmod engine needs CHOLMOD through scikit-sparse: pip install "
+                              "'rfverify[cholmod]' (and libsuitesparse-dev, an optimised BLAS such as "
+                              "libopenblas0, to build and run it)")
+        return "cholmod"
+    return "cholmod" if rows >= CHOLMOD_MIN_ROWS and cholmod_available() else "ldl"
