@@ -41,13 +41,13 @@ def test_every_precision_runs_the_one_loop(monkeypatch):
     assert [space for space, _ in calls[double_ipm]] and {s for s, _ in calls[double_ipm]} == {"_NumpySpace"}
     assert [space for space, _ in calls[dd_ipm]] == ["_DDSpace"]
     dd_run = calls[dd_ipm][0][1]
-    assert np.array_equal(out.extended.v.h, dd_run.v.h) and out.extended.nit == dd_run.k
+    assert np.array_equal(out.extended.v.h, dd_run.iterate[0].h) and out.extended.nit == dd_run.k
     # ... and so is the multiple-precision tail, started from the double-double iterate.
     it = out.extended
     start = {"v": (it.v.h, it.v.l), "r_t": (it.r_t.h, it.r_t.l), "z": (it.z.h, it.z.l)}
     tail = wide.run(ExtendedData(problem), start, max_iter=1)
     assert [space for space, _ in calls[wide]] == ["_WideSpace"]
-    assert tail.v is calls[wide][0][1].v and tail.status == "MaxIterations" and len(tail.trace["sigma"]) == 1
+    assert tail.v is calls[wide][0][1].iterate[0] and tail.status == "MaxIterations" and len(tail.trace["sigma"]) == 1
 
 
 # ---------------------------------------------------------------------- the loop's contract

@@ -45,9 +45,7 @@ class LoopOutcome:
     refine_steps), and the seconds spent scaling and factoring ("factor") and solving
     ("solve")."""
 
-    v: Any
-    r: Any
-    z: Any
+    iterate: tuple
     verdict: Any
     k: int
     records: list = field(default_factory=list)
@@ -131,4 +129,4 @@ def iterate(precision: Precision, policy, start: tuple, *, n_contacts: int, n_co
         if message is None:
             raise
         verdict = policy.breakdown(f"iteration {k}: {message}")
-    return LoopOutcome(v=v, r=r, z=z, verdict=verdict, k=k, records=records, timings=timings)
+    return LoopOutcome(iterate=(v, r, z), verdict=verdict, k=k, records=records, timings=timings)

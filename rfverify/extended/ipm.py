@@ -290,7 +290,7 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
     out = iterate(Precision(space, _DDCones(data), newton), policy, begin, n_contacts=data.n,
                   n_cones=data.n3 + data.n1, clock_origin=t0)
     status, message = out.verdict
-    return ExtendedResult(out.v, out.r, out.z, status, message, out.k, extended_trace(out.records), backend.name,
+    return ExtendedResult(*out.iterate, status, message, out.k, extended_trace(out.records), backend.name,
                           time.perf_counter() - t0, out.timings["factor"], _stats(backend))
 
 

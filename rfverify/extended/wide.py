@@ -733,5 +733,5 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
         out = iterate(Precision(space, _WideCones(data.n3, data.nz, n_cones), newton), policy, begin,
                       n_contacts=data.n, n_cones=n_cones, clock_origin=t0)
     status, message = out.verdict
-    return WideResult(out.v, out.r, out.z, status, message, out.k, extended_trace(out.records), factor.name,
+    return WideResult(*out.iterate, status, message, out.k, extended_trace(out.records), factor.name,
                       time.perf_counter() - t0, bits=bits)
