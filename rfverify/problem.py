@@ -14,6 +14,10 @@ vectors are stored flat (contact i occupies entries ``5i … 5i+4``).
 ``Problem.M`` is the mass matrix *as given* (real files are slightly unsymmetric, DESIGN §1);
 solvers use :attr:`Problem.M_sym` = (M + Mᵀ)/2.  Keeping the raw matrix makes a written file
 round-trip bit for bit and lets ``rfverify info`` report the asymmetry of the source data.
+
+The checks of M (symmetry, definiteness of its diagonal blocks) are :mod:`rfverify.massmatrix`,
+the conversion and finiteness checks of every array :mod:`rfverify._arrays`; their public names
+are importable from here as before.
 """
 
 from __future__ import annotations
@@ -24,9 +28,16 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
+from ._arrays import as_csc, as_vector, check_finite_sparse, check_finite_vector, freeze, freeze_sparse
 from .errors import InvalidArgumentError, InvalidProblemError
+from .massmatrix import (DENSE_BLOCK_LIMIT, BlockStructure, SymmetryReport, asymmetry_error,
+                         block_structure_and_definiteness, check_positive_diagonal, symmetrise,
+                         symmetry_report)
+
+__all__ = ["SPACEDIM", "DEFAULT_MAX_ASYMMETRY", "DENSE_BLOCK_LIMIT", "Problem", "StoredSolution",
+           "LocalForm", "make_local_form", "require_problem", "SymmetryReport", "BlockStructure",
+           "symmetry_report", "asymmetry_error", "block_structure_and_definiteness"]
 
 SPACEDIM = 5
 """Number of components of a rolling-friction contact: (N, T1, T2, R1, R2)."""
@@ -43,10 +54,6 @@ refusal message) but not thresholded: on matrices whose entries span many decade
 finite-element matrices) it hides every entry of the small-magnitude dofs.  Some real FE files
 have entrywise 0.22 but normwise 4e-7; the user judges and passes ``--max-asymmetry``.
 """
-
-DENSE_BLOCK_LIMIT = 400
-"""Diagonal blocks of M up to this size are checked for definiteness by batched dense
-eigenvalues; larger blocks by a symmetric-ordering LDLᵀ (sparse LU without pivoting)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,7 +99,7 @@ def make_local_form(W, q, significant_digits: int | None = None) -> LocalForm:
     if Wc.shape != (qf.size, qf.size):
         raise InvalidProblemError("W", f"has shape {Wc.shape}, expected ({qf.size}, {qf.size}) from q",
                                   fix="W has one row and one column per entry of q")
-    return LocalForm(W=_freeze_sparse(Wc), q=_freeze(qf), significant_digits=significant_digits)
+    return LocalForm(W=freeze_sparse(Wc), q=freeze(qf), significant_digits=significant_digits)
 
 
 @dataclass(frozen=True)
@@ -102,95 +109,6 @@ class StoredSolution:
     v: np.ndarray | None = None
     u: np.ndarray | None = None
     r: np.ndarray | None = None
-
-
-
-@dataclass(frozen=True)
-class SymmetryReport:
-    """How far the given M is from symmetric.
-
-    ``scaled`` = max |M_ij − M_ji| / sqrt(M_ii M_jj) (entrywise: unit-invariant, the thresholded
-    measure), attained at ``(row, col)``; ``frobenius`` = ‖M − Mᵀ‖_F / ‖M‖_F (normwise,
-    information).
-    """
-
-    scaled: float
-    frobenius: float
-    row: int | None
-    col: int | None
-
-    @property
-    def entrywise(self) -> float:
-        """Alias of ``scaled``: max |M_ij − M_ji| / sqrt(M_ii M_jj)."""
-        return self.scaled
-
-    @property
-    def normwise(self) -> float:
-        """Alias of ``frobenius``: ‖M − Mᵀ‖_F / ‖M‖_F."""
-        return self.frobenius
-
-    def as_dict(self, matrix: str = "M") -> dict:
-        """JSON-able: both measures, where the entrywise one is attained, and whether the
-        matrix was symmetrised ((A + Aᵀ)/2 differs from A)."""
-        return {"matrix": matrix, "entrywise": self.scaled, "normwise": self.frobenius,
-                "at": None if self.row is None else [self.row, self.col],
-                "symmetrised": bool(self.scaled > 0)}
-
-    def describe(self, matrix: str = "M") -> str:
-        """One line: what was symmetrised and both measures (``info``, solution files)."""
-        if not self.scaled > 0:
-            return f"{matrix} is exactly symmetric: nothing symmetrised"
-        at = "" if self.row is None else f" at ({self.row}, {self.col})"
-        return (f"{matrix} symmetrised as ({matrix} + {matrix}^T)/2; entrywise asymmetry "
-                f"max|{matrix}_ij - {matrix}_ji|/sqrt({matrix}_ii {matrix}_jj) = {self.scaled:.3g}{at}, "
-                f"normwise ||{matrix} - {matrix}^T||_F/||{matrix}||_F = {self.frobenius:.3g}")
-
-
-def asymmetry_error(matrix: str, report: SymmetryReport, max_asymmetry: float) -> InvalidProblemError:
-    """The refusal of a matrix whose entrywise asymmetry exceeds ``max_asymmetry``: both
-    measures, so the user can judge, and the option value that would accept it."""
-    suggest = _round_up_2(report.scaled)
-    return InvalidProblemError(
-        matrix,
-        f"is not symmetric: entrywise asymmetry max|{matrix}_ij - {matrix}_ji|/sqrt({matrix}_ii "
-        f"{matrix}_jj) = {report.scaled:.3g} > max_asymmetry = {max_asymmetry:.3g} (the thresholded "
-        f"measure); normwise ||{matrix} - {matrix}^T||_F/||{matrix}||_F = {report.frobenius:.3g}",
-        index=None if report.row is None else (report.row, report.col),
-        fix=f"if the difference is rounding in the source data (a small normwise figure suggests "
-            f"so), accept it and solve with ({matrix} + {matrix}^T)/2: --max-asymmetry {suggest} "
-            f"(Python: max_asymmetry={suggest}); otherwise check the matrix")
-
-
-def _round_up_2(x: float) -> str:
-    """``x`` rounded up to two significant digits, as text (a limit that accepts ``x``)."""
-    if not np.isfinite(x):
-        return "inf"
-    if x <= 0:
-        return "0"
-    text = f"{x:.2g}"
-    step = 10.0 ** (np.floor(np.log10(float(text))) - 1)
-    while float(text) < x:
-        text = f"{float(text) + step:.2g}"
-    return text
-
-
-@dataclass(frozen=True)
-class BlockStructure:
-    """Connected components of the sparsity graph of M (bodies, for rigid-body problems).
-
-    ``labels[j]`` is the block of dof j; ``sizes[b]`` the number of dofs of block b;
-    ``min_eigenvalues[b]`` the smallest eigenvalue of the symmetrised block (NaN when the
-    block was checked by factorisation only, in which case ``min_pivots[b]`` is set).
-    """
-
-    labels: np.ndarray
-    sizes: np.ndarray
-    min_eigenvalues: np.ndarray
-    min_pivots: np.ndarray
-
-    @property
-    def count(self) -> int:
-        return int(self.sizes.size)
 
 
 @dataclass(frozen=True, eq=False)
@@ -312,12 +230,12 @@ class Problem:
                 f"is {spacedim}, rolling-friction problems have spacedim = {SPACEDIM}",
                 fix="use a fclib_global_rolling problem (N, T1, T2, R1, R2 per contact)",
             )
-        M = _as_csc("M", M)
-        H = _as_csc("H", H)
-        f = _as_vector("f", f)
-        w = _as_vector("w", w)
-        mu = _as_vector("mu", mu)
-        mu_r = _as_vector("mu_r", mu_r)
+        M = as_csc("M", M)
+        H = as_csc("H", H)
+        f = as_vector("f", f)
+        w = as_vector("w", w)
+        mu = as_vector("mu", mu)
+        mu_r = as_vector("mu_r", mu_r)
 
         m = M.shape[0]
         if M.shape[0] != M.shape[1]:
@@ -344,10 +262,10 @@ class Problem:
             raise InvalidProblemError("w", f"has {w.size} entries, expected 5n = {SPACEDIM * n}",
                                       fix="w must have 5 entries per contact")
 
-        _check_finite_sparse("M", M)
-        _check_finite_sparse("H", H)
+        check_finite_sparse("M", M)
+        check_finite_sparse("H", H)
         for name, vec in (("f", f), ("w", w), ("mu", mu), ("mu_r", mu_r)):
-            _check_finite_vector(name, vec)
+            check_finite_vector(name, vec)
         for name, vec in (("mu", mu), ("mu_r", mu_r)):
             bad = np.flatnonzero(vec < 0)
             if bad.size:
@@ -356,12 +274,12 @@ class Problem:
                           f" ({bad.size} negative in all)",
                     index=int(bad[0]), fix="friction coefficients must be ≥ 0")
 
-        _check_positive_diagonal(M)  # before symmetry: a zero diagonal is not an asymmetry
+        check_positive_diagonal(M)  # before symmetry: a zero diagonal is not an asymmetry
         symmetry = symmetry_report(M)
         if not symmetry.scaled <= max_asymmetry:
             raise asymmetry_error("M", symmetry, max_asymmetry)
 
-        M_sym = _symmetrise(M)
+        M_sym = symmetrise(M)
         M_sym.sort_indices()
         blocks = block_structure_and_definiteness(M_sym)
 
@@ -370,13 +288,13 @@ class Problem:
         guesses = tuple(_frozen_solution(f"guesses[{k}]", g, m, n) for k, g in enumerate(guesses))
 
         problem = cls(
-            M=_freeze_sparse(M), H=_freeze_sparse(H), f=_freeze(f), w=_freeze(w),
-            mu=_freeze(mu), mu_r=_freeze(mu_r), title=title, description=description,
+            M=freeze_sparse(M), H=freeze_sparse(H), f=freeze(f), w=freeze(w),
+            mu=freeze(mu), mu_r=freeze(mu_r), title=title, description=description,
             math_info=math_info, solution=solution, guesses=guesses,
             storage=dict(storage or {"M": "csc", "H": "csc"}), symmetry=symmetry,
             blocks=blocks, source=source, provenance=dict(provenance or {}),
         )
-        object.__setattr__(problem, "M_sym", _freeze_sparse(M_sym))
+        object.__setattr__(problem, "M_sym", freeze_sparse(M_sym))
         return problem
 
     # ------------------------------------------------------------------ sizes
@@ -397,7 +315,7 @@ class Problem:
     @cached_property
     def M_sym(self) -> sp.csc_matrix:
         """(M + Mᵀ)/2, the matrix every solver uses (computed at validation)."""
-        return _freeze_sparse(_symmetrise(self.M))
+        return freeze_sparse(symmetrise(self.M))
 
     @cached_property
     def contact_free_dofs(self) -> np.ndarray:
@@ -419,187 +337,6 @@ class Problem:
                 f"nnz(M)={self.M.nnz}, nnz(H)={self.H.nnz})")
 
 
-# ---------------------------------------------------------------------- helpers
-def _symmetrise(M: sp.spmatrix) -> sp.csc_matrix:
-    """(M + Mᵀ)/2 computed as M/2 + Mᵀ/2: the same value (halving is exact), but entries near
-    1e308 do not overflow to inf."""
-    return (M * 0.5 + M.T * 0.5).tocsc()
-
-
-def symmetry_report(M: sp.spmatrix) -> SymmetryReport:
-    """Measure the asymmetry of a square sparse matrix (see :class:`SymmetryReport`)."""
-    M = sp.csc_matrix(M)
-    A = (M - M.T).tocoo()
-    A.eliminate_zeros()
-    # Frobenius norms of pre-scaled data: squares of entries near 1e154 would overflow.
-    big = float(np.abs(M.data).max(initial=0.0))
-    normM = sp.linalg.norm(M / big) if big > 0 else 0.0
-    frob = float(sp.linalg.norm(A / big) / normM) if normM > 0 else 0.0
-    if A.nnz == 0:
-        return SymmetryReport(0.0, frob, None, None)
-    # sqrt(d_i)·sqrt(d_j), not sqrt(d_i d_j): the product under/overflows at extreme scales.
-    d = np.sqrt(np.abs(M.diagonal()))
-    scale = d[A.row] * d[A.col]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.where(scale > 0, np.abs(A.data) / scale, np.inf)
-    k = int(np.argmax(rel))
-    return SymmetryReport(float(rel[k]), frob, int(A.row[k]), int(A.col[k]))
-
-
-def block_structure_and_definiteness(M_sym: sp.csc_matrix) -> BlockStructure:
-    """Split symmetric ``M_sym`` into the connected components of its sparsity graph and check
-    each for positive definiteness.
-
-    Small blocks (≤ DENSE_BLOCK_LIMIT dofs) are grouped by size and their eigenvalues computed
-    in one batched call per size (rigid bodies give thousands of 6×6 blocks); large blocks are
-    factored by sparse LU with a symmetric fill-reducing ordering and no off-diagonal
-    pivoting, which is an LDLᵀ factorisation whose pivots are all positive exactly when the
-    block is positive definite (Sylvester).
-
-    Raises
-    ------
-    InvalidProblemError
-        field ``"M"``, index = the failing block and its dof range.
-    """
-    _check_positive_diagonal(M_sym)
-    n_blocks, labels = connected_components(M_sym, directed=False)
-    sizes = np.bincount(labels, minlength=n_blocks)
-    min_eig = np.full(n_blocks, np.nan)
-    min_piv = np.full(n_blocks, np.nan)
-    order = np.argsort(labels, kind="stable")  # dofs grouped by block, increasing within
-    starts = np.concatenate(([0], np.cumsum(sizes)))
-    csr = M_sym.tocsr()
-    for size in np.unique(sizes):
-        ids = np.flatnonzero(sizes == size)
-        if size <= DENSE_BLOCK_LIMIT:
-            # Gather every block of this size into one (count, size, size) stack.
-            dofs = order[starts[ids][:, None] + np.arange(size)[None, :]]
-            stack = _gather_blocks(csr, dofs)
-            eig = np.linalg.eigvalsh(stack)[:, 0]
-            min_eig[ids] = eig
-            # Relative threshold: an eigenvalue below eps·‖block‖ is zero to working accuracy.
-            norms = np.abs(stack).max(axis=(1, 2))
-            fail = np.flatnonzero(~(eig > 8 * np.finfo(float).eps * size * norms))
-            if fail.size:
-                b = int(ids[fail[0]])
-                _raise_not_pd(b, order[starts[b]:starts[b + 1]], f"smallest eigenvalue "
-                              f"{eig[fail[0]]:.3e} (block norm {norms[fail[0]]:.3e})")
-        else:
-            for b in ids:
-                dofs = order[starts[b]:starts[b + 1]]
-                block = csr[dofs][:, dofs].tocsc()
-                pivots = _ldl_pivots(block)
-                min_piv[b] = pivots.min()
-                if not pivots.min() > 8 * np.finfo(float).eps * size * abs(block).max():
-                    _raise_not_pd(int(b), dofs, f"LDLᵀ pivot {pivots.min():.3e}")
-    return BlockStructure(labels=labels, sizes=sizes, min_eigenvalues=min_eig, min_pivots=min_piv)
-
-
-def _check_positive_diagonal(M: sp.spmatrix):
-    diag = M.diagonal()
-    bad = np.flatnonzero(~(diag > 0))
-    if bad.size:
-        j = int(bad[0])
-        raise InvalidProblemError(
-            "M", f"diagonal entry M[{j},{j}] = {float(diag[j])!r} is not positive, so M is not "
-                 f"positive definite ({bad.size} such diagonal entries)",
-            index=(j, j), fix="every dof needs a positive mass or inertia")
-
-
-def _gather_blocks(csr: sp.csr_matrix, dofs: np.ndarray) -> np.ndarray:
-    """Dense (count, s, s) stack of the diagonal blocks M[dofs[b]][:, dofs[b]]."""
-    count, s = dofs.shape
-    rows = dofs.ravel()
-    sub = csr[rows].tocoo()  # rows of all blocks, all columns
-    # Position of each column inside its block: only entries whose column is in the same
-    # block as the row survive (blocks are connected components, so all do).
-    pos_in_block = np.empty(csr.shape[1], dtype=np.int64)
-    pos_in_block[dofs.ravel()] = np.tile(np.arange(s), count)
-    stack = np.zeros((count, s, s))
-    blk = sub.row // s
-    stack[blk, sub.row % s, pos_in_block[sub.col]] = sub.data
-    return stack
-
-
-def _ldl_pivots(block: sp.csc_matrix) -> np.ndarray:
-    from scipy.sparse.linalg import splu
-
-    try:
-        lu = splu(block, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                  options={"SymmetricMode": True})
-    except RuntimeError:  # exactly singular
-        return np.array([0.0])
-    if np.any(lu.perm_r != lu.perm_c):
-        # SuperLU pivoted off the diagonal after all: fall back to the dense test.
-        return np.linalg.eigvalsh(block.toarray())
-    return lu.U.diagonal()
-
-
-def _raise_not_pd(block: int, dofs: np.ndarray, detail: str):
-    lo, hi = int(dofs.min()), int(dofs.max())
-    span = f"dofs {lo}..{hi}" if hi - lo + 1 == dofs.size else f"{dofs.size} dofs from {lo} to {hi}"
-    raise InvalidProblemError(
-        "M", f"diagonal block {block} ({span}) of the symmetrised M is not positive definite: "
-             f"{detail}",
-        index=f"block {block}: {span}",
-        fix="check the masses/inertias of that body (a rigid body needs a positive mass and "
-            "a positive definite inertia tensor)")
-
-
-def _as_csc(name: str, A) -> sp.csc_matrix:
-    try:
-        if sp.issparse(A):
-            A = sp.csc_matrix(A, dtype=np.float64, copy=True)  # never sort the caller's matrix
-        else:
-            arr = np.asarray(A, dtype=np.float64)
-            if arr.ndim != 2:
-                raise InvalidProblemError(name, f"has {arr.ndim} dimensions, expected a matrix",
-                                          fix="pass a 2-D array or a scipy.sparse matrix")
-            A = sp.csc_matrix(arr)
-    except (TypeError, ValueError) as exc:
-        if isinstance(exc, InvalidProblemError):
-            raise
-        raise InvalidProblemError(name, f"cannot be converted to a float64 matrix ({exc})",
-                                  fix="pass numeric data") from None
-    A.sum_duplicates()
-    A.sort_indices()
-    return A
-
-
-def _as_vector(name: str, x) -> np.ndarray:
-    try:
-        arr = np.array(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidProblemError(name, f"cannot be converted to a float64 vector ({exc})",
-                                  fix="pass numeric data") from None
-    if arr.ndim != 1:
-        if arr.ndim == 2 and 1 in arr.shape:
-            arr = arr.ravel()
-        else:
-            raise InvalidProblemError(name, f"has shape {arr.shape}, expected a 1-D vector",
-                                      fix="pass a flat array")
-    return arr
-
-
-def _check_finite_vector(name: str, x: np.ndarray):
-    bad = np.flatnonzero(~np.isfinite(x))
-    if bad.size:
-        raise InvalidProblemError(name, f"contains a non-finite value ({float(x[bad[0]])!r}) at index "
-                                        f"{bad[0]} ({bad.size} in all)",
-                                  index=int(bad[0]), fix="remove NaN/Inf from the data")
-
-
-def _check_finite_sparse(name: str, A: sp.csc_matrix):
-    bad = np.flatnonzero(~np.isfinite(A.data))
-    if bad.size:
-        k = int(bad[0])
-        col = int(np.searchsorted(A.indptr, k, side="right") - 1)
-        row = int(A.indices[k])
-        raise InvalidProblemError(name, f"contains a non-finite value ({float(A.data[k])!r}) at "
-                                        f"({row}, {col}) ({bad.size} in all)",
-                                  index=(row, col), fix="remove NaN/Inf from the data")
-
-
 def _frozen_solution(where: str, s: StoredSolution, m: int, n: int) -> StoredSolution:
     """Check shapes/finiteness and return read-only float64 copies (no aliasing of inputs)."""
     out = {}
@@ -610,23 +347,10 @@ def _frozen_solution(where: str, s: StoredSolution, m: int, n: int) -> StoredSol
         if np.ndim(arr) != 1 or np.size(arr) != size:
             raise InvalidProblemError(f"{where}.{name}", f"has shape {np.shape(arr)}, expected ({size},)",
                                       fix="store one value per dof (v) or 5 per contact (u, r)")
-        vec = _as_vector(f"{where}.{name}", arr)
-        _check_finite_vector(f"{where}.{name}", vec)
-        out[name] = _freeze(vec)
+        vec = as_vector(f"{where}.{name}", arr)
+        check_finite_vector(f"{where}.{name}", vec)
+        out[name] = freeze(vec)
     return StoredSolution(**out)
-
-
-def _freeze(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=np.float64, copy=True)
-    a.setflags(write=False)
-    return a
-
-
-def _freeze_sparse(A: sp.csc_matrix) -> sp.csc_matrix:
-    A = sp.csc_matrix(A, copy=True)
-    for arr in (A.data, A.indices, A.indptr):
-        arr.setflags(write=False)
-    return A
 
 
 def require_problem(obj, argument: str = "problem"):
@@ -636,3 +360,4 @@ def require_problem(obj, argument: str = "problem"):
             argument, f"expected an rfverify.Problem, got {type(obj).__name__}",
             fix="pass the result of rfverify.load(path) or rfverify.Problem.from_arrays(...)")
     return obj
+

@@ -117,7 +117,7 @@ def random_local_problem(n_contacts: int, *, seed: int = 0) -> Problem:
     lifted problem, which is what it is; a local *file* with such a W is proven on its own W
     (DESIGN §6.1b), and its rounding usually makes it indefinite, so it is not certified.
     Used by ``benchmarks/bench_digits.py`` and the tests of ``method="auto"``."""
-    from .io.siconos_dat import LocalProblem, lift_local
+    from .io.local_lift import LocalProblem, lift_local
 
     base = random_problem(n_contacts // 2, n_contacts, seed=seed)
     Minv_H = np.linalg.solve(base.M_sym.toarray(), base.H.toarray())

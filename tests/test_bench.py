@@ -18,7 +18,8 @@ from rfverify.measures import measures
 from rfverify.cli import main
 from rfverify.random_problems import random_problem
 from rfverify.report import load_run, make_report
-from rfverify.report.data import RunData, performance_profile, sgm
+from rfverify.report.aggregates import performance_profile, sgm
+from rfverify.report.data import RunData
 
 
 @pytest.fixture(scope="module")

@@ -161,7 +161,7 @@ def test_an_exact_answer_certifies_without_computing_a_point():
     """A 1-dof wedge: W = 1 on the normal only (μ = μr = 0 leaves r_T, r_R = 0), q = 0: v = 0,
     u = 0, r = (1, 0, ...) is a solution with no strictly feasible point around it.  certify
     tries the candidate itself first and certifies it with ε = 0, in O(nnz)."""
-    from rfverify.io.siconos_dat import LocalProblem, lift_local
+    from rfverify.io.local_lift import LocalProblem, lift_local
     from rfverify.problem import make_local_form
 
     W = np.diag([1.0, 0, 0, 0, 0])
@@ -230,7 +230,7 @@ def test_mutation_proving_the_lifting_instead_of_the_file_is_caught(tmp_path):
     """Put the old behaviour back: prove the lifted problem (eigenvalues below the 6-digit data
     precision dropped, HᵀH ≠ W) as if it were the file's.  The claims then fail against the
     file's truth: the checks above would catch it."""
-    from rfverify.io.siconos_dat import factor_delassus
+    from rfverify.io.local_lift import factor_delassus
 
     path = tmp_path / "diag.dat"
     write_local_dat(path, np.diag([1, 1, 1e-6, 1, 1]), [-1, 0, 1e-3, 0, 0], 0.5, 0.1)
@@ -276,7 +276,7 @@ def test_solve_judges_a_local_answer_on_the_file_not_on_the_lifting():
 def _sticking_identity_problem():
     """W = I, q = (−1, 0.1, 0, 0, 0), μ = 0.5, μr = 0.1: the contact sticks, u* = 0 and
     r* = −q = (1, −0.1, 0, 0, 0) exactly."""
-    from rfverify.io.siconos_dat import LocalProblem, lift_local
+    from rfverify.io.local_lift import LocalProblem, lift_local
     from rfverify.problem import make_local_form
 
     W = np.eye(5)

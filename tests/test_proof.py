@@ -274,7 +274,7 @@ def test_solution_of_a_similar_problem_is_refused():
 
 def _local_problem(W, q, mu, mu_r):
     """A local problem (W 5n × 5n, q) read as rfverify reads a full-precision local file."""
-    from rfverify.io.siconos_dat import LocalProblem, lift_local
+    from rfverify.io.local_lift import LocalProblem, lift_local
     from rfverify.problem import make_local_form
     import dataclasses
 

@@ -15,7 +15,8 @@ import scipy.sparse as sp
 
 from rfverify import Problem, solve
 from rfverify.random_problems import random_problem
-from rfverify.report.data import RunData, median, worst_cases
+from rfverify.report.aggregates import median, worst_cases
+from rfverify.report.data import RunData
 from rfverify.report.figures import work_precision_medians
 from rfverify.report.lockstep import component_problem, diagnose_as_run, solve_groups
 from rfverify.solver import Settings

@@ -23,7 +23,7 @@ from rfverify.scenes import (SCENES, Bodies, MoreauJean, Statics, contact_matrix
 from rfverify.scenes.assembly import generalized_velocity
 from rfverify.scenes.deposition import _descent, deposit_spheres, fcc_positions
 from rfverify.scenes.geometry import random_quaternions, segment_closest_points
-from rfverify.scenes.library import rescale_arrays
+from rfverify.scenes.extreme import rescale_arrays
 
 SAMPLE_DIR = Path(__file__).parent / "data" / "scenes"
 SMALL = 12

@@ -14,7 +14,8 @@ from ..errors import InvalidArgumentError, ProblemFileError
 from ..problem import DEFAULT_MAX_ASYMMETRY, Problem
 from ._paths import BUNDLED_PREFIX, bundled_problems, read_head, resolve_path
 from .fclib import read_fclib, write_fclib, write_solution_in_place
-from .siconos_dat import LocalProblem, lift_local, parse_siconos_dat, read_siconos_dat
+from .local_lift import LocalProblem, lift_local
+from .siconos_dat import parse_siconos_dat, read_siconos_dat
 
 __all__ = ["load", "save", "read_fclib", "write_fclib", "write_solution_in_place", "read_siconos_dat", "parse_siconos_dat",
            "lift_local", "LocalProblem", "bundled_problems", "resolve_path", "BUNDLED_PREFIX"]

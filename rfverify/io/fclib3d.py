@@ -44,7 +44,7 @@ from ..problem import SPACEDIM, Problem, StoredSolution, make_local_form
 from ._hdf5 import (check_mass_declaration, h5py_module, matrix_meta, member, read_guesses, read_info, read_matrix,
                     read_scalar_int,
                     read_solution, read_vector, write_matrix, write_solution_arrays)
-from .siconos_dat import LOCAL_DENSE_LIMIT, check_finite, factor_delassus
+from .local_lift import LOCAL_DENSE_LIMIT, check_finite, factor_delassus
 
 GLOBAL = "fclib_global"
 LOCAL = "fclib_local"

@@ -237,23 +237,30 @@ def write_bytes_atomic(path, data: bytes, *, option: str = "RUN_DIR") -> Path:
 
 
 # ---------------------------------------------------------------------- strict JSON
+def _plain(obj, non_finite):
+    """A copy of ``obj`` in the types JSON encodes: dict keys as strings, tuples as lists, numpy
+    arrays and scalars as Python lists and numbers, and a non-finite float (Python or numpy) as
+    ``non_finite(obj)``; other objects are left for ``json.dumps``'s ``default`` (or its error)."""
+    if isinstance(obj, (float, np.floating)) and not math.isfinite(obj):
+        return non_finite(obj)
+    if isinstance(obj, (str, int, float, bool)) or obj is None:
+        return obj
+    if isinstance(obj, dict):
+        return {(k if isinstance(k, str) else str(k)): _plain(v, non_finite) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v, non_finite) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist(), non_finite)
+    if isinstance(obj, np.generic):
+        return _plain(obj.item(), non_finite)
+    return obj
+
+
 def json_safe(obj):
     """A copy of ``obj`` that strict JSON can encode: numpy scalars and arrays become Python
     numbers and lists, non-finite floats become None, tuples become lists; other objects are
     left for ``json.dumps``'s ``default`` (or its error)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, (str, int, bool)) or obj is None:
-        return obj
-    if isinstance(obj, dict):
-        return {(k if isinstance(k, str) else str(k)): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return json_safe(obj.tolist())
-    if isinstance(obj, np.generic):
-        return json_safe(obj.item())
-    return obj
+    return _plain(obj, lambda x: None)
 
 
 def dumps(obj, **kwargs) -> str:
@@ -265,17 +272,7 @@ def dumps(obj, **kwargs) -> str:
 def tag_floats(obj):
     """Like :func:`json_safe`, but a non-finite float becomes ``{"$float": "nan"|"inf"|"-inf"}``
     so that a cache written as strict JSON reads back exactly (see :func:`untag_floats`)."""
-    if isinstance(obj, (float, np.floating)) and not math.isfinite(obj):
-        return {"$float": "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")}
-    if isinstance(obj, dict):
-        return {(k if isinstance(k, str) else str(k)): tag_floats(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [tag_floats(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return tag_floats(obj.tolist())
-    if isinstance(obj, np.generic):
-        return tag_floats(obj.item())
-    return obj
+    return _plain(obj, lambda x: {"$float": "nan" if math.isnan(x) else ("inf" if x > 0 else "-inf")})
 
 
 def untag_floats(obj):

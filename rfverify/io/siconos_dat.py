@@ -19,28 +19,27 @@ exact sum of the printed values is not a float64).
 
 The file kind is recognised from the content: after the first matrix, a global file has a
 second matrix header (a line holding one integer); a local file has the vector q (floats).
+A local problem is lifted to global form by :mod:`.local_lift` (shared with ``/fclib_local``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidProblemError, ProblemFileError
-from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, SymmetryReport, asymmetry_error, make_local_form
+from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, make_local_form
 from ._exact import FIX_INEXACT, exact_csc
 from ._paths import read_head
+from .local_lift import LOCAL_DENSE_LIMIT, LocalProblem, lift_local
 
 STORAGE_DENSE = 0
 STORAGE_SPARSE_BLOCK = 1
 STORAGE_SPARSE = 2
-
-_TINY = np.finfo(float).tiny
 
 CSPARSE_DIGITS = 6
 """Significant digits kept by CSparse's ``%g`` print-out."""
@@ -55,45 +54,6 @@ _CSC_ENTRY = re.compile(r"^(\d{1,18})\s*:\s*(\S+)$")
 
 _FIX_FORMAT = ("correct the file there (layout of Siconos' *_printInFile: DESIGN §7), or "
                "re-export the problem")
-
-LOCAL_DENSE_LIMIT = 10000
-"""Largest W (rows) of a local problem: lifting it takes a dense eigendecomposition."""
-
-
-@dataclass(frozen=True)
-class LocalProblem:
-    """A local (reduced) rolling-friction problem ``u = W r + q``, ``K* ∋ u ⊥ r ∈ K``.
-
-    W (5n×5n, symmetric positive semidefinite up to data precision), q (5n,), mu, mu_r (n,).
-    ``significant_digits`` is the precision of the printed data (None = full double).
-    """
-
-    W: np.ndarray
-    q: np.ndarray
-    mu: np.ndarray
-    mu_r: np.ndarray
-    significant_digits: int | None = None
-
-    @property
-    def n_contacts(self) -> int:
-        return int(self.mu.size)
-
-
-@dataclass(frozen=True)
-class LiftReport:
-    """What :func:`lift_local` did: W = HᵀH with H = Λ^{1/2}Vᵀ on the kept eigenpairs."""
-
-    rank: int
-    dropped: int
-    min_eigenvalue: float
-    max_eigenvalue: float
-    rank_tol: float
-    asymmetry: float
-    """Entrywise max |W_ij − W_ji|/sqrt(W_ii W_jj) (thresholded by ``max_asymmetry``)."""
-    asymmetry_normwise: float = 0.0
-    """‖W − Wᵀ‖_F/‖W‖_F (information)."""
-    asymmetry_at: list | None = None
-    """(row, col) where the entrywise asymmetry is attained (None: W exactly symmetric)."""
 
 
 class _Lines:
@@ -385,126 +345,3 @@ def _split(path, tokens, spec):
                                      f"({total} expected after the matrices)", location=f"line {ln}",
                                fix="remove the extra numbers, or correct nc (line 2)")
     return result
-
-
-# ---------------------------------------------------------------------- lifting
-def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
-               max_asymmetry: float = DEFAULT_MAX_ASYMMETRY):
-    """Lift a local problem (W, q) to global form: M = I_m, H = Λ^{1/2}Vᵀ (m×5n), f = 0, w = q.
-
-    W is symmetrised and factored as W = V Λ Vᵀ (dense symmetric eigendecomposition, fine for
-    the few-thousand-row local problems Siconos prints).  Eigenvalues ≤ 100·eps·5n·‖W‖₂ (the
-    eigensolver's rounding) are dropped (W is often singular; m = the numerical rank), so
-    HᵀH = W up to rounding, and u = HᵀH r + q ≈ W r + q.  The lifting is a *solver device*:
-    the extended phase and the proof work on the file's W itself (``Problem.local``,
-    DESIGN §6.1b), never on HᵀH.
-
-    ``rank_tol`` (default: the data precision) is the refusal threshold: an eigenvalue below
-    −rank_tol·‖W‖ is refused as not PSD.  A print-out rounded to d significant digits perturbs
-    each entry by |E_ij| ≤ ½·10^(1−d)·|W_ij|, so every eigenvalue moves by at most
-    ½·10^(1−d)·‖|W|‖₂: a printed singular W may be that far from PSD and is still read (the
-    certificate then says whether the printed W is PSD).  A ``rank_tol`` given explicitly is
-    also the drop threshold.  See :func:`factor_delassus`.
-
-    Raises
-    ------
-    InvalidProblemError
-        field ``"W"``: asymmetric beyond ``max_asymmetry``, non-finite, or with an eigenvalue
-        below −rank_tol·‖W‖ (not positive semidefinite).
-    """
-    # q, mu, mu_r become w, mu, mu_r of the lifted problem: check them under their own names.
-    for name, vec in (("q", local.q), ("mu", local.mu), ("mu_r", local.mu_r)):
-        check_finite(name, vec)
-    dim = np.asarray(local.W).shape[0]
-    H, report = factor_delassus(local.W, significant_digits=local.significant_digits,
-                                rank_tol=rank_tol, max_asymmetry=max_asymmetry)
-    m = H.shape[0]
-    problem = Problem.from_arrays(
-        sp.identity(m, format="csc"), sp.csc_matrix(H), np.zeros(m), local.q, local.mu, local.mu_r,
-        title="lifted local rolling problem",
-        description=(f"local problem (W {dim}×{dim}, rank {m}) lifted to global form: M = I, "
-                     f"H = Λ^1/2 Vᵀ from W = V Λ Vᵀ, f = 0, w = q"),
-        storage={"M": "csc", "H": "csc"},
-    )
-    return problem, report
-
-
-def check_finite(name: str, vec) -> None:
-    """InvalidProblemError naming ``name`` and the first index when ``vec`` holds NaN/Inf."""
-    vec = np.asarray(vec, dtype=np.float64)
-    bad = np.flatnonzero(~np.isfinite(vec))
-    if bad.size:
-        raise InvalidProblemError(name, f"contains a non-finite value ({vec[bad[0]]!r}) at index "
-                                        f"{bad[0]} ({bad.size} in all)", index=int(bad[0]),
-                                  fix="remove NaN/Inf from the data")
-
-
-def factor_delassus(W, *, significant_digits: int | None = None, rank_tol: float | None = None,
-                    max_asymmetry: float = DEFAULT_MAX_ASYMMETRY):
-    """The factor H (m × dim, m = numerical rank) with HᵀH = (W + Wᵀ)/2 up to ``rank_tol``, and
-    its :class:`LiftReport`: the lifting of :func:`lift_local`, on any square W (the 5n×5n W of a
-    rolling problem or the 3n×3n W of an FCLIB ``/fclib_local`` problem).
-
-    The asymmetry of W is measured entrywise (max |W_ij − W_ji|/sqrt(W_ii W_jj), thresholded by
-    ``max_asymmetry``) and normwise (‖W − Wᵀ‖_F/‖W‖_F, reported).
-    """
-    W = np.asarray(W, dtype=np.float64)
-    dim = W.shape[0]
-    if not np.all(np.isfinite(W)):
-        i, j = np.argwhere(~np.isfinite(W))[0]
-        raise InvalidProblemError("W", f"contains a non-finite value ({float(W[i, j])!r})", index=(int(i), int(j)),
-                                  fix="remove NaN/Inf from the data")
-    d = np.sqrt(np.abs(np.diag(W)))
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        asym = np.abs(W - W.T)  # an overflow here is an asymmetry too large to accept
-        scaled = np.where(asym > 0, asym / np.outer(d, d), 0.0)
-    scaled[np.isnan(scaled)] = np.inf
-    asymmetry = float(scaled.max()) if scaled.size else 0.0
-    big = float(np.abs(W).max()) if W.size else 0.0
-    normwise = 0.0
-    if big > 0:  # Frobenius norms of W / max|W|: squares of entries near 1e154 would overflow
-        with np.errstate(over="ignore", invalid="ignore"):
-            normwise = float(np.linalg.norm(W / big - W.T / big) / np.linalg.norm(W / big))
-    at = None
-    if asymmetry > 0:
-        i, j = np.unravel_index(np.argmax(scaled), scaled.shape)
-        at = (int(i), int(j))
-    if not asymmetry <= max_asymmetry:
-        raise asymmetry_error("W", SymmetryReport(asymmetry, normwise, *(at or (None, None))),
-                              max_asymmetry)
-    if big == 0.0:
-        raise InvalidProblemError("W", "is zero", fix="a local problem needs a non-zero Delassus matrix")
-    # Work on W / 2^k ≤ 1 (exact scaling): entries near 1e308 would overflow W + Wᵀ and the
-    # eigensolver's norms.
-    exp = int(np.frexp(big)[1])
-    Ws = 0.5 * (np.ldexp(W, -exp) + np.ldexp(W.T, -exp))
-    lam, V = np.linalg.eigh(Ws)
-    norm_s = float(max(abs(lam[0]), abs(lam[-1])))
-    norm = float(np.ldexp(norm_s, exp))
-    # Two thresholds: an eigenvalue below −psd_tol·‖W‖ is refused (not PSD even allowing for the
-    # print precision); eigenvalues above keep_tol·‖W‖ are kept.  The printed numbers are the
-    # data exactly (DESIGN §6), so keep_tol is the eigensolver's rounding, not the print precision.
-    keep_tol = 100 * np.finfo(float).eps * dim if rank_tol is None else rank_tol
-    if rank_tol is None:
-        if significant_digits:
-            abs_norm_s = float(np.linalg.norm(np.abs(Ws), 2))
-            rank_tol = 0.5 * 10.0 ** (1 - significant_digits) * abs_norm_s / max(norm_s, _TINY)
-        else:
-            rank_tol = keep_tol
-    if norm_s == 0.0:
-        raise InvalidProblemError("W", "is zero to working precision",
-                                  fix="a local problem needs a non-zero Delassus matrix")
-    if lam[0] < -rank_tol * norm_s:
-        raise InvalidProblemError(
-            "W", f"is not positive semidefinite: eigenvalue {np.ldexp(lam[0], exp):.3e} < -{rank_tol:.1e}·‖W‖ "
-                 f"(‖W‖ = {norm:.3e})",
-            fix="a Delassus matrix W = H M⁻¹ Hᵀ is PSD; check the data or pass a larger rank_tol")
-    keep = lam > keep_tol * norm_s
-    lam = np.ldexp(lam, exp)
-    H = (V[:, keep] * np.sqrt(lam[keep])).T  # m × dim
-    m = H.shape[0]
-    report = LiftReport(rank=int(m), dropped=int(dim - m), min_eigenvalue=float(lam[0]),
-                        max_eigenvalue=float(lam[-1]), rank_tol=float(keep_tol),
-                        asymmetry=asymmetry, asymmetry_normwise=normwise,
-                        asymmetry_at=None if at is None else list(at))
-    return H, report

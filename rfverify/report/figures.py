@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from ..solver.result import METHODS
-from .data import DIGITS_CAP, RunData, performance_profile
+from .aggregates import DIGITS_CAP, performance_profile
+from .data import RunData
 
 _STYLE = {
     "jqinv": ("tab:blue", "o"), "qp2": ("tab:orange", "s"), "reduced": ("tab:green", "^"),
@@ -317,7 +318,7 @@ def proven_digits_time(data: RunData, out: Path) -> Path | None:
         d = (r.get("proven") or {}).get("answer")
         if d is not None and r.get("time") is not None:
             pts.setdefault(r["method"], []).append((r["time"], min(d, DIGITS_CAP), r["tol"]))
-    from .data import path_answer_digits
+    from .aggregates import path_answer_digits
 
     path_pts = [(d["time"], min(x, DIGITS_CAP)) for d in data.digits.values()
                 if d.get("time") is not None and (x := path_answer_digits(d)) is not None]

@@ -8,14 +8,25 @@ again exactly as the bench did, finds the component that did not reach the toler
 diagnoses that component alone, as the sub-problem the solver handed to Algorithm 1 (its own
 M, H, f, w, μ, μr: the same matrices, scales and starting point).  It checks that the
 component alone ends as it did inside the bench's run (status and iterations) and says so.
+
+:func:`diagnose_worst` runs it on the report's worst cases and caches each diagnosis in
+``RUN_DIR/diagnostics/``.
 """
 
 from __future__ import annotations
 
+import json
+import warnings
+
 import numpy as np
 
+from .._version import __version__
+from ..bench.records import tol_text
+from ..io.output import tag_floats, untag_floats, write_text_atomic
 from ..problem import SPACEDIM, Problem
 from ..solver.result import Settings
+from .aggregates import worst_cases
+from .data import RunData
 
 
 def solve_groups(problem: Problem, settings):
@@ -137,3 +148,56 @@ def _compare_status(diag: dict, bench_status, rerun=None) -> dict:
         diag["scope"]["text"] += (f" (note: solved again now, the problem ends {now}, the bench recorded "
                                   f"{bench_status}: the solver or its settings changed since the bench ran)")
     return diag
+
+
+# ---------------------------------------------------------------------- the report's worst cases, cached
+DIAGNOSIS_CACHE_VERSION = 2
+"""Layout of a cached lockstep diagnosis (2: diagnosed as the bench ran it, with its scope)."""
+
+
+def diagnose_worst(data: RunData, count, max_contacts, dps, quiet) -> list:
+    """(case, diagnosis) of the worst cases of a run (:func:`.aggregates.worst_cases`), each
+    diagnosed as the bench ran it (:func:`diagnose_as_run`) and cached in
+    ``RUN_DIR/diagnostics/`` under the problem's content, the digits, the rfverify version and
+    the cache layout."""
+    from ..bench.runner import resolve_spec
+    from ..io import load
+    from ..progress import Progress
+
+    chosen = worst_cases(data, count, max_contacts)
+    cache = data.run_dir / "diagnostics"
+    if chosen:
+        cache.mkdir(exist_ok=True)
+    out = []
+    bar = Progress(len(chosen), "report: lockstep diagnosis", quiet=quiet)
+    for case in chosen:
+        key, method, tol, kind = case["problem"], case["method"], case["tol"], case["kind"]
+        rec = case["record"]
+        max_iter = int(rec.get("max_iter") or data.manifest.get("max_iter") or 100)
+        sha = data.problems[key]["sha256"]
+        prefix = "trajectory-" if kind == "trajectory" else ""
+        path = cache / f"{key.replace('/', '__')}__{prefix}{method}@{tol_text(tol)}.json"
+        ident = {"sha256": sha, "dps": dps, "version": __version__, "layout": DIAGNOSIS_CACHE_VERSION,
+                 "kind": kind, "max_iter": max_iter, "bench_status": rec.get("status")}
+        diag = None
+        if path.exists():
+            try:
+                cached = untag_floats(json.loads(path.read_text(encoding="utf-8")))
+            except (OSError, ValueError):
+                cached = None  # a damaged cache entry is recomputed
+            if isinstance(cached, dict) and all(cached.get(k) == v for k, v in ident.items()):
+                diag = cached
+        if diag is None:
+            problem = load(resolve_spec(data.problems[key]["spec"], data.run_dir))
+            with warnings.catch_warnings(record=True):
+                warnings.simplefilter("always")  # the double run's warnings: not for stderr
+                diag = diagnose_as_run(problem, method, tol, max_iter=max_iter, dps=dps, kind=kind,
+                                       bench_status=rec.get("status") if kind == "solve" else None)
+            diag.update(ident, tol=tol, problem=key)
+            # Tagged, so NaN/inf survive strict JSON (null would lose which one it was).
+            write_text_atomic(path, json.dumps(tag_floats(diag), indent=1, allow_nan=False, default=float))
+        out.append((case, diag))
+        bar.advance(key)
+    bar.close()
+    return out
+

@@ -39,7 +39,8 @@ import numpy as np
 from .analysis import StateMix, contact_state_mix, contacts_per_body, free_velocity, h_structure
 from .assembly import contact_matrix, mass_matrix, relative_velocity
 from .geometry import Bodies, Contacts, Statics, detect_contacts
-from .library import ALIASES, ALL_SCENES, FE_SCENES, SCENES, Scene, World, resolve_scene
+from .library import ALIASES, ALL_SCENES, FE_SCENES, SCENES, resolve_scene
+from .scene import Scene, World
 from .stepper import STEP_SOLVER_SETTINGS, MoreauJean, SceneError, StepRecord
 from ..problem import Problem
 
@@ -125,8 +126,6 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
         title = scene name; description = human-readable scene, parameters, seed, stage and
         step, generator version; ``provenance`` holds the same as a dict plus the sizes.
     """
-    from .._version import __version__
-
     sc, p, size = scene_parameters(scene, size, **params)
     if int(count) < 1:
         raise SceneError(f"count = {count!r} must be ≥ 1")
@@ -140,18 +139,10 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
     if getattr(sc, "step_free", False):
         return _generate_step_free(sc, p, size, count, int(seed), children, say)
     say(0.0, f"{sc.name}: base configuration")
-    t0 = time.perf_counter()
-    base = sc.prepare(p, size, np.random.default_rng(children[0]))
-    t_base = time.perf_counter() - t0
+    t_base, worlds = _stage_worlds(sc, p, size, count, children)
     out = []
-    for K in range(count):
-        phi = K / (count - 1) if count > 1 else 1.0
-        t1 = time.perf_counter()
-        world = sc.stage(base, p, size, phi, np.random.default_rng(children[K + 1]))
-        stepper = MoreauJean(world.bodies, world.statics, h=world.h, gravity=world.gravity,
-                             margin=world.margin, mu_table=world.mu_table,
-                             mu_r_table=world.mu_r_table, method=method, tol=tol,
-                             max_iter=max_iter)
+    for K, phi, t1, world in worlds:
+        stepper = _stepper(world, method=method, tol=tol, max_iter=max_iter)
         records = []
         dumped = None
         limit = steps + 10 * steps
@@ -170,18 +161,16 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
         solves = [{"step": r.step, "contacts": r.n_contacts, "status": r.status,
                    "iterations": r.nit, "solves": r.desaxce_solves, "time": round(r.solve_time, 4),
                    **({"message": r.message} if not r.success else {})} for r in records]
-        prov = {
-            "generator": "rfverify.scenes", "generator_version": GENERATOR_VERSION,
-            "rfverify_version": __version__, "scene": sc.name, "seed": int(seed),
-            "count": count, "trace_index": K, "stage": phi, "size": size,
-            "steps": steps, "dumped_step": dumped.step, "time": dumped.time,
-            "parameters": p, "units": sc.units, "notes": world.notes,
-            "solver": {"method": method, "tol": tol, "max_iter": max_iter, **STEP_SOLVER_SETTINGS},
-            "solves": solves, "failed_solves": sum(not r.success for r in records),
-            "timing": {"base_configuration": round(t_base, 3),
-                       "stage_without_solves": round(t_stage - sum(r.solve_time for r in records), 3),
-                       "solves": round(sum(r.solve_time for r in records), 3)},
-        }
+        prov = _provenance(
+            sc, int(seed), count, K, phi, size,
+            steps=steps, dumped_step=dumped.step, time=dumped.time,
+            parameters=p, units=sc.units, notes=world.notes,
+            solver={"method": method, "tol": tol, "max_iter": max_iter, **STEP_SOLVER_SETTINGS},
+            solves=solves, failed_solves=sum(not r.success for r in records),
+            timing={"base_configuration": round(t_base, 3),
+                    "stage_without_solves": round(t_stage - sum(r.solve_time for r in records), 3),
+                    "solves": round(sum(r.solve_time for r in records), 3)},
+        )
         raw = dumped.problem
         arrays = sc.convert({k: getattr(raw, k) for k in ("M", "H", "f", "w", "mu", "mu_r")})
         problem = Problem.from_arrays(**arrays, title=sc.name, provenance=prov)
@@ -189,6 +178,38 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
         out.append(problem)
     say(1.0, f"{sc.name}: done")
     return out
+
+
+def _stage_worlds(sc: Scene, p: dict, size: int, count: int, children):
+    """The base configuration, built once from the first child seed, and its build time; then,
+    lazily, per stage K: (K, φ = K/(count−1) (1 when count = 1), the time the stage began, its
+    world, built from child seed K + 1)."""
+    t0 = time.perf_counter()
+    base = sc.prepare(p, size, np.random.default_rng(children[0]))
+    t_base = time.perf_counter() - t0
+
+    def worlds():
+        for K in range(count):
+            phi = K / (count - 1) if count > 1 else 1.0
+            t1 = time.perf_counter()
+            yield K, phi, t1, sc.stage(base, p, size, phi, np.random.default_rng(children[K + 1]))
+
+    return t_base, worlds()
+
+
+def _stepper(world: World, **solver) -> MoreauJean:
+    """A Moreau–Jean run from ``world`` (``solver``: method, tol, max_iter of its step solves)."""
+    return MoreauJean(world.bodies, world.statics, h=world.h, gravity=world.gravity, margin=world.margin,
+                      mu_table=world.mu_table, mu_r_table=world.mu_r_table, **solver)
+
+
+def _provenance(sc: Scene, seed: int, count: int, K: int, phi: float, size: int, **rest) -> dict:
+    """A generated problem's ``provenance``: generator, versions, scene, seed and stage, then ``rest``."""
+    from .._version import __version__
+
+    return {"generator": "rfverify.scenes", "generator_version": GENERATOR_VERSION,
+            "rfverify_version": __version__, "scene": sc.name, "seed": seed,
+            "count": count, "trace_index": K, "stage": phi, "size": size, **rest}
 
 
 def _header_lines(sc: Scene, p: dict) -> list[str]:
@@ -227,35 +248,23 @@ def _generate_step_free(sc: Scene, p: dict, size: int, count: int, seed: int, ch
     one-step Moreau-Jean problem of stage K's world (contacts, M, H, f = M v + h F, w_N =
     max(gap, 0)/h, all vectorised), written as it is: no solve, so no step can fail and the
     arrays do not depend on the solver."""
-    from .._version import __version__
-
     say(0.0, f"{sc.name}: lattice")
-    t0 = time.perf_counter()
-    base = sc.prepare(p, size, np.random.default_rng(children[0]))
-    t_base = time.perf_counter() - t0
+    t_base, worlds = _stage_worlds(sc, p, size, count, children)
     out = []
-    for K in range(count):
-        phi = K / (count - 1) if count > 1 else 1.0
-        t1 = time.perf_counter()
-        world = sc.stage(base, p, size, phi, np.random.default_rng(children[K + 1]))
-        stepper = MoreauJean(world.bodies, world.statics, h=world.h, gravity=world.gravity,
-                             margin=world.margin, mu_table=world.mu_table, mu_r_table=world.mu_r_table)
-        M, H, f, w, mu, mu_r, contacts = stepper.one_step_arrays()
+    for K, phi, t1, world in worlds:
+        M, H, f, w, mu, mu_r, contacts = _stepper(world).one_step_arrays()
         if contacts.count == 0:
             raise SceneError(f"{sc.name} stage {K} (phi = {phi:.3f}): no contact; nothing to dump")
         gaps = contacts.gap
         notes = dict(world.notes, contacts=contacts.count, open_gap_max=float(gaps.max()),
                      touching=int(np.sum(gaps <= 0)))
-        prov = {
-            "generator": "rfverify.scenes", "generator_version": GENERATOR_VERSION,
-            "rfverify_version": __version__, "scene": sc.name, "seed": seed,
-            "count": count, "trace_index": K, "stage": phi, "size": size,
-            "steps": 0, "dumped_step": 0, "time": 0.0,
-            "parameters": p, "units": sc.units, "notes": notes,
-            "solver": {"method": "none (the first step's problem, built without solving)"},
-            "solves": [], "failed_solves": 0,
-            "timing": {"base_configuration": round(t_base, 3), "stage": round(time.perf_counter() - t1, 3)},
-        }
+        prov = _provenance(
+            sc, seed, count, K, phi, size,
+            steps=0, dumped_step=0, time=0.0, parameters=p, units=sc.units, notes=notes,
+            solver={"method": "none (the first step's problem, built without solving)"},
+            solves=[], failed_solves=0,
+            timing={"base_configuration": round(t_base, 3), "stage": round(time.perf_counter() - t1, 3)},
+        )
         problem = Problem.from_arrays(M, H, f, w, mu, mu_r, title=sc.name, provenance=prov)
         out.append(replace(problem, description=_step_free_description(sc, prov, problem)))
         say((K + 1) / count, f"{sc.name} {K + 1}/{count}: {contacts.count} contacts")
@@ -284,7 +293,6 @@ def _generate_finite_element(sc: Scene, p: dict, size: int, count: int, seed: in
     :class:`.fem.ElasticMoreauJean` from rest; problem K is the problem of step (K+1)·steps
     (1-based) of that run, written with its known solution (the clamped solve, every contact
     checked strictly inside its cone) as ``/solution``.  No interior-point solve is made."""
-    from .._version import __version__
     from ..problem import StoredSolution
     from .fem import entry_range
 
@@ -316,17 +324,13 @@ def _generate_finite_element(sc: Scene, p: dict, size: int, count: int, seed: in
         solves = [{"step": r.step, "contacts": n, "status": "Clamped", "iterations": 0,
                    "solves": 1, "max_tangential_ratio": round(r.max_ratio, 6)}
                   for r in records[K * steps:]]
-        prov = {
-            "generator": "rfverify.scenes", "generator_version": GENERATOR_VERSION,
-            "rfverify_version": __version__, "scene": sc.name, "seed": seed,
-            "count": count, "trace_index": K, "stage": phi, "size": size,
-            "steps": steps, "dumped_step": rec.step, "time": rec.time,
-            "parameters": p, "units": sc.units, "notes": notes,
-            "solver": {"method": "clamped direct solve (sparse LU of M on the free dofs)"},
-            "solves": solves, "failed_solves": 0,
-            "timing": {"base_configuration": round(t_base, 3),
-                       "stage": round(time.perf_counter() - t1, 3)},
-        }
+        prov = _provenance(
+            sc, seed, count, K, phi, size,
+            steps=steps, dumped_step=rec.step, time=rec.time, parameters=p, units=sc.units, notes=notes,
+            solver={"method": "clamped direct solve (sparse LU of M on the free dofs)"},
+            solves=solves, failed_solves=0,
+            timing={"base_configuration": round(t_base, 3), "stage": round(time.perf_counter() - t1, 3)},
+        )
         u = H.T @ rec.v + w  # exactly 0: the bottom nodes' velocity is exactly 0
         problem = Problem.from_arrays(mj.M, H, rec.f, w, mu, mu_r, title=sc.name, provenance=prov,
                                       solution=StoredSolution(v=rec.v, u=u, r=rec.r))
