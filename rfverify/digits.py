@@ -24,7 +24,7 @@ from .certificate import Certificate, candidate_point, certificate_from_proof
 from .errors import InvalidArgumentError
 from .extended import ipm as ext
 from .extended.dd import vmul_d
-from .extended import wide
+from .extended import wide, wide_factor
 from .extended.contactspace import ENGINES
 from .extended.data import ExtendedData
 from .extended.mixed import cholmod_available
@@ -121,7 +121,7 @@ WIDE_MAX_FACTOR_OPS = 2e7
 counts of L in its minimum-degree order): measured ~0.26 µs each at 320 bits (the whole
 iteration ~2× its factorisation), so about 5 s per factorisation at the limit (a 274-contact
 Lattice: 1.0e6, a 769-contact SpheresPile: 1.5e7).  This is the tail's only limit: its factor
-is sparse (:class:`.extended.wide.SparseDofSpace`, memory O(nnz(L))), so the number of dofs
+is sparse (:class:`.extended.wide_factor.SparseDofSpace`, memory O(nnz(L))), so the number of dofs
 does not matter, only the fill (the 9675-contact GranularBed: 1.3e10, about 56 min per factorisation;
 docs/DECISIONS.md, "The 10-digit path at scale")."""
 
@@ -261,7 +261,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     ``options`` say otherwise), Algorithm 1 in double-double
     (``extended_max_iter`` iterations at most, Newton back end ``backend``, whose float64
     factorisation is ``factor_engine``: "auto" (CHOLMOD where scikit-sparse is installed, see
-    :func:`.extended.system.resolve_engine`), "cholmod" or "ldl"), and — only when
+    :func:`.extended.contactspace.resolve_engine`), "cholmod" or "ldl"), and — only when
     that ends without a proof, on a problem whose sparse dof-space factor costs at most
     ``WIDE_MAX_FACTOR_OPS`` — Algorithm 1
     in ``wide_bits``-bit arithmetic (``wide_max_iter`` iterations at most; ``wide_tail=False``
@@ -390,7 +390,7 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             note = "not run (the candidate is farther from the point than any tail could fix)"
         elif data.local:
             note = "not run (the tail works in the dofs of a global problem; a local problem has none)"
-        elif (ordering := wide.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:
+        elif (ordering := wide_factor.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:
             ops = ordering[1]
             note = (f"not run (its factorisation would take {ops:.1e} multiply-subtract pairs > "
                     f"{WIDE_MAX_FACTOR_OPS:.0e}, about {ops * WIDE_SECONDS_PER_OP:.0f} s per factorisation)")

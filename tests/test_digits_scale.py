@@ -17,9 +17,10 @@ from hypothesis import strategies as st
 
 import rfverify
 from rfverify.extended import cones as C
-from rfverify.extended import dd, wide
+from rfverify.extended import dd, wide, wide_data, wide_factor
 from rfverify.extended.contactspace import ContactSpace, resolve_engine
 from rfverify.extended.data import ExtendedData
+from rfverify.jordan import mpfr as JM
 from rfverify.extended.ldl import DDCholesky
 from rfverify.extended.mixed import CholmodMixed, MixedCholesky, cholmod_available
 from rfverify.extended.system import choose_backend
@@ -247,8 +248,8 @@ def _interior_scaling(problem, gap_exp, seed):
         out += [gmpy2.mpfr(float(rng.uniform(1e-3, 2.0))) for _ in range(n1)]
         return np.array(out, dtype=object)
 
-    with wide._context(BITS):
-        sc, bad = wide.nt_scaling(data.n3, cones(data.n3, data.n1), cones(data.n3, data.n1))
+    with wide_data.context(BITS):
+        sc, bad = JM.nt_scaling(data.n3, cones(data.n3, data.n1), cones(data.n3, data.n1))
     assert bad == -1
     return data, sc
 
@@ -263,10 +264,10 @@ def test_sparse_tail_factor_equals_the_dense_one(seed, gap):
     problem = random_problem(6, 12, seed=seed % 50, mu_zero_fraction=0.25, mu_r_zero_fraction=0.25)
     data, sc = _interior_scaling(problem, gap, seed)
     rng = np.random.default_rng(seed)
-    with wide._context(BITS):
-        W = wide.WideData(data)
-        a, t = wide.from_dd(rng.normal(size=data.m)), wide.from_dd(rng.normal(size=data.nk))
-        dense, sparse = wide.DenseDofSpace(data, W), wide.SparseDofSpace(data, W)
+    with wide_data.context(BITS):
+        W = wide_data.WideData(data)
+        a, t = wide_data.from_dd(rng.normal(size=data.m)), wide_data.from_dd(rng.normal(size=data.nk))
+        dense, sparse = wide_factor.DenseDofSpace(data, W), wide_factor.SparseDofSpace(data, W)
         assert dense.update(sc) and sparse.update(sc)
         (dv1, dr1), (dv2, dr2) = dense.solve(a, t), sparse.solve(a, t)
         assert all(x == y for x, y in zip(dv1, dv2)) and all(x == y for x, y in zip(dr1, dr2))
@@ -278,8 +279,8 @@ def test_sparse_tail_stores_no_dense_matrix():
     """Its memory is the factor's entries (nnz(L) + m numbers), not m²."""
     problem = random_problem(30, 60, seed=5)
     data, sc = _interior_scaling(problem, 20, 1)
-    with wide._context(BITS):
-        back = wide.SparseDofSpace(data, wide.WideData(data))
+    with wide_data.context(BITS):
+        back = wide_factor.SparseDofSpace(data, wide_data.WideData(data))
         assert back.update(sc)
     assert back.Lx.size == back.Li.size < data.m * data.m // 4 and back.Ld.size == data.m
     assert not hasattr(back, "M_dense")

@@ -17,8 +17,9 @@ import rfverify
 import rfverify.io.certificate
 from reference import jordan as RJ
 from rfverify import digits as D
-from rfverify.extended import wide
+from rfverify.extended import wide, wide_data, wide_factor
 from rfverify.extended.data import ExtendedData
+from rfverify.jordan import mpfr as JM
 from rfverify.random_problems import random_problem
 from rfverify.scenes import generate
 
@@ -53,15 +54,15 @@ def test_wide_kernels_agree_with_the_reference(seed, gap_exp):
     reference.jordan at 150 digits, to the working precision times the condition."""
     rng = np.random.default_rng(seed)
     n3, n1 = 3, 2
-    with wide._context(BITS):
+    with wide_data.context(BITS):
         z, s = _cones(rng, n3, n1, gap_exp), _cones(rng, n3, n1, gap_exp)
-        y = wide.from_dd(rng.normal(size=3 * n3 + n1))
-        sc, bad = wide.nt_scaling(n3, z, s)
+        y = wide_data.from_dd(rng.normal(size=3 * n3 + n1))
+        sc, bad = JM.nt_scaling(n3, z, s)
         assert bad == -1
-        Qz, Qs = wide.quad_pow(n3, 1, sc, z), wide.quad_pow(n3, -1, sc, s)
-        prods = {k: wide.quad_pow(n3, k, sc, y) for k in (1, -1, 2, -2)}
-        zs = wide.product(n3, z, s)
-        back = wide.arrow_solve(n3, z, zs)
+        Qz, Qs = JM.quad_pow(n3, 1, sc, z), JM.quad_pow(n3, -1, sc, s)
+        prods = {k: JM.quad_pow(n3, k, sc, y) for k in (1, -1, 2, -2)}
+        zs = JM.product(n3, z, s)
+        back = JM.arrow_solve(n3, z, zs)
     ctx = RJ.context(150)
     with mpmath.workdps(150):
         for c in range(n3 + n1):
@@ -81,32 +82,32 @@ def test_wide_kernels_agree_with_the_reference(seed, gap_exp):
 
 
 def test_nt_scaling_refuses_a_point_outside_the_cone():
-    with wide._context(BITS):
-        z = wide.from_dd(np.array([1.0, 0.6, 0.8, 1.0]))  # λ₂ = 0: on the boundary
-        s = wide.from_dd(np.array([1.0, 0.0, 0.0, 1.0]))
-        sc, bad = wide.nt_scaling(1, z, s)
+    with wide_data.context(BITS):
+        z = wide_data.from_dd(np.array([1.0, 0.6, 0.8, 1.0]))  # λ₂ = 0: on the boundary
+        s = wide_data.from_dd(np.array([1.0, 0.0, 0.0, 1.0]))
+        sc, bad = JM.nt_scaling(1, z, s)
     assert sc is None and bad == 0
 
 
 def test_max_step_is_the_distance_to_the_boundary():
     """x + α·dx stays in the cone up to α = max_step and leaves it just after."""
     rng = np.random.default_rng(5)
-    with wide._context(BITS):
+    with wide_data.context(BITS):
         x = _cones(rng, 4, 2, 50)
-        dx = wide.from_dd(rng.normal(size=14))
-        a = wide.max_step(4, x, dx)
+        dx = wide_data.from_dd(rng.normal(size=14))
+        a = JM.max_step(4, x, dx)
         assert 0 < a < math.inf
-        inside = wide.lambda2(4, x + (a * (1 - 1e-12)) * dx)
-        outside = wide.lambda2(4, x + (a * (1 + 1e-12)) * dx)
+        inside = JM.lambda2(4, x + (a * (1 - 1e-12)) * dx)
+        outside = JM.lambda2(4, x + (a * (1 + 1e-12)) * dx)
     assert all(v >= 0 for v in inside) and any(v < 0 for v in outside)
 
 
 def _interior_scaling(problem, gap_exp, seed=0):
     data = ExtendedData(problem)
     rng = np.random.default_rng(seed)
-    with wide._context(BITS):
+    with wide_data.context(BITS):
         z, s = _cones(rng, data.n3, data.n1, gap_exp), _cones(rng, data.n3, data.n1, gap_exp)
-        sc, bad = wide.nt_scaling(data.n3, z, s)
+        sc, bad = JM.nt_scaling(data.n3, z, s)
     assert bad == -1
     return data, sc
 
@@ -117,8 +118,8 @@ def test_contact_factor_inverse_whitens_every_contact_kind():
     problem = random_problem(6, 12, seed=3, mu_zero_fraction=0.25, mu_r_zero_fraction=0.25)
     data, sc = _interior_scaling(problem, 40)
     assert set(np.unique(data.kinds)) >= {0, 1, 2}
-    with wide._context(BITS):
-        Finv = wide.contact_factor_inverse(data, sc)
+    with wide_data.context(BITS):
+        Finv = wide_factor.contact_factor_inverse(data, sc)
         J = data.lp.J.tocsr()
         worst = 0.0
         for c in range(data.n):
@@ -127,9 +128,9 @@ def test_contact_factor_inverse_whitens_every_contact_kind():
             cols = np.unique(J[rows].indices)
             G = np.empty((k, k), dtype=object)
             for b in range(k):
-                e = wide._zeros(data.nk)
+                e = wide_data.zeros(data.nk)
                 e[rows[b]] = gmpy2.mpfr(1)
-                col = wide.WideMatrix(data.J) @ wide.quad_pow(data.n3, -2, sc, wide.WideMatrix(data.JT) @ e)
+                col = wide_data.WideMatrix(data.J) @ JM.quad_pow(data.n3, -2, sc, wide_data.WideMatrix(data.JT) @ e)
                 G[:, b] = col[rows]
             assert cols.size > 0
             Fc = Finv[c, :k, :k]
@@ -143,11 +144,11 @@ def test_dense_dof_space_solves_the_newton_system_to_working_precision():
     problem = rfverify.load("bundled:chute")
     data, sc = _interior_scaling(problem, 40, seed=2)
     rng = np.random.default_rng(1)
-    with wide._context(BITS):
-        W = wide.WideData(data)
-        back = wide.DenseDofSpace(data, W)
+    with wide_data.context(BITS):
+        W = wide_data.WideData(data)
+        back = wide_factor.DenseDofSpace(data, W)
         assert back.update(sc)
-        a, t = wide.from_dd(rng.normal(size=data.m)), wide.from_dd(rng.normal(size=data.nk))
+        a, t = wide_data.from_dd(rng.normal(size=data.m)), wide_data.from_dd(rng.normal(size=data.nk))
         dv, dr = back.solve(a, t)
         residual = newton_residual(data, W, sc, a, t, dv, dr)  # in the tail's precision
     assert residual <= 1e-50
@@ -156,11 +157,11 @@ def test_dense_dof_space_solves_the_newton_system_to_working_precision():
 def newton_residual(data, W, sc, a, t, dv, dr) -> float:
     """Residual of the tail's Newton system [[M, −H̃ᵀ], [H̃, G]] (dv, dr) = (a, t), relative to
     the largest term (and 1); call it inside the tail's precision context."""
-    Gdr = W.J @ wide.quad_pow(data.n3, -2, sc, W.JT @ dr)
+    Gdr = W.J @ JM.quad_pow(data.n3, -2, sc, W.JT @ dr)
     e1 = W.M @ dv - W.HtT @ dr - a
     e2 = W.Ht @ dv + Gdr - t
-    scale = max(wide.inf_norm(W.M @ dv), wide.inf_norm(W.HtT @ dr), wide.inf_norm(Gdr), 1.0)
-    return max(wide.inf_norm(e1), wide.inf_norm(e2)) / scale
+    scale = max(wide_data.inf_norm(W.M @ dv), wide_data.inf_norm(W.HtT @ dr), wide_data.inf_norm(Gdr), 1.0)
+    return max(wide_data.inf_norm(e1), wide_data.inf_norm(e2)) / scale
 
 
 def test_the_tail_leaves_the_precision_as_it_found_it():
@@ -271,7 +272,7 @@ def test_the_tail_factors_sparsely_and_has_no_limit_in_dofs(lattice):
     """Issue 27: the tail's factor is sparse (memory O(nnz(L))); only its predicted cost
     limits it, so the old 3000-dof limit is gone."""
     _, out = lattice
-    assert out.wide is not None and out.wide.backend == wide.SparseDofSpace.name
+    assert out.wide is not None and out.wide.backend == wide_factor.SparseDofSpace.name
     assert not hasattr(D, "WIDE_MAX_DOFS")
 
 
@@ -326,7 +327,7 @@ def test_certify_without_a_stored_point_goes_on_to_the_tail(lattice):
 
 def test_the_tail_is_skipped_when_its_factor_would_be_too_costly(lattice, monkeypatch):
     problem, _ = lattice
-    _, ops = wide.dof_space_ordering(ExtendedData(problem))
+    _, ops = wide_factor.dof_space_ordering(ExtendedData(problem))
     assert 0 < ops < D.WIDE_MAX_FACTOR_OPS
     monkeypatch.setattr(D, "WIDE_MAX_FACTOR_OPS", ops / 2)
     out = rfverify.solve_to_digits(problem, digits=10)
@@ -339,7 +340,7 @@ def test_a_singular_contact_factor_in_the_tail_is_a_status_not_a_crash(lattice, 
     def singular(data, sc):
         raise ArithmeticError("a contact's factor is singular")
 
-    monkeypatch.setattr(wide, "contact_factor_inverse", singular)
+    monkeypatch.setattr(wide_factor, "contact_factor_inverse", singular)
     out = rfverify.solve_to_digits(problem, digits=10)
     assert not out.success and out.wide is not None and out.wide.status == "NumericalError"
     assert "singular" in out.certificate.extra["wide_tail"]

@@ -103,7 +103,7 @@ class ExtendedResult:
     """Outcome of :func:`run`: the last iterate (v, r̃, z as double-double), status
     ("Stopped" when ``until`` accepted an iterate, "MaxIterations", "NumericalError"),
     per-iteration trace and timings; ``stats``: the back end's factorisation statistics
-    (:meth:`.system._Backend.stats`)."""
+    (:meth:`.factored.FactoredBackend.stats`)."""
 
     v: V
     r_t: V
@@ -165,7 +165,7 @@ def interior_start(data: ExtendedData, v, r, u=None, margin_rel: float = 1e-8) -
 
 
 class _DDOperator:
-    """A :class:`.system.DDMatrix` applied to double-double vectors by ``@``."""
+    """A :class:`.data.DDMatrix` applied to double-double vectors by ``@``."""
 
     __slots__ = ("A",)
 

@@ -1,5 +1,11 @@
 """The closed forms of the Jordan-algebra operations on 2-D arrays ``(N, k)`` whose rows need
-no rescaling; they check nothing (see :mod:`rfverify.jordan`)."""
+no rescaling; they check nothing (see :mod:`rfverify.jordan`).
+
+They are written once for every numpy precision: float64 and longdouble arrays, and object
+arrays of gmpy2 ``mpfr`` numbers (the multiple-precision tail, :mod:`rfverify.extended.wide`),
+for which :func:`_root` and the two-column norm take the element's own correctly rounded
+operations.  The compiled kernels (:mod:`rfverify.solver.kernels` in float64,
+:mod:`rfverify.extended.cones` in double-double) are transcriptions tested against them."""
 
 from __future__ import annotations
 
@@ -10,6 +16,12 @@ from ._checks import _shift
 # --------------------------------------------------------------------------------------------
 # kernels: the formulas on 2-D arrays (N, k) whose rows need no rescaling; no checks
 # --------------------------------------------------------------------------------------------
+
+
+def _root(x):
+    """√x elementwise.  numpy's object loop calls ``elem.sqrt()``, which mpfr lacks; ``x ** 0.5``
+    is its correctly rounded power, hence the same number as its square root."""
+    return x ** 0.5 if x.dtype == object else np.sqrt(x)
 
 
 def _bar_norm(xb):
@@ -27,6 +39,8 @@ def _norm(cols, n, dtype):
     if len(cols) == 2:
         # L3, the hot case: libm's hypot is already overflow/underflow-safe and correctly
         # rounded to within an ulp, at a fraction of the cost of the scaled sum below.
+        if cols[0].dtype == object:  # mpfr: the exponent range makes hypot's scaling unnecessary
+            return _root(cols[0] * cols[0] + cols[1] * cols[1])
         return np.hypot(cols[0], cols[1])
     xb = np.stack(cols, axis=1)
     m = np.max(np.abs(xb), axis=-1)
@@ -142,7 +156,7 @@ def _sqrt(x, r1, r2):
 
 def _inverse_sqrt(x, l1, l2):
     """x^{-1/2} = R x^{1/2} / √det x for interior x, with x^{1/2} in the closed form above."""
-    r1, r2 = np.sqrt(l1), np.sqrt(l2)
+    r1, r2 = _root(l1), _root(l2)
     half = _sqrt(x, r1, r2)
     rr = r1 * r2
     return _rows(half[:, 0] / rr, [-hj / rr for hj in _bar(half)])
@@ -195,8 +209,8 @@ def _nt(zs, ss, l1z, l2z, l1s, l2s):
     """NT scaling of interior rows in the units of zs, ss: (q, p̂, p̂⁻¹, λ̂, v, cond) with
     p = p̂·2^((es-ez)/4), p⁻¹ = p̂⁻¹·2^((ez-es)/4), λ = λ̂·2^((es+ez)/2), √β = q·2^((es-ez)/4)
     (see :func:`nt_scaling`)."""
-    rz = np.sqrt(l1z) * np.sqrt(l2z)  # √det ẑ, no overflow: ẑ is O(1)
-    rs = np.sqrt(l1s) * np.sqrt(l2s)
+    rz = _root(l1z) * _root(l2z)  # √det ẑ, no overflow: ẑ is O(1)
+    rs = _root(l1s) * _root(l2s)
     z0, s0 = zs[:, 0] / rz, ss[:, 0] / rs
     zb = [c / rz for c in _bar(zs)]
     sb = [c / rs for c in _bar(ss)]
@@ -205,16 +219,16 @@ def _nt(zs, ss, l1z, l2z, l1s, l2s):
     dot = z0 * s0
     for a, b in zip(zb, sb):
         dot = dot + a * b
-    g = np.sqrt((1 + dot) / 2)
+    g = _root((1 + dot) / 2)
     g2 = 2 * g
     wb0 = (s0 + z0) / g2
-    den = np.sqrt(2 * (wb0 + 1))
+    den = _root(2 * (wb0 + 1))
     v0 = (wb0 + 1) / den
     vb = [((b - a) / g2) / den for a, b in zip(zb, sb)]
-    q = np.sqrt(np.sqrt(rs / rz))
+    q = _root(_root(rs / rz))
     d = g2 + z0 + s0
     cz, cs = (g + z0) / d, (g + s0) / d
-    root = np.sqrt(rs * rz)
+    root = _root(rs * rz)
     lam = _rows(g * root, [(cz * b + cs * a) * root for a, b in zip(zb, sb)])
     v = _rows(v0, vb)
     l1v = v0 + _bar_norm(v[:, 1:])
