@@ -378,9 +378,9 @@ class _ProtocolOnly:
 
 @pytest.mark.parametrize("method", FORMS)
 def test_driver_uses_the_kkt_back_end_only_through_its_protocol(method, monkeypatch):
-    from rfverify.solver import ipm, kkt
+    from rfverify.solver import forms, ipm
 
-    wrapped = {name: (lambda cls: (lambda *a, **k: _ProtocolOnly(cls(*a, **k))))(cls) for name, cls in kkt.FORMS.items()}
+    wrapped = {name: (lambda cls: (lambda *a, **k: _ProtocolOnly(cls(*a, **k))))(cls) for name, cls in forms.FORMS.items()}
     monkeypatch.setattr(ipm, "FORMS", wrapped)
     res = solve(rfverify.load("bundled:chute"), method=method)
     assert res.success, res.message
@@ -395,7 +395,8 @@ def _system_at_an_iterate(method, tol=1e-6, **kw):
     from rfverify import jordan
     from rfverify.lifting import lift
     from rfverify.solver.cones import ProductCone
-    from rfverify.solver.kkt import FORMS as KFORMS, ScalingPoint
+    from rfverify.solver.forms import FORMS as KFORMS
+    from rfverify.solver.kkt import ScalingPoint
 
     problem = rfverify.load("bundled:cube")
     res = solve(problem, tol=tol)
@@ -718,7 +719,7 @@ def test_a_failed_factorisation_without_delta_is_not_repeated_at_the_same_matrix
 
 
 # ---------------------------------------------------------------- the CHOLMOD Schur form
-# (kkt.SchurSystem, optional extra "cholmod"; issue 27).  Its method name, auto's choice of it
+# (forms.SchurSystem, optional extra "cholmod"; issue 27).  Its method name, auto's choice of it
 # and the missing-extra error: tests/test_scale.py.
 
 def _schur_solve(problem, monkeypatch, **kw):

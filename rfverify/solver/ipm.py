@@ -6,7 +6,7 @@
 Here the loop's interfaces are: numpy vectors in float64, then in the extended dtypes
 (longdouble where the settings ask) once the criterion is below ``extended_below`` or a
 float64 solve falls short; the product cone of :mod:`.cones` (numba kernels for float64);
-a pluggable linear-system form of :mod:`.kkt` as the Newton solver; and :class:`Termination`
+a pluggable linear-system form of :mod:`.forms` as the Newton solver; and :class:`Termination`
 with the settings' σ rule as the policy.  The stopping test is the criterion of
 :mod:`rfverify.measures` on the (v, u, r) that would be returned — the same function every
 recheck uses; DESIGN's pinfeas, dinfeas and μ = zᵀs / n are computed and traced beside it.
@@ -24,7 +24,8 @@ from ..algorithm.interfaces import PROMOTE, Breakdown, Direction
 from ..algorithm.loop import Precision, iterate
 from ..errors import ConeDomainError
 from .cones import ProductCone
-from .kkt import FORMS, ScalingPoint, _amax
+from .forms import FORMS
+from .kkt import ScalingPoint, _amax
 from .result import TRACE_FIELDS, IterationInfo, Outcome, Settings, Status
 from .termination import Termination, Verdict
 
@@ -175,7 +176,7 @@ class _NumpyScaling:
 
 
 class _KKTNewton:
-    """A float64 form of :mod:`.kkt` through the Newton interface: its own regularisation and
+    """A float64 form of :mod:`.forms` through the Newton interface: its own regularisation and
     refinement; its second block row is −H̃ dv + J dz = −b."""
 
     def __init__(self, system, form: str):
