@@ -13,10 +13,11 @@ Counted through numba's event API (``numba:compile``, fired only for a real comp
 not for a load from the cache); a compilation nested in another one counts once.
 
 On a cold cache, :func:`compile_extended_in_background` starts a child process that compiles
-the double-double kernels in the reverse order of their first use, into the same cache, while
-this process runs the double solve and compiles forward: on two cores the two meet in the
-middle and the cold k-digit path pays about half of its compilation (docs/DECISIONS.md,
-"Cold start").
+the double-double kernels (the most expensive first, then the others in the reverse order of
+their first use) into the same cache, while this process runs the double solve and compiles
+forward: on two cores the two meet in the middle and the cold k-digit path pays about half of
+its compilation (docs/DECISIONS.md, "Cold start").  :func:`cache_is_cold` tells the k-digit path whether the float64 cone kernels
+would be compiled first: on a cold cache its double solve runs them in numpy instead.
 """
 
 from __future__ import annotations
@@ -90,10 +91,21 @@ EXTENDED_KERNELS = (
 )
 """(module of :mod:`rfverify.extended`, kernel, argument types) of the double-double kernels
 the k-digit path calls from Python, in the reverse order of their first use on the bundled
-Chute with the default install's factorisation engine (``ldl``: where scikit-sparse is
-installed the CHOLMOD engine makes the LDLᵀ kernels unused, and the child compiles them for
-nothing on the other core).  A test keeps the list equal to what such a run compiles.  The child compiles them in this
-order; the kernels they call are compiled with them."""
+Chute with the default install's factorisation engine (``ldl``; where scikit-sparse is
+installed the CHOLMOD engine leaves the :data:`LDL_ENGINE_KERNELS` unused).  A test keeps the
+list equal to what such a run compiles.  The child compiles :data:`CHILD_FIRST` first, then the
+others in this order; the kernels they call are compiled with them."""
+
+CHILD_FIRST = ("blocks", "contact_factor_inverse")
+"""The kernel the child compiles before all others: the most expensive one (2–3 s of the
+~11 s), which the two processes would otherwise meet at on the Chute — the parent reaches it
+about halfway through its share and would compile it a second time while the child is still
+at it.  Taken first, it is in the cache long before the parent's first call, and the two meet
+among kernels of a few tenths of a second."""
+
+LDL_ENGINE_KERNELS = frozenset({("ldl", "_numeric_double"), ("ldl", "_solve_double")})
+"""The kernels of :data:`EXTENDED_KERNELS` only the compiled float64 LDLᵀ engine calls: a run
+whose contact-space factor is CHOLMOD's never compiles them, so the child leaves them out."""
 
 BACKGROUND_ENV = "RFVERIFY_BACKGROUND_COMPILE"
 """Set to ``0`` to never start the background compilation."""
@@ -107,15 +119,26 @@ def _dispatcher(module: str, name: str):
     return getattr(importlib.import_module(f"rfverify.extended.{module}"), name)
 
 
-def extended_cache_is_cold() -> bool:
-    """True when numba's cache holds no compiled version of the most expensive double-double
-    kernel for the current sources (so the k-digit path would compile them all).  Reads
-    numba's cache index, a private interface: any surprise there answers False (no child)."""
+def cache_is_cold(dispatcher) -> bool:
+    """True when numba's cache holds no compiled version of ``dispatcher`` (an
+    ``@njit(cache=True)`` kernel) for its current source, so that its first call compiles.
+    Reads numba's cache index, a private interface: any surprise there answers False (callers
+    then do what they do on a warm cache)."""
     try:
-        index = _dispatcher("blocks", "contact_factor_inverse")._cache._cache_file._load_index()
+        index = dispatcher._cache._cache_file._load_index()
     except Exception:
         return False
     return not index
+
+
+def extended_cache_is_cold() -> bool:
+    """True when numba's cache holds no compiled version of the most expensive double-double
+    kernel for the current sources (so the k-digit path would compile them all)."""
+    try:
+        dispatcher = _dispatcher("blocks", "contact_factor_inverse")
+    except Exception:
+        return False
+    return cache_is_cold(dispatcher)
 
 
 def _cores() -> int:
@@ -125,19 +148,22 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def compile_extended_in_background() -> bool:
+def compile_extended_in_background(engine: str = "auto") -> bool:
     """Start the child that compiles :data:`EXTENDED_KERNELS` into numba's cache, when that
     cache is cold, the process may use two cores or more, and ``RFVERIFY_BACKGROUND_COMPILE``
-    is not ``0``.  Returns whether a child was started (at most one per process); it is
-    ended when this process exits.  Results never depend on it: a kernel the child has not
-    finished is compiled here as before, and a compiled kernel is the same code either way."""
+    is not ``0``; ``engine`` is the run's float64 factorisation engine ("auto", "ldl" or
+    "cholmod", see :func:`.extended.contactspace.resolve_engine`), which decides whether the
+    :data:`LDL_ENGINE_KERNELS` are compiled.  Returns whether a child was started (at most one
+    per process); it is ended when this process exits.  Results never depend on it: a kernel
+    the child has not finished is compiled here as before, and a compiled kernel is the same
+    code either way."""
     global _child
     if _child is not None or os.environ.get(BACKGROUND_ENV, "1") == "0" or _cores() < 2:
         return False
     if not extended_cache_is_cold():
         return False
     try:
-        _child = subprocess.Popen([sys.executable, "-m", "rfverify.compilation"], stdin=subprocess.DEVNULL,
+        _child = subprocess.Popen([sys.executable, "-m", "rfverify.compilation", engine], stdin=subprocess.DEVNULL,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
     except OSError:
         return False
@@ -158,11 +184,36 @@ def _end_child() -> None:
             _child.kill()
 
 
-def compile_extended(kernels=EXTENDED_KERNELS) -> None:
-    """Compile ``kernels`` (with numba's cache on, so they are saved) in the given order."""
+def _uses_ldl_engine(engine: str) -> bool:
+    """Whether a run with this factorisation engine calls the :data:`LDL_ENGINE_KERNELS`: the
+    rule of :func:`.extended.contactspace.resolve_engine`, which takes CHOLMOD at every size
+    where it can be imported (the test of :func:`.extended.mixed.cholmod_available`, repeated
+    here since this layer is above that module).  Asked only when the child reaches the first
+    of them: importing scikit-sparse takes a third of a second."""
+    if engine == "ldl":
+        return True
+    if engine == "cholmod":
+        return False
+    try:
+        import sksparse.cholmod  # noqa: F401
+    except ImportError:
+        return True
+    return False
+
+
+def compile_extended(kernels=EXTENDED_KERNELS, engine: str = "ldl") -> None:
+    """Compile ``kernels`` (with numba's cache on, so they are saved) in the given order, but
+    :data:`CHILD_FIRST` first, leaving out the :data:`LDL_ENGINE_KERNELS` when ``engine`` does
+    not factor with them."""
     from numba.core import sigutils
 
-    for module, name, signature in kernels:
+    uses_ldl = None
+    for module, name, signature in sorted(kernels, key=lambda kernel: kernel[:2] != CHILD_FIRST):
+        if (module, name) in LDL_ENGINE_KERNELS:
+            if uses_ldl is None:
+                uses_ldl = _uses_ldl_engine(engine)
+            if not uses_ldl:
+                continue
         # As a tuple of types, the form a call compiles and keys numba's cache index by: a
         # signature string would be saved under another key, and never found by a call.
         args, _ = sigutils.normalize_signature(signature)
@@ -174,4 +225,4 @@ if __name__ == "__main__":  # the background child: lowest priority, so the solv
         os.nice(19)
     except OSError:
         pass
-    compile_extended()
+    compile_extended(engine=sys.argv[1] if len(sys.argv) > 1 else "auto")

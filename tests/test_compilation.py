@@ -58,7 +58,8 @@ def test_a_childs_compilation_is_found_by_another_process(tmp_path):
     child = textwrap.dedent("""
         from rfverify import compilation
         kernel = [k for k in compilation.EXTENDED_KERNELS if k[:2] == ("dd", "vsub")]
-        print(compilation.extended_cache_is_cold())
+        from rfverify.solver import kernels
+        print(compilation.extended_cache_is_cold(), compilation.cache_is_cold(kernels.nt_scaling))
         before = compilation.compile_seconds()
         compilation.compile_extended(kernel)
         print(compilation.compile_seconds() > before)
@@ -76,7 +77,78 @@ def test_a_childs_compilation_is_found_by_another_process(tmp_path):
     """)
     first = subprocess.run([sys.executable, "-c", child], env=env, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
-    assert first.stdout.split() == ["True", "True"]  # cold, and vsub was compiled
+    assert first.stdout.split() == ["True", "True", "True"]  # cold (both kinds), and vsub was compiled
     second = subprocess.run([sys.executable, "-c", caller], env=env, capture_output=True, text=True, timeout=300)
     assert second.returncode == 0, second.stderr
     assert second.stdout.split() == ["False"]  # the call loaded the child's vsub, compiled nothing
+
+
+def test_the_cholmod_engine_leaves_the_ldl_kernels_out(tmp_path):
+    """The child compiles the float64 LDLᵀ kernels only for a run that factors with them."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    script = textwrap.dedent("""
+        import sys
+        from rfverify import compilation
+        from rfverify.extended import dd, ldl
+        kernels = [k for k in compilation.EXTENDED_KERNELS if k[:2] in {("ldl", "_solve_double"), ("dd", "vsub")}]
+        compilation.compile_extended(kernels, engine=sys.argv[1])
+        print(len(ldl._solve_double.signatures), len(dd.vsub.signatures))
+    """)
+    runs = {engine: subprocess.run([sys.executable, "-c", script, engine], env=env, capture_output=True, text=True,
+                                   timeout=300) for engine in ("cholmod", "ldl")}
+    assert all(run.returncode == 0 for run in runs.values()), [run.stderr for run in runs.values()]
+    assert runs["cholmod"].stdout.split() == ["0", "1"]
+    assert runs["ldl"].stdout.split() == ["1", "1"]
+
+
+def test_the_ldl_only_kernels_are_those_a_cholmod_run_does_not_call():
+    pytest.importorskip("sksparse.cholmod")
+    script = textwrap.dedent("""
+        import rfverify
+        from rfverify import compilation
+        rfverify.solve_to_digits(rfverify.load("bundled:chute"), 10, factor_engine="cholmod")
+        called = {(m, n) for m, n, _ in compilation.EXTENDED_KERNELS if compilation._dispatcher(m, n).signatures}
+        print(sorted({(m, n) for m, n, _ in compilation.EXTENDED_KERNELS} - called))
+    """)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == str(sorted(compilation.LDL_ENGINE_KERNELS))
+
+
+def test_the_child_compiles_the_most_expensive_kernel_first(monkeypatch):
+    order = []
+
+    class Recorder:
+        def __init__(self, kernel):
+            self.kernel = kernel
+
+        def compile(self, args):
+            order.append(self.kernel)
+
+    monkeypatch.setattr(compilation, "_dispatcher", lambda module, name: Recorder((module, name)))
+    compilation.compile_extended(engine="ldl")
+    listed = [kernel[:2] for kernel in compilation.EXTENDED_KERNELS]
+    assert order[0] == compilation.CHILD_FIRST
+    assert order[1:] == [kernel for kernel in listed if kernel != compilation.CHILD_FIRST]
+    order.clear()
+    compilation.compile_extended(engine="cholmod")
+    assert set(order) == set(listed) - compilation.LDL_ENGINE_KERNELS
+
+
+def test_a_cold_cache_runs_the_double_solve_in_numpy_with_the_same_answer(monkeypatch):
+    """On a cold cache the k-digit path's double solve does not wait for the float64 cone
+    kernels to compile; its answer, and so the whole run's, is bit for bit the warm one."""
+    from rfverify import digits
+    from rfverify.solver import kernels
+
+    monkeypatch.setenv(compilation.BACKGROUND_ENV, "0")
+    runs = {}
+    for cold in (False, True):
+        monkeypatch.setattr(digits, "cache_is_cold", lambda dispatcher, cold=cold: cold and dispatcher is kernels.nt_scaling)
+        runs[cold] = rfverify.solve_to_digits(rfverify.load("bundled:chute"), 10, factor_engine="ldl")
+    assert runs[False].double.settings.compiled_kernels is True
+    assert runs[True].double.settings.compiled_kernels is False
+    assert runs[True].status == runs[False].status == "Certified"
+    for name in ("v", "u", "r"):
+        assert getattr(runs[True], name).tobytes() == getattr(runs[False], name).tobytes()
+        assert getattr(runs[True].double, name).tobytes() == getattr(runs[False].double, name).tobytes()
