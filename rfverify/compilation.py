@@ -16,8 +16,9 @@ On a cold cache, :func:`compile_extended_in_background` starts a child process t
 the double-double kernels (the most expensive first, then the others in the reverse order of
 their first use) into the same cache, while this process runs the double solve and compiles
 forward: on two cores the two meet in the middle and the cold k-digit path pays about half of
-its compilation (docs/DECISIONS.md, "Cold start").  :func:`cache_is_cold` tells the k-digit path whether the float64 cone kernels
-would be compiled first: on a cold cache its double solve runs them in numpy instead.
+its compilation (docs/DECISIONS.md, "Cold start").  The float64 cone kernels of the double
+solve are left to the child too (:func:`float64_kernels_deferred`): the parent's double solve
+runs their numpy formulas meanwhile.
 """
 
 from __future__ import annotations
@@ -93,8 +94,16 @@ EXTENDED_KERNELS = (
 the k-digit path calls from Python, in the reverse order of their first use on the bundled
 Chute with the default install's factorisation engine (``ldl``; where scikit-sparse is
 installed the CHOLMOD engine leaves the :data:`LDL_ENGINE_KERNELS` unused).  A test keeps the
-list equal to what such a run compiles.  The child compiles :data:`CHILD_FIRST` first, then the
-others in this order; the kernels they call are compiled with them."""
+list equal to what such a run compiles.  The child compiles them in the order of
+:data:`CHILD_ORDER`; the kernels they call are compiled with them."""
+
+FLOAT64_KERNELS = tuple(("rfverify.solver.kernels", name, "(int64" + ", float64[::1]" * arrays + ")") for name, arrays in (
+    ("lambda2", 2), ("nt_scaling", 6), ("quad_det", 2), ("quad_blocks", 2), ("quad_apply", 4), ("step_point", 3),
+    ("min_ray_lambda2", 3), ("product", 3), ("arrow_solve", 3)))
+"""The float64 cone kernels of the double solver (:mod:`rfverify.solver.kernels`, every one of
+them, as the product cone calls them: the number of cones and flat float64 vectors).  On a cold
+cache the k-digit path's double solve runs their numpy formulas instead of waiting for them
+(:func:`float64_kernels_deferred`), and the child compiles them for the next run."""
 
 CHILD_FIRST = ("blocks", "contact_factor_inverse")
 """The kernel the child compiles before all others: the most expensive one (2–3 s of the
@@ -102,6 +111,13 @@ CHILD_FIRST = ("blocks", "contact_factor_inverse")
 about halfway through its share and would compile it a second time while the child is still
 at it.  Taken first, it is in the cache long before the parent's first call, and the two meet
 among kernels of a few tenths of a second."""
+
+CHILD_ORDER = (tuple(k for k in EXTENDED_KERNELS if k[:2] == CHILD_FIRST) + FLOAT64_KERNELS
+               + tuple(k for k in EXTENDED_KERNELS if k[:2] != CHILD_FIRST))
+"""What the child compiles, in order: :data:`CHILD_FIRST`; the :data:`FLOAT64_KERNELS`, which
+the parent does not call in this run, so that they are in the cache before the parent exits
+(and ends the child); then the double-double kernels from the last used to the first, towards
+the parent, which compiles them from the first."""
 
 LDL_ENGINE_KERNELS = frozenset({("ldl", "_numeric_double"), ("ldl", "_solve_double")})
 """The kernels of :data:`EXTENDED_KERNELS` only the compiled float64 LDLᵀ engine calls: a run
@@ -114,9 +130,11 @@ _child: subprocess.Popen | None = None
 
 
 def _dispatcher(module: str, name: str):
+    """The kernel ``name`` of ``module``: a module of :mod:`rfverify.extended` by its short name,
+    or a full module name."""
     import importlib
 
-    return getattr(importlib.import_module(f"rfverify.extended.{module}"), name)
+    return getattr(importlib.import_module(module if "." in module else f"rfverify.extended.{module}"), name)
 
 
 def cache_is_cold(dispatcher) -> bool:
@@ -129,6 +147,20 @@ def cache_is_cold(dispatcher) -> bool:
     except Exception:
         return False
     return not index
+
+
+def float64_kernels_deferred() -> bool:
+    """True when this process has started the child and numba's cache holds no compiled float64
+    cone kernels: the double solve then runs their numpy formulas (bit for bit the same,
+    ``Settings.compiled_kernels=False``) rather than compile them on the critical path, and the
+    child compiles them for later runs (:data:`CHILD_ORDER`)."""
+    if _child is None:
+        return False
+    try:
+        dispatcher = _dispatcher("rfverify.solver.kernels", "nt_scaling")
+    except Exception:
+        return False
+    return cache_is_cold(dispatcher)
 
 
 def extended_cache_is_cold() -> bool:
@@ -201,14 +233,14 @@ def _uses_ldl_engine(engine: str) -> bool:
     return False
 
 
-def compile_extended(kernels=EXTENDED_KERNELS, engine: str = "ldl") -> None:
-    """Compile ``kernels`` (with numba's cache on, so they are saved) in the given order, but
-    :data:`CHILD_FIRST` first, leaving out the :data:`LDL_ENGINE_KERNELS` when ``engine`` does
+def compile_extended(kernels=CHILD_ORDER, engine: str = "ldl") -> None:
+    """Compile ``kernels`` (with numba's cache on, so they are saved; one already there is only
+    loaded) in the given order, leaving out the :data:`LDL_ENGINE_KERNELS` when ``engine`` does
     not factor with them."""
     from numba.core import sigutils
 
     uses_ldl = None
-    for module, name, signature in sorted(kernels, key=lambda kernel: kernel[:2] != CHILD_FIRST):
+    for module, name, signature in kernels:
         if (module, name) in LDL_ENGINE_KERNELS:
             if uses_ldl is None:
                 uses_ldl = _uses_ldl_engine(engine)

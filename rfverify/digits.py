@@ -30,10 +30,9 @@ from .extended.data import ExtendedData
 from .extended.mixed import cholmod_available
 from .extended.system import choose_backend
 from .problem import SPACEDIM, Problem
-from .compilation import cache_is_cold, compile_extended_in_background, compile_seconds
+from .compilation import compile_extended_in_background, compile_seconds, float64_kernels_deferred
 from .proof import Point, Proof, ProofContext, validate_digits
 from .solver import SolveResult, solve
-from .solver import kernels as cone_kernels
 from .solver.result import ResultAliases
 
 
@@ -287,10 +286,10 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
                                    fix="use method='auto' (default) or an Algorithm 1 form")
     say = progress or (lambda msg: None)
-    # On a cold numba cache the other core compiles the extended kernels, and the double solve
-    # runs its cone operations in numpy (bit for bit the compiled ones) instead of compiling first.
+    # On a cold numba cache the other core compiles the kernels, and the double solve runs its
+    # cone operations in numpy (bit for bit the compiled ones) instead of compiling them first.
     compile_extended_in_background(factor_engine)
-    cold = {"compiled_kernels": False} if cache_is_cold(cone_kernels.nt_scaling) else {}
+    cold = {"compiled_kernels": False} if float64_kernels_deferred() else {}
     t0, c0 = time.perf_counter(), compile_seconds()
     double = solve(problem, method=method, tol=tol, max_iter=max_iter, **{**DOUBLE_SETTINGS, **cold, **options})
     t_double = time.perf_counter() - t0

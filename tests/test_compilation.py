@@ -51,6 +51,16 @@ def test_no_child_on_a_warm_cache_or_when_switched_off(chute_run, monkeypatch):
     assert compilation.compile_extended_in_background() is False
 
 
+def test_the_float64_kernels_are_deferred_only_to_a_child_on_a_cold_cache(monkeypatch):
+    monkeypatch.setattr(compilation, "cache_is_cold", lambda dispatcher: True)
+    monkeypatch.setattr(compilation, "_child", None)
+    assert compilation.float64_kernels_deferred() is False  # nobody would compile them
+    monkeypatch.setattr(compilation, "_child", object())
+    assert compilation.float64_kernels_deferred() is True
+    monkeypatch.setattr(compilation, "cache_is_cold", lambda dispatcher: False)
+    assert compilation.float64_kernels_deferred() is False  # in the cache: the compiled kernels
+
+
 def test_a_childs_compilation_is_found_by_another_process(tmp_path):
     """In a fresh cache folder the cache is cold; one kernel compiled by one process is loaded,
     not compiled, by the next."""
@@ -115,7 +125,7 @@ def test_the_ldl_only_kernels_are_those_a_cholmod_run_does_not_call():
     assert run.stdout.strip() == str(sorted(compilation.LDL_ENGINE_KERNELS))
 
 
-def test_the_child_compiles_the_most_expensive_kernel_first(monkeypatch):
+def test_the_child_compiles_the_most_expensive_kernel_first_then_the_float64_ones(monkeypatch):
     order = []
 
     class Recorder:
@@ -127,24 +137,42 @@ def test_the_child_compiles_the_most_expensive_kernel_first(monkeypatch):
 
     monkeypatch.setattr(compilation, "_dispatcher", lambda module, name: Recorder((module, name)))
     compilation.compile_extended(engine="ldl")
-    listed = [kernel[:2] for kernel in compilation.EXTENDED_KERNELS]
-    assert order[0] == compilation.CHILD_FIRST
-    assert order[1:] == [kernel for kernel in listed if kernel != compilation.CHILD_FIRST]
+    extended = [kernel[:2] for kernel in compilation.EXTENDED_KERNELS]
+    float64 = [kernel[:2] for kernel in compilation.FLOAT64_KERNELS]
+    assert order == ([compilation.CHILD_FIRST] + float64
+                     + [kernel for kernel in extended if kernel != compilation.CHILD_FIRST])
     order.clear()
     compilation.compile_extended(engine="cholmod")
-    assert set(order) == set(listed) - compilation.LDL_ENGINE_KERNELS
+    assert sorted(order) == sorted(set(extended + float64) - compilation.LDL_ENGINE_KERNELS)
+
+
+def test_the_float64_kernels_listed_are_those_the_double_solve_compiles():
+    """Each listed signature is the one a compiled double solve calls (else the child's entry
+    would never be found), and every kernel of the module is listed."""
+    import numba
+    from numba.core import sigutils
+
+    from rfverify.solver import kernels
+
+    result = rfverify.solve(rfverify.load("bundled:chute"), tol=1e-10, compiled_kernels=True)
+    assert result.success
+    for module, name, signature in compilation.FLOAT64_KERNELS:
+        args, _ = sigutils.normalize_signature(signature)
+        assert tuple(args) in [tuple(s) for s in compilation._dispatcher(module, name).signatures], name
+    called = {name for name in dir(kernels) if isinstance(getattr(kernels, name), numba.core.registry.CPUDispatcher)
+              and getattr(kernels, name).signatures}
+    assert called == {name for _, name, _ in compilation.FLOAT64_KERNELS}
 
 
 def test_a_cold_cache_runs_the_double_solve_in_numpy_with_the_same_answer(monkeypatch):
     """On a cold cache the k-digit path's double solve does not wait for the float64 cone
     kernels to compile; its answer, and so the whole run's, is bit for bit the warm one."""
     from rfverify import digits
-    from rfverify.solver import kernels
 
     monkeypatch.setenv(compilation.BACKGROUND_ENV, "0")
     runs = {}
     for cold in (False, True):
-        monkeypatch.setattr(digits, "cache_is_cold", lambda dispatcher, cold=cold: cold and dispatcher is kernels.nt_scaling)
+        monkeypatch.setattr(digits, "float64_kernels_deferred", lambda cold=cold: cold)
         runs[cold] = rfverify.solve_to_digits(rfverify.load("bundled:chute"), 10, factor_engine="ldl")
     assert runs[False].double.settings.compiled_kernels is True
     assert runs[True].double.settings.compiled_kernels is False
