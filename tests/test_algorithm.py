@@ -92,11 +92,15 @@ class _Policy:
 
 
 class _Promoting(loop.Precision):
+    """Promotes to a longdouble space whose Jᵀ doubles r̃: the gap it computes is twice the
+    judged one, so a loop that forgot the judged μ would hand the Newton solver another μ."""
+
     promotions = 0
 
     def promote(self, v, r, z):
         self.promotions += 1
         self.space = _Space(np.longdouble)
+        self.space.JT = 2 * self.space.JT
         return v.astype(np.longdouble), r.astype(np.longdouble), z.astype(np.longdouble)
 
 
@@ -115,16 +119,28 @@ def test_a_breakdown_is_the_policys_verdict_at_its_iteration():
 
 
 def test_a_switch_of_precision_keeps_the_judged_mu_and_works_on_in_the_wider_one():
-    seen = []
+    seen, handed = [], []
+
+    class Scaling:
+        @staticmethod
+        def describe():
+            return {}
 
     class Cones:
         def scaling(self, z, s):
-            seen.append((z.dtype, s.dtype))
+            seen.append((z.dtype, s.dtype, float(s[0])))
+            return Scaling()
+
+    class Newton:
+        def update(self, scaling, k, mu):
+            handed.append(mu)
             raise Breakdown("stop here")
 
-    precision = _Promoting(_Space(np.float64), Cones(), None)
+    precision = _Promoting(_Space(np.float64), Cones(), Newton())
     out = loop.iterate(precision, _Policy([PROMOTE]), _start(), n_contacts=2, n_cones=1, clock_origin=0.0)
-    assert precision.promotions == 1 and seen == [(np.longdouble, np.longdouble)]
+    assert precision.promotions == 1
+    # the cones see the wider precision's s = Jᵀr̃ (doubled there), the Newton solver the judged μ
+    assert seen == [(np.longdouble, np.longdouble, 4.0)] and handed == [3.0]
     assert out.records[0]["mu"] == 3.0 and out.verdict[1] == "iteration 0: stop here"
 
 
