@@ -45,13 +45,13 @@ class UntilPolicy:
         return ("NumericalError", message)
 
 
-def extended_trace(records: list, step_columns=("sigma", "alpha", "refine", "solve_residual")) -> dict:
+def extended_trace(records: list) -> dict:
     """The extended phases' trace from the loop's records: mu, pinfeas, dinfeas, time per
     iterate; the step columns per iteration that computed its step (``refine`` is the
     records' refine_steps); "centrality" per iteration that reached its scaling."""
     trace = {key: [rec[key] for rec in records] for key in ("mu", "pinfeas", "dinfeas", "time")}
     stepped = [rec for rec in records if "sigma" in rec]
-    for key in step_columns:
+    for key in ("sigma", "alpha", "refine", "solve_residual"):
         trace[key] = [rec["refine_steps" if key == "refine" else key] for rec in stepped]
     if any("centrality" in rec for rec in records):
         trace["centrality"] = [rec["centrality"] for rec in records if "centrality" in rec]
