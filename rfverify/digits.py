@@ -121,9 +121,9 @@ WIDE_MAX_FACTOR_OPS = 2e7
 counts of L in its minimum-degree order): measured ~0.26 µs each at 320 bits (the whole
 iteration ~2× its factorisation), so about 5 s per factorisation at the limit (a 274-contact
 Lattice: 1.0e6, a 769-contact SpheresPile: 1.5e7).  This is the tail's only limit: its factor
-is sparse (:class:`.extended.wide_factor.SparseDofSpace`, memory O(nnz(L))), so the number of dofs
-does not matter, only the fill (the 9675-contact GranularBed: 1.3e10, about 56 min per factorisation;
-docs/DECISIONS.md, "The 10-digit path at scale")."""
+is sparse (:class:`.extended.wide_cholesky.SparseWideCholesky`, memory O(nnz(L))), so the number
+of dofs does not matter, only the fill (the 9675-contact GranularBed: 1.3e10, about 56 min per
+factorisation; docs/DECISIONS.md, "The 10-digit path at scale")."""
 
 
 WIDE_SECONDS_PER_OP = 0.26e-6

@@ -24,6 +24,7 @@ from rfverify.jordan import mpfr as JM
 from rfverify.extended.ldl import DDCholesky
 from rfverify.extended.mixed import CholmodMixed, MixedCholesky, cholmod_available
 from rfverify.extended.system import choose_backend
+from rfverify.extended.wide_cholesky import DenseWideCholesky, SparseWideCholesky
 from rfverify.random_problems import random_problem
 
 from test_extended import singular_in_float64
@@ -267,7 +268,8 @@ def test_sparse_tail_factor_equals_the_dense_one(seed, gap):
     with wide_data.context(BITS):
         W = wide_data.WideData(data)
         a, t = wide_data.from_dd(rng.normal(size=data.m)), wide_data.from_dd(rng.normal(size=data.nk))
-        dense, sparse = wide_factor.DenseDofSpace(data, W), wide_factor.SparseDofSpace(data, W)
+        dense = wide_factor.WideDofSpace(data, W, DenseWideCholesky)
+        sparse = wide_factor.WideDofSpace(data, W, SparseWideCholesky)
         assert dense.update(sc) and sparse.update(sc)
         (dv1, dr1), (dv2, dr2) = dense.solve(a, t), sparse.solve(a, t)
         assert all(x == y for x, y in zip(dv1, dv2)) and all(x == y for x, y in zip(dr1, dr2))
@@ -280,10 +282,14 @@ def test_sparse_tail_stores_no_dense_matrix():
     problem = random_problem(30, 60, seed=5)
     data, sc = _interior_scaling(problem, 20, 1)
     with wide_data.context(BITS):
-        back = wide_factor.SparseDofSpace(data, wide_data.WideData(data))
+        back = wide_factor.WideDofSpace(data, wide_data.WideData(data), SparseWideCholesky)
         assert back.update(sc)
-    assert back.Lx.size == back.Li.size < data.m * data.m // 4 and back.Ld.size == data.m
-    assert not hasattr(back, "M_dense")
+    engine = back.engine
+    assert isinstance(engine, SparseWideCholesky)
+    assert engine.Lx.size == engine.Li.size < data.m * data.m // 4 and engine.Ld.size == data.m
+    for holder in (back, engine):
+        arrays = [x for x in vars(holder).values() if isinstance(x, np.ndarray)]
+        assert arrays and all(x.size < data.m * data.m for x in arrays)  # no m × m array anywhere
 
 
 @needs_cholmod

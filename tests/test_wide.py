@@ -18,6 +18,7 @@ import rfverify.io.certificate
 from reference import jordan as RJ
 from rfverify import digits as D
 from rfverify.extended import wide, wide_data, wide_factor
+from rfverify.extended.wide_cholesky import DenseWideCholesky
 from rfverify.extended.data import ExtendedData
 from rfverify.jordan import mpfr as JM
 from rfverify.random_problems import random_problem
@@ -146,7 +147,7 @@ def test_dense_dof_space_solves_the_newton_system_to_working_precision():
     rng = np.random.default_rng(1)
     with wide_data.context(BITS):
         W = wide_data.WideData(data)
-        back = wide_factor.DenseDofSpace(data, W)
+        back = wide_factor.WideDofSpace(data, W, DenseWideCholesky)
         assert back.update(sc)
         a, t = wide_data.from_dd(rng.normal(size=data.m)), wide_data.from_dd(rng.normal(size=data.nk))
         dv, dr = back.solve(a, t)
@@ -272,7 +273,7 @@ def test_the_tail_factors_sparsely_and_has_no_limit_in_dofs(lattice):
     """Issue 27: the tail's factor is sparse (memory O(nnz(L))); only its predicted cost
     limits it, so the old 3000-dof limit is gone."""
     _, out = lattice
-    assert out.wide is not None and out.wide.backend == wide_factor.SparseDofSpace.name
+    assert out.wide is not None and out.wide.backend == "sparse dof-space (M + H̃ᵀG⁻¹H̃), multiple precision"
     assert not hasattr(D, "WIDE_MAX_DOFS")
 
 

@@ -12,10 +12,11 @@ definiteness near μ = 1e-41 whatever precision the residuals have.
 So everything is wider here: the iterate (v, r̃, z), the residuals, every cone kernel (NT
 scaling, Q_{p^k}, products, step lengths; the formulas of :mod:`.cones`, vectorised over cones
 in numpy object arrays) and the Newton solve — the dof-space matrix M + BᵀB, B = F⁻¹H̃, formed
-and factored sparsely in ``bits``-bit arithmetic in a minimum-degree order
-(:class:`SparseDofSpace`), each solve refined against the unreduced three-block system.  The
-cost is Σ c_j² multiply-subtract pairs (O(m³) at worst), so the k-digit path runs this tail
-only where double-double stalled and the factorisation is affordable (:mod:`rfverify.digits`).
+(:class:`.wide_factor.WideDofSpace`) and factored sparsely in ``bits``-bit arithmetic in a
+minimum-degree order (:class:`.wide_cholesky.SparseWideCholesky`), each solve refined against
+the unreduced three-block system.  The cost is Σ c_j² multiply-subtract pairs (O(m³) at
+worst), so the k-digit path runs this tail only where double-double stalled and the
+factorisation is affordable (:mod:`rfverify.digits`).
 
 gmpy2's precision is set in a local context for the duration of each call; nothing leaks.
 """
@@ -34,8 +35,9 @@ from ..algorithm.policy import UntilPolicy, extended_trace
 from ..jordan.mpfr import arrow_solve, centrality, identity, max_step, nt_scaling, product, quad_pow
 from .data import ExtendedData
 from .ipm import ExtendedResult
+from .wide_cholesky import DenseWideCholesky, SparseWideCholesky
 from .wide_data import WideData, WideMatrix, context, dot, expansion, from_dd, inf_norm, two_norm
-from .wide_factor import DenseDofSpace, SparseDofSpace
+from .wide_factor import WideDofSpace
 
 DEFAULT_BITS = 320
 """Working precision: 96 decimal digits, enough for cones whose λ₂/λ₁ is 1e-60 with margin."""
@@ -188,15 +190,15 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
     ``start`` = {"v", "r_t", "z"}, each a (hi, lo) pair of float64 arrays (a double-double
     iterate) or an mpfr array.  ``until(WideIterate)`` is called at every iterate; True stops
     the run ("Stopped").  Same policy as :func:`.ipm.run` (the paper's σ rule, the capped step
-    rule).  ``perm``: the factor's ordering from :func:`dof_space_ordering`, if the caller
-    computed it.  ``sparse``: the factor is :class:`SparseDofSpace` (default; memory
-    O(nnz(L))), else :class:`DenseDofSpace` (m × m; kept as the reference the sparse one is
-    tested against)."""
+    rule).  ``perm``: the factor's ordering from :func:`.wide_factor.dof_space_ordering`, if
+    the caller computed it.  ``sparse``: the factor's engine is :class:`SparseWideCholesky`
+    (default; memory O(nnz(L))), else :class:`DenseWideCholesky` (m × m; kept as the reference
+    the sparse one is tested against)."""
     t0 = time.perf_counter()
     n_cones = data.n3 + data.n1
     with context(bits):
         W = WideData(data)
-        factor = (SparseDofSpace if sparse else DenseDofSpace)(data, W, perm=perm)
+        factor = WideDofSpace(data, W, SparseWideCholesky if sparse else DenseWideCholesky, perm=perm)
         space = _WideSpace(W)
         newton = ReducedNewton(space, _WideBackend(factor), refine_max=refine_max, floor=2.0 ** (-bits + 24),
                                inf=inf_norm)
