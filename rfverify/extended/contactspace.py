@@ -15,6 +15,7 @@ from .blocks import block_apply, contact_factor_inverse, scatter_add, small_prod
 from .data import ExtendedData
 from .factored import FactoredBackend
 from .ldl import DDCholesky
+from ..solver.engines import cholmod_missing_message
 from .mixed import CholmodMixed, MixedCholesky, cholmod_available
 
 njit = numba.njit(cache=True)
@@ -380,8 +381,6 @@ def resolve_engine(engine: str, rows: int) -> str:
         return "ldl"
     if engine == "cholmod":
         if not cholmod_available():
-            raise ImportError("the cholmod engine needs CHOLMOD through scikit-sparse: pip install "
-                              "'rfverify[cholmod]' (and libsuitesparse-dev, an optimised BLAS such as "
-                              "libopenblas0, to build and run it)")
+            raise ImportError(cholmod_missing_message("the cholmod engine"))
         return "cholmod"
     return "cholmod" if rows >= CHOLMOD_MIN_ROWS and cholmod_available() else "ldl"

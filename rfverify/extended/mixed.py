@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import dd
+from ..solver.engines import CholmodEngine
 from .ldl import (DDCholesky, _numeric_double, _solve_double, _symbolic, _workspace, symmetric_pattern,
                   upper_csc, upper_positions)
 
@@ -204,8 +205,7 @@ class CholmodMixed(_RefinedFloat64Factor):
     """
 
     def __init__(self, pattern: sp.spmatrix, backward_target: float = 1e-29, max_steps: int = 12):
-        from sksparse import cholmod  # noqa: F401  (fails early, with the import error, when absent)
-
+        self._engine = CholmodEngine("the cholmod engine")  # first: fails early when CHOLMOD is absent
         n = pattern.shape[0]
         self.n = n
         self.pattern = symmetric_pattern(pattern)
@@ -217,7 +217,6 @@ class CholmodMixed(_RefinedFloat64Factor):
         self._lower_indices, self._lower_indptr = T.indices, T.indptr
         self._init_refinement(backward_target, max_steps)
         self.factored = False
-        self._factor = None
         self._dd = None
 
     @property
@@ -230,7 +229,8 @@ class CholmodMixed(_RefinedFloat64Factor):
         of the double-double factor after a fallback."""
         if self._dd is not None:
             return self._dd.Lp
-        perm = self._factor.P() if self._factor is not None else np.arange(self.n)
+        perm = self._engine.permutation()
+        perm = np.arange(self.n) if perm is None else perm
         Ap, Ai, _ = upper_csc(self.pattern[perm][:, perm])
         return _symbolic(self.n, Ap, Ai)[1]
 
@@ -245,7 +245,7 @@ class CholmodMixed(_RefinedFloat64Factor):
                                 np.asarray(cols, dtype=np.int64))
 
     def _dd_factor(self) -> int:
-        self._factor = None  # in double-double for good: the float64 factor's memory is not needed
+        self._engine.release()  # in double-double for good: the float64 factor's memory is not needed
         if self._dd is None:
             self._dd = DDCholesky(self.pattern)
             cols = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.Ap))
@@ -260,20 +260,15 @@ class CholmodMixed(_RefinedFloat64Factor):
         return self._dd.solve(bh, bl)
 
     def _float64_factor(self) -> str:
-        from sksparse import cholmod
-
-        A = sp.csc_matrix((self._A[0][self._lower_map], self._lower_indices, self._lower_indptr),
-                          shape=(self.n, self.n))
         try:
-            if self._factor is None:
-                self._factor = cholmod.analyze(A, mode="supernodal", ordering_method="amd")
-            self._factor.cholesky_inplace(A)
-        except cholmod.CholmodError as exc:
-            return f"CHOLMOD's float64 factorisation failed ({exc})"
+            self._engine.factor(sp.csc_matrix((self._A[0][self._lower_map], self._lower_indices,
+                                               self._lower_indptr), shape=(self.n, self.n)))
+        except ArithmeticError as exc:
+            return f"the float64 factorisation failed ({exc})"
         return ""
 
     def _float64_solve(self, rh: np.ndarray) -> np.ndarray:  # CHOLMOD's float64 solve on the residual
-        return np.asarray(self._factor(rh), dtype=np.float64).reshape(self.n)
+        return self._engine.solve(rh)
 
     def _to_stored(self, bh: np.ndarray, bl: np.ndarray):
         return bh, bl

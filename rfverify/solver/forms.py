@@ -1,6 +1,7 @@
 """The linear-system forms of Algorithm 1 (DESIGN §4), one :class:`~.kkt.KKTSystem` each:
-what matrix a form factors, with which engine (QDLDL for the quasi-definite forms, SuperLU
-for ``noscaling``, CHOLMOD for ``schur``), and how one solve recovers (dv, dr̃, dz) from it.
+what matrix a form factors, which :mod:`.engines` engine factors it (QDLDL for the
+quasi-definite forms, SuperLU for ``noscaling``, CHOLMOD for ``schur``), and how one solve
+recovers (dv, dr̃, dz) from it.
 The unreduced system they all solve, its refinement and regularisation are :mod:`.kkt`'s;
 :data:`FORMS` maps method names to them (see :mod:`.kkt` for each form's matrix)."""
 
@@ -9,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .engines import CholmodEngine, SuperLUEngine
 from .kkt import KKTSystem, SparseAssembler
 
 
@@ -18,19 +20,17 @@ class JQinvSystem(KKTSystem):
     name = "jqinv"
     regularisable = True
 
-    def __init__(self, *args, **kw):
-        super().__init__(*args, **kw)
-        m, nk, nz = self.m, self.nk, self.nz
-        cones = self.cones
-        up = self.rho[cones.bd_rows]  # J row of the Q row
-        self._set_quasidefinite_pattern([m + up, m + nk + np.arange(nz)],
-                                        [m + nk + cones.bd_cols, m + nk + np.arange(nz)], m + nk + nz)
+    def _set_form_pattern(self):
+        m, nk, cones = self.m, self.nk, self.cones
+        y = m + nk + np.arange(self.nz)
+        # Q_{p⁻¹} block at (J row of its Q row, y column), then the identity on y
+        self._set_quasidefinite_pattern([m + self.rho[cones.bd_rows], y], [m + nk + cones.bd_cols, y], y.size + m + nk)
 
     def factor(self):
         self._factor_quasidefinite(self.Qp_inv_blocks, np.ones(self.nz))
 
     def solve_once(self, rhs):
-        x = self._solver.solve(np.asarray(rhs, dtype=np.float64))
+        x = self.engine.solve(rhs)
         mk = self.m + self.nk
         x[mk:] = self.Qp_inv64(x[mk:])  # y = Q_p dz
         return x
@@ -42,14 +42,12 @@ class QP2System(KKTSystem):
     name = "qp2"
     regularisable = True
 
-    def __init__(self, *args, **kw):
-        super().__init__(*args, **kw)
-        m, nk, nz = self.m, self.nk, self.nz
-        cones = self.cones
-        upper = cones.bd_rows <= cones.bd_cols
-        self._upper = upper
+    def _set_form_pattern(self):
+        m, nk, cones = self.m, self.nk, self.cones
+        self._upper = upper = cones.bd_rows <= cones.bd_cols
+        # J at (its row, dz column), then the upper triangle of Q_{p²} on dz
         self._set_quasidefinite_pattern([m + self.rho, m + nk + cones.bd_rows[upper]],
-                                        [m + nk + np.arange(nz), m + nk + cones.bd_cols[upper]], m + nk + nz)
+                                        [m + nk + np.arange(self.nz), m + nk + cones.bd_cols[upper]], m + nk + self.nz)
 
     def factor(self):
         q2 = self.cones.quad_blocks(self.cones.power(self.p, 2))[self._upper]
@@ -59,7 +57,7 @@ class QP2System(KKTSystem):
         rhs = np.array(rhs, dtype=np.float64)
         mk = self.m + self.nk
         rhs[mk:] = self.Qp64(rhs[mk:])
-        return self._solver.solve(rhs)
+        return self.engine.solve(rhs)
 
 
 class ReducedSystem(KKTSystem):
@@ -68,14 +66,10 @@ class ReducedSystem(KKTSystem):
     name = "reduced"
     regularisable = True
 
-    def __init__(self, *args, **kw):
-        super().__init__(*args, **kw)
-        m, nk = self.m, self.nk
-        cones = self.cones
-        gr, gc = self.rho[cones.bd_rows], self.rho[cones.bd_cols]
-        upper = gr <= gc
-        self._upper = upper
-        self._set_quasidefinite_pattern([m + gr[upper]], [m + gc[upper]], m + nk)
+    def _set_form_pattern(self):
+        gr, gc = self.rho[self.cones.bd_rows], self.rho[self.cones.bd_cols]
+        self._upper = upper = gr <= gc  # the upper triangle of G = J Q_{p⁻²} Jᵀ on dr̃
+        self._set_quasidefinite_pattern([self.m + gr[upper]], [self.m + gc[upper]], self.m + self.nk)
 
     def factor(self):
         p_inv2 = self.cones.power(self.p, -2)
@@ -86,7 +80,7 @@ class ReducedSystem(KKTSystem):
         rhs = np.asarray(rhs, dtype=np.float64)
         m, mk = self.m, self.m + self.nk
         qc = self.Qp_inv64(rhs[mk:])
-        x = self._solver.solve(np.concatenate((rhs[:m], rhs[m:mk] - self.J @ qc)))
+        x = self.engine.solve(np.concatenate((rhs[:m], rhs[m:mk] - self.J @ qc)))
         dz = qc - self.Qp_inv2_64(self.J.T @ x[m:])
         return np.concatenate((x, dz))
 
@@ -97,8 +91,7 @@ class NoScalingSystem(KKTSystem):
     name = "noscaling"
     symmetric = False
 
-    def __init__(self, *args, **kw):
-        super().__init__(*args, **kw)
+    def _set_form_pattern(self):
         m, nk, nz = self.m, self.nk, self.nz
         cones = self.cones
         Mf = self.M.tocoo()
@@ -109,19 +102,17 @@ class NoScalingSystem(KKTSystem):
                 m + nk + cones.bd_cols]
         self._set_pattern(rows, cols, m + nk + nz)
         self._fixed = (Mf.data, -Hc.data, -Hc.data, np.ones(nz))
-        self._lu = None
+
+    def _new_engine(self):
+        return SuperLUEngine()
 
     def factor(self):
-        from scipy.sparse.linalg import splu
-
         arw_z = self.cones.arrow_blocks(self.z)
         arw_s = self.cones.arrow_blocks(self.s)
-        vals = np.concatenate((*self._fixed, arw_z, arw_s))
-        self._lu = splu(self.asm.matrix(vals))
-        self.factor_count += 1
+        self.engine.factor(self.asm.matrix(np.concatenate((*self._fixed, arw_z, arw_s))))
 
     def solve_once(self, rhs):
-        return self._lu.solve(np.asarray(rhs, dtype=np.float64))
+        return self.engine.solve(rhs)
 
 
 class ReducedFactoredSystem(KKTSystem):
@@ -141,11 +132,12 @@ class ReducedFactoredSystem(KKTSystem):
 
     name = "reduced_factored"
 
-    def __init__(self, *args, **kw):
+    def _set_contact_blocks(self):
+        """The contact blocks of G (kept rows joined through the cones they feed), their
+        padding to 5 × 5, and where each entry of P = J Q_{p⁻¹} and of B = L⁻¹H̃ goes."""
         from scipy.sparse.csgraph import connected_components
 
-        super().__init__(*args, **kw)
-        m, nk = self.m, self.nk
+        nk = self.nk
         cones = self.cones
         # Contact blocks of G: kept rows joined through the cones they feed.
         cone_of_z = np.concatenate((np.arange(3 * cones.n3) // 3, cones.n3 + np.arange(cones.n1)))
@@ -182,7 +174,6 @@ class ReducedFactoredSystem(KKTSystem):
         # k < 5 kept rows has exactly k cone components), so every padded block has full rank.
         pad_b, pad_l = np.nonzero(self.pad_idx == nk)
         self._pad = (pad_b, pad_l)
-        self._set_form_pattern()
 
     def _b_pattern(self):
         """B = L⁻¹H̃ as contributions: each H̃ entry (b, j) feeds rows a of its block, value
@@ -198,6 +189,7 @@ class ReducedFactoredSystem(KKTSystem):
 
     def _set_form_pattern(self):
         """The pattern of [[M, −Bᵀ], [−B, −I]] (upper triangle)."""
+        self._set_contact_blocks()
         m, nk = self.m, self.nk
         b_rows, b_cols = self._b_pattern()
         Mc = self._Mcoo
@@ -237,7 +229,7 @@ class ReducedFactoredSystem(KKTSystem):
         rhs = np.asarray(rhs, dtype=np.float64)
         m, mk = self.m, self.m + self.nk
         qc = self.Qp_inv64(rhs[mk:])
-        x = self._solver.solve(np.concatenate((rhs[:m], self._blocks(rhs[m:mk] - self.J @ qc))))
+        x = self.engine.solve(np.concatenate((rhs[:m], self._blocks(rhs[m:mk] - self.J @ qc))))
         dr = self._blocks(x[m:], transpose=True)
         dz = qc - self.Qp_inv2_64(self.J.T @ dr)
         return np.concatenate((x[:m], dr, dz))
@@ -260,16 +252,11 @@ class SchurSystem(ReducedFactoredSystem):
 
     name = "schur"
 
-    def __init__(self, *args, **kw):
-        try:
-            import sksparse.cholmod  # noqa: F401
-        except ImportError:
-            raise ImportError("the schur form needs CHOLMOD through scikit-sparse: "
-                              "pip install 'rfverify[cholmod]' (and libsuitesparse-dev, an optimised "
-                              "BLAS such as libopenblas0, to build and run it)") from None
-        super().__init__(*args, **kw)
+    def _new_engine(self):
+        return CholmodEngine("the schur form")
 
     def _set_form_pattern(self):
+        self._set_contact_blocks()
         m, nk = self.m, self.nk
         b_rows, b_cols = self._b_pattern()
         self._basm = SparseAssembler(b_rows, b_cols, (nk, m))
@@ -281,11 +268,8 @@ class SchurSystem(ReducedFactoredSystem):
         self._s_indices, self._s_indptr = pat.indices, pat.indptr
         self._s_key = np.repeat(np.arange(m, dtype=np.int64), np.diff(pat.indptr)) * m + pat.indices
         self.N = m
-        self._chol = None
 
     def factor(self):
-        from sksparse import cholmod
-
         self._factor_blocks()
         hb, la, lb, hv = self._b
         B = self._basm.matrix(self.Linv[hb, la, lb] * hv)
@@ -293,21 +277,14 @@ class SchurSystem(ReducedFactoredSystem):
         key = np.repeat(np.arange(self.m, dtype=np.int64), np.diff(C.indptr)) * self.m + C.indices
         data = np.zeros(self._s_key.size)
         data[np.searchsorted(self._s_key, key)] = C.data
-        S = sp.csc_matrix((data, self._s_indices, self._s_indptr), shape=(self.m, self.m))
-        try:
-            if self._chol is None:
-                self._chol = cholmod.analyze(S, mode="supernodal", ordering_method="amd")
-            self._chol.cholesky_inplace(S)
-        except cholmod.CholmodError as exc:
-            raise ArithmeticError(f"CHOLMOD: {exc}") from None
-        self.factor_count += 1
+        self.engine.factor(sp.csc_matrix((data, self._s_indices, self._s_indptr), shape=(self.m, self.m)))
 
     def solve_once(self, rhs):
         rhs = np.asarray(rhs, dtype=np.float64)
         m, mk = self.m, self.m + self.nk
         qc = self.Qp_inv64(rhs[mk:])
         y = self._blocks(rhs[m:mk] - self.J @ qc)
-        dv = self._chol(rhs[:m] - self.H_t.T @ self._blocks(y, transpose=True))
+        dv = self.engine.solve(rhs[:m] - self.H_t.T @ self._blocks(y, transpose=True))
         dr = -self._blocks(y + self._blocks(self.H_t @ dv), transpose=True)
         dz = qc - self.Qp_inv2_64(self.J.T @ dr)
         return np.concatenate((dv, dr, dz))

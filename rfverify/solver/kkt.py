@@ -48,6 +48,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from .cones import ProductCone
+from .engines import QDLDLEngine
 
 
 @dataclass
@@ -156,6 +157,7 @@ class KKTSystem:
 
     def __init__(self, M, H_t, J, cones: ProductCone, *, dtype_ref=np.longdouble, static_reg=1e-12,
                  adaptive_reg=True, refine_max=10, refine_tol=None, forcing=None):
+        self.engine = self._new_engine()  # first: a missing optional engine fails before any work
         self.M = sp.csc_matrix(M)
         self.H_t = sp.csr_matrix(H_t)
         self.J = sp.csr_matrix(J)
@@ -184,8 +186,6 @@ class KKTSystem:
         self._A_ref = {}
         self._Mcoo = sp.triu(self.M, format="coo")
         self._Hcoo = self.H_t.tocoo()
-        self.factor_count = 0
-        self._solver = None
         self.refine_max = refine_max
         self.forcing = forcing
         self.refine_tol = refine_tol
@@ -195,6 +195,7 @@ class KKTSystem:
         # (complementarity) block row's change with the point (see _set_point).
         rows = np.asarray(abs(self._A[: self.m + self.nk]).sum(axis=1)).ravel()
         self.block_norms = [float(rows[: self.m].max(initial=0.0)), float(rows[self.m:].max(initial=0.0)), 0.0]
+        self._set_form_pattern()
 
     def set_refinement_dtype(self, dtype_ref):
         """Evaluate refinement residuals in ``dtype_ref`` from now on (the driver's precision
@@ -243,13 +244,13 @@ class KKTSystem:
         negative pivots as dr̃ rows).  On False the caller must factor again."""
         try:
             self._factor_upper(np.concatenate((self._fixed_vals, np.zeros(self.nk))))
-            _, D, _ = self._solver.factors()
+            D = self.engine.pivots()
             if np.all(np.isfinite(D)) and np.all(D != 0) and np.count_nonzero(D < 0) == self.nk:
                 self.regularised = False
                 self.unregularised_count += 1
                 return True
         except (RuntimeError, ValueError):  # QDLDL refuses a zero pivot by raising
-            self._solver = None
+            pass
         self._unregularised_failed = True
         return False
 
@@ -267,15 +268,18 @@ class KKTSystem:
         return False
 
     def _factor_upper(self, vals):
-        """Assemble the upper triangle from ``vals`` (pattern order) and factor it with QDLDL."""
-        import qdldl
+        """Assemble the upper triangle from ``vals`` (pattern order) and factor it."""
+        self.engine.factor(self.asm.matrix(vals))
 
-        K = self.asm.matrix(vals)
-        if self._solver is None:
-            self._solver = qdldl.Solver(K, upper=True)
-        else:
-            self._solver.update(K, upper=True)
-        self.factor_count += 1
+    def _new_engine(self):
+        """The factorisation engine of this form (:mod:`.engines`): QDLDL for the symmetric
+        quasi-definite forms; a form with another matrix class overrides this."""
+        return QDLDLEngine()
+
+    @property
+    def factor_count(self) -> int:
+        """Factorisations of this form's matrix that succeeded so far."""
+        return self.engine.factorisations
 
     # ------------------------------------------------------------------ the protocol
     def update(self, point: ScalingPoint) -> bool:
@@ -339,6 +343,12 @@ class KKTSystem:
         return y
 
     # ------------------------------------------------------------------ to be provided
+    def _set_form_pattern(self):
+        """Once, at construction: the sparsity pattern of the matrix this form factors
+        (:meth:`_set_pattern`, or :meth:`_set_quasidefinite_pattern` for a form factored through
+        :meth:`_factor_quasidefinite`), in the order :meth:`factor` supplies its values."""
+        raise NotImplementedError
+
     def factor(self):
         raise NotImplementedError
 
@@ -366,21 +376,22 @@ class KKTSystem:
             if (info.backward_error > self.reg_fallback_above and not info.forced) or slow:
                 if self.regularised:
                     if self.refactor_unregularised():
-                        retry = self.refined(a, b, c)
-                        if retry.backward_error < info.backward_error:
-                            info = retry
-                            info.refactored = True
-                        else:
-                            self.refactor_regularised()
+                        info = self._better_of(info, a, b, c, switch_back=self.refactor_regularised)
                 else:
                     self.refactor_regularised()
-                    retry = self.refined(a, b, c)
-                    if retry.backward_error < info.backward_error:
-                        info = retry
-                        info.refactored = True
-                    else:
-                        self.refactor_unregularised()
+                    info = self._better_of(info, a, b, c, switch_back=self.refactor_unregularised)
             self.prefer_unregularised = not self.regularised
+        return info
+
+    def _better_of(self, info: SolveInfo, a, b, c, switch_back) -> SolveInfo:
+        """The solve again with the factorisation just switched to (with or without δ): kept
+        if its backward error is smaller than ``info``'s, else ``switch_back()`` restores the
+        other factorisation and ``info`` stands."""
+        retry = self.refined(a, b, c)
+        if retry.backward_error < info.backward_error:
+            retry.refactored = True
+            return retry
+        switch_back()
         return info
 
     def refined(self, a, b, c) -> SolveInfo:
