@@ -154,20 +154,20 @@ def float64_kernels_deferred() -> bool:
     cone kernels: the double solve then runs their numpy formulas (bit for bit the same,
     ``Settings.compiled_kernels=False``) rather than compile them on the critical path, and the
     child compiles them for later runs (:data:`CHILD_ORDER`)."""
-    if _child is None:
-        return False
-    try:
-        dispatcher = _dispatcher("rfverify.solver.kernels", "nt_scaling")
-    except Exception:
-        return False
-    return cache_is_cold(dispatcher)
+    return _child is not None and _kernel_cache_is_cold("rfverify.solver.kernels", "nt_scaling")
 
 
 def extended_cache_is_cold() -> bool:
     """True when numba's cache holds no compiled version of the most expensive double-double
     kernel for the current sources (so the k-digit path would compile them all)."""
+    return _kernel_cache_is_cold("blocks", "contact_factor_inverse")
+
+
+def _kernel_cache_is_cold(module: str, name: str) -> bool:
+    """Whether numba's cache lacks the kernel ``name`` of ``module`` (see :func:`_dispatcher`);
+    False when the kernel cannot be found at all: then nothing is deferred or announced."""
     try:
-        dispatcher = _dispatcher("blocks", "contact_factor_inverse")
+        dispatcher = _dispatcher(module, name)
     except Exception:
         return False
     return cache_is_cold(dispatcher)

@@ -53,10 +53,7 @@ class RollingExtremes(SpheresPile):
     MU_R_LEVELS = (0.0, 1e-5, 1.0)
 
     def tables(self, p):
-        return coefficient_table(p["mu"], 3), min_rule_table(self.MU_R_LEVELS)
-
-    def ground_material(self):
-        return 2
+        return coefficient_table(p["mu"], self.n_materials), min_rule_table(self.MU_R_LEVELS)
 
 
 class Frictionless(SpheresPile):
@@ -68,10 +65,7 @@ class Frictionless(SpheresPile):
     n_materials = 2
 
     def tables(self, p):
-        return coefficient_table(0.0, 2), min_rule_table((0.0, p["mu_r"]))
-
-    def ground_material(self):
-        return 1
+        return coefficient_table(0.0, self.n_materials), min_rule_table((0.0, p["mu_r"]))
 
 
 class AllSticking(SpheresPile):

@@ -70,7 +70,8 @@ class SpheresPile(Scene):
         return coefficient_table(p["mu"]), coefficient_table(p["mu_r"])
 
     def ground_material(self):
-        return 0
+        """The ground is made of the last material (the only one of a one-material pile)."""
+        return self.n_materials - 1
 
     def stage(self, base, p, size, phi, rng):
         dep = base["deposit"]
