@@ -69,11 +69,9 @@ EXTENDED_KERNELS = (
     ("dd", "vaxpy", "(float64, float64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "max_step", "(int64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("mixed", "_symmetric_residual", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
-    ("ldl", "_solve_double", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1])"),
     ("blocks", "block_apply", "(int64, int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("ldl", "_solve", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "quad_pow", "(int64, int64, float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
-    ("ldl", "_numeric_double", "(int64, int64[::1], int64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1])"),
     ("contactspace", "_scaled_blocks", "(int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[:, :, ::1], float64[::1], float64[::1])"),
     ("blocks", "contact_factor_inverse", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1])"),
     ("contactspace", "_scatter_pairs", "(int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[:, :, ::1], float64[:, :, ::1])"),
@@ -92,9 +90,8 @@ EXTENDED_KERNELS = (
 )
 """(module of :mod:`rfverify.extended`, kernel, argument types) of the double-double kernels
 the k-digit path calls from Python, in the reverse order of their first use on the bundled
-Chute with the default install's factorisation engine (``ldl``; where scikit-sparse is
-installed the CHOLMOD engine leaves the :data:`LDL_ENGINE_KERNELS` unused).  A test keeps the
-list equal to what such a run compiles.  The child compiles them in the order of
+Chute (the same with either float64 factorisation engine: QDLDL and CHOLMOD are not numba
+code).  A test keeps the list equal to what such a run compiles.  The child compiles them in the order of
 :data:`CHILD_ORDER`; the kernels they call are compiled with them."""
 
 FLOAT64_KERNELS = tuple(("rfverify.solver.kernels", name, "(int64" + ", float64[::1]" * arrays + ")") for name, arrays in (
@@ -118,10 +115,6 @@ CHILD_ORDER = (tuple(k for k in EXTENDED_KERNELS if k[:2] == CHILD_FIRST) + FLOA
 the parent does not call in this run, so that they are in the cache before the parent exits
 (and ends the child); then the double-double kernels from the last used to the first, towards
 the parent, which compiles them from the first."""
-
-LDL_ENGINE_KERNELS = frozenset({("ldl", "_numeric_double"), ("ldl", "_solve_double")})
-"""The kernels of :data:`EXTENDED_KERNELS` only the compiled float64 LDLᵀ engine calls: a run
-whose contact-space factor is CHOLMOD's never compiles them, so the child leaves them out."""
 
 BACKGROUND_ENV = "RFVERIFY_BACKGROUND_COMPILE"
 """Set to ``0`` to never start the background compilation."""
@@ -180,12 +173,10 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def compile_extended_in_background(engine: str = "auto") -> bool:
+def compile_extended_in_background() -> bool:
     """Start the child that compiles :data:`EXTENDED_KERNELS` into numba's cache, when that
     cache is cold, the process may use two cores or more, and ``RFVERIFY_BACKGROUND_COMPILE``
-    is not ``0``; ``engine`` is the run's float64 factorisation engine ("auto", "ldl" or
-    "cholmod", see :func:`.extended.contactspace.resolve_engine`), which decides whether the
-    :data:`LDL_ENGINE_KERNELS` are compiled.  Returns whether a child was started (at most one
+    is not ``0``.  Returns whether a child was started (at most one
     per process); it is ended when this process exits.  Results never depend on it: a kernel
     the child has not finished is compiled here as before, and a compiled kernel is the same
     code either way."""
@@ -195,7 +186,7 @@ def compile_extended_in_background(engine: str = "auto") -> bool:
     if not extended_cache_is_cold():
         return False
     try:
-        _child = subprocess.Popen([sys.executable, "-m", "rfverify.compilation", engine], stdin=subprocess.DEVNULL,
+        _child = subprocess.Popen([sys.executable, "-m", "rfverify.compilation"], stdin=subprocess.DEVNULL,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
     except OSError:
         return False
@@ -216,36 +207,12 @@ def _end_child() -> None:
             _child.kill()
 
 
-def _uses_ldl_engine(engine: str) -> bool:
-    """Whether a run with this factorisation engine calls the :data:`LDL_ENGINE_KERNELS`: the
-    rule of :func:`.extended.contactspace.resolve_engine`, which takes CHOLMOD at every size
-    where it can be imported (the test of :func:`.extended.mixed.cholmod_available`, repeated
-    here since this layer is above that module).  Asked only when the child reaches the first
-    of them: importing scikit-sparse takes a third of a second."""
-    if engine == "ldl":
-        return True
-    if engine == "cholmod":
-        return False
-    try:
-        import sksparse.cholmod  # noqa: F401
-    except ImportError:
-        return True
-    return False
-
-
-def compile_extended(kernels=CHILD_ORDER, engine: str = "ldl") -> None:
+def compile_extended(kernels=CHILD_ORDER) -> None:
     """Compile ``kernels`` (with numba's cache on, so they are saved; one already there is only
-    loaded) in the given order, leaving out the :data:`LDL_ENGINE_KERNELS` when ``engine`` does
-    not factor with them."""
+    loaded) in the given order."""
     from numba.core import sigutils
 
-    uses_ldl = None
     for module, name, signature in kernels:
-        if (module, name) in LDL_ENGINE_KERNELS:
-            if uses_ldl is None:
-                uses_ldl = _uses_ldl_engine(engine)
-            if not uses_ldl:
-                continue
         # As a tuple of types, the form a call compiles and keys numba's cache index by: a
         # signature string would be saved under another key, and never found by a call.
         args, _ = sigutils.normalize_signature(signature)
@@ -257,4 +224,4 @@ if __name__ == "__main__":  # the background child: lowest priority, so the solv
         os.nice(19)
     except OSError:
         pass
-    compile_extended(engine=sys.argv[1] if len(sys.argv) > 1 else "auto")
+    compile_extended()

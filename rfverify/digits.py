@@ -288,7 +288,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     say = progress or (lambda msg: None)
     # On a cold numba cache the other core compiles the kernels, and the double solve runs its
     # cone operations in numpy (bit for bit the compiled ones) instead of compiling them first.
-    compile_extended_in_background(factor_engine)
+    compile_extended_in_background()
     cold = {"compiled_kernels": False} if float64_kernels_deferred() else {}
     t0, c0 = time.perf_counter(), compile_seconds()
     double = solve(problem, method=method, tol=tol, max_iter=max_iter, **{**DOUBLE_SETTINGS, **cold, **options})

@@ -1,7 +1,7 @@
 """The contact-space back end: S_r = W̃ + G (nk × nk), W̃ = H̃ M⁻¹ H̃ᵀ built once, factored in its
 scaled form I + F⁻¹W̃F⁻ᵀ (F_c F_cᵀ = G_c, :func:`.blocks.contact_factor_inverse`) — the
 default of the extended phase (:func:`.system.choose_backend`).  The factorisation is float64
-refined in double-double (the compiled LDLᵀ or CHOLMOD: :func:`resolve_engine`) or
+refined in double-double (QDLDL's LDLᵀ or CHOLMOD: :func:`resolve_engine`) or
 double-double throughout (:mod:`.ldl`)."""
 
 from __future__ import annotations
@@ -366,14 +366,16 @@ class ContactSpace(FactoredBackend):
 ENGINES = ("auto", "ldl", "cholmod")
 CHOLMOD_MIN_ROWS = 0
 """Smallest contact-space matrix (kept rows) ``engine="auto"`` factors with CHOLMOD when it is
-installed: 0, since no size was measured where the compiled LDLᵀ is faster (164 to 9675
-contacts; docs/DECISIONS.md "The 10-digit path at scale")."""
+installed: 0, since no size was measured where an LDLᵀ engine is faster (164 to 9675 contacts
+against the compiled LDLᵀ of the time, docs/DECISIONS.md "The 10-digit path at scale"; QDLDL,
+which replaced it, spent 20–22 s in float64 factorisations of the 10-digit path on a
+2269-contact random problem where CHOLMOD spent 1.0 s)."""
 
 
 def resolve_engine(engine: str, rows: int) -> str:
     """"cholmod" or "ldl": the float64 factorisation engine of the contact-space form.
     ``auto`` takes CHOLMOD (scikit-sparse, optional extra ``cholmod``) when it is importable and
-    the matrix has at least :data:`CHOLMOD_MIN_ROWS` rows, else the compiled up-looking LDLᵀ;
+    the matrix has at least :data:`CHOLMOD_MIN_ROWS` rows, else QDLDL's up-looking LDLᵀ;
     ``cholmod`` demands it (ImportError, saying what to install, when absent)."""
     if engine not in ENGINES:
         raise ValueError(f"engine {engine!r} is not one of {', '.join(ENGINES)}")

@@ -8,9 +8,10 @@ matrix is read, in CSC form.  Used for symmetric positive definite systems, wher
 without pivoting is backward stable.
 
 The fill-reducing ordering is scipy's multiple minimum degree on AᵀA + A (SuperLU's
-``MMD_AT_PLUS_A``), computed once from the pattern.  The same factorisation and solve in
-float64 (:func:`_numeric_double`, :func:`_solve_double`) serve the float64 factors refined in
-double-double (:mod:`.mixed`) and the multiple-precision tail (:mod:`.wide`).
+``MMD_AT_PLUS_A``), computed once from the pattern.  The float64 factors refined in
+double-double (:mod:`.mixed`) are those of :mod:`rfverify.solver.engines` (QDLDL, CHOLMOD);
+the multiple-precision tail takes the structure of L from :func:`_numeric`
+(:mod:`.wide_cholesky`).
 """
 
 from __future__ import annotations
@@ -233,48 +234,3 @@ class DDCholesky:
         oh[self.perm] = xh
         ol[self.perm] = xl
         return oh, ol
-
-
-@numba.njit(cache=True)
-def _numeric_double(n, Ap, Ai, Ax, Lp, parent, Li, Lx, D, y, flag, pattern, lnz):
-    """:func:`_numeric` in float64 (same algorithm, same symbolic factor; y zero (n,))."""
-    for k in range(n):
-        for p in range(Ap[k], Ap[k + 1]):
-            if Ai[p] <= k:
-                y[Ai[p]] += Ax[p]
-        top = _row_pattern(k, Ap, Ai, parent, flag, pattern, n)
-        d = y[k]
-        y[k] = 0.0
-        while top < n:
-            i = pattern[top]
-            top += 1
-            v = y[i]
-            y[i] = 0.0
-            p2 = Lp[i] + lnz[i]
-            for p in range(Lp[i], p2):
-                y[Li[p]] -= Lx[p] * v
-            li = v / D[i]
-            d -= li * v
-            Li[p2] = k
-            Lx[p2] = li
-            lnz[i] += 1
-        if not d > 0.0:
-            return k
-        D[k] = d
-    return -1
-
-
-@numba.njit(cache=True)
-def _solve_double(n, Lp, Li, Lx, D, x):
-    """In place: x ← (L D Lᵀ)⁻¹ x in float64 (x already permuted)."""
-    for j in range(n):
-        v = x[j]
-        for p in range(Lp[j], Lp[j + 1]):
-            x[Li[p]] -= Lx[p] * v
-    for j in range(n):
-        x[j] /= D[j]
-    for j in range(n - 1, -1, -1):
-        s = x[j]
-        for p in range(Lp[j], Lp[j + 1]):
-            s -= Lx[p] * x[Li[p]]
-        x[j] = s

@@ -2,10 +2,11 @@
 
 A float64 factor of a symmetric positive definite matrix given in double-double is the
 "oracle" of an iterative refinement with double-double residuals (as in SoPlex's iterative
-refinement, :func:`refine_in_double_double`): :class:`MixedCholesky` with the compiled
-up-looking LDLᵀ of :mod:`.ldl`, :class:`CholmodMixed` with CHOLMOD (scikit-sparse, the optional
-extra ``cholmod``).  Both fall back, for good, to the double-double :class:`.ldl.DDCholesky`
-where the float64 factorisation fails or refinement stalls.
+refinement, :func:`refine_in_double_double`): :class:`MixedCholesky` with QDLDL's LDLᵀ,
+:class:`CholmodMixed` with CHOLMOD (scikit-sparse, the optional extra ``cholmod``) — the
+float64 engines of :mod:`rfverify.solver.engines`, the ones the double solver's forms use.
+Both fall back, for good, to the double-double :class:`.ldl.DDCholesky` where the float64
+factorisation fails or refinement stalls.
 """
 
 from __future__ import annotations
@@ -17,9 +18,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import dd
-from ..solver.engines import CholmodEngine
-from .ldl import (DDCholesky, _numeric_double, _solve_double, _symbolic, _workspace, symmetric_pattern,
-                  upper_csc, upper_positions)
+from ..solver.engines import CholmodEngine, QDLDLEngine
+from .ldl import DDCholesky, _symbolic, symmetric_pattern, upper_csc, upper_positions
 
 
 @numba.njit(cache=True)
@@ -137,7 +137,10 @@ class _RefinedFloat64Factor:
 class MixedCholesky(_RefinedFloat64Factor, DDCholesky):
     """:class:`DDCholesky` whose factorisation is done in float64 and whose solves are refined
     to double-double accuracy (a double "oracle" with double-double residuals, as in SoPlex's
-    iterative refinement): 15–20× cheaper per factorisation.
+    iterative refinement).  The float64 factor is QDLDL's (:class:`.QDLDLEngine`: its own AMD
+    order on top of the stored one, symbolic analysis kept), of the upper triangle in the
+    stored order; a pivot that is not positive (QDLDL factors indefinite matrices too) counts
+    as a failed factorisation.
 
     Refinement converges when the double factor is accurate in the matrix's own scaling, which
     holds for the scaled contact-space matrix I + F⁻¹W̃F⁻ᵀ while W̃ is well conditioned on the
@@ -150,18 +153,20 @@ class MixedCholesky(_RefinedFloat64Factor, DDCholesky):
     def __init__(self, pattern: sp.spmatrix, perm: np.ndarray | None = None,
                  backward_target: float = 1e-29, max_steps: int = 12):
         super().__init__(pattern, perm)
-        self.Lx = np.zeros(self.nnz_L)
+        self._engine = QDLDLEngine()
         self._init_refinement(backward_target, max_steps)
 
     def _float64_factor(self) -> str:
-        bad = _numeric_double(self.n, self.Ap, self.Ai, self._A[0], self.Lp, self.parent, self.Li, self.Lx,
-                              self.Dh, np.zeros(self.n), *_workspace(self.n))
-        return f"non-positive pivot {bad} in the float64 factorisation" if bad >= 0 else ""
+        try:
+            self._engine.factor(sp.csc_matrix((self._A[0], self.Ai, self.Ap), shape=(self.n, self.n)))
+            pivots = self._engine.pivots()
+        except (RuntimeError, ValueError) as exc:
+            return f"a zero pivot in the float64 factorisation (QDLDL: {' '.join(str(exc).split())})"
+        bad = np.count_nonzero(~(pivots > 0))  # also the zero pivots qdldl's update does not report
+        return f"{bad} non-positive pivot(s) in the float64 factorisation" if bad else ""
 
     def _float64_solve(self, rh: np.ndarray) -> np.ndarray:
-        d = rh.copy()  # the correction's right-hand side to float64: its error is refined away
-        _solve_double(self.n, self.Lp, self.Li, self.Lx, self.Dh, d)
-        return d
+        return self._engine.solve(rh)  # rh in float64: its rounding error is refined away
 
     def _dd_factor(self) -> int:
         return DDCholesky.factor(self, *self._A)

@@ -18,7 +18,7 @@ import gmpy2
 import numpy as np
 import scipy.sparse as sp
 
-from .ldl import _numeric_double, _symbolic, _workspace
+from .ldl import _numeric, _symbolic, _workspace
 from .wide_data import dot, zeros
 
 
@@ -143,12 +143,14 @@ class SparseWideCholesky:
         self.pattern = pattern
         m = pattern.m
         Ap, Ai, Lp = pattern.upper_indptr, pattern.upper_indices, pattern.column_pointers
-        # the structure itself from a float64 factorisation of a strictly diagonally dominant
-        # matrix on the pattern (its kernel writes every structural entry; no pivot can fail)
+        # the structure itself from the double-double LDLᵀ of a strictly diagonally dominant
+        # matrix on the pattern (its kernel, compiled for the double-double phase already,
+        # writes every structural entry; no pivot can fail)
         dominant = np.where(Ai == np.repeat(np.arange(m), np.diff(Ap)), float(m + 1), 1.0)
-        Li, Lx = np.zeros(int(Lp[-1]), dtype=np.int64), np.zeros(int(Lp[-1]))
-        if _numeric_double(m, Ap, Ai, dominant, Lp, pattern.parent, Li, Lx, np.zeros(m), np.zeros(m),
-                           *_workspace(m)) >= 0:
+        nnz = int(Lp[-1])
+        Li = np.zeros(nnz, dtype=np.int64)
+        if _numeric(m, Ap, Ai, dominant, np.zeros(Ai.size), Lp, pattern.parent, Li, np.zeros(nnz), np.zeros(nnz),
+                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), *_workspace(m)) >= 0:
             raise AssertionError("a diagonally dominant matrix lost a pivot")
         self.Lp, self.Li = Lp, Li
         # row j of L: the columns k < j with an entry there, each with the offset of that entry
