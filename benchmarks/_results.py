@@ -5,11 +5,13 @@ the README drifted from the code).
 
 Use in a script::
 
-    from _results import recording
+    from _results import recorded
 
+    @recorded("bench_forms")
     def main(argv=None):
-        with recording("bench_scale", argv):
-            print(...)          # goes to stdout and to benchmarks/results/bench_scale.md
+        print(...)              # goes to stdout and to benchmarks/results/bench_forms.md
+
+or ``with recording("bench_scale", argv) as path:`` around the part of ``main`` to record.
 
 ``RFVERIFY_BENCH_RESULTS`` names another directory (the tests point it at a temporary one);
 set to the empty string, nothing is written.  The file is replaced atomically at the end of a
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import functools
 import io
 import os
 import platform
@@ -94,6 +97,18 @@ class _Tee(io.TextIOBase):
     def flush(self):
         for s in self.streams:
             s.flush()
+
+
+def recorded(name: str):
+    """Decorate a script's ``main(argv=None)``: everything it prints is also written, stamped, to
+    the results file of ``name`` (:func:`recording`); its return value is passed on."""
+    def decorate(main):
+        @functools.wraps(main)
+        def run(argv=None):
+            with recording(name, argv):
+                return main(argv)
+        return run
+    return decorate
 
 
 @contextlib.contextmanager

@@ -27,7 +27,7 @@ import rfverify
 from rfverify.measures import measures
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _results import recording  # noqa: E402  (stamped results file)
+from _results import recorded  # noqa: E402  (stamped results file)
 from bench_digits import scene_file, user_files  # noqa: E402  (the same cached scene files)
 
 SETS = [("SpheresPile", "SpheresPile", None), ("Chute", "Chute", None), ("PrimitiveSoup", "PrimitiveSoup", None),
@@ -55,7 +55,8 @@ def _value(text: str):
         return text
 
 
-def _main(argv=None):
+@recorded("bench_clarabel")
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--files", nargs="*", default=[])
     ap.add_argument("--tol", type=float, default=1e-8)
@@ -101,12 +102,6 @@ def _main(argv=None):
     for m, r in ratios.items():
         if r:
             print(f"\nmedian {m}/clarabel = {statistics.median(r):.2f}x over {len(r)} problems (both verified at {args.tol:g})")
-
-
-def main(argv=None):
-    """Run, printing the table and writing it to benchmarks/results/bench_clarabel.md (stamped)."""
-    with recording("bench_clarabel", argv):
-        return _main(argv)
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ from rfverify.problem import StoredSolution
 from rfverify.random_problems import random_local_problem
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _results import recording  # noqa: E402  (stamped results file)
+from _results import recorded  # noqa: E402  (stamped results file)
 
 # (label, scene, size, count, which problem of the trace): published-size scenes as the issue lists them
 SCENES = [
@@ -120,7 +120,8 @@ def run_one(label, problem, digits: int, workdir: Path):
             "verdict": out.certificate.verdict}
 
 
-def _main(argv=None):
+@recorded("bench_digits")
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--files", nargs="*", default=[])
     ap.add_argument("--digits", type=int, default=10)
@@ -148,12 +149,6 @@ def _main(argv=None):
         print(f"\n≥ 500 contacts: median total/double = {np.median([r['ratio'] for r in big]):.1f}×, "
               f"max recheck/total = {max(r['recheck_frac'] for r in big):.1%}")
     return 0 if all(r["certified"] for r in rows) else 1
-
-
-def main(argv=None):
-    """Run, printing the table and writing it to benchmarks/results/bench_digits.md (stamped)."""
-    with recording("bench_digits", argv):
-        return _main(argv)
 
 
 if __name__ == "__main__":

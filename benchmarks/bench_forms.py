@@ -30,7 +30,7 @@ from rfverify.solver import METHODS, solve
 from rfverify.solver.result import method_unavailable
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _results import recording  # noqa: E402  (stamped results file)
+from _results import recorded  # noqa: E402  (stamped results file)
 
 TOLS = [1e-8, 1e-9, 1e-10]
 
@@ -48,7 +48,8 @@ def problems(sizes, seeds, files=()):
                                   free_bodies=nb // 10))
 
 
-def _main(argv=None):
+@recorded("bench_forms")
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="50,200,500,1000", help="contact counts of generated problems")
     ap.add_argument("--seeds", type=int, default=2, help="problems per size")
@@ -96,12 +97,6 @@ def _main(argv=None):
                     ratios.append(mine[0][3] / peer[0][3])
             if ratios:
                 print(f"{method:10s} {statistics.median(ratios):6.2f}x  ({len(ratios)} problems)")
-
-
-def main(argv=None):
-    """Run, printing the table and writing it to benchmarks/results/bench_forms.md (stamped)."""
-    with recording("bench_forms", argv):
-        return _main(argv)
 
 
 if __name__ == "__main__":

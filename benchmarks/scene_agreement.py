@@ -27,11 +27,11 @@ import numpy as np
 import reference
 import rfverify
 from rfverify.bench.runner import BenchInputError, discover_problems
-from rfverify.check import criterion
+from rfverify.measures import measures
 from rfverify.scenes.analysis import contact_state_mix, free_velocity
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _results import recording  # noqa: E402  (stamped results file)
+from _results import recorded  # noqa: E402  (stamped results file)
 
 DEFAULT = Path(__file__).resolve().parent.parent / "reports" / "example" / "problems" / "scenes"
 
@@ -41,7 +41,8 @@ def digits(x, x_ref, scale) -> float:
     return math.inf if err == 0 else -math.log10(err / scale)
 
 
-def _main(argv=None):
+@recorded("scene_agreement")
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("paths", nargs="*", default=[str(DEFAULT)], help="problem files, directories of them or bundled:NAME")
     ap.add_argument("--tol", type=float, default=1e-10)
@@ -58,7 +59,7 @@ def _main(argv=None):
     for path in files:
         p = rfverify.load(path)
         runs = {m: rfverify.solve(p, method=m, tol=args.tol) for m in ("jqinv", "clarabel")}
-        crit = {m: criterion(p, r.v, r.u, r.r)["max"] for m, r in runs.items()}
+        crit = {m: measures(p, r.v, r.u, r.r, "longdouble").max for m, r in runs.items()}
         scale = max(float(np.abs(free_velocity(p)).max(initial=0.0)), np.finfo(float).tiny)
         d = {m: float("nan") for m in runs}
         mix = ""
@@ -78,12 +79,6 @@ def _main(argv=None):
               f"{d['clarabel']:5.1f} | {agree:5.1f} | {mix}", flush=True)
     print("\ncrit = recomputed criterion (≤ tol means verified solved); dig = correct digits of v against "
           "the reference, scaled by max(|v_ref|, |M⁻¹f|); agree = digits of agreement jqinv vs clarabel, same scale")
-
-
-def main(argv=None):
-    """Run, printing the table and writing it to benchmarks/results/scene_agreement.md (stamped)."""
-    with recording("scene_agreement", argv):
-        return _main(argv)
 
 
 if __name__ == "__main__":

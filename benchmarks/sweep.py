@@ -35,7 +35,7 @@ from rfverify.measures import measures
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).parent))
-from _results import recording  # noqa: E402  (stamped results file)
+from _results import recorded  # noqa: E402  (stamped results file)
 from bench_digits import scene_file  # noqa: E402  (the same cached scene files)
 
 
@@ -93,7 +93,8 @@ def problem_set(args):
         yield from generated_problems(Path(args.cache))
 
 
-def _main(argv=None):
+@recorded("sweep")
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--a", default="{}", help="options of run A (JSON)")
     ap.add_argument("--b", default="{}", help="options of run B (JSON)")
@@ -126,12 +127,6 @@ def _main(argv=None):
     for name, options, tot in zip("AB", runs, totals):
         print(f"{name} {json.dumps(options)}: {tot['verified']}/{count} verified, {tot['iterations']} iterations, "
               f"{tot['seconds']:.1f} s" + (f"; not verified: {', '.join(tot['lost'])}" if tot["lost"] else ""))
-
-
-def main(argv=None):
-    """Run, printing the table and writing it to benchmarks/results/sweep.md (stamped)."""
-    with recording("sweep", argv):
-        return _main(argv)
 
 
 if __name__ == "__main__":

@@ -47,6 +47,19 @@ def test_sweep_counts_every_committed_problem(capsys):
 
 
 @pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
+def test_scene_agreement_runs_and_judges_by_the_one_criterion(capsys):
+    """The script had imported a criterion removed in issue 13 and did not run at all; nothing
+    ran it.  On the bundled sphere (one contact) every column must be filled."""
+    agreement = _load("scene_agreement")
+    agreement.main(["bundled:sphere", "--max-contacts", "1"])
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("RFC3D_sphere"))
+    cells = [c.split() for c in row.split("|")]
+    assert cells[1][0] == "Solved" and float(cells[1][1]) <= 1e-10 and float(cells[1][2]) >= 8
+    assert cells[2][0] == "Solved" and float(cells[2][2]) >= 8 and float(cells[3][0]) >= 8
+    assert cells[4] == ["0/1/0/0"]  # the reference's state: one sticking contact
+
+
+@pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
 def test_bench_clarabel_parses_option_literals(capsys):
     bench = _load("bench_clarabel")
     assert bench._value("None") is None and bench._value("1e-6") == 1e-6 and bench._value("siconos") == "siconos"
@@ -74,7 +87,8 @@ def test_scripts_write_stamped_results(capsys, _results_elsewhere):
     # Every script stamps its results (the helper is the one place that knows how).
     for script in sorted(BENCH.glob("*.py")):
         if not script.name.startswith("_"):
-            assert "recording(" in script.read_text(encoding="utf-8"), script.name
+            text = script.read_text(encoding="utf-8")
+            assert "@recorded(" in text or "recording(" in text, script.name
     # A run that fails writes nothing.
     (_results_elsewhere / "bench_forms.md").unlink()
     with pytest.raises(SystemExit):

@@ -31,7 +31,7 @@ import rfverify
 from rfverify.measures import measures
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from _results import recording  # noqa: E402  (stamped results file, benchmarks/_results.py)
+from _results import recorded  # noqa: E402  (stamped results file, benchmarks/_results.py)
 
 
 BUNDLED = "chute,cube,sphere"
@@ -76,7 +76,8 @@ def _dig(x) -> str:
     return "–" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.1f}"
 
 
-def _main(argv=None):
+@recorded("peers/siconos/compare")
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--files", nargs="*", default=[])
     ap.add_argument("--tol", type=float, default=1e-10)
@@ -149,12 +150,6 @@ def _main(argv=None):
               f"range {_dig(min(dig) if dig else None)}–{_dig(max(dig) if dig else None)}; "
               f"time / {base}'s on the {len(s['ratio'])} problems both verified: median "
               f"{statistics.median(s['ratio']) if s['ratio'] else float('nan'):.2f}")
-
-
-def main(argv=None):
-    """Run, printing the table and writing it to benchmarks/results/peers/siconos/compare.md (stamped)."""
-    with recording("peers/siconos/compare", argv):
-        return _main(argv)
 
 
 if __name__ == "__main__":
