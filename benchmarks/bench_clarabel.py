@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -28,7 +27,7 @@ from rfverify.measures import measures
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import recorded  # noqa: E402  (stamped results file)
-from bench_digits import scene_file, user_files  # noqa: E402  (the same cached scene files)
+from bench_digits import add_problem_options, scene_file, user_files  # noqa: E402  (the same cached scene files)
 
 SETS = [("SpheresPile", "SpheresPile", None), ("Chute", "Chute", None), ("PrimitiveSoup", "PrimitiveSoup", None),
         ("Chute 888", "Chute", 700), ("Lattice 779", "Lattice", 160)]
@@ -58,12 +57,11 @@ def _value(text: str):
 @recorded("bench_clarabel")
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--files", nargs="*", default=[])
+    add_problem_options(ap)
     ap.add_argument("--tol", type=float, default=1e-8)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--min-contacts", type=int, default=750)
     ap.add_argument("--methods", default="jqinv,clarabel")
-    ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "rfverify-bench-digits"))
     ap.add_argument("--options", default="",
                     help="solver options for the Algorithm 1 methods, e.g. sigma_rule=siconos,extended_below=None")
     args = ap.parse_args(argv)

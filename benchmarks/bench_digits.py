@@ -46,6 +46,18 @@ SCENES = [
 ]
 
 
+SCENE_CACHE = Path(tempfile.gettempdir()) / "rfverify-bench-digits"
+"""Where generated scene problems are kept between runs (this script, bench_clarabel.py and
+peers/siconos/compare.py share the folder)."""
+
+
+def add_problem_options(ap: argparse.ArgumentParser) -> None:
+    """The options every script on the cached scenes takes: ``--files`` (your own problem files,
+    run instead of the default set) and ``--cache`` (the folder of the generated scenes)."""
+    ap.add_argument("--files", nargs="*", default=[], help="problem files to run instead of the default set")
+    ap.add_argument("--cache", default=str(SCENE_CACHE), help=f"folder of the generated scenes (default {SCENE_CACHE})")
+
+
 def scene_file(cache: Path, scene: str, size, count: int, index: int) -> Path:
     from rfverify.scenes import generate, save_collection
 
@@ -123,9 +135,8 @@ def run_one(label, problem, digits: int, workdir: Path):
 @recorded("bench_digits")
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--files", nargs="*", default=[])
+    add_problem_options(ap)
     ap.add_argument("--digits", type=int, default=10)
-    ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "rfverify-bench-digits"))
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
     rows = []

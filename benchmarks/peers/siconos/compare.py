@@ -23,7 +23,6 @@ import argparse
 import math
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -32,6 +31,7 @@ from rfverify.measures import measures
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from _results import recorded  # noqa: E402  (stamped results file, benchmarks/_results.py)
+from bench_digits import add_problem_options, scene_file, user_files  # noqa: E402  (the same cached scenes)
 
 
 BUNDLED = "chute,cube,sphere"
@@ -44,24 +44,9 @@ HARD = Path(__file__).resolve().parents[3] / "tests" / "data" / "hard" / "Chute-
 """A committed Chute on which GRFC3D_IPM crashes (zero pivot in its LDLᵀ)."""
 
 
-def scene_file(cache: Path, scene: str, size, count: int, index: int) -> Path:
-    """A generated scene problem, cached as benchmarks/bench_digits.py caches it (same folders)."""
-    from rfverify.scenes import generate, save_collection
-
-    folder = cache / f"{scene}-{size or 'default'}-{count}"
-    files = sorted(folder.glob("*.hdf5")) if folder.is_dir() else []
-    if not files:
-        folder.mkdir(parents=True, exist_ok=True)
-        problems = generate(scene, count=count, seed=0, **({} if size is None else {"size": size}))
-        save_collection(problems, folder)
-        files = sorted(folder.glob("*.hdf5"))
-    return files[min(index, len(files) - 1)]
-
-
 def problem_set(args):
     if args.files:
-        for f in args.files:
-            yield Path(f).stem, rfverify.load(f)
+        yield from user_files(args.files)
         return
     for name in BUNDLED.split(","):
         yield f"bundled:{name}", rfverify.load(f"bundled:{name}")
@@ -79,12 +64,11 @@ def _dig(x) -> str:
 @recorded("peers/siconos/compare")
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--files", nargs="*", default=[])
+    add_problem_options(ap)
     ap.add_argument("--tol", type=float, default=1e-10)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--methods", default="jqinv,clarabel,siconos")
     ap.add_argument("--digits", type=int, default=10, help="digits certify is asked to prove (default: 10)")
-    ap.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "rfverify-bench-digits"))
     args = ap.parse_args(argv)
     methods = args.methods.split(",")
     from rfverify.solver import kernels
