@@ -137,10 +137,10 @@ class ContactSpace(FactoredBackend):
 
     @property
     def name(self) -> str:
-        how = {"mixed": "float64 factor refined in double-double",
-               "double-double": "double-double factor"}[getattr(self.chol, "precision", "double-double")]
-        if isinstance(self.chol, CholmodMixed) and self.chol.precision == "mixed":
-            how = "float64 CHOLMOD factor refined in double-double"
+        how = "double-double factor"
+        if getattr(self.chol, "precision", "double-double") == "mixed":
+            engine = "CHOLMOD" if isinstance(self.chol, CholmodMixed) else "QDLDL"
+            how = f"float64 {engine} factor refined in double-double"
         reason = getattr(self.chol, "fallback_reason", "")
         form = "I + F⁻¹W̃F⁻ᵀ, W̃ = P W P of the local file" if self.data.local else "I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ"
         return f"contact-space, scaled ({form}), {how}" + (f" ({reason})" if reason else "")
