@@ -219,6 +219,26 @@ def test_mixed_ldl_falls_back_to_double_double_where_float64_cannot_see_the_matr
     assert np.allclose(np.asarray(x[1::2], dtype=float), x1, rtol=1e-12)
 
 
+def test_mixed_ldl_is_not_fooled_by_a_zero_pivot_qdldl_does_not_report():
+    """qdldl's update, unlike its first factorisation, returns normally on a zero pivot and
+    leaves a factor that is not the new matrix's.  MixedCholesky does not read the pivots
+    (that copies L); refinement against the double-double matrix must catch it: the answer is
+    the new matrix's, from the double-double fallback."""
+    n = 40
+    pattern = sp.identity(n, format="csc") + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1))
+    mixed = MixedCholesky(pattern)
+    good = sp.csc_matrix(4 * np.eye(n) + np.eye(n, k=1) + np.eye(n, k=-1))
+    assert mixed.factor(*_upper_values(mixed, good)) == -1 and mixed.precision == "mixed"
+    hi, lo = singular_in_float64(mixed, n)
+    assert mixed.factor(hi, lo) == -1  # qdldl 0.1.9: no error, the update's zero pivot goes unreported
+    b = np.arange(1.0, n + 1)
+    xh, xl = mixed.solve(b, np.zeros(n))
+    reason = mixed.fallback_reason  # "refinement stalled", or "zero pivot" from a qdldl that reports it
+    assert mixed.precision == "double-double" and ("refinement stalled" in reason or "zero pivot" in reason)
+    x1 = (b[1::2] - b[0::2]) * 2.0 ** 60  # the exact answer of the new matrix (see above)
+    assert np.allclose(np.asarray(dd.to_longdouble(xh, xl)[1::2], dtype=float), x1, rtol=1e-12)
+
+
 def test_mixed_ldl_falls_back_when_refinement_stalls():
     """A condition number of 1e17 in a random basis (no scaling removes it): the float64
     factor exists (seed chosen so that no pivot fails) but refinement with it cannot converge;
