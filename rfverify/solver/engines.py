@@ -6,13 +6,15 @@ with the factor.  It knows nothing of contacts, cones or the KKT system.  Three 
 
 ``QDLDLEngine``    LDLᵀ without pivoting of a symmetric quasi-definite matrix given as its upper
                    triangle (QDLDL: AMD ordering, symbolic analysis kept from one factorisation
-                   to the next); the forms (11), (14), (15), (16)
+                   to the next); the forms (11), (14), (15), (16), and the float64 oracle
+                   the double-double phase refines by default
+                   (:class:`rfverify.extended.mixed.MixedCholesky`)
 ``SuperLUEngine``  LU with partial pivoting of a general square matrix (SuperLU, a new
                    factorisation each time); the unsymmetric form (6)
 ``CholmodEngine``  supernodal Cholesky of a symmetric positive definite matrix given as its
                    lower triangle (CHOLMOD through scikit-sparse, the optional extra
                    ``cholmod``; AMD ordering, symbolic analysis once); the ``schur`` form, and
-                   the float64 oracle of the double-double phase's contact-space solve
+                   the double-double phase's oracle where it is installed
                    (:class:`rfverify.extended.mixed.CholmodMixed`)
 
 Every factorisation after the first must have the first one's sparsity pattern (same
