@@ -35,6 +35,23 @@ def _lams(x0h, x0l, x1h, x1l, x2h, x2l):
     return l1h, l1l, l2h, l2l
 
 
+@dd.jit
+def _root_det(l1h, l1l, l2h, l2l):
+    """√(λ1λ2) as √λ1·√λ2: no cancellation when λ2 ≪ λ1."""
+    ah, al = dd.sqrt(l1h, l1l)
+    bh, bl = dd.sqrt(l2h, l2l)
+    return dd.mul(ah, al, bh, bl)
+
+
+@dd.jit
+def _div3(x0h, x0l, x1h, x1l, x2h, x2l, dh, dl):
+    """(x0, x1, x2)/d, each component by one double-double division."""
+    y0h, y0l = dd.div(x0h, x0l, dh, dl)
+    y1h, y1l = dd.div(x1h, x1l, dh, dl)
+    y2h, y2l = dd.div(x2h, x2l, dh, dl)
+    return y0h, y0l, y1h, y1l, y2h, y2l
+
+
 @njit
 def min_lambda2(n3, xh, xl):
     """(smallest λ2 over all cones as float, index of that cone)."""
@@ -67,35 +84,26 @@ def nt_scaling(n3, zh, zl, sh, sl, ph, pl, pih, pil, lh, ll, spec):
         l1s, l1sl, l2s, l2sl = _lams(sh[i], sl[i], sh[i + 1], sl[i + 1], sh[i + 2], sl[i + 2])
         if not (l2z > 0.0 and l2s > 0.0):
             return c
-        a, al = dd.sqrt(l1z, l1zl)
-        b, bl = dd.sqrt(l2z, l2zl)
-        rz, rzl = dd.mul(a, al, b, bl)
-        a, al = dd.sqrt(l1s, l1sl)
-        b, bl = dd.sqrt(l2s, l2sl)
-        rs, rsl = dd.mul(a, al, b, bl)
-        zb0, zb0l = dd.div(zh[i], zl[i], rz, rzl)
-        zb1, zb1l = dd.div(zh[i + 1], zl[i + 1], rz, rzl)
-        zb2, zb2l = dd.div(zh[i + 2], zl[i + 2], rz, rzl)
-        sb0, sb0l = dd.div(sh[i], sl[i], rs, rsl)
-        sb1, sb1l = dd.div(sh[i + 1], sl[i + 1], rs, rsl)
-        sb2, sb2l = dd.div(sh[i + 2], sl[i + 2], rs, rsl)
+        rz, rzl = _root_det(l1z, l1zl, l2z, l2zl)
+        rs, rsl = _root_det(l1s, l1sl, l2s, l2sl)
+        zb0, zb0l, zb1, zb1l, zb2, zb2l = _div3(zh[i], zl[i], zh[i + 1], zl[i + 1],
+                                                zh[i + 2], zl[i + 2], rz, rzl)
+        sb0, sb0l, sb1, sb1l, sb2, sb2l = _div3(sh[i], sl[i], sh[i + 1], sl[i + 1],
+                                                sh[i + 2], sl[i + 2], rs, rsl)
         dot, dotl = dd.mul(zb0, zb0l, sb0, sb0l)
         dot, dotl = dd.fma_acc(dot, dotl, zb1, zb1l, sb1, sb1l)
         dot, dotl = dd.fma_acc(dot, dotl, zb2, zb2l, sb2, sb2l)
         t, tl = dd.add_d(dot, dotl, 1.0)
         g, gl = dd.sqrt(t * 0.5, tl * 0.5)
         g2, g2l = g * 2.0, gl * 2.0
-        t, tl = dd.add(sb0, sb0l, zb0, zb0l)
-        w0, w0l = dd.div(t, tl, g2, g2l)
-        t, tl = dd.sub(sb1, sb1l, zb1, zb1l)
-        w1, w1l = dd.div(t, tl, g2, g2l)
-        t, tl = dd.sub(sb2, sb2l, zb2, zb2l)
-        w2, w2l = dd.div(t, tl, g2, g2l)
+        # w = (s̄ + J z̄)/(2γ), then v = (w0 + 1, w̄)/√(2(w0 + 1)), whose det is 1
+        t0, t0l = dd.add(sb0, sb0l, zb0, zb0l)
+        t1, t1l = dd.sub(sb1, sb1l, zb1, zb1l)
+        t2, t2l = dd.sub(sb2, sb2l, zb2, zb2l)
+        w0, w0l, w1, w1l, w2, w2l = _div3(t0, t0l, t1, t1l, t2, t2l, g2, g2l)
         w0p, w0pl = dd.add_d(w0, w0l, 1.0)
         cc, ccl = dd.sqrt(2.0 * w0p, 2.0 * w0pl)
-        v0, v0l = dd.div(w0p, w0pl, cc, ccl)
-        v1, v1l = dd.div(w1, w1l, cc, ccl)
-        v2, v2l = dd.div(w2, w2l, cc, ccl)
+        v0, v0l, v1, v1l, v2, v2l = _div3(w0p, w0pl, w1, w1l, w2, w2l, cc, ccl)
         t, tl = dd.div(rs, rsl, rz, rzl)
         q, ql = dd.sqrt(t, tl)
         q, ql = dd.sqrt(q, ql)
