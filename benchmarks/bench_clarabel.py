@@ -27,7 +27,7 @@ from rfverify.measures import measures
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import recorded  # noqa: E402  (stamped results file)
-from bench_digits import add_problem_options, scene_file, user_files  # noqa: E402  (the same cached scene files)
+from bench_digits import add_comparison_options, add_problem_options, scene_file, user_files  # noqa: E402  (the same cached scene files)
 
 SETS = [("SpheresPile", "SpheresPile", None), ("Chute", "Chute", None), ("PrimitiveSoup", "PrimitiveSoup", None),
         ("Chute 888", "Chute", 700), ("Lattice 779", "Lattice", 160)]
@@ -58,10 +58,8 @@ def _value(text: str):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_problem_options(ap)
-    ap.add_argument("--tol", type=float, default=1e-8)
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--min-contacts", type=int, default=750)
-    ap.add_argument("--methods", default="jqinv,clarabel")
+    add_comparison_options(ap, tol=1e-8, methods="jqinv,clarabel")
+    ap.add_argument("--min-contacts", type=int, default=750, help="skip problems with fewer contacts (default 750)")
     ap.add_argument("--options", default="",
                     help="solver options for the Algorithm 1 methods, e.g. sigma_rule=siconos,extended_below=None")
     args = ap.parse_args(argv)

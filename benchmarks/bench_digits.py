@@ -58,6 +58,15 @@ def add_problem_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--cache", default=str(SCENE_CACHE), help=f"folder of the generated scenes (default {SCENE_CACHE})")
 
 
+def add_comparison_options(ap: argparse.ArgumentParser, *, tol: float, methods: str) -> None:
+    """The options of a timed comparison of methods on those problems: ``--tol`` (each method's
+    stopping tolerance), ``--repeat`` (alternating timed solves, median kept) and ``--methods``
+    (comma-separated ``rfverify.solve`` methods, or a peer's name)."""
+    ap.add_argument("--tol", type=float, default=tol, help=f"stopping tolerance of every method (default {tol:g})")
+    ap.add_argument("--repeat", type=int, default=3, help="timed solves per method, alternating; the median is kept (default 3)")
+    ap.add_argument("--methods", default=methods, help=f"comma-separated methods (default {methods})")
+
+
 def scene_file(cache: Path, scene: str, size, count: int, index: int) -> Path:
     from rfverify.scenes import generate, save_collection
 
