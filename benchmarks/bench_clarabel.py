@@ -16,7 +16,6 @@ Not a test: compare ratios measured in one run on this shared machine.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import time
@@ -27,7 +26,7 @@ from rfverify.measures import measures
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import recorded  # noqa: E402  (stamped results file)
-from bench_digits import add_comparison_options, add_problem_options, scene_file, user_files  # noqa: E402  (the same cached scene files)
+from bench_digits import comparison_parser, scene_file, user_files  # noqa: E402  (the same cached scene files)
 
 SETS = [("SpheresPile", "SpheresPile", None), ("Chute", "Chute", None), ("PrimitiveSoup", "PrimitiveSoup", None),
         ("Chute 888", "Chute", 700), ("Lattice 779", "Lattice", 160)]
@@ -56,9 +55,7 @@ def _value(text: str):
 
 @recorded("bench_clarabel")
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    add_problem_options(ap)
-    add_comparison_options(ap, tol=1e-8, methods="jqinv,clarabel")
+    ap = comparison_parser(__doc__, tol=1e-8, methods="jqinv,clarabel")
     ap.add_argument("--min-contacts", type=int, default=750, help="skip problems with fewer contacts (default 750)")
     ap.add_argument("--options", default="",
                     help="solver options for the Algorithm 1 methods, e.g. sigma_rule=siconos,extended_below=None")

@@ -51,20 +51,25 @@ SCENE_CACHE = Path(tempfile.gettempdir()) / "rfverify-bench-digits"
 peers/siconos/compare.py share the folder)."""
 
 
-def add_problem_options(ap: argparse.ArgumentParser) -> None:
-    """The options every script on the cached scenes takes: ``--files`` (your own problem files,
-    run instead of the default set) and ``--cache`` (the folder of the generated scenes)."""
+def problem_parser(doc: str) -> argparse.ArgumentParser:
+    """The parser of a script on the cached scenes, described by the first paragraph of ``doc``,
+    with the options every such script takes: ``--files`` (your own problem files, run instead
+    of the default set) and ``--cache`` (the folder of the generated scenes)."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("--files", nargs="*", default=[], help="problem files to run instead of the default set")
     ap.add_argument("--cache", default=str(SCENE_CACHE), help=f"folder of the generated scenes (default {SCENE_CACHE})")
+    return ap
 
 
-def add_comparison_options(ap: argparse.ArgumentParser, *, tol: float, methods: str) -> None:
-    """The options of a timed comparison of methods on those problems: ``--tol`` (each method's
-    stopping tolerance), ``--repeat`` (alternating timed solves, median kept) and ``--methods``
-    (comma-separated ``rfverify.solve`` methods, or a peer's name)."""
+def comparison_parser(doc: str, *, tol: float, methods: str) -> argparse.ArgumentParser:
+    """:func:`problem_parser` plus the options of a timed comparison of methods: ``--tol``
+    (each method's stopping tolerance), ``--repeat`` (alternating timed solves, median kept)
+    and ``--methods`` (comma-separated ``rfverify.solve`` methods, or a peer's name)."""
+    ap = problem_parser(doc)
     ap.add_argument("--tol", type=float, default=tol, help=f"stopping tolerance of every method (default {tol:g})")
     ap.add_argument("--repeat", type=int, default=3, help="timed solves per method, alternating; the median is kept (default 3)")
     ap.add_argument("--methods", default=methods, help=f"comma-separated methods (default {methods})")
+    return ap
 
 
 def scene_file(cache: Path, scene: str, size, count: int, index: int) -> Path:
@@ -143,10 +148,9 @@ def run_one(label, problem, digits: int, workdir: Path):
 
 @recorded("bench_digits")
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    add_problem_options(ap)
-    ap.add_argument("--digits", type=int, default=10)
-    ap.add_argument("--quick", action="store_true")
+    ap = problem_parser(__doc__)
+    ap.add_argument("--digits", type=int, default=10, help="digits to prove (default 10)")
+    ap.add_argument("--quick", action="store_true", help="the small problems only")
     args = ap.parse_args(argv)
     rows = []
     head = (f"{'problem':<22} {'n':>5} {'m':>5} {'double':>7} {'ext':>7} {'mp':>6} {'proof':>6} {'total':>7} "

@@ -19,7 +19,6 @@ date and machine (benchmarks/_results.py).
 
 from __future__ import annotations
 
-import argparse
 import math
 import statistics
 import sys
@@ -31,7 +30,7 @@ from rfverify.measures import measures
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from _results import recorded  # noqa: E402  (stamped results file, benchmarks/_results.py)
-from bench_digits import add_comparison_options, add_problem_options, scene_file, user_files  # noqa: E402  (the same cached scenes)
+from bench_digits import comparison_parser, scene_file, user_files  # noqa: E402  (the same cached scenes)
 
 
 BUNDLED = "chute,cube,sphere"
@@ -63,9 +62,7 @@ def _dig(x) -> str:
 
 @recorded("peers/siconos/compare")
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    add_problem_options(ap)
-    add_comparison_options(ap, tol=1e-10, methods="jqinv,clarabel,siconos")
+    ap = comparison_parser(__doc__, tol=1e-10, methods="jqinv,clarabel,siconos")
     ap.add_argument("--digits", type=int, default=10, help="digits certify is asked to prove (default: 10)")
     args = ap.parse_args(argv)
     methods = args.methods.split(",")
