@@ -80,6 +80,7 @@ def run_one(kind: str, size: int, seed: int, method: str, tol: float, time_limit
     import rfverify
     from rfverify.measures import measures
     from rfverify.solver import kernels
+    from rfverify.solver.engines import cholmod_importable
 
     t0 = time.perf_counter()
     own = problem is None
@@ -87,7 +88,7 @@ def run_one(kind: str, size: int, seed: int, method: str, tol: float, time_limit
         problem = make_problem(kind, size, seed)
     t_gen = time.perf_counter() - t0
     kernels.warm_up()
-    if method == "schur":
+    if method == "schur" and cholmod_importable():
         import sksparse.cholmod  # noqa: F401  (its library load is not the solve, as Clarabel's is not)
     before = _maxrss_bytes()
     t0 = time.perf_counter()
@@ -212,6 +213,8 @@ def main(argv=None) -> int:
 
 
 def _run(args, kinds, path) -> int:
+    from rfverify.solver.engines import schur_engine_name
+
     sizes = [int(s) for s in args.sizes.split(",") if s] + (list(LARGE_SIZES) if args.large else [])
     methods, skipped = available_methods([m for m in args.methods.split(",") if m])
     for m, why in skipped.items():
@@ -221,7 +224,7 @@ def _run(args, kinds, path) -> int:
     except OSError:
         load = "unknown"
     print(f"tol {args.tol:g}, seed {args.seed}, OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}, "
-          f"load average {load} at the start; "
+          f"load average {load} at the start; schur factored by {schur_engine_name()}; "
           + ("every solve in this process, warm (no memory)" if args.no_memory else
              "each solve in its own child process, one after the other"), flush=True)
     rows = []

@@ -1,6 +1,6 @@
-"""Issue 27 at scale: the ``schur`` method (CHOLMOD, optional extra ``cholmod``) as a method
-name, ``auto``'s choice of it, the error without the extra; and the GranularBed scene, the
-large structured problems built without any solve (small sizes here)."""
+"""Issue 27 at scale: the ``schur`` method (CHOLMOD with the optional extra ``cholmod``, QDLDL
+without it) as a method name, ``auto``'s choice of it with either engine; and the GranularBed
+scene, the large structured problems built without any solve (small sizes here)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ import pytest
 
 import rfverify
 from rfverify.cli import main
-from rfverify.errors import BenchInputError, InvalidArgumentError
 from rfverify.scenes import SCENES, SceneError, generate
 from rfverify.solver import auto_sequence
 from rfverify.solver.result import (ALGORITHM1_METHODS, AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL,
@@ -25,14 +24,19 @@ try:
 except ImportError:
     HAVE_CHOLMOD = False
 
-needs_cholmod = pytest.mark.skipif(not HAVE_CHOLMOD, reason="scikit-sparse (extra 'cholmod') not installed")
 
-
-@pytest.fixture
-def without_cholmod(monkeypatch):
-    """scikit-sparse made unimportable for the test (a None entry in sys.modules stops an import)."""
+@pytest.fixture(params=["cholmod", "qdldl"])
+def schur_engine(request, monkeypatch):
+    """Each test twice: with scikit-sparse as installed (skipped where it is not) and with it made
+    unimportable (a None entry in sys.modules stops an import), as on the default install.
+    The value is the engine name the solver log should give."""
+    if request.param == "cholmod":
+        if not HAVE_CHOLMOD:
+            pytest.skip("scikit-sparse (extra 'cholmod') not installed")
+        return "CHOLMOD"
     monkeypatch.setitem(sys.modules, "sksparse", None)
     monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
+    return "QDLDL"
 
 
 # ---------------------------------------------------------------- schur, the method
@@ -41,35 +45,35 @@ def test_schur_is_declared_once_and_left_out_of_the_bench_defaults():
     from rfverify.cli.app import build_parser
 
     assert "schur" in ALGORITHM1_METHODS and "schur" in METHODS
-    assert "schur" not in DEFAULT_METHODS  # form (16)'s iterates by another engine, optional
+    assert "schur" not in DEFAULT_METHODS  # form (16)'s iterates by another engine
     sol = build_parser()._subparsers._group_actions[0].choices["solve"]
     method = next(a for a in sol._actions if a.dest == "method")
-    assert "schur" in method.choices and "rfverify[cholmod]" in method.help
+    assert "schur" in method.choices and "rfverify[cholmod]" in method.help and "QDLDL" in method.help
     assert str(AUTO_SCHUR_MIN_CONTACTS) in method.help and f"{AUTO_SCHUR_MIN_FILL:g}" in method.help
     assert "schur" in rfverify.solve.__doc__
 
 
 def _never():
-    raise AssertionError("the fill is computed only when size and CHOLMOD allow schur")
+    raise AssertionError("the fill is computed only when the problem is large enough for schur")
 
 
-def test_auto_sequence_starts_with_schur_only_when_available_large_and_filling():
+def test_auto_sequence_starts_with_schur_only_when_large_and_filling():
     n, fill = AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL
-    assert auto_sequence(n - 1, _never, True) == AUTO_SEQUENCE and AUTO_SEQUENCE[0] == "jqinv"
-    assert auto_sequence(10 ** 6, _never, False) == AUTO_SEQUENCE
-    assert auto_sequence(n, fill, True) == AUTO_SEQUENCE_LARGE and AUTO_SEQUENCE_LARGE[0] == "schur"
-    assert auto_sequence(n, lambda: fill, True) == AUTO_SEQUENCE_LARGE
-    assert auto_sequence(10 ** 6, 0.99 * fill, True) == AUTO_SEQUENCE  # a thin chute flow: jqinv wins
-    assert auto_sequence(n, fill, None) == (AUTO_SEQUENCE_LARGE if HAVE_CHOLMOD else AUTO_SEQUENCE)
+    assert auto_sequence(n - 1, _never) == AUTO_SEQUENCE and AUTO_SEQUENCE[0] == "jqinv"
+    assert auto_sequence(n, fill) == AUTO_SEQUENCE_LARGE and AUTO_SEQUENCE_LARGE[0] == "schur"
+    assert auto_sequence(n, lambda: fill) == AUTO_SEQUENCE_LARGE
+    assert auto_sequence(10 ** 6, 0.99 * fill) == AUTO_SEQUENCE  # a thin chute flow: jqinv wins
+    assert auto_sequence(10 ** 6, None) == AUTO_SEQUENCE
 
 
-def test_auto_sequence_without_cholmod_is_the_default_one(without_cholmod):
-    assert method_unavailable("schur") is not None and method_unavailable("jqinv") is None
-    assert auto_sequence(10 ** 6, _never) == AUTO_SEQUENCE
+def test_schur_runs_with_either_engine(schur_engine):
+    assert method_unavailable("schur") is None and method_unavailable("jqinv") is None
+    from rfverify.solver.engines import schur_engine_name
+
+    assert schur_engine_name() == schur_engine
 
 
-@needs_cholmod
-def test_body_fill_counts_the_factor_of_the_body_graph():
+def test_body_fill_counts_the_factor_of_the_body_graph(schur_engine):
     from rfverify.solver import body_fill
 
     # Two spheres side by side on the ground: 3 contacts, body graph = one edge, L has column
@@ -82,43 +86,18 @@ def test_body_fill_counts_the_factor_of_the_body_graph():
     assert cube >= AUTO_SCHUR_MIN_FILL > layer
 
 
-def test_auto_runs_what_auto_sequence_says(monkeypatch):
+def test_auto_runs_what_auto_sequence_says(monkeypatch, schur_engine, capsys):
     import rfverify.solver as solver_pkg
 
     monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_CONTACTS", 1)  # the chute counts as large
     monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_FILL", 0.0)
     p = rfverify.load("bundled:chute")
-    res = rfverify.solve(p, tol=1e-8)
-    assert res.success and res.extras["attempts"][0]["method"] == ("schur" if HAVE_CHOLMOD else "jqinv")
+    res = rfverify.solve(p, tol=1e-8, verbose=True)
+    assert res.success and res.extras["attempts"][0]["method"] == "schur" == res.method
+    assert f"form schur (factored by {schur_engine})" in capsys.readouterr().out
 
 
-def test_auto_on_a_large_problem_without_cholmod_runs_jqinv(monkeypatch, without_cholmod):
-    import rfverify.solver as solver_pkg
-
-    monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_CONTACTS", 1)
-    monkeypatch.setattr(solver_pkg, "AUTO_SCHUR_MIN_FILL", 0.0)
-    res = rfverify.solve(rfverify.load("bundled:chute"), tol=1e-8)
-    assert res.success and res.method == "jqinv"
-
-
-def test_schur_without_cholmod_names_the_fix(without_cholmod, capsys, tmp_path):
-    why = method_unavailable("schur")
-    assert "sksparse.cholmod" in why and "pip install 'rfverify[cholmod]'" in why
-    with pytest.raises(InvalidArgumentError, match=r"rfverify\[cholmod\].*libsuitesparse-dev"):
-        rfverify.solve(rfverify.load("bundled:chute"), method="schur")
-    assert main(["solve", "bundled:chute", "--method", "schur"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "rfverify solve: error: method:" in err
-    assert "pip install 'rfverify[cholmod]'" in err and "libsuitesparse-dev" in err
-    from rfverify.bench.runner import run_bench
-
-    with pytest.raises(BenchInputError, match="rfverify\\[cholmod\\]"):
-        run_bench(["bundled:chute"], tmp_path / "run", methods=("jqinv", "schur"), quiet=True)
-    assert not (tmp_path / "run" / "runs").exists()  # refused before any task
-
-
-@needs_cholmod
-def test_schur_through_the_cli_and_the_api(capsys):
+def test_schur_through_the_cli_and_the_api(capsys, schur_engine):
     assert main(["solve", "bundled:chute", "--method", "schur", "--tol", "1e-9", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["method"] == "schur" and out["status"] == "Solved" and out["criterion"] <= 1e-9
@@ -126,6 +105,7 @@ def test_schur_through_the_cli_and_the_api(capsys):
     api = rfverify.solve(p, method="schur", tol=1e-9)
     ref = rfverify.solve(p, method="reduced_factored", tol=1e-9)
     assert api.method == "schur" and api.success and api.nit == ref.nit == out["iterations"]
+    np.testing.assert_allclose(api.v, ref.v, rtol=0, atol=1e-9 * np.abs(ref.v).max())
 
 
 # ---------------------------------------------------------------- GranularBed
@@ -213,9 +193,8 @@ def test_granular_bed_solves_at_small_size():
 
     counts = contact_state_mix(p, res.v, res.u, res.r).counts
     assert counts["open"] > 0 and counts["sticking"] + counts["sliding"] + counts["rolling"] > 0, counts
-    if HAVE_CHOLMOD:
-        s = rfverify.solve(p, method="schur", tol=1e-9)
-        assert s.success and abs(s.nit - res.nit) <= 1
+    s = rfverify.solve(p, method="schur", tol=1e-9)  # CHOLMOD or QDLDL, whichever is here
+    assert s.success and abs(s.nit - res.nit) <= 1
 
 
 def test_granular_bed_refuses_bad_parameters(capsys, tmp_path):

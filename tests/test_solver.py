@@ -5,6 +5,7 @@ change the answer; zero coefficients never divide; failures are diagnosed, never
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import h5py
@@ -718,18 +719,25 @@ def test_a_failed_factorisation_without_delta_is_not_repeated_at_the_same_matrix
         pytest.skip("the δ fallback did not run on this chute with these library versions")
 
 
-# ---------------------------------------------------------------- the CHOLMOD Schur form
-# (forms.SchurSystem, optional extra "cholmod"; issue 27).  Its method name, auto's choice of it
-# and the missing-extra error: tests/test_scale.py.
+# ---------------------------------------------------------------- the Schur form
+# (forms.SchurSystem: CHOLMOD with the optional extra "cholmod", else QDLDL; issue 27).  Its
+# method name and auto's choice of it: tests/test_scale.py.
 
-def _schur_solve(problem, monkeypatch, **kw):
-    return solve(problem, method="schur", **kw)
+@pytest.fixture(params=["cholmod", "qdldl"])
+def schur_engine(request, monkeypatch):
+    """The schur form with each engine: CHOLMOD (skipped where scikit-sparse is not installed),
+    and QDLDL, the default install's (scikit-sparse made unimportable)."""
+    if request.param == "cholmod":
+        pytest.importorskip("sksparse.cholmod")
+    else:
+        monkeypatch.setitem(sys.modules, "sksparse", None)
+        monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
+    return request.param
 
 
-def test_schur_solves_against_the_unreduced_operator():
+def test_schur_solves_against_the_unreduced_operator(schur_engine):
     """One unrefined solve of the Schur form solves the dense unreduced operator of the cube
     at a late iterate to a small backward error, and refinement reaches its target."""
-    pytest.importorskip("sksparse.cholmod")
     rng = np.random.default_rng(3)
     system, A, (m, mk) = _system_at_an_iterate("schur", tol=1e-9)
     n = A.shape[0]
@@ -743,16 +751,15 @@ def test_schur_solves_against_the_unreduced_operator():
 
 
 @pytest.mark.parametrize("problem", ["bundled:chute", "random", "lattice"])
-def test_schur_takes_the_path_of_form_16(problem, monkeypatch):
+def test_schur_takes_the_path_of_form_16(problem, schur_engine):
     """S = M + BᵀB is form (16) with its identity block eliminated: same statuses and
     iteration counts as reduced_factored, answers agreeing far below the tolerance."""
-    pytest.importorskip("sksparse.cholmod")
     p = {"bundled:chute": lambda: rfverify.load("bundled:chute"),
          "random": lambda: random_problem(60, 150, seed=5),
          "lattice": lambda: rfverify.load(Path(__file__).parent / "data" / "hard" / "Lattice-ndof-360-nc-274-1.hdf5"),
          }[problem]()
     ref = solve(p, method="reduced_factored", tol=1e-10)
-    res = _schur_solve(p, monkeypatch, tol=1e-10)
+    res = solve(p, method="schur", tol=1e-10)
     assert res.status is Status.SOLVED and ref.status is Status.SOLVED, res.message
     assert abs(res.nit - ref.nit) <= 1
     scale = max(np.abs(ref.v).max(), 1e-300)

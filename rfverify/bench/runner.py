@@ -41,11 +41,11 @@ from .execution import (crash_message, die_with_parent, npz_intact, outcome, pro
 from .tasks import run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
-DEFAULT_METHODS = tuple(m for m in METHODS if m != "reduced_factored" and m not in PORTFOLIO_METHODS
+DEFAULT_METHODS = tuple(m for m in METHODS if m not in ("reduced_factored", "schur") and m not in PORTFOLIO_METHODS
                         and m not in OPTIONAL_METHODS)
 """What ``bench`` runs unless told otherwise: every method but (16), the factored twin of (15),
-auto (it runs the forms in turn) and the methods that need an optional module (schur: form
-(16)'s iterates by CHOLMOD; ``--methods schur`` asks for it)."""
+and schur (form (16)'s iterates by another engine: ``--methods schur`` asks for it), auto (it runs
+the forms in turn) and the methods that need an optional module (the Siconos peer)."""
 DEFAULT_TOLS = (1e-8, 1e-9, 1e-10)
 MANIFEST_SCHEMA = 2
 """2: adds ``schema``, ``rfverify_version`` and the planned ``tasks`` (what report expects)."""

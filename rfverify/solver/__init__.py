@@ -13,6 +13,7 @@ from ..lifting import KIND_NAMES
 from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
 from ..problem import SPACEDIM, Problem
 from .cones import ProductCone
+from .engines import cholmod_importable
 from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, IterationInfo, Settings, SolveResult, Status, method_unavailable)
@@ -20,32 +21,27 @@ from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE
 __all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence", "body_fill"]
 
 
-def auto_sequence(n_contacts: int, fill=None, cholmod_available: bool | None = None) -> tuple:
+def auto_sequence(n_contacts: int, fill=None) -> tuple:
     """The forms ``method="auto"`` tries, in order, on a problem of ``n_contacts`` contacts:
-    ``AUTO_SEQUENCE_LARGE`` (schur first) when CHOLMOD is available (``cholmod_available=None``:
-    find out by importing it), ``n_contacts ≥ AUTO_SCHUR_MIN_CONTACTS`` and the factorisation's
-    ``fill`` (:func:`body_fill`; a number, or a callable that computes it, called only when the
-    other two hold) is at least ``AUTO_SCHUR_MIN_FILL``; else ``AUTO_SEQUENCE`` (jqinv first).
-    The names and thresholds are declared in :mod:`rfverify.solver.result`."""
+    ``AUTO_SEQUENCE_LARGE`` (schur first) when ``n_contacts ≥ AUTO_SCHUR_MIN_CONTACTS`` and the
+    factorisation's ``fill`` (:func:`body_fill`; a number, or a callable that computes it, called
+    only when the problem is that large) is at least ``AUTO_SCHUR_MIN_FILL``; else
+    ``AUTO_SEQUENCE`` (jqinv first).  The same choice with or without the optional CHOLMOD, which
+    only makes schur faster (:func:`rfverify.solver.engines.schur_engine`).  The names and
+    thresholds are declared in :mod:`rfverify.solver.result`."""
     if n_contacts < AUTO_SCHUR_MIN_CONTACTS:
-        return AUTO_SEQUENCE
-    if cholmod_available is None:
-        cholmod_available = method_unavailable("schur") is None
-    if not cholmod_available:
         return AUTO_SEQUENCE
     fill = fill() if callable(fill) else fill
     return AUTO_SEQUENCE_LARGE if fill is not None and fill >= AUTO_SCHUR_MIN_FILL else AUTO_SEQUENCE
 
 
 def body_fill(problem: Problem) -> float:
-    """Σ(column count)² per contact of the Cholesky factor, under CHOLMOD's AMD ordering, of the
-    body graph: one node per body (6 consecutive dofs when every block of M lies in such a group,
-    the rigid-body convention; else one per block of M), an edge per pair of bodies sharing a
-    contact.  Proportional to the flops of factoring any form of the problem (every form's matrix
-    has this graph, blown up by the dofs per body), at a small fraction of their cost (~1 ms at
-    10³ contacts, ~1 s at 10⁵).  Needs scikit-sparse."""
-    from sksparse import cholmod
-
+    """Σ(column count)² per contact of the Cholesky factor, under an AMD ordering (CHOLMOD's where
+    scikit-sparse imports, else QDLDL's), of the body graph: one node per body (6 consecutive
+    dofs when every block of M lies in such a group, the rigid-body convention; else one per
+    block of M), an edge per pair of bodies sharing a contact.  Proportional to the flops of
+    factoring any form of the problem (every form's matrix has this graph, blown up by the dofs
+    per body), at a small fraction of their cost (~1 ms at 10³ contacts, ~1 s at 10⁵)."""
     m = problem.n_dofs
     labels = problem.blocks.labels
     group = np.arange(m) // 6
@@ -60,8 +56,15 @@ def body_fill(problem: Problem) -> float:
     used = np.flatnonzero(A.diagonal() > 0)
     A = A[used][:, used]
     A = (A + sp.diags(np.asarray(A.sum(axis=1)).ravel() + 1.0)).tocsc()  # diagonally dominant: SPD
-    L = cholmod.cholesky(A, ordering_method="amd").L().tocsc()
-    counts = np.diff(L.indptr).astype(np.float64)
+    if cholmod_importable():
+        from sksparse import cholmod
+
+        counts = np.diff(cholmod.cholesky(A, ordering_method="amd").L().tocsc().indptr).astype(np.float64)
+    else:
+        import qdldl
+
+        L = qdldl.Solver(A).factors()[0].tocsc()  # strictly lower: the unit diagonal is not stored
+        counts = np.diff(L.indptr).astype(np.float64) + 1.0
     return float(np.sum(counts * counts)) / max(problem.n_contacts, 1)
 
 
@@ -79,15 +82,15 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     problem : Problem
     method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur", "auto", "clarabel", "siconos"}
         Linear-system form (DESIGN §4); ``schur`` is form (16) with its identity block
-        eliminated, the dof-space matrix M + H̃ᵀG⁻¹H̃ factored by CHOLMOD's supernodal Cholesky
-        — the same iterates as ``reduced_factored``, much faster from a few thousand contacts
-        on; it needs the optional extra ``cholmod`` (``pip install 'rfverify[cholmod]'``, built
-        against libsuitesparse-dev) and raises InvalidArgumentError naming that fix without it.
+        eliminated, the dof-space matrix M + H̃ᵀG⁻¹H̃ — the same iterates as
+        ``reduced_factored``, factored by CHOLMOD's supernodal Cholesky with the optional extra
+        ``cholmod`` (``pip install 'rfverify[cholmod]'``, built against libsuitesparse-dev), else
+        by QDLDL (about 10× slower on a 10⁴-contact bed, still faster there than the other forms).
         ``auto`` (default) runs the forms of :func:`auto_sequence` — jqinv, then reduced, then
-        noscaling; with CHOLMOD importable, on a problem of at least ``AUTO_SCHUR_MIN_CONTACTS``
-        contacts whose factorisation fill (:func:`body_fill`) is at least
-        ``AUTO_SCHUR_MIN_FILL`` per contact (result.py), schur, then jqinv, then noscaling (large
-        granular piles and beds: yes; thin chute flows: no) — each from the start, while
+        noscaling; on a problem of at least ``AUTO_SCHUR_MIN_CONTACTS`` contacts whose
+        factorisation fill (:func:`body_fill`) is at least ``AUTO_SCHUR_MIN_FILL`` per contact
+        (result.py), schur, then jqinv, then noscaling (large granular piles and beds: yes;
+        thin chute flows: no), with or without CHOLMOD — each from the start, while
         the previous one stalled or broke down, and returns the Solved run or else the answer
         with the smallest criterion — ``extras["attempts"]`` lists every run and ``method``
         names the form returned; ``clarabel`` hands the same convex problem to Clarabel;

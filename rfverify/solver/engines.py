@@ -13,9 +13,9 @@ with the factor.  It knows nothing of contacts, cones or the KKT system.  Three 
                    factorisation each time); the unsymmetric form (6)
 ``CholmodEngine``  supernodal Cholesky of a symmetric positive definite matrix given as its
                    lower triangle (CHOLMOD through scikit-sparse, the optional extra
-                   ``cholmod``; AMD ordering, symbolic analysis once); the ``schur`` form, and
-                   the double-double phase's oracle where it is installed
-                   (:class:`rfverify.extended.mixed.CholmodMixed`)
+                   ``cholmod``; AMD ordering, symbolic analysis once); the ``schur`` form
+                   (QDLDL without the extra), and the double-double phase's oracle where it
+                   is installed (:class:`rfverify.extended.mixed.CholmodMixed`)
 
 Every factorisation after the first must have the first one's sparsity pattern (same
 ``indptr``/``indices``): the engines that keep a symbolic analysis rely on it.
@@ -32,8 +32,10 @@ import scipy.sparse as sp
 class FactorEngine(Protocol):
     """What a form asks of a factorisation engine.
 
-    ``factor(K)`` replaces the factor with that of ``K`` (scipy CSC, float64, n × n, in the
-    triangle or whole as the engine's docstring says); it raises :class:`ArithmeticError`,
+    ``triangle`` says which part of a matrix ``factor`` reads: ``"upper"``, ``"lower"`` (a
+    symmetric matrix given as that triangle) or ``"full"``.
+    ``factor(K)`` replaces the factor with that of ``K`` (scipy CSC, float64, n × n, as
+    ``triangle`` says); it raises :class:`ArithmeticError`,
     ``RuntimeError`` or ``ValueError`` when the engine detects that the matrix cannot be
     factored (a zero or non-positive pivot, a singular matrix; see :class:`QDLDLEngine` for
     the one case its library does not report).
@@ -41,6 +43,7 @@ class FactorEngine(Protocol):
     ``factorisations`` counts the calls of ``factor`` that succeeded."""
 
     factorisations: int
+    triangle: str
 
     def factor(self, K: sp.csc_matrix) -> None: ...
 
@@ -61,6 +64,8 @@ class QDLDLEngine:
     against the unreduced operator, and the factorisation without δ is kept only when
     :meth:`pivots` shows the right inertia); docs/DECISIONS.md, "Factorisation engines",
     says how often this happens and why it is not changed here."""
+
+    triangle = "upper"
 
     def __init__(self):
         self._solver = None
@@ -93,6 +98,8 @@ class SuperLUEngine:
     """LU with partial pivoting of a general square matrix (scipy's SuperLU), factored anew at
     every call (the pivots change with the values)."""
 
+    triangle = "full"
+
     def __init__(self):
         self._lu = None
         self.factorisations = 0
@@ -120,6 +127,8 @@ class CholmodEngine:
     (CSC), by CHOLMOD (scikit-sparse): AMD ordering and symbolic analysis on the first call,
     dense BLAS-3 kernels on the supernodes.  A matrix that is not positive definite raises
     :class:`ArithmeticError` naming CHOLMOD's complaint."""
+
+    triangle = "lower"
 
     def __init__(self, what: str = "the cholmod engine"):
         try:
@@ -151,3 +160,23 @@ class CholmodEngine:
     def release(self) -> None:
         """Drop the factor (and its symbolic analysis): the next ``factor`` starts afresh."""
         self._factor = None
+
+
+def cholmod_importable() -> bool:
+    """True when scikit-sparse's CHOLMOD imports here (the optional extra ``cholmod``)."""
+    try:
+        import sksparse.cholmod  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def schur_engine() -> FactorEngine:
+    """The engine of the ``schur`` form: CHOLMOD where it imports, else QDLDL (the same
+    factorisation of the same SPD matrix, without supernodes: slower on a factor that fills)."""
+    return CholmodEngine("the schur form") if cholmod_importable() else QDLDLEngine()
+
+
+def schur_engine_name() -> str:
+    """"CHOLMOD" or "QDLDL": which engine :func:`schur_engine` gives here."""
+    return "CHOLMOD" if cholmod_importable() else "QDLDL"

@@ -1,6 +1,7 @@
 """The linear-system forms of Algorithm 1 (DESIGN §4), one :class:`~.kkt.KKTSystem` each:
 what matrix a form factors, which :mod:`.engines` engine factors it (QDLDL for the
-quasi-definite forms, SuperLU for ``noscaling``, CHOLMOD for ``schur``), and how one solve
+quasi-definite forms, SuperLU for ``noscaling``, CHOLMOD for ``schur`` where it is installed
+and QDLDL without it), and how one solve
 recovers (dv, dr̃, dz) from it.
 The unreduced system they all solve, its refinement and regularisation are :mod:`.kkt`'s;
 :data:`FORMS` maps method names to them (see :mod:`.kkt` for each form's matrix)."""
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .engines import CholmodEngine, SuperLUEngine
+from .engines import SuperLUEngine, schur_engine
 from .kkt import KKTSystem, SparseAssembler
 
 
@@ -240,30 +241,35 @@ class SchurSystem(ReducedFactoredSystem):
 
         S = M + Bᵀ B = M + H̃ᵀ G⁻¹ H̃,   B = L⁻¹ H̃,   G = J Q_{p⁻²} Jᵀ = L Lᵀ,
 
-    symmetric positive definite (M is), factored by CHOLMOD's supernodal Cholesky
-    (scikit-sparse, the optional extra ``cholmod``; AMD ordering, symbolic analysis once):
-    dense BLAS-3 kernels on the supernodes, where QDLDL's up-looking LDLᵀ works entry by
-    entry.  S dv = a − Bᵀ L⁻¹ b′ with b′ = b − J Q_{p⁻¹} c, then
-    dr̃ = −L⁻ᵀ (L⁻¹ b′ + B dv) and dz = Q_{p⁻¹}c − Q_{p⁻²}Jᵀdr̃.  S is M + BᵀB (sparse
-    product) put on the fixed pattern of M + |B|ᵀ|B|, so that the ordering and symbolic
-    analysis of the first factorisation hold for every later one.  Needs no δ (S is
-    definite); refinement as for every form, against the unreduced operator.
+    symmetric positive definite (M is), factored by CHOLMOD's supernodal Cholesky where the
+    optional extra ``cholmod`` (scikit-sparse) is installed: dense BLAS-3 kernels on the
+    supernodes, where QDLDL's up-looking LDLᵀ, the engine without the extra, works entry by
+    entry (the same path, about 10× slower per factorisation on a 9675-contact bed; still 4×
+    faster than the quasi-definite forms there, whose matrices fill more).  S dv = a − Bᵀ L⁻¹ b′
+    with b′ = b − J Q_{p⁻¹} c, then dr̃ = −L⁻ᵀ (L⁻¹ b′ + B dv) and dz = Q_{p⁻¹}c − Q_{p⁻²}Jᵀdr̃.
+    S is M + BᵀB (sparse product) put on the fixed pattern of M + |B|ᵀ|B|, in the triangle the
+    engine reads, so that the ordering and symbolic analysis of the first factorisation hold
+    for every later one.  Needs no δ (S is definite); refinement as for every form, against
+    the unreduced operator.
     """
 
     name = "schur"
 
     def _new_engine(self):
-        return CholmodEngine("the schur form")
+        return schur_engine()
+
+    def _triangle(self, A):
+        return sp.tril(A, format="csc") if self.engine.triangle == "lower" else sp.triu(A, format="csc")
 
     def _set_form_pattern(self):
         self._set_contact_blocks()
         m, nk = self.m, self.nk
         b_rows, b_cols = self._b_pattern()
         self._basm = SparseAssembler(b_rows, b_cols, (nk, m))
-        # The lower triangle of S's pattern, from B's and M's (all entries counted: a product
-        # of positive ones cannot cancel), in CSC order = ascending key col·m + row.
+        # One triangle of S's pattern, from B's and M's (all entries counted: a product of
+        # positive ones cannot cancel), in CSC order = ascending key col·m + row.
         ones = sp.csc_matrix((np.ones(self._basm.nnz), self._basm.indices, self._basm.indptr), shape=(nk, m))
-        pat = sp.tril(abs(self.M) + (ones.T @ ones), format="csc")
+        pat = self._triangle(abs(self.M) + (ones.T @ ones))
         pat.sort_indices()
         self._s_indices, self._s_indptr = pat.indices, pat.indptr
         self._s_key = np.repeat(np.arange(m, dtype=np.int64), np.diff(pat.indptr)) * m + pat.indices
@@ -273,7 +279,7 @@ class SchurSystem(ReducedFactoredSystem):
         self._factor_blocks()
         hb, la, lb, hv = self._b
         B = self._basm.matrix(self.Linv[hb, la, lb] * hv)
-        C = sp.tril(self.M + (B.T @ B), format="csc")  # a numerical zero may leave C's pattern
+        C = self._triangle(self.M + (B.T @ B))  # a numerical zero may leave C's pattern
         key = np.repeat(np.arange(self.m, dtype=np.int64), np.diff(C.indptr)) * self.m + C.indices
         data = np.zeros(self._s_key.size)
         data[np.searchsorted(self._s_key, key)] = C.data

@@ -15,14 +15,14 @@ but factors a different matrix:
 ``reduced_factored`` (16)  [[M, −(L⁻¹H̃)ᵀ], [−L⁻¹H̃, −I]], L Lᵀ = J Q_{p⁻²} Jᵀ, unknowns (dv, Lᵀdr̃)
 ``noscaling`` (6) [[M, −H̃ᵀ, 0], [−H̃, 0, J], [0, Arw(z) Jᵀ, Arw(s)]],      unsymmetric
 ``schur``   (16) with its identity block eliminated: M + Bᵀ B, B = L⁻¹H̃, SPD, unknowns dv
-            (CHOLMOD supernodal Cholesky; optional extra ``cholmod``; ``--method schur``)
+            (CHOLMOD supernodal Cholesky with the optional extra ``cholmod``, else QDLDL)
 
 The symmetric forms are quasi-definite once a small static regularisation −δI is put on the
 dr̃ block (positive blocks M, I or Q_{p²}; negative block dr̃): they are factored by QDLDL
 (LDLᵀ without pivoting, AMD ordering, symbolic analysis reused through ``update``).  The
 unsymmetric form is factored by SuperLU with partial pivoting, the definite ``schur`` form by
-CHOLMOD (docs/DECISIONS.md, "Where the factorisation time goes": QDLDL's entry-by-entry
-factorisation is the wall from a few thousand contacts on).
+CHOLMOD where it is installed (docs/DECISIONS.md, "Where the factorisation time goes": QDLDL's
+entry-by-entry factorisation is the wall from a few thousand contacts on), else by QDLDL.
 
 Iterative refinement runs on the *unreduced, unregularised* three-block system above, with
 its residual evaluated by the exact operator (Q applied by Q_x y = 2(xᵀy)x − det(x)Ry, never

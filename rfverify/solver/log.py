@@ -19,10 +19,13 @@ def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
     """The settings block printed before the iterations (also used by the CLI)."""
     from .._version import __version__
 
+    from .engines import schur_engine_name
+
     st = settings
+    form = f"{method} (factored by {schur_engine_name()})" if method == "schur" else method
     lines = [
         "-" * 78,
-        f"rfverify {__version__}: Algorithm 1 (Mehrotra predictor-corrector, NT scaling), form {method}",
+        f"rfverify {__version__}: Algorithm 1 (Mehrotra predictor-corrector, NT scaling), form {form}",
         "-" * 78,
         f"problem:  {problem.title or problem.source}",
         f"          m = {problem.n_dofs} dofs, n = {problem.n_contacts} contacts, "

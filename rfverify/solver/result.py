@@ -10,7 +10,8 @@ import numpy as np
 
 ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur")
 """Linear-system forms of Algorithm 1 (DESIGN §4): (14), (11), (15), (16), (6), and (16) with its
-identity block eliminated, factored by CHOLMOD (``schur``: needs the optional extra ``cholmod``)."""
+identity block eliminated (``schur``: factored by CHOLMOD with the optional extra ``cholmod``, else
+by QDLDL)."""
 
 AUTO_SEQUENCE = ("jqinv", "reduced", "noscaling")
 """The forms ``method="auto"`` tries in turn until one is Solved: jqinv first (fastest and most
@@ -18,9 +19,9 @@ robust on the scene collections), then the reduced and unscaled forms, which sol
 problems with a singular Delassus operator where jqinv stalls (docs/DECISIONS.md)."""
 
 AUTO_SEQUENCE_LARGE = ("schur", "jqinv", "noscaling")
-"""``auto``'s forms on a problem whose factorisation is expensive, when CHOLMOD is importable
-(``rfverify.solver.auto_sequence`` decides): schur, the path of form (16) at CHOLMOD's speed, then
-jqinv (another path), then noscaling."""
+"""``auto``'s forms on a problem whose factorisation is expensive (``rfverify.solver.auto_sequence``
+decides): schur, the path of form (16) on the smallest matrix (CHOLMOD's speed where it is
+installed), then jqinv (another path), then noscaling."""
 
 AUTO_SCHUR_MIN_CONTACTS = 500
 AUTO_SCHUR_MIN_FILL = 100.0
@@ -29,12 +30,11 @@ contacts whose factorisation costs at least AUTO_SCHUR_MIN_FILL per contact, mea
 Σ(column count)² of the Cholesky factor (AMD) of the body graph (``rfverify.solver.body_fill``):
 fill, not size, decides which engine wins — a 2324-contact chute (8 per contact) runs 2.2× faster
 with jqinv, a 576-contact lattice bed (135) 2.3× faster with schur (docs/DECISIONS.md, "Scale
-(issue 27 items 2, 3, 5)")."""
+(issue 27 items 2, 3, 5)").  Without CHOLMOD schur factors by QDLDL and the same thresholds hold on
+beds (1.5× at 576 contacts, 4× at 9675) at a cost of up to 1.35× on random problems of
+1000–2000 contacts (docs/DECISIONS.md, "schur without the extra")."""
 
-OPTIONAL_METHODS = {"schur": ("sksparse.cholmod", "pip install 'rfverify[cholmod]' (scikit-sparse; building it "
-                                                  "needs libsuitesparse-dev, and CHOLMOD is fast only with an "
-                                                  "optimised BLAS such as libopenblas0)"),
-                    "siconos": ("rfverify.solver.siconos_peer", "bash benchmarks/peers/siconos/build.sh, then "
+OPTIONAL_METHODS = {"siconos": ("rfverify.solver.siconos_peer", "bash benchmarks/peers/siconos/build.sh, then "
                                                                 "RFVERIFY_SICONOS=<the prefix it prints>")}
 """Methods that need an optional module: name -> (module to import, how to install it).  A module
 may also define ``unavailable()`` for what an import cannot tell (the Siconos peer's built driver)."""
