@@ -16,6 +16,7 @@ Not a test: timings on a shared machine are noisy; compare rows of one run.
         scene:GranularBed:3375 --engines cholmod                          # 931, 2800, 9675 contacts
     python benchmarks/bench_digits_scale.py --problems random:3000:10000 --engines cholmod
     python benchmarks/bench_digits_scale.py --problems PILE.hdf5 --engines cholmod ldl
+    python benchmarks/bench_digits_scale.py --problems scene:GranularBed:3375 --engines default  # no extra
 
 A problem is ``random:NB:NC`` (``random_problem(NB, NC, seed=5)``: random rigid bodies, more
 fill than granular media have), ``scene:NAME:SIZE`` (``rfverify generate NAME --size SIZE``,
@@ -53,13 +54,23 @@ def load(spec: str):
     return rfverify.load(spec)
 
 
+ENGINES = ("cholmod", "ldl", "default")
+"""``factor_engine`` of the double-double phase (the double solve's form is ``auto``'s either
+way, schur by CHOLMOD on the filled problems), or ``default``: the default install, scikit-sparse
+made unimportable in the child, so that every factorisation, the double solve's included, is
+QDLDL's."""
+
+
 def one(spec: str, engine: str) -> dict:
     """Run the path once in this process; the row as a dict."""
+    if engine == "default":
+        sys.modules["sksparse"] = sys.modules["sksparse.cholmod"] = None  # an import of it now fails
     import rfverify
+    from rfverify.solver.engines import schur_engine_name
 
     problem = load(spec)
     t0 = time.perf_counter()
-    out = rfverify.solve_to_digits(problem, digits=10, factor_engine=engine)
+    out = rfverify.solve_to_digits(problem, digits=10, factor_engine="auto" if engine == "default" else engine)
     total = time.perf_counter() - t0
     q = out.certificate.quantities
     digits = {k: (None if x.digits is None else round(x.digits, 2)) for k, x in q.items() if x.mode != "information"}
@@ -71,7 +82,8 @@ def one(spec: str, engine: str) -> dict:
             "update_seconds": round(getattr(ext, "factor_seconds", 0.0), 2),
             "stats": getattr(ext, "stats", {}), "wide": None if out.wide is None else int(out.wide.nit),
             "wide_note": out.certificate.extra.get("wide_tail", ""), "certified": bool(out.success),
-            "digits": digits, "peak_MB": round(rss_kb / 1024, 1),
+            "digits": digits, "double_method": out.double.method, "schur_engine": schur_engine_name(),
+            "peak_MB": round(rss_kb / 1024, 1),
             "peak_kB_per_contact": round(rss_kb / max(problem.n_contacts, 1), 1),
             "backend": out.certificate.extra.get("backend", "")}
 
@@ -79,7 +91,9 @@ def one(spec: str, engine: str) -> dict:
 def _main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--problems", nargs="*", default=["random:300:1000", "random:1000:3000"])
-    ap.add_argument("--engines", nargs="*", default=["cholmod", "ldl"])
+    ap.add_argument("--engines", nargs="*", default=["cholmod", "ldl"], choices=ENGINES,
+                    help="cholmod or ldl: the double-double phase's float64 factor; default: the default "
+                         "install (scikit-sparse unimportable: QDLDL everywhere) (default: cholmod ldl)")
     ap.add_argument("--one", nargs=2, metavar=("PROBLEM", "ENGINE"), help=argparse.SUPPRESS)
     ap.add_argument("--timeout", type=float, default=3600.0, help="seconds per run (default 3600)")
     args = ap.parse_args(argv)
@@ -115,6 +129,8 @@ def _main(argv=None):
                   f"{s.get('solves', 0):>6} {s.get('refinement_steps', 0):>6} {r['update_seconds']:>7.1f} "
                   f"{r['peak_MB']:>7.0f} {r['peak_kB_per_contact']:>6.1f}  "
                   f"{'yes' if r['certified'] else 'NO'} {dig}", flush=True)
+            if r.get("double_method") == "schur":
+                print(f"    double solve: schur factored by {r['schur_engine']}", flush=True)
             if not r["certified"]:
                 print(f"    tail: {r['wide_note']}", flush=True)
             ok = ok and r["certified"]
