@@ -11,6 +11,7 @@ Select explicitly with ``HYPOTHESIS_PROFILE=ci pytest`` or ``pytest --hypothesis
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -78,3 +79,17 @@ def _mpmath_precision_is_restored():
     after = mpmath.mp.prec
     mpmath.mp.prec = before
     assert after == before, f"test changed mpmath.mp.prec: {before} -> {after}"
+
+
+@pytest.fixture(params=["cholmod", "qdldl"])
+def schur_engine(request, monkeypatch) -> str:
+    """Each test twice, once per engine of the ``schur`` form: CHOLMOD (skipped where the extra
+    ``cholmod`` is not installed) and QDLDL, the default install's (scikit-sparse made
+    unimportable: a None entry in sys.modules stops an import).  The value is the engine's name
+    as the solver log gives it."""
+    if request.param == "cholmod":
+        pytest.importorskip("sksparse.cholmod", reason="scikit-sparse (extra 'cholmod') not installed")
+        return "CHOLMOD"
+    monkeypatch.setitem(sys.modules, "sksparse", None)
+    monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
+    return "QDLDL"

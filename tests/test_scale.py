@@ -5,7 +5,6 @@ scene, the large structured problems built without any solve (small sizes here).
 from __future__ import annotations
 
 import json
-import sys
 
 import numpy as np
 import pytest
@@ -16,28 +15,6 @@ from rfverify.scenes import SCENES, SceneError, generate
 from rfverify.solver import auto_sequence
 from rfverify.solver.result import (ALGORITHM1_METHODS, AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL,
                                     AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS, method_unavailable)
-
-try:
-    import sksparse.cholmod  # noqa: F401
-
-    HAVE_CHOLMOD = True
-except ImportError:
-    HAVE_CHOLMOD = False
-
-
-@pytest.fixture(params=["cholmod", "qdldl"])
-def schur_engine(request, monkeypatch):
-    """Each test twice: with scikit-sparse as installed (skipped where it is not) and with it made
-    unimportable (a None entry in sys.modules stops an import), as on the default install.
-    The value is the engine name the solver log should give."""
-    if request.param == "cholmod":
-        if not HAVE_CHOLMOD:
-            pytest.skip("scikit-sparse (extra 'cholmod') not installed")
-        return "CHOLMOD"
-    monkeypatch.setitem(sys.modules, "sksparse", None)
-    monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
-    return "QDLDL"
-
 
 # ---------------------------------------------------------------- schur, the method
 def test_schur_is_declared_once_and_left_out_of_the_bench_defaults():

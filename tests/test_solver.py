@@ -5,7 +5,6 @@ change the answer; zero coefficients never divide; failures are diagnosed, never
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import h5py
@@ -722,18 +721,6 @@ def test_a_failed_factorisation_without_delta_is_not_repeated_at_the_same_matrix
 # ---------------------------------------------------------------- the Schur form
 # (forms.SchurSystem: CHOLMOD with the optional extra "cholmod", else QDLDL; issue 27).  Its
 # method name and auto's choice of it: tests/test_scale.py.
-
-@pytest.fixture(params=["cholmod", "qdldl"])
-def schur_engine(request, monkeypatch):
-    """The schur form with each engine: CHOLMOD (skipped where scikit-sparse is not installed),
-    and QDLDL, the default install's (scikit-sparse made unimportable)."""
-    if request.param == "cholmod":
-        pytest.importorskip("sksparse.cholmod")
-    else:
-        monkeypatch.setitem(sys.modules, "sksparse", None)
-        monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
-    return request.param
-
 
 def test_schur_solves_against_the_unreduced_operator(schur_engine):
     """One unrefined solve of the Schur form solves the dense unreduced operator of the cube
