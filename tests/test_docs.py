@@ -234,3 +234,17 @@ def test_solve_help_says_how_3d_and_local_files_are_solved(capsys):
     for phrase in ("/fclib_global, /fclib_local", "convex relaxation", "mu_r = 0", "DESIGN §7.2", "own W",
                    "Exit codes: 0 "):
         assert phrase in text, phrase
+
+
+@in_repo
+def test_reference_lists_the_methods_and_bench_defaults_the_cli_accepts():
+    """docs/REFERENCE.md's command summary names every ``--method`` choice and ``bench``'s
+    default methods as the code declares them (it had lost ``schur`` and ``siconos``)."""
+    from rfverify.bench.runner import DEFAULT_METHODS
+    from rfverify.solver.result import METHODS
+
+    text = (ROOT / "docs" / "REFERENCE.md").read_text(encoding="utf-8")
+    solve_methods = re.search(r"rfverify solve +PROBLEM \[--method ([a-z0-9_|]+)\]", text).group(1).split("|")
+    assert sorted(solve_methods) == sorted(METHODS)
+    bench_methods = re.search(r"rfverify bench .*?\[--methods ([a-z0-9_,]+)\]", text).group(1).split(",")
+    assert bench_methods == list(DEFAULT_METHODS)
