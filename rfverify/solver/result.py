@@ -30,9 +30,10 @@ contacts whose factorisation costs at least AUTO_SCHUR_MIN_FILL per contact, mea
 Σ(column count)² of the Cholesky factor (AMD) of the body graph (``rfverify.solver.body_fill``):
 fill, not size, decides which engine wins — a 2324-contact chute (8 per contact) runs 2.2× faster
 with jqinv, a 576-contact lattice bed (135) 2.3× faster with schur (docs/DECISIONS.md, "Scale
-(issue 27 items 2, 3, 5)").  Without CHOLMOD schur factors by QDLDL and the same thresholds hold on
-beds (1.5× at 576 contacts, 4× at 9675) at a cost of up to 1.35× on random problems of
-1000–2000 contacts (docs/DECISIONS.md, "schur without the extra")."""
+(issue 27 items 2, 3, 5)").  Without CHOLMOD schur factors by QDLDL and the same thresholds gain
+1.5× (576 contacts) to 4× (9675) on lattice beds, are about even on deposited piles (0.87× at 3209
+contacts, 1.08× at 10 116) and cost up to 1.35× on random problems of 1000–2000 contacts
+(docs/DECISIONS.md, "schur without the extra")."""
 
 OPTIONAL_METHODS = {"siconos": ("rfverify.solver.siconos_peer", "bash benchmarks/peers/siconos/build.sh, then "
                                                                 "RFVERIFY_SICONOS=<the prefix it prints>")}
