@@ -160,8 +160,9 @@ def test_every_form_reaches_its_matrix_through_an_engine():
 
 
 def test_without_scikit_sparse_the_schur_form_factors_by_qdldl_on_the_upper_triangle(monkeypatch):
-    """The default install's schur: the same S, handed to QDLDL as the triangle QDLDL reads;
-    its solves are S⁻¹ (checked against the dense S built from the form's own blocks)."""
+    """The default install's schur: S is handed to QDLDL as the upper triangle QDLDL reads, and
+    the solves invert the symmetric matrix that triangle stands for (that it is the right S is
+    checked through the whole path: test_solver's schur tests against form (16), per engine)."""
     import rfverify
     from rfverify.lifting import lift
     from rfverify.solver.cones import ProductCone
