@@ -27,12 +27,12 @@ from .extended.dd import vmul_d
 from .extended import wide, wide_factor
 from .extended.contactspace import ENGINES
 from .extended.data import ExtendedData
-from .extended.mixed import cholmod_available
 from .extended.system import choose_backend
 from .problem import SPACEDIM, Problem
 from .compilation import compile_extended_in_background, compile_seconds, float64_kernels_deferred
 from .proof import Point, Proof, ProofContext, validate_digits
 from .solver import SolveResult, solve
+from .solver.engines import cholmod_available
 from .solver.result import ResultAliases
 
 

@@ -22,7 +22,8 @@ from rfverify.extended.contactspace import ContactSpace, resolve_engine
 from rfverify.extended.data import ExtendedData
 from rfverify.jordan import mpfr as JM
 from rfverify.extended.ldl import DDCholesky
-from rfverify.extended.mixed import CholmodMixed, MixedCholesky, cholmod_available
+from rfverify.extended.mixed import CholmodMixed, MixedCholesky
+from rfverify.solver.engines import cholmod_available
 from rfverify.extended.system import choose_backend
 from rfverify.extended.wide_cholesky import DenseWideCholesky, SparseWideCholesky
 from rfverify.random_problems import random_problem

@@ -15,8 +15,8 @@ from .blocks import block_apply, contact_factor_inverse, scatter_add, small_prod
 from .data import ExtendedData
 from .factored import FactoredBackend
 from .ldl import DDCholesky
-from ..solver.engines import cholmod_missing_message
-from .mixed import CholmodMixed, MixedCholesky, cholmod_available
+from ..solver.engines import cholmod_available, cholmod_missing_message
+from .mixed import CholmodMixed, MixedCholesky
 
 njit = numba.njit(cache=True)
 DENSE_BLOCK = 200  # blocks of M up to this size are inverted densely when forming W̃

@@ -183,15 +183,6 @@ class MixedCholesky(_RefinedFloat64Factor, DDCholesky):
         return oh, ol
 
 
-def cholmod_available() -> bool:
-    """True when CHOLMOD (scikit-sparse, the optional extra ``cholmod``) can be imported."""
-    try:
-        import sksparse.cholmod  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 class CholmodMixed(_RefinedFloat64Factor):
     """The interface of :class:`MixedCholesky` (values aligned with :meth:`positions`,
     ``factor``, ``solve`` to double-double accuracy) with the float64 factorisation done by

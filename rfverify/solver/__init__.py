@@ -13,7 +13,7 @@ from ..lifting import KIND_NAMES
 from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
 from ..problem import SPACEDIM, Problem
 from .cones import ProductCone
-from .engines import cholmod_importable
+from .engines import cholmod_available
 from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, IterationInfo, Settings, SolveResult, Status, method_unavailable)
@@ -56,7 +56,7 @@ def body_fill(problem: Problem) -> float:
     used = np.flatnonzero(A.diagonal() > 0)
     A = A[used][:, used]
     A = (A + sp.diags(np.asarray(A.sum(axis=1)).ravel() + 1.0)).tocsc()  # diagonally dominant: SPD
-    if cholmod_importable():
+    if cholmod_available():
         from sksparse import cholmod
 
         counts = np.diff(cholmod.cholesky(A, ordering_method="amd").L().tocsc().indptr).astype(np.float64)

@@ -162,7 +162,7 @@ class CholmodEngine:
         self._factor = None
 
 
-def cholmod_importable() -> bool:
+def cholmod_available() -> bool:
     """True when scikit-sparse's CHOLMOD imports here (the optional extra ``cholmod``)."""
     try:
         import sksparse.cholmod  # noqa: F401
@@ -174,9 +174,9 @@ def cholmod_importable() -> bool:
 def schur_engine() -> FactorEngine:
     """The engine of the ``schur`` form: CHOLMOD where it imports, else QDLDL (the same
     factorisation of the same SPD matrix, without supernodes: slower on a factor that fills)."""
-    return CholmodEngine("the schur form") if cholmod_importable() else QDLDLEngine()
+    return CholmodEngine("the schur form") if cholmod_available() else QDLDLEngine()
 
 
 def schur_engine_name() -> str:
     """"CHOLMOD" or "QDLDL": which engine :func:`schur_engine` gives here."""
-    return "CHOLMOD" if cholmod_importable() else "QDLDL"
+    return "CHOLMOD" if cholmod_available() else "QDLDL"

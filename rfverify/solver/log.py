@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import sys
 
+from .engines import schur_engine_name
+
 COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e}"),
            ("pinfeas", "pinfeas", "{:>9.2e}"), ("dinfeas", "dinfeas", "{:>9.2e}"), ("mu", "mu", "{:>9.2e}"),
            ("sigma", "sigma", "{:>9.2e}"), ("alpha_aff", "alpha_aff", "{:>9.2e}"), ("alpha", "alpha", "{:>9.2e}"),
@@ -18,8 +20,6 @@ COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e
 def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
     """The settings block printed before the iterations (also used by the CLI)."""
     from .._version import __version__
-
-    from .engines import schur_engine_name
 
     st = settings
     form = f"{method} (factored by {schur_engine_name()})" if method == "schur" else method
