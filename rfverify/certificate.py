@@ -51,6 +51,18 @@ class Certificate(ResultAliases):
         return {} if self.proof is None else self.proof.quantities
 
     @property
+    def statement(self) -> str:
+        """The problem the proof is about, in words (e.g. "the convex relaxation with
+        (M + Mᵀ)/2"; DESIGN §6.4)."""
+        return "" if self.proof is None else self.proof.statement
+
+    @property
+    def stored_equations(self) -> Proof | None:
+        """Where the proof is about (M + Mᵀ)/2 of an unsymmetric stored M: the same answer proven
+        against the stored equations (their solution differs), else None."""
+        return None if self.proof is None else self.proof.stored_equations
+
+    @property
     def r_unique(self) -> bool | None:
         if self.proof is None or "r" not in self.proof.quantities:
             return None
@@ -83,9 +95,14 @@ class Certificate(ResultAliases):
         """Seconds: ``total`` (= ``seconds``, the whole of :func:`certify`)."""
         return {"total": self.seconds}
 
+    @property
+    def headline(self) -> str:
+        """The verdict's first sentence: what was proven, for which problem."""
+        return self.verdict.split(". ")[0]
+
     def __repr__(self) -> str:
         return f"Certificate(status={self.status!r}, requested={self.requested}, seconds={self.seconds:.3g},\n" \
-               f"    {self.verdict!r})"
+               f"    {self.headline!r})"
 
     def as_dict(self) -> dict:
         p = self.proof
@@ -96,29 +113,62 @@ class Certificate(ResultAliases):
                 "quantities": {} if p is None else {k: q.as_dict() for k, q in p.quantities.items()},
                 "terms": {} if p is None else p.terms,
                 "arithmetic": None if p is None else p.arithmetic,
+                "problem": self.statement or None,
+                "equations": None if p is None else p.equations,
+                "stored_equations": _stored_dict(self.stored_equations),
                 "cross_check": self.cross_check, "seconds": self.seconds, **self.extra}
 
 
 def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict | None = None,
                            seconds: float = 0.0) -> Certificate:
-    """The certificate of a proof, with a verdict that claims exactly what was proven: "proven to
-    K digits" only when every quantity has K relative digits; a quantity proven zero at the
-    data scale is stated as "zero within e" (DESIGN §6.3), never as digits."""
+    """The certificate of a proof, with a verdict that claims exactly what was proven, and of
+    which problem: "proven to K digits" only when every quantity has K relative digits; a
+    quantity proven zero at the data scale is stated as "zero within e" (DESIGN §6.3), never as
+    digits; the problem (:attr:`Proof.statement`) ends the first sentence, and where the stored
+    M is unsymmetric a second one says how many digits of the stored equations' solution the
+    answer has."""
     req = proof.requested
+    about = f" for {proof.statement}" if proof.statement else ""
     if not proof.valid:
-        verdict = f"not certified: {proof.failure}"
+        verdict = f"not certified{about}: {proof.failure}"
     elif proof.certified:
         if any(q.mode == "absolute" for q in proof.quantities.values()):
-            verdict = f"certified ({req} digits requested; zero quantities bounded absolutely): {proof.summary()}"
+            verdict = f"certified ({req} digits requested; zero quantities bounded absolutely){about}: {proof.summary()}"
         else:
-            verdict = f"proven to {req} digits ({proof.summary()})"
+            verdict = f"proven to {req} digits ({proof.summary()}){about}"
     else:
         worst = proof.weakest()
         q = proof.quantities[worst]
         have = "no relative digits" if q.digits is None else f"{q.digits:.1f} proven digits"
         why = f"; {q.note}" if q.digits is None and q.note else ""
-        verdict = f"not proven to {req} digits: {worst} has {have} ({proof.summary()}){why}"
+        verdict = f"not proven to {req} digits{about}: {worst} has {have} ({proof.summary()}){why}"
+    verdict += stored_sentence(proof)
     return Certificate(req, proof.certified, verdict, proof, point, None, dict(extra or {}), seconds)
+
+
+def stored_sentence(proof: Proof) -> str:
+    """The verdict's second sentence when the proof is about (M + Mᵀ)/2 of an unsymmetric M:
+    what the same answer is proven to be for the equations with M as stored ("" otherwise)."""
+    st = proof.stored_equations
+    if st is None:
+        return ""
+    if not st.valid:
+        return f". For M as stored (unsymmetric) nothing is proven: {st.failure}"
+    if st.certified:
+        return f". It is also proven to {st.requested} digits for M as stored (unsymmetric): {st.summary()}"
+    fewest = st.fewest_digits()
+    have = "no relative digits" if fewest is None else f"{fewest:.1f} proven digits"
+    return (f". M as stored is unsymmetric and its equations have another solution, of which this answer has "
+            f"{have} ({st.summary()}); --as-stored (as_stored=True) solves and proves those")
+
+
+def _stored_dict(st: Proof | None) -> dict | None:
+    if st is None:
+        return None
+    return {"certified": st.certified, "valid_proof": st.valid, "failure": st.failure or None,
+            "fewest_digits": st.fewest_digits(), "eps_M": st.eps_M,
+            "digits": {k: q.digits for k, q in st.quantities.items() if q.mode != "information"},
+            "bounds": {k: q.abs_bound for k, q in st.quantities.items() if q.mode != "information"}}
 
 
 def candidate_point(v, r) -> Point:

@@ -11,8 +11,9 @@
 
 The bound (:mod:`rfverify.proof.bound`) is evaluated rigorously: exact dyadic arithmetic for
 the point's residuals and cone membership, verified floating point for the norms of M⁻¹.
-What it assumes: the problem is the convex relaxation with M := (M + Mᵀ)/2 exactly (the
-asymmetry of the file's M is symmetrised away, not modelled), and the data are the float64
+What it assumes: the problem is the convex relaxation with M := (M + Mᵀ)/2 exactly, or with M
+as stored (``as_stored=True``; the verdict names which, and a proof of (M + Mᵀ)/2 of an
+unsymmetric M also states the digits for the stored equations), and the data are the float64
 numbers in the file.  What it does not prove: anything about the physical (De Saxcé)
 problem, or about r where r is not unique.
 
@@ -70,7 +71,7 @@ def _solution_arrays(problem: Problem, v, u, r):
 
 def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Point | None = None,
             cross_check: bool = False, dps: int = 50, polish_max_iter: int = 60,
-            relative: bool = False, progress=None) -> Certificate:
+            relative: bool = False, progress=None, as_stored: bool | None = None) -> Certificate:
     """Prove how many significant digits of the float64 solution are correct.
 
     Parameters
@@ -89,6 +90,11 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     relative : bool
         Demand relative digits for every quantity: a quantity whose exact value may be zero is
         then not certified (instead of being bounded against its data scale, DESIGN §6.3).
+    as_stored : bool, optional
+        True: prove the digits of the solution of the equations with M exactly as stored;
+        False: with (M + Mᵀ)/2; None (default): what ``problem.equations`` says (symmetrised
+        unless the problem came from :meth:`Problem.stored_equations`).  A proof of
+        (M + Mᵀ)/2 of an unsymmetric M also states the digits for the stored equations.
 
     Without ``point``, the candidate itself is tried first as the proof point (exact or
     near-exact answers certify at O(nnz) cost, DESIGN §6.6); only if that does not certify is
@@ -100,6 +106,9 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     """
     t0 = time.perf_counter()
     digits = validate_digits(digits)
+    from .solver import posed
+
+    problem = posed(problem, as_stored)
     if point is None and hasattr(v, "point") and u is None and r is None:
         point = v.point
     v, u, r = _solution_arrays(problem, v, u, r)
@@ -121,7 +130,7 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
         else:
             proof, point, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative)
             extra.update(info)
-    cert = certificate_from_proof(proof, point, extra)
+    cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra)
     if cross_check:
         say(f"cross-check: independent reference at {dps} digits")
         cert.cross_check = reference_agreement(problem, v, u, r, dps=dps)

@@ -31,7 +31,7 @@ from .extended.system import choose_backend
 from .problem import SPACEDIM, Problem
 from .compilation import compile_extended_in_background, compile_seconds, float64_kernels_deferred
 from .proof import Point, Proof, ProofContext, validate_digits
-from .solver import SolveResult, solve
+from .solver import SolveResult, posed, solve
 from .solver.engines import cholmod_available
 from .solver.result import ResultAliases
 
@@ -86,7 +86,7 @@ class DigitsSolution(ResultAliases):
     def __repr__(self) -> str:
         total = self.timings.get("total", float("nan"))
         return (f"DigitsSolution(status={self.status!r}, nit={self.nit}, time={total:.3g} s,\n"
-                f"    {self.message!r})")
+                f"    {self.certificate.headline!r})")
 
 
 def point_from_iterate(data: ExtendedData, v, r_t) -> Point:
@@ -252,7 +252,8 @@ class ProofDriver:
 def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", tol: float = 1e-10,
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
-                    relative: bool = False, progress=None, factor_engine: str = "auto", **options) -> DigitsSolution:
+                    relative: bool = False, progress=None, factor_engine: str = "auto",
+                    as_stored: bool | None = None, **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; see :mod:`rfverify.proof.bound` for what "digits" means when a
     quantity is zero).  ``progress(message)`` receives one line per stage.
@@ -269,6 +270,12 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     demands relative digits of every quantity (a quantity that may be zero is then not
     certified; DESIGN §6.3).
 
+    ``as_stored``: True proves the equations with M exactly as stored, False those with
+    (M + Mᵀ)/2, None (default) what ``problem.equations`` says (symmetrised unless the problem
+    came from :meth:`Problem.stored_equations`); they differ only for an unsymmetric M, and a
+    proof of (M + Mᵀ)/2 then also states how many digits of the stored equations' solution the
+    answer has (DESIGN §6.1).
+
     For a problem read from a local file (``problem.local``) the quantities are u and r of the
     file's own local problem (DESIGN §6.1b): the double solve runs on the lifting, the
     double-double phase on the file's W, and the proof on W exactly.  When a hypothesis of the
@@ -276,6 +283,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     semidefinite as stored) no point can be proven: the path stops after the double solve
     and says why."""
     digits = validate_digits(digits)
+    problem = posed(problem, as_stored, method)
     if factor_engine not in ENGINES:
         raise InvalidArgumentError("factor_engine", f"{factor_engine!r} is not one of {', '.join(ENGINES)}",
                                    fix="use 'auto' (CHOLMOD where installed), 'cholmod' or 'ldl'")
@@ -312,7 +320,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         else:
             say(f"no proof is possible: {proof.failure}")
             source, why = "the double solve (no proof possible)", proof.failure
-        cert = certificate_from_proof(proof, point, extra={"point_source": source})
+        cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra={"point_source": source})
         return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
                               extended=ext.ExtendedResult(None, None, None, "NotRun", why, 0),
                               timings={"double": t_double - (c1 - c0),
@@ -330,7 +338,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
                      wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
     _, proof, point, (v, u, r) = driver.best
-    cert = certificate_from_proof(proof, point, extra={"point_source": ext_out.point_source, **ext_out.summary(),
+    cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra={"point_source": ext_out.point_source, **ext_out.summary(),
                                                        "proof_attempts": driver.attempts})
     c3 = compile_seconds()  # in extend(): the double-double kernels (the tail and the proofs compile none)
     timings = {"double": t_double - (c1 - c0), "setup": t_setup - (c2 - c1), "extended": ext_out.seconds_dd - (c3 - c_ext),

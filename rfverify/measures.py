@@ -271,7 +271,7 @@ class MeasureData:
 
     @staticmethod
     def of(problem: Problem, arith=FLOAT64) -> "MeasureData":
-        return MeasureData(problem.M_sym, problem.H, problem.f, problem.w, problem.mu, problem.mu_r,
+        return MeasureData(problem.M_eq, problem.H, problem.f, problem.w, problem.mu, problem.mu_r,
                            data_scales(problem), arithmetic(arith))
 
     def measures(self, v, u, r) -> Measures:

@@ -159,6 +159,13 @@ class Problem:
         For a problem read from a *local* file (Siconos local ``.dat``, ``/fclib_local``): the
         file's own W and q.  M, H, f, w are then its lifting (a solver device); what is proven
         is the local problem (DESIGN §6).  None for global problems.
+    equations : {"symmetrised", "stored"}
+        Which equations every solver, criterion and proof of this problem object judges:
+        ``"symmetrised"`` (default, the field's convention: Siconos' GRFC3D_IPM and FCLIB's
+        format take M symmetric) poses M v = H r + f with M := (M + Mᵀ)/2 (W := (W + Wᵀ)/2 for
+        a local file); ``"stored"`` poses them with M (W) exactly as stored.  The two differ
+        only where the stored matrix is unsymmetric (:attr:`matrix_is_symmetric`); factorisations
+        always use the symmetric part.  :meth:`stored_equations` gives the ``"stored"`` copy.
     """
 
     M: sp.csc_matrix
@@ -179,6 +186,7 @@ class Problem:
     provenance: dict = field(default_factory=dict)
     native: object = field(default=None, repr=False)
     local: LocalForm | None = field(default=None, repr=False)
+    equations: str = "symmetrised"
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -318,6 +326,50 @@ class Problem:
         return freeze_sparse(symmetrise(self.M))
 
     @cached_property
+    def matrix_is_symmetric(self) -> bool:
+        """True when the stored M (W for a local file) equals its transpose exactly: then the
+        symmetrised and the stored equations are the same problem."""
+        A = self.local.W if self.local is not None else self.M
+        return (abs(A - A.T) > 0).nnz == 0
+
+    @property
+    def M_eq(self) -> sp.csc_matrix:
+        """The M of the equations this problem poses (see ``equations``): :attr:`M_sym`, or the
+        stored M.  Residuals and criteria use it; factorisations use :attr:`M_sym`."""
+        return self.M if self.equations == "stored" else self.M_sym
+
+    @property
+    def as_stored(self) -> bool:
+        """True when the posed equations use the stored, unsymmetric matrix (``equations ==
+        "stored"`` and the matrix is not symmetric): a solver must then judge M as stored."""
+        return self.equations == "stored" and not self.matrix_is_symmetric
+
+    def stored_equations(self, as_stored: bool = True) -> "Problem":
+        """This problem posing its equations with M (W) as stored (``as_stored=True``) or with
+        (M + Mᵀ)/2 (``False``); ``self`` when it already does."""
+        want = "stored" if as_stored else "symmetrised"
+        if self.equations == want:
+            return self
+        out = dataclasses.replace(self, equations=want)
+        object.__setattr__(out, "M_sym", self.M_sym)
+        return out
+
+    @property
+    def statement(self) -> str:
+        """The problem every claim about this object is about, in a few words (DESIGN §1, §6.4):
+        always the convex relaxation; for a 3-D file, with μr = 0 and De Saxcé's term dropped
+        (so not the Coulomb solution); where the stored matrix is unsymmetric, which matrix the
+        equations use."""
+        X = "W" if self.local is not None else "M"
+        text = "the convex relaxation"
+        if self.provenance.get("spacedim") == 3:
+            text += " of the 3-D problem (μr = 0, De Saxcé's term dropped: not the Coulomb solution)"
+        if not self.matrix_is_symmetric:
+            text += (f" with {X} as stored (unsymmetric)" if self.equations == "stored"
+                     else f" with ({X} + {X}ᵀ)/2")
+        return text
+
+    @cached_property
     def contact_free_dofs(self) -> np.ndarray:
         """Indices of dofs in blocks of M that no contact touches (presolve can solve them
         directly: v = M⁻¹ f there)."""
@@ -330,7 +382,9 @@ class Problem:
         """A copy of this problem with ``solution`` replaced (shapes checked)."""
         if solution is not None:
             solution = _frozen_solution("solution", solution, self.n_dofs, self.n_contacts)
-        return dataclasses.replace(self, solution=solution)
+        out = dataclasses.replace(self, solution=solution)
+        object.__setattr__(out, "M_sym", self.M_sym)
+        return out
 
     def __repr__(self) -> str:
         return (f"Problem(title={self.title!r}, m={self.n_dofs}, n={self.n_contacts}, "

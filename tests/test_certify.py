@@ -29,7 +29,8 @@ def test_solve_digits_writes_a_certificate_that_rechecks(chute_file, capsys):
     with h5py.File(chute_file, "r") as fh:
         cg = fh["certificate"]
         assert cg.attrs["certified"] and cg.attrs["requested_digits"] == 10
-        assert "strong convexity" in cg.attrs["theorem"]
+        assert "monotonicity" in cg.attrs["theorem"]
+        assert cg.attrs["problem"] == "the convex relaxation with (M + Mᵀ)/2" and cg.attrs["equations"] == "symmetrised"
         v_dec = [s.decode() if isinstance(s, bytes) else s for s in cg["point/v_decimal"][()]]
         v_sol = fh["solution/v"][()]
         eps = cg["terms"].attrs["eps_M"]

@@ -258,7 +258,7 @@ def test_no_digits_are_claimed_for_a_quantity_bounded_only_absolutely(capsys):
     assert "zero within" in u_line and "digits (" not in u_line and "no significant digits" in u_line
     assert main(["solve", "bundled:sphere", "--digits", "10", "--quiet", "--relative"]) == 1
     out = capsys.readouterr().out
-    assert "not proven to 10 digits: u has no relative digits" in out and "meaningless" in out
+    assert "not proven to 10 digits for the convex relaxation: u has no relative digits" in out and "meaningless" in out
 
 
 def test_solve_judges_a_local_answer_on_the_file_not_on_the_lifting():

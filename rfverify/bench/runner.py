@@ -121,7 +121,8 @@ def discover_problems(inputs) -> list[ProblemEntry]:
 
 
 def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=True,
-               digits=10, reference_max_contacts=60, sizes=None, max_iter=100, dps=30) -> list[dict]:
+               digits=10, reference_max_contacts=60, sizes=None, max_iter=100, dps=30,
+               as_stored: bool = False) -> list[dict]:
     """The task list: a timed solve per (problem, method, tol), a trajectory per (problem,
     Algorithm 1 method), and the mixed-precision path per problem small enough for the
     reference (``n ≤ reference_max_contacts``; 0 disables it)."""
@@ -130,6 +131,8 @@ def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=Tr
     for e in problems:
         base = {"problem": e.key, "collection": e.collection, "path": e.path, "sha256": e.sha256,
                 "max_iter": max_iter, "dps": dps}
+        if as_stored:
+            base["as_stored"] = True
         for method in methods:
             for tol in tols:
                 tasks.append({**base, "kind": "solve", "method": method, "tol": float(tol)})
@@ -282,7 +285,7 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
               trajectory_tol: float = 1e-14, trajectories: bool = True, digits: int = 10,
               reference_max_contacts: int = 60, max_iter: int = 100, quiet: bool = False,
               command: str | None = None, retry_failed: bool = False,
-              scheduler: str | None = None) -> dict:
+              scheduler: str | None = None, as_stored: bool = False) -> dict:
     """Run (or resume) a benchmark.  Returns ``{"ran", "skipped", "timeouts", "total",
     "run_dir", "counts"}`` with ``counts[(method, tol)] = (verified solved, runs)`` over the
     problems of this invocation.  ``command`` (the CLI line) is recorded in the manifest so the
@@ -299,6 +302,11 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     ``time_limit``; this process writes the records as a local run does.  ``jobs`` is the
     number of local processes (default 1), or with ``scheduler`` the most tasks in flight at
     once (default: twice the cluster's worker threads).
+
+    ``as_stored`` solves, rechecks and proves every problem's equations with M exactly as
+    stored instead of (M + Mᵀ)/2 (DESIGN §6.1); a run directory holds one choice.  The peers
+    (clarabel, siconos) solve (M + Mᵀ)/2 only and are refused with it when a problem's M is
+    unsymmetric.
     """
     import math
 
@@ -336,19 +344,29 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     for e in problems:
         p = load(e.path)
         sizes[e.key] = (p.n_contacts, p.n_dofs)
+        peers = [m for m in methods if m in ("clarabel", "siconos")]
+        if as_stored and peers and not p.matrix_is_symmetric:
+            raise BenchInputError(f"--as-stored: {e.key} has an unsymmetric M, and {', '.join(peers)} "
+                                  f"{'solve' if len(peers) > 1 else 'solves'} (M + Mᵀ)/2 only; fix: leave them out of --methods, or drop --as-stored")
+    old = read_manifest(run_dir, required=False) if run_dir.is_dir() else {}
+    if old and bool(old.get("as_stored", False)) != bool(as_stored):
+        raise BenchInputError(f"{run_dir}: its runs were made {'with' if old.get('as_stored') else 'without'} "
+                              f"--as-stored; fix: give another --out for runs "
+                              f"{'with' if as_stored else 'without'} it")
     tasks = plan_tasks(problems, methods, sorted(tols, reverse=True), trajectory_tol=trajectory_tol,
                        trajectories=trajectories, digits=digits,
                        reference_max_contacts=reference_max_contacts,
-                       sizes={k: v[0] for k, v in sizes.items()}, max_iter=max_iter)
+                       sizes={k: v[0] for k, v in sizes.items()}, max_iter=max_iter, as_stored=as_stored)
     run_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(run_dir):
         return _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit,
                            trajectory_tol, digits, reference_max_contacts, quiet, command,
-                           retry_failed, scheduler)
+                           retry_failed, scheduler, as_stored)
 
 
 def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit, trajectory_tol,
-                digits, reference_max_contacts, quiet, command, retry_failed, scheduler) -> dict:
+                digits, reference_max_contacts, quiet, command, retry_failed, scheduler,
+                as_stored: bool = False) -> dict:
     from .._version import __version__
 
     old = read_manifest(run_dir, required=False)
@@ -373,6 +391,7 @@ def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit
         "reference_max_contacts": reference_max_contacts, "time_limit": time_limit, "jobs": jobs,
         "machine": _machine(), "scheduler": scheduler,
         "command": command or old.get("command"),
+        "as_stored": bool(as_stored),
     }
     write_json(run_dir / "manifest.json", manifest)
 

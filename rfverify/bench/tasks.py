@@ -50,6 +50,8 @@ def task_key(task: dict) -> str:
             "tol": None if task.get("tol") is None else tol_text(task["tol"]),
             "max_iter": task.get("max_iter"), "dps": task.get("dps"), "digits": task.get("digits"),
             "settings": settings}
+    if task.get("as_stored"):  # only then: the keys of default runs are unchanged
+        what["as_stored"] = True
     if task.get("method") == "siconos":  # a rebuilt peer (other sources, patches, driver) re-runs its tasks
         from ..solver.siconos_peer import build_id
 
@@ -82,7 +84,9 @@ def run_task(task: dict, out_dir: str) -> None:
             from ..io import load
 
             problem = load(task["path"])
-            record.update(n_contacts=problem.n_contacts, n_dofs=problem.n_dofs)
+            if task.get("as_stored"):  # the stored, unsymmetric M: solved, rechecked and proven as such
+                problem = problem.stored_equations()
+            record.update(n_contacts=problem.n_contacts, n_dofs=problem.n_dofs, problem_statement=problem.statement)
             if task["kind"] == "solve":
                 record.update(_solve(problem, task, out / f"{stem}.npz"))
             elif task["kind"] == "trajectory":

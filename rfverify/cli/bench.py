@@ -10,7 +10,7 @@ import sys
 from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
 from ..solver.result import METHODS
 from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
-from .common import DOCS_NOTE, exit_codes, EXIT_OK, dumps
+from .common import DOCS_NOTE, exit_codes, EXIT_OK, add_equations_option, dumps
 
 NO_LIMIT = 10**9
 """--reference-max-contacts when not given: every problem gets the --digits path."""
@@ -76,6 +76,7 @@ def add_parser(sub) -> None:
                        help="also re-run runs recorded as Timeout, Crashed or Error (e.g. with a "
                             "longer --time-limit); other finished runs are reused as usual")
     bench.add_argument("--quiet", action="store_true", help="no progress output")
+    add_equations_option(bench)
     bench.add_argument("--json", action="store_true", help="print the outcome as JSON")
     bench.set_defaults(func=cmd_bench, check_outputs=check_outputs)
 
@@ -102,7 +103,7 @@ def cmd_bench(args) -> int:
                     reference_max_contacts=NO_LIMIT if args.reference_max_contacts is None
                     else args.reference_max_contacts, max_iter=args.max_iter,
                     quiet=args.quiet, command=command, retry_failed=args.retry_failed,
-                    scheduler=args.scheduler)
+                    scheduler=args.scheduler, as_stored=args.as_stored)
     if args.json:
         out = dict(out, counts=[{"method": m, "tol": t, "solved": s, "total": n}
                                 for (m, t), (s, n) in out["counts"].items()])

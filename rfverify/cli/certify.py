@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from .argtypes import digit_count, out_path, positive_int
-from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
+from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_equations_option,
+                     add_load_options, dumps, is_hdf5_input,
                      load_problem, print_quantities, progress_printer)
 
 HELP = "prove how many digits of a solution are right (a rigorous error bound)"
@@ -15,8 +16,11 @@ Prove a lower bound on the correct significant digits of a solution (v, u, r) of
 relaxation (DESIGN §6): an extended-precision point near the solution set (stored in
 the solution file by 'solve --digits --out', or computed by a double solve and double-double
 iterations, continued in 320-bit arithmetic where double-double stalls) is evaluated in exact
-arithmetic, and the bound ||v - v*||_M <= sqrt(g'M^-1 g + 2 r'u) is carried to the solution.
-Exit code 0 only when --digits are proven."""
+arithmetic, and the bound ||v - v*||_Ms <= (sqrt(g'Ms^-1 g) + sqrt(g'Ms^-1 g + 4 r'u))/2 is
+carried to the solution. The verdict names the problem it proves (with (M + Mᵀ)/2 unless
+--as-stored). A /certificate already in the solution file is checked against the /solution it
+holds (its digest) and the output says whether it is about that solution. Exit code 0 only
+when --digits are proven."""
 
 
 def add_parser(sub) -> None:
@@ -44,6 +48,7 @@ def add_parser(sub) -> None:
                       help="write the problem, the given solution and /certificate (the point, "
                            "exactly and as decimal strings, the bound and every intermediate norm)")
     cert.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_equations_option(cert)
     add_load_options(cert)
     cert.set_defaults(func=cmd_certify, check_outputs=check_outputs)
 
@@ -60,20 +65,22 @@ def cmd_certify(args) -> int:
     from ..certification import certify
     from ..errors import ProblemFileError
     from ..io import load
-    from ..io.certificate import read_point
+    from ..io.certificate import read_point, read_stored_certificate
 
     problem = load_problem(args)
-    point = None
+    point = stored = None
     if args.solution:
         other = load(args.solution, max_asymmetry=np.inf)
         _require_same_problem(problem, other, args.solution)
         sol = other.solution
         where = args.solution
         point = read_point(_resolve(args.solution))
+        stored = read_stored_certificate(_resolve(args.solution))
     else:
         sol, where = problem.solution, args.problem
         if is_hdf5_input(args.problem):
             point = read_point(_resolve(args.problem))
+            stored = read_stored_certificate(_resolve(args.problem))
     # A 3-D file's /solution (3 per contact; local: u and r, v = H r) is read into the rolling
     # layout by load(), so it is certified like any other.
     if sol is None or sol.v is None or sol.r is None:
@@ -88,11 +95,15 @@ def cmd_certify(args) -> int:
     u = sol.u if sol.u is not None else _velocity(problem, sol)
     if args.out:
         _write_certificate(args, problem, sol, u, cert)
+    stored_note = _stored_certificate_note(stored, where)
     if args.json:
-        print(dumps(cert.as_dict(), indent=2))
+        print(dumps({**cert.as_dict(), "stored_certificate": None if stored is None else
+                     {**stored, "note": stored_note}}, indent=2))
     else:
         print(cert.verdict)
         print_quantities(cert)
+        if stored_note:
+            print(stored_note)
         src = cert.extra.get("point_source")
         print(f"point: {'stored in ' + where if src == 'given' else 'computed (' + str(src) + ')'}; "
               f"time {cert.seconds:.2f} s")
@@ -102,6 +113,22 @@ def cmd_certify(args) -> int:
             print(f"cross-check against the mpmath reference ({cc.get('reference_status')}): "
                   f"agreement {shown or cc.get('note', '')}")
     return EXIT_OK if cert.certified else EXIT_NOT_SOLVED
+
+
+def _stored_certificate_note(stored: dict | None, where) -> str:
+    """One line on the /certificate the file already held: whether it is about the /solution
+    the file holds (its digest), and what it claimed."""
+    if stored is None:
+        return ""
+    claim = stored.get("verdict") or "(no verdict)"
+    if stored["matches_solution"] is False:
+        return (f"stored certificate in {where}: NOT about this /solution (it was written for another one; "
+                f"digest differs): its claim does not hold for the solution now stored; the verdict above "
+                f"is the one that does (its point was used only as a proof point)")
+    if stored["matches_solution"] is None:
+        return (f"stored certificate in {where}: written before certificates recorded their solution's digest, "
+                f"so it may be about another solution; the verdict above is recomputed for the stored one")
+    return f"stored certificate in {where}: about this /solution (digest matches); it claimed: {claim}"
 
 
 def _velocity(problem, sol):

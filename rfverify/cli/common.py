@@ -48,12 +48,31 @@ def add_load_options(p: argparse.ArgumentParser):
                         "||M - Mᵀ||_F/||M||_F. An accepted M is symmetrised as (M + Mᵀ)/2.")
 
 
+AS_STORED_HELP = ("solve and prove the equations with M (W of a local file) exactly as stored, instead of "
+                  "(M + Mᵀ)/2, the convention of Siconos and FCLIB and the default; the two differ only when "
+                  "the stored matrix is unsymmetric, and a verdict about (M + Mᵀ)/2 then also states how many "
+                  "digits of the stored equations' solution the answer has (DESIGN §6.1). Not with the peers "
+                  "clarabel and siconos, nor for a local file with an unsymmetric W")
+
+
+def add_equations_option(p: argparse.ArgumentParser):
+    """``--as-stored``: the equations with the stored, unsymmetric matrix (solve, certify, bench)."""
+    p.add_argument("--as-stored", action="store_true", help=AS_STORED_HELP)
+
+
 def load_problem(args):
+    """The PROBLEM argument loaded with the load options, posing the equations ``--as-stored``
+    asks for (where the command has that option)."""
     from ..io import load
     from ..problem import DEFAULT_MAX_ASYMMETRY
 
     limit = DEFAULT_MAX_ASYMMETRY if args.max_asymmetry is None else args.max_asymmetry
-    return load(args.problem, max_asymmetry=limit)
+    problem = load(args.problem, max_asymmetry=limit)
+    if getattr(args, "as_stored", False):
+        from ..solver import posed
+
+        problem = posed(problem, True, getattr(args, "method", None))
+    return problem
 
 
 @contextlib.contextmanager

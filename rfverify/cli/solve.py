@@ -7,7 +7,8 @@ import numpy as np
 
 from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS
 from .argtypes import digit_count, out_path, positive_float, positive_int, tolerance
-from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, is_hdf5_input,
+from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_equations_option,
+                     add_load_options, dumps, is_hdf5_input,
                      load_problem, print_quantities, print_warnings, progress_printer,
                      recorded_warnings, warning_summary)
 
@@ -82,6 +83,7 @@ def add_parser(sub) -> None:
     sol.add_argument("--no-presolve", action="store_true",
                      help="switch off the presolve reductions (cone reduction for mu = 0 / "
                           "mu_r = 0 requires them; such problems are refused)")
+    add_equations_option(sol)
     add_load_options(sol)
     sol.set_defaults(func=cmd_solve, check_outputs=check_outputs)
 
@@ -124,6 +126,7 @@ def cmd_solve(args) -> int:
         _write_solution_file(args, problem, result.v, result.u, result.r)
     summary = {
         "status": str(result.status), "success": result.success, "message": result.message,
+        "problem": problem.statement, "equations": problem.equations,
         "method": result.method, "requested_method": args.method,
         "attempts": result.extras.get("attempts", []), "iterations": result.nit, "time": wall, "tol": args.tol,
         "criterion": result.criterion,
@@ -141,6 +144,8 @@ def cmd_solve(args) -> int:
         print(dumps(summary, indent=2))
     else:
         print(f"status {result.status}: {result.message}")
+        if problem.statement != "the convex relaxation":
+            print(f"problem: {problem.statement}{_stored_hint(problem)}")
         m = result.measures
         if m is not None:
             print(f"criterion {m.max:.2e} (dynamics {m.dynamics:.1e}, velocity {m.velocity:.1e}, cone "
@@ -152,6 +157,14 @@ def cmd_solve(args) -> int:
         print_warnings(summary["numerical_warnings"], "during the solve (the status above is "
                         "judged by the recomputed criterion, not by these)")
     return EXIT_OK if result.success else EXIT_NOT_SOLVED
+
+
+def _stored_hint(problem) -> str:
+    """Where the stored M is unsymmetric and the symmetrised equations were solved: how to solve
+    the stored ones."""
+    if problem.matrix_is_symmetric or problem.equations == "stored":
+        return ""
+    return " (M as stored is unsymmetric and its equations have another solution: --as-stored solves them)"
 
 
 def _solve_digits(args, problem, options) -> int:
@@ -169,6 +182,7 @@ def _solve_digits(args, problem, options) -> int:
         _write_solution_file(args, problem, out.v, out.u, out.r, certificate=cert)
     summary = {"status": "Certified" if out.success else "NotCertified",
                "success": out.success, "digits_requested": args.digits,
+               "problem": problem.statement, "equations": problem.equations,
                "certificate": cert.as_dict(), "double_status": str(out.double.status),
                "double_iterations": out.double.nit, "extended_iterations": out.extended.nit,
                "extended_status": out.extended.status, "backend": out.extended.backend,

@@ -148,6 +148,13 @@ class ExtendedData:
         Msym, sh, sl = _exact_symmetric(Msrc, self.m)
         self.M = DDMatrix((self.m, self.m), Msym.indptr, Msym.indices, sh, sl)
         self.M_pattern = Msym
+        # The M of the posed equations (residuals, refinement): the stored one for an
+        # ``as_stored`` problem, exactly; the Newton matrices always use the symmetric M.
+        self.M_eq = self.M
+        if problem.as_stored and not self.local:
+            Mst = sp.csr_matrix(problem.M, dtype=np.float64)
+            Mst.sort_indices()
+            self.M_eq = DDMatrix.from_scipy(Mst)
         self.Wt = None
         if self.local:
             Wk = sp.csr_matrix(problem.local.W)[lp.keep][:, lp.keep]
@@ -174,7 +181,8 @@ class ExtendedData:
 
     # ---- residual-level operators (double-double)
     def M_apply(self, vh, vl):
-        return self.M.matvec(vh, vl)
+        """M v of the posed equations (``M_eq``), double-double."""
+        return self.M_eq.matvec(vh, vl)
 
     def velocity(self, vh, vl, rh, rl):
         """ũ = H̃v + w̃ (global) or W̃r̃ + q̃ (local), double-double (hi, lo)."""

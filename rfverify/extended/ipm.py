@@ -182,7 +182,8 @@ class _DDSpace:
     tiny = 1e-300
 
     def __init__(self, data: ExtendedData):
-        self.M, self.H, self.HT = _DDOperator(data.M), _DDOperator(data.Ht), _DDOperator(data.HtT)
+        # M of the posed equations (stored, for an as_stored problem): residuals and refinement.
+        self.M, self.H, self.HT = _DDOperator(data.M_eq), _DDOperator(data.Ht), _DDOperator(data.HtT)
         self.J, self.JT = _DDOperator(data.J), _DDOperator(data.JT)
         self.W = _DDOperator(data.Wt) if data.local else None  # ũ = W̃r̃ + q̃ of the file's W (no dofs)
         self.f, self.w = V(*data.f), V(*data.w_t)

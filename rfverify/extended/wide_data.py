@@ -84,7 +84,7 @@ class WideData:
 
     def __init__(self, data: ExtendedData):
         self.data = data
-        self.M, self.Ht, self.HtT = WideMatrix(data.M), WideMatrix(data.Ht), WideMatrix(data.HtT)
+        self.M, self.Ht, self.HtT = WideMatrix(data.M_eq), WideMatrix(data.Ht), WideMatrix(data.HtT)
         self.J, self.JT = WideMatrix(data.J), WideMatrix(data.JT)
         self.f = from_dd(*data.f)
         self.w_t = from_dd(*data.w_t)

@@ -4,7 +4,10 @@ Written by ``rfverify solve --digits K --out SOL.h5`` and ``rfverify certify ...
 beside the problem and its ``/solution``::
 
     /certificate                 attrs: format, version, rfverify_version, requested_digits,
-                                        certified, verdict, arithmetic, theorem, point_source
+                                        certified, verdict, arithmetic, theorem, point_source,
+                                        problem (the statement the proof is about), equations
+                                        ("symmetrised" or "stored"), solution_sha256 (digest of
+                                        the /solution datasets this certificate is about)
     /certificate/point           attrs: layout = "rolling5" (r 5 per contact, (N, T1, T2, R1, R2),
                                         also for a 3-D file: its problem embedded with R = 0, and
                                         the v of a lifted local problem)
@@ -23,6 +26,15 @@ beside the problem and its ``/solution``::
                                         digits (NaN: none), mode, certified, note
     /certificate/terms           attrs: every intermediate norm of the proof (eps_M, gap_rTu,
                                         gMinvg_upper, lam_min_M_lower, ...)
+    /certificate/stored_equations
+                                 only for a proof of (M + Mᵀ)/2 of an unsymmetric M: attrs
+                                 certified, valid, failure, eps_M, fewest_digits and digits_<q>,
+                                 abs_bound_<q>: the same answer proven against M as stored
+
+Every write of ``/solution`` removes or rewrites ``/certificate``
+(:func:`rfverify.io.fclib.write_solution_in_place`), so a file never keeps a claim about a
+solution it no longer holds; ``certify`` compares ``solution_sha256`` with the stored
+``/solution`` and says whether the stored certificate is about it.
 
 To recheck: ``rfverify certify PROBLEM --solution SOL.h5`` evaluates the bound again from the
 stored point, in exact arithmetic, against the stored ``/solution``.
@@ -38,10 +50,32 @@ FORMAT = "rfverify-certificate"
 VERSION = 1
 POINT_LAYOUT = "rolling5"
 """The point is stored in rfverify's internal layout, 5 per contact, whatever the file's layout."""
-THEOREM = ("For M = (M+M^T)/2 positive definite, any v with u(v) = H^T v + w in K* and any r in K, "
-           "with g = Mv - Hr - f: ||v - v*||_M^2 <= g^T M^-1 g + 2 r^T u(v) (strong convexity and weak "
-           "duality of the convex relaxation); per-component bounds by Cauchy-Schwarz in the M inner "
-           "product, carried to the stored solution by the triangle inequality (DESIGN section 6).")
+THEOREM = ("For M_s = (M+M^T)/2 positive definite and the posed M (M_s, or M as stored), any v with "
+           "u(v) = H^T v + w in K* and any r in K, with g = Mv - Hr - f: ||v - v*||_Ms <= (sqrt(g^T Ms^-1 g) "
+           "+ sqrt(g^T Ms^-1 g + 4 r^T u(v)))/2 (monotonicity of the convex relaxation); per-component bounds "
+           "by Cauchy-Schwarz in the M_s inner product, carried to the stored solution by the triangle "
+           "inequality (DESIGN section 6).")
+SOLUTION_NAMES = ("v", "u", "r")
+
+
+def solution_digest(fh) -> str:
+    """SHA-256 of the ``/solution`` datasets of an open FCLIB file, as stored (float64 bytes,
+    little-endian, with their names; "" when there is no /solution group): what a
+    certificate is about."""
+    import hashlib
+
+    import h5py
+
+    grp = fh.get("solution")
+    if not isinstance(grp, h5py.Group):
+        return ""
+    h = hashlib.sha256()
+    for name in SOLUTION_NAMES:
+        obj = grp.get(name)
+        if isinstance(obj, h5py.Dataset):
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(np.asarray(obj[()], dtype="<f8")).tobytes())
+    return h.hexdigest()
 
 
 def write_certificate(fh, certificate) -> None:
@@ -63,8 +97,23 @@ def write_certificate(fh, certificate) -> None:
     grp.attrs["verdict"] = certificate.verdict
     grp.attrs["theorem"] = THEOREM if proof is None else proof.theorem  # global (§6.1) or local (§6.1b)
     grp.attrs["point_source"] = str(certificate.extra.get("point_source", ""))
+    grp.attrs["solution_sha256"] = solution_digest(fh)
     if proof is not None:
         grp.attrs["arithmetic"] = proof.arithmetic
+        grp.attrs["problem"] = proof.statement
+        grp.attrs["equations"] = proof.equations
+        st = proof.stored_equations
+        if st is not None:
+            sg = grp.create_group("stored_equations")
+            sg.attrs["certified"] = bool(st.certified)
+            sg.attrs["valid"] = bool(st.valid)
+            sg.attrs["failure"] = st.failure
+            sg.attrs["eps_M"] = st.eps_M
+            few = st.fewest_digits()
+            sg.attrs["fewest_digits"] = np.nan if few is None else few
+            for name, q in st.quantities.items():
+                sg.attrs[f"digits_{name}"] = np.nan if q.digits is None else q.digits
+                sg.attrs[f"abs_bound_{name}"] = q.abs_bound
         terms = grp.create_group("terms")
         for k, v in proof.terms.items():
             terms.attrs[k] = np.nan if v is None else v
@@ -86,6 +135,31 @@ def write_certificate(fh, certificate) -> None:
             terms = {k: getattr(point, k) for k in (f"{name}_hi", f"{name}_lo", f"{name}_more")}
             pg.create_dataset(f"{name}_decimal", data=np.array(_point_decimals(terms, name),
                                                                dtype=h5py.string_dtype()))
+
+
+def read_stored_certificate(path) -> dict | None:
+    """What ``/certificate`` of ``path`` claims, and whether it is about the ``/solution`` the
+    file holds now: ``{"certified", "verdict", "problem", "equations", "solution_sha256",
+    "current_sha256", "matches_solution"}`` (``matches_solution`` None for a certificate
+    written before digests were stored); None when there is no certificate."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as fh:
+            grp = fh.get("certificate")
+            if not isinstance(grp, h5py.Group):
+                return None
+            attrs = {k: grp.attrs.get(k) for k in ("certified", "verdict", "problem", "equations",
+                                                    "solution_sha256", "requested_digits")}
+            current = solution_digest(fh)
+    except OSError as exc:
+        raise ProblemFileError(path, f"cannot be read ({exc})", fix="check the file") from None
+    out = {k: (v.decode("utf-8", "replace") if isinstance(v, bytes) else v) for k, v in attrs.items()}
+    out["certified"] = None if out["certified"] is None else bool(out["certified"])
+    out["current_sha256"] = current
+    stored = out["solution_sha256"]
+    out["matches_solution"] = None if not stored else stored == current
+    return out
 
 
 def read_point(path):

@@ -211,6 +211,9 @@ def write_solution_in_place(target, solution: StoredSolution, *, extra=None, pro
     ``layout``, ``symmetrised``, ``symmetrised_matrix``, ``asymmetry_entrywise`` and
     ``asymmetry_normwise`` (what was symmetrised for solving).
 
+    Any ``/certificate`` of the file is removed (it was about the old solution); ``extra``
+    writes the new one where there is one.
+
     FCLIB keeps ``/solution`` beside the problem, so ``solve in.hdf5 --out in.hdf5`` is a
     reasonable request; the file is copied, the copy updated and renamed over the original,
     so an interrupted write leaves the original untouched.
@@ -244,6 +247,10 @@ def write_solution_in_place(target, solution: StoredSolution, *, extra=None, pro
             if problem is not None:
                 for key, val in solution_attributes(problem).items():
                     grp.attrs[key] = val
+            # A certificate is about the solution it was written with: a new /solution voids it
+            # (``extra`` writes a new one where there is one).
+            if fh.get("certificate", getlink=True) is not None:
+                del fh["certificate"]
             if extra is not None:  # e.g. /certificate beside the new /solution, in the same copy
                 extra(fh)
     return target.path

@@ -180,9 +180,13 @@ def describe_symmetrised(d: dict) -> str:
 
 
 def solution_attributes(problem: Problem) -> dict:
-    """Attributes written on ``/solution``: its layout and what was symmetrised."""
+    """Attributes written on ``/solution``: its layout, the problem it solves (``problem``, the
+    statement every verdict prints; ``equations``: "symmetrised", "stored" or "symmetric" when
+    the stored matrix is symmetric and both are the same) and what was symmetrised."""
     d = symmetrised(problem)
     return {"layout": SOLUTION_LAYOUT[file_layout(problem)],
+            "problem": problem.statement,
+            "equations": problem.equations if not problem.matrix_is_symmetric else "symmetric",
             "symmetrised": describe_symmetrised(d),
             "symmetrised_matrix": d["matrix"] if d["symmetrised"] else "",
             "asymmetry_entrywise": float(d["entrywise"]),

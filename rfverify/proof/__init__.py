@@ -72,7 +72,8 @@ class ProofContext:
             self.exact = ExactData(problem)
             self.mass: MassBounds = verify_mass_matrix(problem.M, problem.M_sym)
             self.w_diag = self.mass.quad_upper_columns(problem.H) if self.mass.proven else None
-            self.scales = data_scales(problem)
+            self.scales = data_scales(problem, self.exact, self.mass, self.w_diag)
+        self._stored_scales = None
         self.setup_seconds = time.perf_counter() - t0
 
     @property
@@ -101,10 +102,31 @@ class ProofContext:
         return _prove(self.problem, pv, pr, v, u, r, requested=requested, mass=self.mass, exact=self.exact,
                       scales=self.scales, w_diag=self.w_diag, relative=relative)
 
+    @property
+    def has_companion(self) -> bool:
+        """True when a proof of the symmetrised equations of a global problem whose stored M is
+        unsymmetric gets a companion: the same point judged by the stored equations."""
+        p = self.problem
+        return not self.is_local and p.equations == "symmetrised" and not p.matrix_is_symmetric
+
+    def with_companion(self, proof: Proof, point: Point, v, u, r) -> Proof:
+        """``proof`` with :attr:`Proof.stored_equations` set where :attr:`has_companion`: the
+        same point and solution proven against the stored, unsymmetric M (how many digits of
+        the stored equations' solution the answer has; DESIGN §6.1).  Costs one proof."""
+        if not self.has_companion or not proof.valid:
+            return proof
+        stored = self.problem.stored_equations()
+        if self._stored_scales is None:
+            self._stored_scales = data_scales(stored, self.exact, self.mass, self.w_diag)
+        pv, pr = point.exact()
+        proof.stored_equations = _prove(stored, pv, pr, v, u, r, requested=proof.requested, mass=self.mass,
+                                        exact=self.exact, scales=self._stored_scales, w_diag=self.w_diag)
+        return proof
+
     def eps_lower(self, gap: float) -> float:
-        """The smallest ε a point with duality gap rᵀu = ``gap`` can give (√(2 gap) globally,
-        √gap for the local theorem)."""
-        return math.sqrt(max(gap, 0.0) * (1.0 if self.is_local else 2.0))
+        """The smallest ε a point with duality gap rᵀu = ``gap`` can give (√gap: the theorem's
+        ε with g = 0, globally and for the local theorem)."""
+        return math.sqrt(max(gap, 0.0))
 
     def may_certify(self, eps_lower: float, v_inf: float, u_inf: float, requested: int) -> bool:
         """Necessary condition, cheap: with ε ≥ ``eps_lower`` the bounds on v and u are at least

@@ -1,39 +1,44 @@
 """The a-posteriori error bound of DESIGN §6, evaluated rigorously.
 
-Theorem (convex relaxation, M := (M + Mᵀ)/2 ≻ 0).  For any v with u(v) = Hᵀv + w ∈ K* and
-any r ∈ K, with g = Mv − Hr − f,
+Theorem (convex relaxation; M_s := (M + Mᵀ)/2 ≻ 0; the posed M is M_s, or M as stored for an
+``as_stored`` problem — DESIGN §6.1).  For any v with u(v) = Hᵀv + w ∈ K* and any r ∈ K, with
+g = Mv − Hr − f and d = v − v*, subtracting the equations of a solution gives
+M d − H(r − r*) = g, so (xᵀM x = xᵀM_s x for any M)
 
-    ½‖v − v*‖²_M  ≤  P(v) − P*  ≤  P(v) − D(r)  =  ½ gᵀM⁻¹g + rᵀu(v),
+    ‖d‖²_{M_s} = dᵀg + (u − u*)ᵀ(r − r*) ≤ ‖g‖_{M_s⁻¹} ‖d‖_{M_s} + rᵀu(v)
 
-(strong convexity of P(v) = ½vᵀMv − fᵀv with modulus 1 in the M-norm, and weak duality), so
+(u*ᵀr* = 0; uᵀr*, u*ᵀr ≥ 0 as pairs of K* and K), hence
 
-    ‖v − v*‖_M ≤ ε := √(gᵀM⁻¹g + 2 rᵀu(v)).
+    ‖v − v*‖_{M_s} ≤ ε := (√(gᵀM_s⁻¹g) + √(gᵀM_s⁻¹g + 4 rᵀu(v))) / 2.
 
-Consequences, per component (Cauchy–Schwarz in the M inner product):
+(For a symmetric M this is never weaker than √(gᵀM⁻¹g + 2rᵀu) of strong duality, and it
+needs no objective, so the stored, unsymmetric equations are covered by the same lines.)
+Consequences, per component (Cauchy–Schwarz in the M_s inner product):
 
-* |v_j − v*_j| ≤ √((M⁻¹)_jj) ε;
-* u − u* = Hᵀ(v − v*):  |u_k − u*_k| ≤ √(h_kᵀM⁻¹h_k) ε  (h_k = column k of H);
-* Hr* = Mv* − f:  Hr − Hr* = −g + M(v − v*), so |(Hr − Hr*)_i| ≤ |g_i| + √(M_ii) ε;
+* |v_j − v*_j| ≤ √((M_s⁻¹)_jj) ε;
+* u − u* = Hᵀ(v − v*):  |u_k − u*_k| ≤ √(h_kᵀM_s⁻¹h_k) ε  (h_k = column k of H);
+* Hr* = Mv* − f:  Hr − Hr* = −g + M(v − v*), so |(Hr − Hr*)_i| ≤ |g_i| + √(m_iᵀM_s⁻¹m_i) ε
+  (m_i = row i of the posed M; √(M_ii) when it is symmetric);
 * r* is unique on the contacts that can carry load when H restricted to their (kept) columns
   has full column rank: if u* is proven to lie in the interior of K*_i, then r*_i = 0 for
   every solution; on the others (set S), ‖r_S − r*_S‖₂ ≤ ‖H_S r_S − Hr*‖₂ / σmin(H_S).
 
 A *point* (v_p, r_p) — an extended-precision interior-point iterate — is evaluated **exactly**
 (dyadic rationals, :mod:`.dyadic`): cone membership by comparing squares, g, rᵀu; the
-norms of M⁻¹ come from :mod:`.massbounds` (verified floating point).  The triangle inequality
+norms of M_s⁻¹ come from :mod:`.massbounds` (verified floating point).  The triangle inequality
 then carries the bound to the returned double solution (v, u, r):
-|v_j − v*_j| ≤ |v_j − v_p,j| + √((M⁻¹)_jj) ε, and likewise for u, Hr and r.  Every float
+|v_j − v*_j| ≤ |v_j − v_p,j| + √((M_s⁻¹)_jj) ε, and likewise for u, Hr and r.  Every float
 that enters a bound is rounded upwards (``np.nextafter`` after each operation, or the
 a-priori factors of :mod:`.massbounds`).
 
 Digits.  For each quantity x the certificate states the proven absolute bound
 ‖x − x*‖∞ ≤ e, a rigorous lower bound s of ‖x*‖∞ (‖x‖∞ − e), and digits = −log10(e / s), a
-lower bound on the correct significant digits relative to ‖x*‖∞.  When s ≤ e (x* = 0: all
-contacts sticking give u* = 0 and often v* = 0; all contacts open give r* = 0) no relative
-digits exist; the absolute bound is reported against a stated *data scale* (‖M⁻¹f‖∞ for v,
-‖Hᵀ M⁻¹f + w‖∞ for u, ‖f‖∞ for Hr, ‖f‖∞ / max_k ‖h_k‖₂ for r), and x is certified to k
-digits in that sense when ‖x‖∞ + e ≤ 10⁻ᵏ·scale (x* is zero at the requested accuracy) and
-e ≤ 10⁻ᵏ·scale.
+lower bound on the correct significant digits relative to ‖x*‖∞ (e = 0: x is x* exactly).
+When s ≤ e (x* = 0: all contacts sticking give u* = 0 and often v* = 0; all contacts open
+give r* = 0) no relative digits exist; the absolute bound is reported against a stated *data
+scale* (‖M⁻¹f‖∞ for v, ‖Hᵀ M⁻¹f + w‖∞ for u, ‖f‖∞ for Hr, ‖f‖∞ / max_k ‖h_k‖₂ for r: each a
+proven lower bound, never a float sum), and x is certified to k digits in that sense when
+‖x‖∞ + e ≤ 10⁻ᵏ·scale (x* is zero at the requested accuracy) and e ≤ 10⁻ᵏ·scale.
 """
 
 from __future__ import annotations
@@ -55,9 +60,10 @@ MAX_CERTIFIABLE_DIGITS = 15
 QUANTITIES = ("v", "u", "Hr", "r")
 DATA_SCALE_NAMES = {"v": "‖M⁻¹f‖∞", "u": "‖HᵀM⁻¹f + w‖∞", "Hr": "‖f‖∞", "r": "‖f‖∞ / max_k ‖h_k‖₂"}
 DATA_SCALE_NAMES_LOCAL = {"u": "‖q‖∞", "r": "‖q‖∞ / max_k W_kk"}
-THEOREM_GLOBAL = ("Global problem, M = (M+M^T)/2 positive definite: for any v with u(v) = H^T v + w in K* and any "
-                  "r in K, with g = Mv - Hr - f: ||v - v*||_M^2 <= g^T M^-1 g + 2 r^T u(v) (strong convexity and "
-                  "weak duality of the convex relaxation); per-component bounds by Cauchy-Schwarz in the M inner "
+THEOREM_GLOBAL = ("Global problem, M_s = (M+M^T)/2 positive definite, M the posed matrix (M_s, or M as stored): for "
+                  "any v with u(v) = H^T v + w in K* and any r in K, with g = Mv - Hr - f: ||v - v*||_Ms^2 <= "
+                  "g^T(v - v*) + r^T u(v), so ||v - v*||_Ms <= (sqrt(g^T Ms^-1 g) + sqrt(g^T Ms^-1 g + 4 r^T u(v)))/2 "
+                  "(monotonicity of the convex relaxation); per-component bounds by Cauchy-Schwarz in the M_s inner "
                   "product, carried to the stored solution by the triangle inequality (DESIGN 6.1).")
 
 
@@ -93,22 +99,28 @@ class QuantityBound:
 
     @property
     def zero_within(self) -> float:
-        """Proven upper bound of ‖x*‖∞ (‖x‖∞ + abs_bound, rounded up)."""
-        return float(_up(self.norm + self.abs_bound)) if math.isfinite(self.abs_bound) else math.inf
+        """Proven upper bound of ‖x*‖∞ (‖x‖∞ + abs_bound, rounded up; 0 when x = x* = 0 exactly)."""
+        if not math.isfinite(self.abs_bound):
+            return math.inf
+        return 0.0 if self.norm == 0 and self.abs_bound == 0 else float(_up(self.norm + self.abs_bound))
 
     @property
     def scale_digits(self) -> float | None:
         """−log10(zero_within / data_scale): how far below its data scale x* is proven to be
         (the absolute mode's measure; not significant digits of x*)."""
         z = max(self.zero_within, self.abs_bound)
+        if z == 0:
+            return FLOAT64_DIGITS
         if not (self.data_scale > 0 and math.isfinite(z)):
             return None
-        return FLOAT64_DIGITS if z == 0 else -math.log10(z / self.data_scale)
+        return log_ratio(self.data_scale, z)
 
     def short(self) -> str:
         """One phrase that claims exactly what was proven: relative digits, or "zero within"."""
         if self.mode == "information":
             return f"{self.name} not unique"
+        if self.mode == "absolute" and self.zero_within == 0:
+            return f"{self.name} exactly 0"
         if self.mode == "absolute":
             return (f"{self.name} zero within {self.zero_within:.1e} ({self.scale_digits:.1f} digits of "
                     f"{self.data_scale_name})")
@@ -117,6 +129,8 @@ class QuantityBound:
     def describe(self) -> str:
         if self.mode == "information":
             return f"{self.name}: not unique ({self.note}); error bound not available"
+        if self.mode == "absolute" and self.zero_within == 0:
+            return f"{self.name}: exactly 0 (the candidate is the solution: error bound 0)"
         if self.mode == "absolute":
             return (f"{self.name}: zero within {self.zero_within:.2e} (‖{self.name}*‖∞ ≤ {self.zero_within:.2e} = "
                     f"{self.scale_digits:.1f} digits below the data scale {self.data_scale_name} = "
@@ -151,6 +165,14 @@ class Proof:
     arithmetic: str = ("exact dyadic rationals (Python integers) for the point's residuals; "
                        "verified float64 with a-priori rounding-error bounds for M and H norms")
     theorem: str = THEOREM_GLOBAL
+    statement: str = ""
+    """The problem this proof is about, in words (:meth:`rfverify.Problem.statement`)."""
+    equations: str = "symmetrised"
+    """"symmetrised" ((M + Mᵀ)/2) or "stored" (M as stored): the matrix of the posed equations."""
+    stored_equations: "Proof | None" = None
+    """For a proof of the symmetrised equations of a problem whose stored M is unsymmetric: the
+    same point and solution proven against the stored equations (how many digits of *their*
+    solution the answer has), else None."""
 
     @property
     def certified(self) -> bool:
@@ -162,8 +184,19 @@ class Proof:
         return self.theorem != THEOREM_GLOBAL
 
     def weakest(self) -> str | None:
+        """The uncertified quantity with the fewest proven digits (None: all certified)."""
         bad = [q for q in self.quantities.values() if q.mode != "information" and not q.certified]
-        return bad[0].name if bad else None
+        if not bad:
+            return None
+        return min(bad, key=lambda q: -math.inf if q.digits is None else q.digits).name
+
+    def fewest_digits(self) -> float | None:
+        """The smallest relative digits over the quantities that have a bound (None: some
+        quantity has none, or the proof is invalid)."""
+        if not self.valid:
+            return None
+        vals = [q.digits for q in self.quantities.values() if q.mode != "information"]
+        return None if any(d is None for d in vals) or not vals else min(vals)
 
     def summary(self) -> str:
         if not self.valid:
@@ -184,10 +217,37 @@ class ExactData:
         self.w = Dyadic.from_float(problem.w)
         self.mu = Dyadic.from_float(problem.mu)
         self.mu_r = Dyadic.from_float(problem.mu_r)
+        self._row_quad = None
+        self._skew_norm = None
 
     def M_sym_apply(self, v: Dyadic) -> Dyadic:
         """(M + Mᵀ)/2 · v exactly."""
         return (self.M.matvec(v) + self.MT.matvec(v)).scale2(-1)
+
+    def M_apply(self, v: Dyadic, stored: bool) -> Dyadic:
+        """M v of the posed equations exactly: M as stored (``stored``) or (M + Mᵀ)/2."""
+        return self.M.matvec(v) if stored else self.M_sym_apply(v)
+
+    def row_quad_upper(self, mass: MassBounds) -> np.ndarray:
+        """Upper bounds of m_iᵀ M_s⁻¹ m_i for the rows m_i of the stored M (the Hr bound of the
+        stored equations: |e_iᵀM d| ≤ ‖M_s^-½ Mᵀe_i‖₂ ‖d‖_{M_s})."""
+        if self._row_quad is None:
+            self._row_quad = mass.quad_upper_columns(sp.csc_matrix(self.problem.M).T)
+        return self._row_quad
+
+    def skew_norm_upper(self) -> float:
+        """Upper bound of ‖(M − Mᵀ)/2‖₂ ≤ √(‖·‖₁‖·‖∞) (rows and columns of |M − Mᵀ|/2, each
+        difference rounded up)."""
+        if self._skew_norm is None:
+            M = sp.csr_matrix(self.problem.M)
+            D = (M - M.T).tocsr()
+            D.data = _up(np.abs(D.data) * 0.5 * (1 + 2.0 ** -52))
+            k = int(np.max(np.diff(D.indptr), initial=1)) + 2
+            rows = inflate(np.asarray(D.sum(axis=1)).ravel(), k)
+            cols = inflate(np.asarray(D.sum(axis=0)).ravel(), k)
+            self._skew_norm = float(_up(math.sqrt(float(_up(float(np.max(rows, initial=0.0))
+                                                            * float(np.max(cols, initial=0.0)))))))
+        return self._skew_norm
 
 
 def cone_violations(data: ExactData, u: Dyadic, r: Dyadic):
@@ -210,32 +270,58 @@ def cone_violations(data: ExactData, u: Dyadic, r: Dyadic):
     return np.flatnonzero(ks_bad), np.flatnonzero(k_bad)
 
 
-def data_scales(problem: Problem) -> dict:
-    """Non-vanishing data scales, float64 (stated with the certificate; not part of a bound)."""
+def data_scales(problem: Problem, exact: ExactData | None = None, mass: MassBounds | None = None,
+                w_diag: np.ndarray | None = None) -> dict:
+    """Data scales that are proven **lower bounds** (they decide absolute-mode acceptances,
+    DESIGN §6.3): ‖M⁻¹f‖∞ and ‖HᵀM⁻¹f + w‖∞ of the posed M, ‖f‖∞ (exact) and ‖f‖∞ / max_k ‖h_k‖₂.
+
+    x̃ ≈ M⁻¹f is a float solve; its residual ρ = f − M x̃ is exact (dyadic), and M(x − x̃) = ρ
+    gives ‖x − x̃‖_{M_s} ≤ √(ρᵀM_s⁻¹ρ) (the monotonicity step of the theorem), so
+    |x_j − x̃_j| ≤ √((M_s⁻¹)_jj)·√(ρᵀM_s⁻¹ρ) and |u_k − ũ_k| ≤ √(h_kᵀM_s⁻¹h_k)·√(ρᵀM_s⁻¹ρ) with ũ
+    = Hᵀx̃ + w exact: the scales are max(|x̃_j| − bound) (0 where that is negative), rounded
+    down.  Without proven bounds on M the v and u scales are 0 (nothing is accepted by them)."""
     from scipy.sparse.linalg import splu
 
-    try:
-        v_free = splu(problem.M_sym.tocsc()).solve(problem.f)
-    except RuntimeError:
-        v_free = np.zeros(problem.n_dofs)
-    u_free = problem.H.T @ v_free + problem.w
-    col_norm = np.sqrt(np.asarray(problem.H.power(2).sum(axis=0)).ravel())
     f_inf = float(np.max(np.abs(problem.f), initial=0.0))
-    # The scales are only compared with bounds, so a relative inaccuracy of 1e-12 is removed.
-    shrink = 1 - 1e-10
-    return {"v": float(np.max(np.abs(v_free), initial=0.0)) * shrink,
-            "u": float(np.max(np.abs(u_free), initial=0.0)) * shrink,
-            "Hr": f_inf,
-            "r": (f_inf / float(col_norm.max(initial=0.0)) * shrink) if col_norm.max(initial=0.0) > 0 else 0.0}
+    Hc = sp.csc_matrix(problem.H)
+    sq = Hc.multiply(Hc)
+    k = int(np.max(np.diff(Hc.indptr), initial=1)) + 2
+    col_sq = inflate(np.asarray(sq.sum(axis=0)).ravel(), k)
+    col_max = float(_up(math.sqrt(float(np.max(col_sq, initial=0.0)))))
+    r_scale = float(_down(f_inf / col_max)) if col_max > 0 and math.isfinite(col_max) else 0.0
+    out = {"v": 0.0, "u": 0.0, "Hr": f_inf, "r": max(r_scale, 0.0)}
+    if exact is None or mass is None or not mass.proven:
+        return out
+    try:
+        with np.errstate(all="ignore"):
+            x = splu(sp.csc_matrix(problem.M_eq)).solve(np.asarray(problem.f, dtype=np.float64))
+    except RuntimeError:
+        x = np.zeros(problem.n_dofs)
+    if not np.all(np.isfinite(x)):
+        x = np.zeros(problem.n_dofs)
+    xd = Dyadic.from_float(x)
+    rho = exact.f - exact.M_apply(xd, problem.as_stored)
+    root = float(_up(math.sqrt(gMinvg_upper(rho, mass))))
+    e_x = _up(_up(np.sqrt(mass.minv_diag_upper)) * root)
+    x_lo = _down(np.abs(x) - e_x)
+    out["v"] = max(float(np.max(x_lo, initial=0.0)), 0.0)
+    if w_diag is None:
+        w_diag = mass.quad_upper_columns(problem.H)
+    ut = exact.HT.matvec(xd) + exact.w
+    mag_lo = np.where(ut.sign() >= 0, ut.lower(), -ut.upper())  # |ũ| rounded down
+    u_lo = _down(mag_lo - _up(_up(np.sqrt(w_diag)) * root))
+    out["u"] = max(float(np.max(u_lo, initial=0.0)), 0.0)
+    return out
 
 
 def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, requested: int = 10,
           mass: MassBounds | None = None, exact: ExactData | None = None,
           scales: dict | None = None, w_diag: np.ndarray | None = None, relative: bool = False) -> Proof:
     """Evaluate the bound for the point (point_v, point_r) and carry it to the returned float64
-    solution (v (m,), u (5n,), r (5n,)).  Reusable pieces (``mass``, ``exact``, ``scales``,
-    ``w_diag``) can be passed in when proving several points of one problem.  ``relative``:
-    accept only relative digits (no "zero at the data scale" mode)."""
+    solution (v (m,), u (5n,), r (5n,)), for the equations ``problem`` poses
+    (``problem.equations``: (M + Mᵀ)/2, or M as stored).  Reusable pieces (``mass``, ``exact``,
+    ``scales``, ``w_diag``) can be passed in when proving several points of one problem.
+    ``relative``: accept only relative digits (no "zero at the data scale" mode)."""
     t0 = time.perf_counter()
     requested = validate_digits(requested)
     m, n = problem.n_dofs, problem.n_contacts
@@ -246,15 +332,20 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
 
             raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {size}",
                                       fix="certify a solution of this problem")
+    stored = problem.as_stored
+    named = {"statement": problem.statement, "equations": "stored" if stored else "symmetrised"}
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
-        return _invalid(requested, "the solution contains NaN or Inf", t0)
+        return _invalid(requested, "the solution contains NaN or Inf", t0, **named)
     exact = exact or ExactData(problem)
     mass = mass or verify_mass_matrix(problem.M, problem.M_sym)
-    scales = scales or data_scales(problem)
     if not mass.proven:
         fb = mass.failures[0]
-        return _invalid(requested, f"M = (M + Mᵀ)/2 is not proven positive definite: block {fb.block} "
-                                   f"(dofs {fb.dofs[:6].tolist()}{'…' if fb.dofs.size > 6 else ''}): {fb.reason}", t0)
+        return _invalid(requested, f"M_s = (M + Mᵀ)/2 is not proven positive definite: block {fb.block} "
+                                   f"(dofs {fb.dofs[:6].tolist()}{'…' if fb.dofs.size > 6 else ''}): {fb.reason}",
+                        t0, **named)
+    if w_diag is None:
+        w_diag = mass.quad_upper_columns(problem.H)
+    scales = scales or data_scales(problem, exact, mass, w_diag)
     if len(point_v) != m or len(point_r) != SPACEDIM * n:
         raise ValueError("the point does not match the problem's sizes")
 
@@ -262,9 +353,9 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     u_p = exact.HT.matvec(point_v) + exact.w
     outside = cones_failure(exact, u_p, point_r, "u(v) = Hᵀv + w")
     if outside:
-        return _invalid(requested, outside, t0)
+        return _invalid(requested, outside, t0, **named)
     Hr_p = exact.H.matvec(point_r)
-    g = exact.M_sym_apply(point_v) - Hr_p - exact.f
+    g = exact.M_apply(point_v, stored) - Hr_p - exact.f
     gap = point_r.dot(u_p)  # ≥ 0: a sum of products of cone-dual pairs
     q_g = gMinvg_upper(g, mass)
     gap_up = fraction_upper_float(gap)
@@ -273,19 +364,21 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     # ---- carry to the returned solution
     vd = Dyadic.from_float(v)
     e_v = upper_sum((vd - point_v).abs_upper(), _up(_up(np.sqrt(mass.minv_diag_upper)) * eps))
-    if w_diag is None:
-        w_diag = mass.quad_upper_columns(problem.H)
     sqrtW = _up(np.sqrt(w_diag))
     e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up(sqrtW * eps))
     Hr_ret = exact.H.matvec(Dyadic.from_float(r))
     g_abs = g.abs_upper()
-    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up(_up(np.sqrt(mass.m_diag_upper)) * eps))
+    # |e_iᵀM d| ≤ √(m_iᵀM_s⁻¹m_i)·ε; for a symmetric M that is √(M_ii)·ε
+    row_norm = _up(np.sqrt(exact.row_quad_upper(mass))) if stored else _up(np.sqrt(mass.m_diag_upper))
+    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up(row_norm * eps))
 
     terms = {"eps_M": eps, "gap_rTu": gap_up, "gMinvg_upper": q_g, "g_inf": float(np.max(g_abs, initial=0.0)),
              "lam_min_M_lower": float(np.nanmin(mass.lam_lower)), "lam_max_M_upper": mass.lam_max_upper,
              "max_sqrt_Minv_jj": float(np.max(np.sqrt(mass.minv_diag_upper), initial=0.0)),
              "max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)),
              "M_blocks_dense": mass.dense_blocks, "M_blocks_sparse": mass.sparse_blocks}
+    if stored:
+        terms["skew_norm2_upper"] = exact.skew_norm_upper()
     q = {}
     q["v"] = _quantity("v", e_v, v, scales, requested, relative=relative)
     q["u"] = _quantity("u", e_u, u, scales, requested, relative=relative)
@@ -293,14 +386,14 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     q["Hr"] = _quantity("Hr", e_Hr, Hr_float, scales, requested, relative=relative)
 
     # ---- r, where it is unique
-    e_r, r_note, r_terms = _r_bound(problem, exact, mass, u_p, sqrtW * eps, point_r, Hr_p, g, eps, r)
+    e_r, r_note, r_terms = _r_bound(problem, exact, mass, u_p, sqrtW * eps, point_r, Hr_p, g, eps, r, stored)
     terms.update(r_terms)
     if e_r is None:
         q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
                                DATA_SCALE_NAMES["r"], None, "information", False, r_note)
     else:
         q["r"] = _quantity("r", e_r, r, scales, requested, note=r_note, relative=relative)
-    return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0)
+    return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, **named)
 
 
 def cones_failure(data, u_p: Dyadic, point_r: Dyadic, u_name: str) -> str:
@@ -326,9 +419,11 @@ def gMinvg_upper(g: Dyadic, mass: MassBounds) -> float:
 
 
 def eps_M_upper(q_g: float, gap_up: float) -> float:
-    """ε ≥ √(gᵀM⁻¹g + 2rᵀu), from upper bounds of both terms."""
-    eps2 = float(_up(q_g + float(_up(2.0 * gap_up))))
-    return float(_up(math.sqrt(eps2)))
+    """ε ≥ (√(gᵀM_s⁻¹g) + √(gᵀM_s⁻¹g + 4rᵀu))/2 ≥ ‖v − v*‖_{M_s}, from upper bounds of both terms."""
+    root_q = float(_up(math.sqrt(q_g)))
+    # (a negative gap is impossible for r ∈ K, u ∈ K*: only a broken cone test gets here)
+    root_all = float(_up(math.sqrt(max(float(_up(q_g + float(_up(4.0 * gap_up)))), 0.0))))
+    return float(_up(float(_up(root_q + root_all)) * 0.5))
 
 
 def validate_digits(digits) -> int:
@@ -349,8 +444,15 @@ def validate_digits(digits) -> int:
     return digits
 
 
-def _invalid(requested, why, t0, theorem: str = THEOREM_GLOBAL) -> Proof:
-    return Proof(False, requested, math.inf, {}, {}, failure=why, seconds=time.perf_counter() - t0, theorem=theorem)
+def _invalid(requested, why, t0, theorem: str = THEOREM_GLOBAL, **named) -> Proof:
+    return Proof(False, requested, math.inf, {}, {}, failure=why, seconds=time.perf_counter() - t0, theorem=theorem,
+                 **named)
+
+
+def log_ratio(big: float, small: float) -> float:
+    """log10(big / small) for positive finite floats, without forming a ratio that under- or
+    overflows (a bound of 1e-300 on a vector of norm 1e300)."""
+    return math.log10(big) - math.log10(small)
 
 
 def _quantity(name, e, x, scales, requested, note="", names=DATA_SCALE_NAMES, relative: bool = False) -> QuantityBound:
@@ -362,17 +464,22 @@ def _quantity(name, e, x, scales, requested, note="", names=DATA_SCALE_NAMES, re
     data = scales[name]
     digits = None
     if own > e_inf and e_inf >= 0:
-        digits = min(FLOAT64_DIGITS, -math.log10(e_inf / own)) if e_inf > 0 else FLOAT64_DIGITS
+        digits = min(FLOAT64_DIGITS, log_ratio(own, e_inf)) if e_inf > 0 else FLOAT64_DIGITS
     tol = 10.0 ** (-requested)
     if digits is not None and digits >= requested:
         return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", True, note)
+    if e_inf == 0 and norm == 0 and not relative:
+        # The bound is 0 and x = 0: x* = 0 exactly, whatever the data scale (the all-zero problem).
+        return QuantityBound(name, 0.0, 0.0, 0.0, data, names[name], None, "absolute", True,
+                             note or f"{name}* = 0 exactly (error bound 0)")
     if relative:
         if digits is None:
             note = note or (f"relative digits requested, but ‖{name}*‖∞ may be 0 (‖{name}‖∞ = {norm:.2e} ≤ "
                             f"error bound {e_inf:.2e}): relative digits are meaningless here")
         return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)
     # x* may be zero: judge absolutely against the data scale when it is negligible there.
-    if data > 0 and float(_up(norm + e_inf)) <= tol * data and e_inf <= tol * data:
+    limit = float(_down(float(_down(tol)) * data))  # ≤ 10⁻ᵏ·scale exactly
+    if data > 0 and float(_up(norm + e_inf)) <= limit and e_inf <= limit:
         return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "absolute", True,
                              note or f"‖{name}*‖∞ ≤ {float(_up(norm + e_inf)):.2e} ≤ 1e-{requested}·{names[name]}")
     return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)
@@ -392,7 +499,7 @@ def proven_open(u_p: Dyadic, u_radius, mu, mur, n: int) -> np.ndarray:
     return lhs > rhs
 
 
-def _r_bound(problem, exact, mass, u_p: Dyadic, u_radius, point_r, Hr_p, g, eps, r):
+def _r_bound(problem, exact, mass, u_p: Dyadic, u_radius, point_r, Hr_p, g, eps, r, stored: bool = False):
     """Per-component bound on r − r* when r* is unique on the loaded contacts, else None."""
     n = problem.n_contacts
     mu, mur = problem.mu, problem.mu_r
@@ -424,8 +531,14 @@ def _r_bound(problem, exact, mass, u_p: Dyadic, u_radius, point_r, Hr_p, g, eps,
     d = exact.H.matvec(Dyadic.from_float(r_S)) - Hr_p
     dist = sqrt_upper(d.square().total())
     gnorm = sqrt_upper(g.square().total())
-    total = float(_up(_up(dist + gnorm) + _up(math.sqrt(mass.lam_max_upper)) * eps))
-    total = float(_up(total + float(_up(math.sqrt(mass.lam_max_upper) * 4 * 2.0 ** -53 * eps))))
+    # ‖M d‖₂ ≤ √λmax(M_s)·ε, plus ‖A‖₂‖d‖₂ ≤ ‖A‖₂ ε/√λmin(M_s) for the skew part A of a stored M
+    gain = float(_up(math.sqrt(mass.lam_max_upper)))
+    if stored:
+        lam_min = float(np.nanmin(mass.lam_lower))
+        gain = float(_up(gain + float(_up(exact.skew_norm_upper() / float(_down(math.sqrt(lam_min)
+                                                                                  * (1 - 4 * 2.0 ** -53)))))))
+    total = float(_up(_up(dist + gnorm) + _up(gain * eps)))
+    total = float(_up(total + float(_up(gain * 4 * 2.0 ** -53 * eps))))
     e = np.abs(r).astype(np.float64)  # off S (and dropped components): r* = 0 there
     if cols.size:
         e_S = float(_up(total / float(_down(math.sqrt(lam) * (1 - 4 * 2.0 ** -53)))))

@@ -172,12 +172,12 @@ def exact_psd(A: sp.spmatrix) -> str:
 
 
 def local_data_scales(problem: Problem) -> dict:
-    """Non-vanishing data scales of a local problem: ‖q‖∞ for u (u at r = 0), and
-    ‖q‖∞ / max_k W_kk for r (float64, stated with the certificate; not part of a bound)."""
+    """Non-vanishing data scales of a local problem: ‖q‖∞ for u (u at r = 0, exact), and
+    ‖q‖∞ / max_k W_kk for r (rounded down: a proven lower bound, as every scale that decides an
+    absolute-mode acceptance must be)."""
     q_inf = float(np.max(np.abs(problem.local.q), initial=0.0))
     wmax = float(np.max(problem.local.W.diagonal(), initial=0.0))
-    shrink = 1 - 1e-10
-    return {"u": q_inf, "r": q_inf / wmax * shrink if wmax > 0 else 0.0}
+    return {"u": q_inf, "r": float(np.nextafter(q_inf / wmax, 0.0)) if wmax > 0 else 0.0}
 
 
 def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10, exact: LocalExact | None = None,
@@ -195,11 +195,11 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
             raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {SPACEDIM * n}",
                                       fix="certify a solution of this problem")
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
-        return _invalid(requested, "the solution contains NaN or Inf", t0, theorem=THEOREM_LOCAL)
+        return _invalid(requested, "the solution contains NaN or Inf", t0, theorem=THEOREM_LOCAL, statement=problem.statement)
     ex = exact or LocalExact(problem)
     scales = scales or local_data_scales(problem)
     if not ex.facts.psd:
-        return _invalid(requested, ex.facts.why, t0, theorem=THEOREM_LOCAL)
+        return _invalid(requested, ex.facts.why, t0, theorem=THEOREM_LOCAL, statement=problem.statement)
     if len(point_r) != SPACEDIM * n:
         raise ValueError("the point does not match the problem's sizes")
 
@@ -209,7 +209,7 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
     if outside:
         shifted = _shift_into_dual_cone(problem, ex, u_p, point_r)
         if shifted is None:
-            return _invalid(requested, outside, t0, theorem=THEOREM_LOCAL)
+            return _invalid(requested, outside, t0, theorem=THEOREM_LOCAL, statement=problem.statement)
     sqrtW = _up(np.sqrt(ex.facts.w_diag))
     if shifted is None:
         gap = point_r.dot(u_p)  # ≥ 0: pairs of K and K*
@@ -243,6 +243,7 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         q["r"] = _quantity("r", e_r, r, scales, requested, note=note, names=DATA_SCALE_NAMES_LOCAL,
                            relative=relative)
     return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, theorem=THEOREM_LOCAL,
+                 statement=problem.statement,
                  arithmetic=("exact dyadic rationals (Python integers) for u = Wr + q, rᵀu and the cones; "
                              "verified float64 (or exact rationals) for W ⪰ 0 and λmin"))
 

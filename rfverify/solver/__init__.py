@@ -18,7 +18,7 @@ from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, IterationInfo, Settings, SolveResult, Status, method_unavailable)
 
-__all__ = ["solve", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence", "body_fill"]
+__all__ = ["solve", "posed", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence", "body_fill"]
 
 
 def auto_sequence(n_contacts: int, fill=None) -> tuple:
@@ -69,7 +69,8 @@ def body_fill(problem: Problem) -> float:
 
 
 def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: int = 100,
-          keep_iterates: bool = False, callback=None, **options) -> SolveResult:
+          keep_iterates: bool = False, callback=None, *, as_stored: bool | None = None,
+          **options) -> SolveResult:
     """Solve a rolling-friction problem with Algorithm 1 (or the Clarabel peer).
 
     For a problem read from a local file (``problem.local``) the iterations run on its lifting
@@ -105,6 +106,13 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     keep_iterates : bool
         Store every iterate in ``extras["iterates"]`` as (v, r̃, z) with v on
         ``extras["active_dofs"]`` (for lockstep diagnosis; implies no component splitting).
+    as_stored : bool, optional
+        True: solve the equations with M exactly as stored (unsymmetric M); False: with
+        (M + Mᵀ)/2, the convention of Siconos and FCLIB; None (default): what
+        ``problem.equations`` says ("symmetrised" unless the problem came from
+        :meth:`Problem.stored_equations`).  They differ only for an unsymmetric M; the status
+        judges the chosen equations.  Not for ``clarabel`` or ``siconos`` (they solve
+        (M + Mᵀ)/2 only) nor for a local file with an unsymmetric W.
     callback : callable, optional
         ``callback(info)`` with an :class:`IterationInfo` once per iteration (of every
         independent component); returning True stops the run with status ``Stopped`` and
@@ -121,10 +129,32 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         v (m,), u = Hᵀv + w (5n,), r (5n,) in the original variables, with status, message,
         trace and timings.
     """
+    problem = posed(problem, as_stored, method)
     c0 = compile_seconds()
     result = _solve(problem, method, tol, max_iter, keep_iterates, callback, **options)
     result.timings["compile"] = compile_seconds() - c0  # numba's, on a cold start (included in total)
     return judged_on_the_file(problem, result) if problem.local is not None else result
+
+
+def posed(problem: Problem, as_stored: bool | None, method: str | None = None) -> Problem:
+    """``problem`` posing the equations ``as_stored`` asks for (None: its own), refused where
+    they cannot be solved: the peers (Clarabel, Siconos) take (M + Mᵀ)/2 only, and a local file
+    is solved through a symmetric lifting of its W."""
+    from ..errors import InvalidArgumentError
+
+    if as_stored is not None:
+        problem = problem.stored_equations(bool(as_stored))
+    if not problem.as_stored:
+        return problem
+    if method in ("clarabel", "siconos"):
+        raise InvalidArgumentError("method", f"{method} solves (M + Mᵀ)/2 only, not an unsymmetric M as stored",
+                                   fix="drop --as-stored (as_stored=False), or use an Algorithm 1 method")
+    if problem.local is not None:
+        raise InvalidArgumentError("as_stored", "is not available for a local file whose W is unsymmetric: the "
+                                                "double solver works on a symmetric lifting W = HᵀH",
+                                   fix="drop --as-stored: the answer is then proven for (W + Wᵀ)/2 and the "
+                                       "verdict says so")
+    return problem
 
 
 def judged_on_the_file(problem: Problem, result: SolveResult) -> SolveResult:
@@ -214,7 +244,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
                       lp.w_t[rows], lp.J[rows][:, zidx].tocsr(), cones, n_c, method, settings,
                       judge=_judge(problem, lp, dofs, rows, settings), describe_cone=describe,
                       keep_iterates=keep_iterates, callback=callback, component=index, t0=t0,
-                      printer=printer)
+                      printer=printer, M_eq=problem.M[dofs][:, dofs].tocsc() if problem.as_stored else None)
         v[dofs] = out.v
         r_t[rows] = out.r_t
         z[zidx] = out.z
@@ -242,7 +272,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
     else:
         from .clarabel_peer import lifted_measures
 
-        pinf, dinf, mu = lifted_measures(M, problem.f, lp.H_t, lp.w_t, lp.J, v, np.asarray(r_t, dtype=np.float64),
+        pinf, dinf, mu = lifted_measures(problem.M_eq, problem.f, lp.H_t, lp.w_t, lp.J, v, np.asarray(r_t, dtype=np.float64),
                                          np.asarray(z, dtype=np.float64), problem.n_contacts)
     timings = {k: sum(o.timings.get(k, 0.0) for o in runs) for k in ("factor", "solve")}
     timings["presolve"] = t_pre
@@ -321,10 +351,10 @@ def _judge(problem, lp, dofs, rows, settings):
     meeting tol implies the whole problem does (numerators are maxima, denominators grow)."""
     contacts = np.unique(lp.keep[rows] // SPACEDIM)
     cols = (SPACEDIM * contacts[:, None] + np.arange(SPACEDIM)).ravel()
-    M_c = problem.M_sym[dofs][:, dofs].tocsc()
+    M_c = problem.M_eq[dofs][:, dofs].tocsc()
     H_c = problem.H[dofs][:, cols].tocsc()
     f_c, w_c = problem.f[dofs], problem.w[cols]
-    scales = data_scales_from_arrays(M_c, H_c, f_c, w_c)
+    scales = data_scales_from_arrays(problem.M_sym[dofs][:, dofs].tocsc(), H_c, f_c, w_c)
     data = {}  # MeasureData per arithmetic, built on first use
     local = np.searchsorted(cols, lp.keep[rows])
     scale = lp.scale[rows]

@@ -58,7 +58,7 @@ class RunResult(Outcome):
 
 def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, settings: Settings,
         judge, describe_cone=lambda k: f"cone {k}", keep_iterates: bool = False, callback=None,
-        component: int = 0, t0: float | None = None, printer=None) -> RunResult:
+        component: int = 0, t0: float | None = None, printer=None, M_eq=None) -> RunResult:
     """Run Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) on one lifted problem in
     float64, continued in the extended settings (longdouble where asked) once the criterion
     is below ``settings.extended_below`` or a float64 solve falls short (:func:`_adequate`).
@@ -69,17 +69,23 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     (status Stopped).  ``printer(IterationInfo)`` (verbose output) is called likewise.
     ``describe_cone(k)`` turns a global cone index into words for messages;
     ``keep_iterates`` stores every iterate (v, r̃, z) (for lockstep diagnosis).
+    ``M_eq`` (default ``M``) is the matrix of the equations the residuals are measured with:
+    the stored, unsymmetric M of ``as_stored`` problems, while the forms factor the symmetric
+    ``M`` and refine each solve against ``M_eq`` (accepted asymmetry is small, so refinement
+    with the symmetric factor converges to the stored system's direction).
     """
     t0 = time.perf_counter() if t0 is None else t0
     t_run = time.perf_counter()
-    arithmetic = _Arithmetic(settings, M, H_t, J, f, w_t)
+    M_eq = M if M_eq is None else M_eq
+    arithmetic = _Arithmetic(settings, M_eq, H_t, J, f, w_t)
     extended = settings.extended_below is None or not _float64_safe(M.data, H_t.data, f, w_t)
     work, jd, ref = arithmetic.dtypes(extended)
     system = FORMS[form](M, H_t, J, cones, dtype_ref=ref,
                          static_reg=settings.static_reg, adaptive_reg=settings.adaptive_reg,
                          refine_max=settings.refine_max,
                          refine_tol=None if settings.refine_tol == "adaptive" else settings.refine_tol,
-                         forcing=REFINE_FORCING if settings.refine_tol == "adaptive" else None)
+                         forcing=REFINE_FORCING if settings.refine_tol == "adaptive" else None,
+                         M_eq=None if M_eq is M else M_eq)
     precision = _NumpyPrecision(arithmetic, extended, cones, _KKTNewton(system, form), describe_cone)
     space = precision.space
 

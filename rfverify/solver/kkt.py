@@ -156,7 +156,7 @@ class KKTSystem:
     regularisable = False
 
     def __init__(self, M, H_t, J, cones: ProductCone, *, dtype_ref=np.longdouble, static_reg=1e-12,
-                 adaptive_reg=True, refine_max=10, refine_tol=None, forcing=None):
+                 adaptive_reg=True, refine_max=10, refine_tol=None, forcing=None, M_eq=None):
         self.engine = self._new_engine()  # first: a missing optional engine fails before any work
         self.M = sp.csc_matrix(M)
         self.H_t = sp.csr_matrix(H_t)
@@ -179,8 +179,10 @@ class KKTSystem:
         # Exact operator in the refinement precision: one sparse matrix maps (dv, dr̃, dz) to
         # (a, b, Jᵀdr̃) — one matvec per refinement step instead of five — and c is completed
         # with the cone operators, never formed.
+        # With ``M_eq`` (an unsymmetric M as stored) the factorisations use the symmetric M and
+        # the refinement converges to the direction of the stored system.
         Z = sp.csr_matrix
-        self._A = sp.bmat([[self.M, -self.H_t.T, None],
+        self._A = sp.bmat([[self.M if M_eq is None else sp.csc_matrix(M_eq), -self.H_t.T, None],
                            [-self.H_t, None, self.J],
                            [Z((self.nz, self.m)), self.J.T, Z((self.nz, self.nz))]], format="csr")
         self._A_ref = {}

@@ -43,7 +43,7 @@ def presolve(problem: Problem, settings: Settings) -> Presolved:
     free = problem.contact_free_dofs if (settings.drop_free_bodies or settings.split_components) \
         else np.empty(0, dtype=np.int64)
     if free.size:
-        M = problem.M_sym
+        M = problem.M_eq  # the posed equations' M: (M + Mᵀ)/2, or M as stored
         v[free] = splu(M[free][:, free].tocsc()).solve(problem.f[free])
     info["free_dofs"] = int(free.size)
     groups = independent_components(problem, lp, free) if settings.split_components else None
