@@ -27,6 +27,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import mpmath
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
@@ -262,7 +263,7 @@ class Solver:
     problem
         An object with ``M_sym`` (m×m) and ``H`` (m×5n) scipy sparse matrices and float
         vectors ``f, w, mu, mu_r`` (an :class:`rfverify.Problem`); its data are converted
-        exactly to the working precision.
+        exactly to the working precision (``f`` may also hold mpmath numbers, rounded to it).
     dps : int
         Requested accuracy in decimal digits (default 50); the arithmetic runs at 2·dps digits
         in the private context ``ctx``.
@@ -284,7 +285,9 @@ class Solver:
         Mc = sp.coo_matrix(problem.M_sym)
         Hc = sp.csc_matrix(problem.H).tocoo()
         self._H_entries = [(int(i), int(j), mpf(float(x))) for i, j, x in zip(Hc.row, Hc.col, Hc.data)]
-        self._f = [mpf(float(x)) for x in problem.f]
+        # f may hold mpmath numbers (a right-hand side that is no float64 vector), kept to the
+        # working precision; floats are converted exactly.
+        self._f = [mpf(x) if isinstance(x, mpmath.mpf) else mpf(float(x)) for x in problem.f]
         self._w = [mpf(float(x)) for x in problem.w]
         # H̃ = P Hᵀ on kept components: row k of H̃ ↔ column keep[k] of H.
         col_to_kept = {c: k for k, c in enumerate(lifted.keep)}

@@ -176,3 +176,71 @@ def candidate_point(v, r) -> Point:
     v = np.asarray(v, dtype=np.float64).copy()
     r = np.asarray(r, dtype=np.float64).copy()
     return Point(v, np.zeros_like(v), r, np.zeros_like(r))
+
+
+def unscaled_proof(proof: Proof | None, scaling) -> Proof | None:
+    """A proof made in units scaled by exact powers of two (:mod:`rfverify.scaling`) with its
+    per-quantity bounds, norms and scales in the problem's units (bounds rounded up, lower
+    bounds down; digits and verdicts are scale-invariant).  ``terms`` stay in the scaled units
+    (``terms_units`` says so)."""
+    import dataclasses
+
+    if proof is None:
+        return None
+    quantities = {}
+    for name, q in proof.quantities.items():
+        quantities[name] = dataclasses.replace(
+            q, abs_bound=scaling.scale_bound_back(name, q.abs_bound), norm=scaling.scale_bound_back(name, q.norm),
+            own_scale=scaling.scale_bound_back(name, q.own_scale, up=False),
+            data_scale=scaling.scale_bound_back(name, q.data_scale, up=False))
+    terms = dict(proof.terms, terms_units="scaled: " + ", ".join(f"{k}·2^{e}" for k, e in scaling.as_dict().items()))
+    return dataclasses.replace(proof, quantities=quantities, terms=terms,
+                               stored_equations=unscaled_proof(proof.stored_equations, scaling))
+
+
+def unscaled_point(point: Point | None, scaling) -> Point | None:
+    """The point in the problem's units (None when a term would leave float64's range: the
+    point then exists only in the scaled units its proof was made in)."""
+    if point is None:
+        return None
+    parts = {}
+    for key in ("v_hi", "v_lo", "r_hi", "r_lo", "v_more", "r_more"):
+        x = getattr(point, key)
+        if x is None:
+            parts[key] = None
+            continue
+        y = scaling.scale(key[0], x, inverse=True)
+        if y is None:
+            return None
+        parts[key] = y
+    return Point(**parts)
+
+
+def scaled_point(point: Point | None, scaling) -> Point | None:
+    """The point in scaled units (None when not exact)."""
+    if point is None:
+        return None
+    parts = {}
+    for key in ("v_hi", "v_lo", "r_hi", "r_lo", "v_more", "r_more"):
+        x = getattr(point, key)
+        if x is None:
+            parts[key] = None
+            continue
+        y = scaling.scale(key[0], x)
+        if y is None:
+            return None
+        parts[key] = y
+    return Point(**parts)
+
+
+def unscaled_certificate(cert: Certificate, scaling) -> Certificate:
+    """A certificate made in scaled units, in the problem's units (its verdict re-worded from the
+    unscaled proof, the scaling recorded in ``extra["binary_scaling"]``)."""
+    proof = unscaled_proof(cert.proof, scaling)
+    extra = dict(cert.extra, binary_scaling=scaling.describe())
+    if proof is None:
+        return Certificate(cert.requested, cert.certified, cert.verdict, None, None, cert.cross_check, extra,
+                           cert.seconds)
+    out = certificate_from_proof(proof, unscaled_point(cert.point, scaling), extra, cert.seconds)
+    out.cross_check = cert.cross_check
+    return out

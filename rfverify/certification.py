@@ -112,6 +112,25 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     if point is None and hasattr(v, "point") and u is None and r is None:
         point = v.point
     v, u, r = _solution_arrays(problem, v, u, r)
+    from .scaling import binary_scaling, scaled_problem
+
+    scaling = binary_scaling(problem)
+    if scaling is not None:
+        from .certificate import scaled_point, unscaled_certificate
+
+        xs = [scaling.scale(name, x) for name, x in (("v", v), ("u", u), ("r", r))]
+        sp_ = scaled_point(point, scaling)
+        if all(x is not None for x in xs) and (point is None or sp_ is not None):
+            # Data beyond float64's safe range: proven in exactly scaled units (DESIGN §6.4).
+            cert = certify(scaled_problem(problem, scaling), *xs, digits=digits, point=sp_, cross_check=False,
+                           polish_max_iter=polish_max_iter, relative=relative, progress=progress)
+            cert = unscaled_certificate(cert, scaling)
+            if cross_check:
+                cert.cross_check = reference_agreement(problem, v, u, r, dps=dps)
+            cert.seconds = time.perf_counter() - t0
+            return cert
+        say_ = progress or (lambda msg: None)
+        say_("the candidate cannot be scaled exactly into float64's safe range: proven in the problem's own units")
     say = progress or (lambda msg: None)
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
         return Certificate(digits, False, "not certified: the solution contains NaN or Inf",
@@ -128,8 +147,13 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
         if proof.certified or not ctx.hypotheses_proven:
             point, extra["point_source"] = own, "the candidate itself"
         else:
-            proof, point, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative)
-            extra.update(info)
+            polished, at, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative)
+            # Keep the better proof: a computed point can bound the candidate worse than itself.
+            if ProofDriver.score(polished) >= ProofDriver.score(proof):
+                proof, point = polished, at
+                extra.update(info)
+            else:
+                point, extra["point_source"] = own, "the candidate itself (better than the computed point)"
     cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra)
     if cross_check:
         say(f"cross-check: independent reference at {dps} digits")

@@ -284,6 +284,16 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     and says why."""
     digits = validate_digits(digits)
     problem = posed(problem, as_stored, method)
+    from .scaling import binary_scaling, scaled_problem
+
+    scaling = binary_scaling(problem)
+    if scaling is not None:  # data beyond float64's safe range: the whole path in scaled units
+        scaled = scaled_problem(problem, scaling)
+        out = solve_to_digits(scaled, digits, method, tol, max_iter,
+                              extended_max_iter=extended_max_iter, backend=backend, wide_tail=wide_tail,
+                              wide_bits=wide_bits, wide_max_iter=wide_max_iter, relative=relative, progress=progress,
+                              factor_engine=factor_engine, **options)
+        return _unscaled_solution(out, scaled, scaling)
     if factor_engine not in ENGINES:
         raise InvalidArgumentError("factor_engine", f"{factor_engine!r} is not one of {', '.join(ENGINES)}",
                                    fix="use 'auto' (CHOLMOD where installed), 'cholmod' or 'ldl'")
@@ -346,6 +356,36 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                "total": time.perf_counter() - t0}
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
                           wide=ext_out.wide, timings=timings)
+
+
+def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsSolution:
+    """A k-digit solution found in the scaled units of ``scaled`` (:mod:`rfverify.scaling`), in
+    the problem's own units.  Where the answer scales back exactly its certificate does too;
+    where it rounds (subnormal entries) the rounded answer is proven again at the same point,
+    in the scaled units (scaling the rounded answer up is exact); where it overflows nothing is
+    certified."""
+    import dataclasses
+
+    from .certificate import unscaled_certificate
+
+    back = {name: scaling.scale(name, getattr(out, name), inverse=True) for name in ("v", "u", "r")}
+    if all(x is not None for x in back.values()):
+        cert = unscaled_certificate(out.certificate, scaling)
+        return dataclasses.replace(out, **back, point=cert.point, certificate=cert)
+    with np.errstate(all="ignore"):
+        back = {name: np.ldexp(np.asarray(getattr(out, name), dtype=np.float64), -scaling.exponent(name))
+                for name in ("v", "u", "r")}
+    if not all(np.all(np.isfinite(x)) for x in back.values()):
+        cert = Certificate(out.certificate.requested, False, "not certified: the proven answer overflows float64 in "
+                                                             f"the problem's own units ({scaling.describe()})",
+                           None, None, None, dict(out.certificate.extra), out.certificate.seconds)
+        return dataclasses.replace(out, **back, point=None, certificate=cert)
+    ups = [scaling.scale(name, back[name]) for name in ("v", "u", "r")]
+    ctx = ProofContext(scaled)
+    proof = ctx.with_companion(ctx.prove(out.point, *ups, requested=out.certificate.requested), out.point, *ups)
+    again = certificate_from_proof(proof, out.point, dict(out.certificate.extra))
+    cert = unscaled_certificate(again, scaling)
+    return dataclasses.replace(out, **back, point=cert.point, certificate=cert)
 
 
 @dataclass

@@ -42,8 +42,9 @@ def test_dumps_turns_non_finite_numbers_into_null():
 
 @pytest.fixture(scope="module")
 def overflowing(tmp_path_factory):
-    """A valid problem whose 1e308 mass and 1e200-scaled H overflow the solver's arithmetic
-    (squares of H̃ entries exceed the float64 range)."""
+    """A valid problem whose 1e308 mass and 1e200-scaled H would overflow the solver's
+    arithmetic and that no exact power-of-two change of units brings into range (M spans
+    0.04 … 1e308): readable (info), refused by the solvers with one line (issue 37)."""
     p = random_problem(2, 3, seed=2)
     M = p.M.toarray()
     M[0, 0] = 1e308
@@ -61,18 +62,38 @@ def overflowing(tmp_path_factory):
 def test_json_output_is_strict_and_warnings_do_not_leak(capsys, overflowing, argv):
     argv = [str(overflowing) if a == "{big}" else a for a in argv]
     code, out, err = run(capsys, *argv)
+    if argv[0] in ("solve", "diagnose") and argv[1] == str(overflowing):
+        # out of float64's range even after exact rescaling: one line naming the field, exit 2
+        assert code == 2 and out == "" and err.count("\n") == 1 and "M: entries span" in err and "fix:" in err
+        return
     assert code in (0, 1), err
     assert err == ""  # no RuntimeWarning text, no traceback
     data = strict_loads(out)
     assert isinstance(data, dict)
-    if argv[0] == "solve":
-        assert data["numerical_warnings"] and "overflow" in data["numerical_warnings"][0]
 
 
-def test_numerical_warnings_become_a_message_in_text_output(capsys, overflowing):
-    code, out, err = run(capsys, "solve", overflowing)
+def _overflow_in_the_solve(monkeypatch):
+    """A float64 overflow warning raised inside the solve (the data that used to cause one are
+    now rescaled or refused): the reporting of warnings is what is tested."""
+    from rfverify.solver import ipm
+
+    real = ipm._float64_safe
+
+    def overflowing_check(*arrays):
+        np.float64(1e308) * np.float64(10.0)  # RuntimeWarning: overflow encountered
+        return real(*arrays)
+
+    monkeypatch.setattr(ipm, "_float64_safe", overflowing_check)
+
+
+def test_numerical_warnings_become_a_message_in_text_output(capsys, monkeypatch):
+    _overflow_in_the_solve(monkeypatch)
+    code, out, err = run(capsys, "solve", "bundled:chute")
     assert err == ""
     assert "numerical warnings during the solve" in out and "overflow" in out
+    code, out, err = run(capsys, "solve", "bundled:chute", "--json")
+    data = strict_loads(out)
+    assert err == "" and data["numerical_warnings"] and "overflow" in data["numerical_warnings"][0]
 
 
 def _command():

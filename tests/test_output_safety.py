@@ -147,9 +147,10 @@ def test_solve_into_its_own_hdf5_keeps_everything_else(capsys, problem_file):
     assert set(after) == set(before)
     for name in set(before) - replaced - {"/solution"}:
         assert after[name] == before[name], name
-    # /solution keeps its own attributes and gains the documented ones (layout, what was
-    # symmetrised, both asymmetry measures); nothing else changes.
-    added = {"layout", "symmetrised", "symmetrised_matrix", "asymmetry_entrywise", "asymmetry_normwise"}
+    # /solution keeps its own attributes and gains the documented ones (layout, the problem it
+    # solves and its equations, what was symmetrised, both asymmetry measures); nothing else changes.
+    added = {"layout", "problem", "equations", "symmetrised", "symmetrised_matrix", "asymmetry_entrywise",
+             "asymmetry_normwise"}
     kind, attrs_after = after["/solution"]
     assert kind == before["/solution"][0]
     assert {k: v for k, v in attrs_after.items() if k not in added} == before["/solution"][1]

@@ -528,7 +528,9 @@ def test_float64_start_then_extended_arithmetic(seed):
 
 def test_data_beyond_float64_comfort_start_extended():
     p = random_problem(4, 6, seed=2)
-    big = rfverify.Problem.from_arrays(p.M * 1e150, p.H * 1e150, p.f * 1e150, p.w, p.mu, p.mu_r)
+    # beyond 2^128 (the float64 phase's comfort) but inside 2^±200, which is solved unscaled
+    s = 2.0 ** 150
+    big = rfverify.Problem.from_arrays(p.M * s, p.H * s, p.f * s, p.w, p.mu, p.mu_r)
     res = solve(big, method="jqinv", split_components=False)
     assert res.extras["extended_from"] == [0]
 

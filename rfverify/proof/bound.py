@@ -71,6 +71,11 @@ def _up(x):
     return np.nextafter(np.asarray(x, dtype=np.float64), np.inf)
 
 
+def _up_times(x, eps: float):
+    """x·eps rounded up, exactly 0 when eps is exactly 0 (a product with an exact zero is exact)."""
+    return np.zeros_like(np.asarray(x, dtype=np.float64)) if eps == 0 else _up(x * eps)
+
+
 def _down(x):
     return np.nextafter(np.asarray(x, dtype=np.float64), -np.inf)
 
@@ -363,14 +368,14 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
 
     # ---- carry to the returned solution
     vd = Dyadic.from_float(v)
-    e_v = upper_sum((vd - point_v).abs_upper(), _up(_up(np.sqrt(mass.minv_diag_upper)) * eps))
+    e_v = upper_sum((vd - point_v).abs_upper(), _up_times(_up(np.sqrt(mass.minv_diag_upper)), eps))
     sqrtW = _up(np.sqrt(w_diag))
-    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up(sqrtW * eps))
+    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up_times(sqrtW, eps))
     Hr_ret = exact.H.matvec(Dyadic.from_float(r))
     g_abs = g.abs_upper()
     # |e_iᵀM d| ≤ √(m_iᵀM_s⁻¹m_i)·ε; for a symmetric M that is √(M_ii)·ε
     row_norm = _up(np.sqrt(exact.row_quad_upper(mass))) if stored else _up(np.sqrt(mass.m_diag_upper))
-    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up(row_norm * eps))
+    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up_times(row_norm, eps))
 
     terms = {"eps_M": eps, "gap_rTu": gap_up, "gMinvg_upper": q_g, "g_inf": float(np.max(g_abs, initial=0.0)),
              "lam_min_M_lower": float(np.nanmin(mass.lam_lower)), "lam_max_M_upper": mass.lam_max_upper,
@@ -409,6 +414,8 @@ def cones_failure(data, u_p: Dyadic, point_r: Dyadic, u_name: str) -> str:
 
 def gMinvg_upper(g: Dyadic, mass: MassBounds) -> float:
     """Upper bound of gᵀM⁻¹g ≤ Σ_b ‖g_b‖² / λ_b (exact squares, rounded up)."""
+    if not any(g.ints):  # g = 0 exactly (an exact point): the bound is 0, not a rounding of it
+        return 0.0
     g_sq = g.square()
     order = np.argsort(mass.labels, kind="stable")
     nb = mass.lam_lower.size
@@ -420,6 +427,8 @@ def gMinvg_upper(g: Dyadic, mass: MassBounds) -> float:
 
 def eps_M_upper(q_g: float, gap_up: float) -> float:
     """ε ≥ (√(gᵀM_s⁻¹g) + √(gᵀM_s⁻¹g + 4rᵀu))/2 ≥ ‖v − v*‖_{M_s}, from upper bounds of both terms."""
+    if q_g == 0 and gap_up == 0:  # g = 0 and rᵀu = 0 exactly: the point is the solution
+        return 0.0
     root_q = float(_up(math.sqrt(q_g)))
     # (a negative gap is impossible for r ∈ K, u ∈ K*: only a broken cone test gets here)
     root_all = float(_up(math.sqrt(max(float(_up(q_g + float(_up(4.0 * gap_up)))), 0.0))))
@@ -537,11 +546,14 @@ def _r_bound(problem, exact, mass, u_p: Dyadic, u_radius, point_r, Hr_p, g, eps,
         lam_min = float(np.nanmin(mass.lam_lower))
         gain = float(_up(gain + float(_up(exact.skew_norm_upper() / float(_down(math.sqrt(lam_min)
                                                                                   * (1 - 4 * 2.0 ** -53)))))))
-    total = float(_up(_up(dist + gnorm) + _up(gain * eps)))
-    total = float(_up(total + float(_up(gain * 4 * 2.0 ** -53 * eps))))
+    if dist == 0 and gnorm == 0 and eps == 0:  # an exact point, the returned r on it: H_S r_S = Hr*
+        total = 0.0
+    else:
+        total = float(_up(_up(dist + gnorm) + _up(gain * eps)))
+        total = float(_up(total + float(_up(gain * 4 * 2.0 ** -53 * eps))))
     e = np.abs(r).astype(np.float64)  # off S (and dropped components): r* = 0 there
     if cols.size:
-        e_S = float(_up(total / float(_down(math.sqrt(lam) * (1 - 4 * 2.0 ** -53)))))
+        e_S = 0.0 if total == 0 else float(_up(total / float(_down(math.sqrt(lam) * (1 - 4 * 2.0 ** -53)))))
         e[cols] = e_S
     terms["r_residual_2norm"] = total
     note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), H of full column rank on the other "

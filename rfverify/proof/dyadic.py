@@ -312,6 +312,8 @@ def sqrt_upper(q: Fraction) -> float:
     """float64 ≥ √q for a Fraction q ≥ 0."""
     if q < 0:
         raise ValueError("sqrt_upper of a negative number")
+    if q == 0:
+        return 0.0
     f = math.sqrt(fraction_upper_float(q))
     f = math.nextafter(f, math.inf)
     while Fraction(f) ** 2 < q:  # never more than a step or two

@@ -47,7 +47,7 @@ import scipy.sparse as sp
 
 from ..problem import SPACEDIM, LocalForm, Problem
 from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cone_violations,
-                    cones_failure,
+                    cones_failure, eps_M_upper, _up_times,
                     proven_open, validate_digits)
 from .dyadic import Dyadic, DyadicCSR, fraction_upper_float, sqrt_upper
 from .massbounds import MassBounds, inflate, upper_sum, verify_mass_matrix
@@ -214,7 +214,7 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
     if shifted is None:
         gap = point_r.dot(u_p)  # ≥ 0: pairs of K and K*
         gap_up = fraction_upper_float(gap)
-        eps = float(_up(math.sqrt(gap_up)))
+        eps = eps_M_upper(0.0, gap_up)  # the global theorem's ε with g = 0: √(rᵀu)
         terms = {"eps_W": eps, "gap_rTu": gap_up}
     else:
         u_shift, e_norm = shifted
@@ -226,7 +226,7 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         eps = float(_up(math.sqrt(float(_up(gap_up + float(_up(e_norm * delta)))))))
         terms = {"eps_W": eps, "gap_rTu": gap_up, "dual_shift_2norm": e_norm, "r_dist_2norm_upper": delta,
                  "lam_min_W_lower": lam}
-    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up(sqrtW * eps))
+    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up_times(sqrtW, eps))
     terms.update({"max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)), "W_psd": ex.facts.how})
     q = {"u": _quantity("u", e_u, u, scales, requested, names=DATA_SCALE_NAMES_LOCAL, relative=relative)}
     if shifted is None:
@@ -301,10 +301,11 @@ def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyad
     r_O[cols] = 0
     rO = Dyadic(r_O, point_r.exp)
     t = sqrt_upper(max(ex.quad(rO), Fraction(0)))
-    radius = float(_up(eps + t))
+    radius = 0.0 if eps == 0 and t == 0 else float(_up(eps + t))
     lam = mass.lam_lower[mass.labels]  # per column of the loaded set
     d_r = (Dyadic.from_float(r[cols]) - point_r[cols]).abs_upper()
-    e[cols] = upper_sum(d_r, _up(radius / np.nextafter(np.sqrt(lam) * (1 - 4 * 2.0 ** -53), 0)))
+    e[cols] = upper_sum(d_r, _up(radius / np.nextafter(np.sqrt(lam) * (1 - 4 * 2.0 ** -53), 0))
+                        if radius else np.zeros(cols.size))
     terms.update({"lam_min_W_S_lower": float(np.min(lam)), "W_norm_r_open": t})
     note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), W definite on the other {S.size} "
             f"(verified λmin ≥ {float(np.min(lam)):.2e})")

@@ -57,7 +57,8 @@ def upper_sum(*terms):
     for t in terms:
         total = total + t
         mag = mag + np.abs(t)
-    return np.nextafter(total + inflate(gamma(len(terms) + 1) * mag, len(terms) + 2), np.inf)
+    # Where every term is exactly 0 (mag = 0: a sum of magnitudes vanishes only then) the sum is 0.
+    return np.where(mag == 0, 0.0, np.nextafter(total + inflate(gamma(len(terms) + 1) * mag, len(terms) + 2), np.inf))
 
 
 def deflate(x, k: int):
@@ -231,17 +232,26 @@ def _dense_blocks(A: np.ndarray):
         return np.full(nb, np.nan), None, np.ones(nb), ["non-finite entries"] * nb
     lam, V = np.linalg.eigh(A)
     lmin = lam[:, 0]
-    tau = lmin * 0.5
-    d = np.sqrt(np.maximum(lam - tau[:, None], 0.0))
-    G = V * d[:, None, :]
     eye = np.eye(s)
-    F = (A - tau[:, None, None] * eye) - G @ np.swapaxes(G, 1, 2)
-    absG = np.abs(G)
-    B = np.abs(F) + gamma(s + 4) * (absG @ np.swapaxes(absG, 1, 2) + np.abs(A) + tau[:, None, None] * eye) \
-        + 2 * U * np.abs(A) + (s + 4) * ETA
-    B = inflate(B, s + 6)
-    normE = inflate(np.maximum(B.sum(axis=1).max(axis=1), B.sum(axis=2).max(axis=1)), s + 2)
-    lam_lower = deflate(tau - normE, 2)
+
+    def lower_bound(tau):
+        # A = τI + GGᵀ + E exactly for any τ and G (GGᵀ ⪰ 0), so λmin(A) ≥ τ − ‖E‖₂ whatever τ is.
+        d = np.sqrt(np.maximum(lam - tau[:, None], 0.0))
+        G = V * d[:, None, :]
+        F = (A - tau[:, None, None] * eye) - G @ np.swapaxes(G, 1, 2)
+        absG = np.abs(G)
+        B = np.abs(F) + gamma(s + 4) * (absG @ np.swapaxes(absG, 1, 2) + np.abs(A) + np.abs(tau)[:, None, None] * eye) \
+            + 2 * U * np.abs(A) + (s + 4) * ETA
+        B = inflate(B, s + 6)
+        normE = inflate(np.maximum(B.sum(axis=1).max(axis=1), B.sum(axis=2).max(axis=1)), s + 2)
+        return deflate(tau - normE, 2), normE
+
+    # τ just below the computed λmin makes the bound nearly λmin itself (the r bounds divide by
+    # its root); τ = λmin/2 is the fallback where rounding makes the first useless.
+    lam_near, normE = lower_bound(lmin * (1 - 2.0 ** -20))
+    lam_half, normE_half = lower_bound(lmin * 0.5)
+    lam_lower = np.fmax(lam_near, lam_half)
+    normE = np.where(lam_near >= lam_half, normE, normE_half)
     for k in range(nb):
         if not lmin[k] > 0:
             bad[k] = f"not positive definite (smallest eigenvalue ≈ {lmin[k]:.3e})"
@@ -286,26 +296,24 @@ def verify_lambda_min_sparse(A: sp.csc_matrix, A_err: sp.spmatrix, tau: float | 
             est = float(np.min(A.diagonal())) * 1e-3
         if not est > 0:
             return np.nan, f"not positive definite (smallest eigenvalue ≈ {est:.3e})"
-        tau = 0.5 * est
+        tau = est * (1 - 1e-3)  # just below the estimate (ARPACK's tol 1e-4): the bound is then ≈ λmin
     absA = abs(A)
     last = ""
-    for _ in range(attempts):
+    taus = [tau, tau * 0.5] + [tau * 0.5 / 16 ** k for k in range(1, attempts)]
+    for tau in taus:
         B = (A - tau * sp.identity(n, format="csc")).tocsc()
         try:
             lu = splu(B, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                       options=dict(SymmetricMode=True))
         except RuntimeError as exc:
             last = f"factorisation of A − τI failed ({exc})"
-            tau *= 1 / 16
             continue
         if not np.array_equal(lu.perm_r, lu.perm_c):
             last = "the factorisation pivoted off the diagonal"
-            tau *= 1 / 16
             continue
         dU = lu.U.diagonal()
         if not np.all(dU > 0):
             last = "a non-positive pivot"
-            tau *= 1 / 16
             continue
         p = np.argsort(lu.perm_c)  # Pr·A·Pc = A[p][:, p] = L·U when perm_r = perm_c
         G = (lu.L @ sp.diags(np.sqrt(dU))).tocsr()
@@ -323,5 +331,4 @@ def verify_lambda_min_sparse(A: sp.csc_matrix, A_err: sp.spmatrix, tau: float | 
         if lam > 0:
             return lam, ""
         last = f"rounding-error bound {normE:.3e} ≥ τ = {tau:.3e}"
-        tau *= 1 / 16
     return np.nan, f"positive definiteness could not be proven in double precision ({last})"

@@ -16,7 +16,8 @@ from .cones import ProductCone
 from .engines import cholmod_available
 from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
-                     OPTIONAL_METHODS, IterationInfo, Settings, SolveResult, Status, method_unavailable)
+                     OPTIONAL_METHODS, TRACE_FIELDS, IterationInfo, Settings, SolveResult, Status,
+                     method_unavailable)
 
 __all__ = ["solve", "posed", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence", "body_fill"]
 
@@ -130,10 +131,64 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         trace and timings.
     """
     problem = posed(problem, as_stored, method)
+    from ..scaling import binary_scaling
+
+    scaling = binary_scaling(problem)
+    if scaling is not None:
+        return _solved_in_scaled_units(problem, scaling, method, tol, max_iter, keep_iterates, callback, options)
+    data = problem.local.q if problem.local is not None else np.concatenate((problem.f, problem.w))
+    if not np.any(data):
+        return _zero_data_result(problem, method, tol, max_iter, options)
     c0 = compile_seconds()
     result = _solve(problem, method, tol, max_iter, keep_iterates, callback, **options)
     result.timings["compile"] = compile_seconds() - c0  # numba's, on a cold start (included in total)
     return judged_on_the_file(problem, result) if problem.local is not None else result
+
+
+def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:
+    """f = 0 and w = 0 (q = 0): v = 0, u = 0, r = 0 is a solution, and v, u, Hr are unique
+    (vᵀMv = vᵀHr = uᵀr = 0 forces v = 0).  Returned exactly, without iterating (an
+    interior-point run has no scale to converge to there)."""
+    from ..errors import InvalidArgumentError
+
+    if method not in METHODS:
+        raise ValueError(f"method {method!r} is not one of {', '.join(METHODS)}")
+    unknown = set(options) - set(Settings.names())
+    if unknown:
+        raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}; valid: {', '.join(Settings.names())}")
+    if method_unavailable(method) is not None:
+        raise InvalidArgumentError("method", method_unavailable(method).split("; fix: ")[0],
+                                   fix=f"{OPTIONAL_METHODS[method][1]}, or use method='auto'")
+    settings = Settings(tol=tol, max_iter=max_iter, **options)
+    m, k = problem.n_dofs, SPACEDIM * problem.n_contacts
+    v, u, r = np.zeros(m), np.zeros(k), np.zeros(k)
+    final = measures(problem, v, u, r, "longdouble")
+    trace = {key: np.zeros(0) for key in TRACE_FIELDS}
+    return SolveResult(v=v, u=u, r=r, status=Status.SOLVED,
+                       message="f = 0 and w = 0: v = 0, u = 0, r = 0 is the solution (exact; no iteration needed)",
+                       nit=0, measures=final, pinfeas=0.0, dinfeas=0.0, mu=0.0, trace=trace,
+                       timings={"total": 0.0, "compile": 0.0}, method=method, settings=settings,
+                       presolve={}, extras={"zero_data": True})
+
+
+def _solved_in_scaled_units(problem, scaling, method, tol, max_iter, keep_iterates, callback, options):
+    """:func:`solve` of a problem whose data lie beyond float64's safe range: solved in units
+    scaled by exact powers of two (:mod:`rfverify.scaling`), the answer scaled back exactly and
+    judged on the problem as given (longdouble holds its range)."""
+    from ..scaling import scaled_problem
+
+    res = solve(scaled_problem(problem, scaling), method, tol, max_iter, keep_iterates, callback, **options)
+    note = scaling.describe("solved")
+    with np.errstate(all="ignore"):  # an answer rounded back to subnormals is one more rounding
+        back = {name: np.ldexp(np.asarray(getattr(res, name), dtype=np.float64), -scaling.exponent(name))
+                for name in ("v", "u", "r")}
+    extras = {**res.extras, "binary_scaling": note, "lifted_units": "scaled"}
+    if not all(np.all(np.isfinite(x)) for x in back.values()):
+        return dataclasses.replace(res, **back, status=Status.NUMERICAL_ERROR, extras=extras,
+                                   message=f"{res.message}; {note}, but the answer overflows float64 in the "
+                                           "problem's own units")
+    # The measures are ratios of terms that scale alike: those of the scaled run are the problem's.
+    return dataclasses.replace(res, **back, message=f"{res.message} ({note})", extras=extras)
 
 
 def posed(problem: Problem, as_stored: bool | None, method: str | None = None) -> Problem:

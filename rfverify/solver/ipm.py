@@ -109,8 +109,17 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     if records and "sigma" not in records[-1] and printer is not None:
         printer(_info(_with_defaults(records[-1]), component))  # the last iterate, stepped or not
     trace = {key: np.asarray([_with_defaults(rec)[key] for rec in records]) for key in TRACE_FIELDS}
-    status, message, ((out_v, out_r, out_z), judged_o, (pinf_o, dinf_o, mu_o)) = policy.term.final(out.verdict,
-                                                                                                     policy.current)
+    status, message, bundle = policy.term.final(out.verdict, policy.current)
+    if bundle is None:
+        # The first iterate was never judged (its residuals or measures overflowed): return it
+        # as it stands, with NaN measures, never nothing.
+        from ..measures import Measures
+
+        nan = float("nan")
+        bundle = (out.iterate, Measures(nan, nan, nan, nan, nan, nan, nan), (nan, nan, nan))
+        if status in (Status.SOLVED, Status.ALMOST_SOLVED):
+            status = Status.NUMERICAL_ERROR
+    ((out_v, out_r, out_z), judged_o, (pinf_o, dinf_o, mu_o)) = bundle
     timings = dict(out.timings, total=time.perf_counter() - t_run)
     return RunResult(v=out_v, r_t=out_r, z=out_z, status=status, message=message,
                      nit=len(records) - 1 if records else 0,

@@ -1,0 +1,174 @@
+"""Exact changes of units by powers of two, for data at the ends of the float64 range.
+
+The problem class is invariant under exact power-of-two scalings: with
+
+    M ← 2^a M,  H ← 2^b H,  f ← 2^(a+k) f,  w ← 2^(b+k) w
+
+(μ and μr unchanged) the solution maps to v ← 2^k v, r ← 2^(a+k−b) r, u ← 2^(b+k) u, Hr ←
+2^(a+k) Hr, and every relative quantity (digits, the criterion) is unchanged.  Multiplying a
+float64 by a power of two is exact unless the result leaves the range (overflow, or a
+subnormal that loses bits), which :func:`binary_scaling` checks entry by entry.
+
+A problem whose largest entries of M, of the lifted H̃ = P Hᵀ (μ and μr included) or of f and
+w̃ = P w lie beyond 2^±:data:`SAFE_EXPONENT` is solved and proven in scaled units, where the
+solver's squares and the proof's verified floating point neither overflow nor underflow, and
+the answers are scaled back exactly.  Where no exact scaling brings the data into that range,
+the problem is refused (:class:`rfverify.errors.InvalidProblemError`, exit 2) naming the field
+and the range of its entries.  Problems inside the range are never touched: their answers stay
+bit for bit the same.
+
+A local problem (u = W r + q) is scaled through q only (W and its lifting unchanged: a = b = 0).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import InvalidProblemError
+from .problem import SPACEDIM, Problem
+
+SAFE_EXPONENT = 200
+"""Data whose largest magnitudes lie within 2^±200 (≈ 1e±60) are used as they are: squares and
+products of a few such numbers stay far inside float64's range (2^±1022)."""
+
+
+def _max_exponent(values) -> int | None:
+    """e with 2^(e−1) ≤ max|x| < 2^e (frexp's exponent), None when every entry is 0."""
+    x = np.asarray(values, dtype=np.float64)
+    big = float(np.max(np.abs(x), initial=0.0))
+    return None if big == 0 else math.frexp(big)[1]
+
+
+def _lifted_exponent(values, per_component) -> int | None:
+    """frexp exponent of max_j |x_j|·P_j without forming the products (which may overflow):
+    ``values`` (…, 5n) columns or entries, ``per_component`` the exponent of P_j per entry."""
+    x = np.abs(np.asarray(values, dtype=np.float64))
+    nz = x > 0
+    if not np.any(nz):
+        return None
+    return int(np.max(np.frexp(x[nz])[1] + per_component[nz]))
+
+
+@dataclass(frozen=True)
+class BinaryScaling:
+    """M ← 2^a M, H ← 2^b H, v ← 2^k v (the rest follows, module docstring).  ``exponent(name)``
+    gives the power of two of each quantity ("M", "H", "f", "w", "v", "u", "Hr", "r")."""
+
+    a: int
+    b: int
+    k: int
+
+    def exponent(self, name: str) -> int:
+        a, b, k = self.a, self.b, self.k
+        return {"M": a, "H": b, "W": 0, "f": a + k, "Hr": a + k, "w": b + k, "q": b + k, "u": b + k, "v": k,
+                "r": a + k - b}[name]
+
+    def as_dict(self) -> dict:
+        return {name: self.exponent(name) for name in ("M", "H", "f", "w", "v", "u", "Hr", "r")}
+
+    def describe(self, what: str = "solved and proven") -> str:
+        e = self.as_dict()
+        return (f"{what} in units scaled by exact powers of two (M·2^{e['M']}, H·2^{e['H']}, "
+                f"f·2^{e['f']}, w·2^{e['w']}; answers scaled back)")
+
+    # ---- vectors
+    def scale(self, name: str, x, inverse: bool = False) -> np.ndarray | None:
+        """x·2^e (x·2^−e with ``inverse``) if that is exact for every entry, else None."""
+        if x is None:
+            return None
+        x = np.asarray(x, dtype=np.float64)
+        e = -self.exponent(name) if inverse else self.exponent(name)
+        y = np.ldexp(x, e)
+        return y if exact_ldexp(x, y, e) else None
+
+    def scale_bound_back(self, name: str, bound: float, up: bool = True) -> float:
+        """A bound in scaled units back in the problem's units, rounded outwards (a bound that
+        underflows becomes the smallest subnormal, never 0 unless it was 0)."""
+        if not math.isfinite(bound) or bound == 0:
+            return bound
+        y = math.ldexp(bound, -self.exponent(name))
+        if y == 0:
+            return math.ulp(0.0) if up else 0.0
+        if up and math.ldexp(y, self.exponent(name)) < bound:
+            y = math.nextafter(y, math.inf)
+        if not up and math.ldexp(y, self.exponent(name)) > bound:
+            y = math.nextafter(y, 0.0)
+        return y
+
+
+def exact_ldexp(x: np.ndarray, y: np.ndarray, e: int) -> bool:
+    """True when y = x·2^e holds exactly for every entry (finite and reversible)."""
+    return bool(np.all(np.isfinite(y)) and np.array_equal(np.ldexp(y, -e), x))
+
+
+def binary_scaling(problem: Problem) -> BinaryScaling | None:
+    """The exact scaling that brings the problem's largest data into 2^±SAFE_EXPONENT, or None
+    when they already are there (the problem is then used as it is).  Raises
+    :class:`InvalidProblemError` naming the field when the data need scaling and no exact one
+    keeps every entry representable."""
+    n = problem.n_contacts
+    mu_e = np.zeros((n, SPACEDIM), dtype=np.int64)
+    with np.errstate(all="ignore"):
+        mu_e[:, 1:3] = np.where(problem.mu > 0, np.frexp(problem.mu)[1] - 1, 0)[:, None]
+        mu_e[:, 3:5] = np.where(problem.mu_r > 0, np.frexp(problem.mu_r)[1] - 1, 0)[:, None]
+    P_e = mu_e.ravel()
+    local = problem.local is not None
+    if local:
+        a = b = 0
+        e_fw = _lifted_exponent(problem.local.q, P_e)
+    else:
+        e_M = _max_exponent(problem.M.data)
+        Hc = sp.coo_matrix(problem.H)
+        e_H = _lifted_exponent(Hc.data, P_e[Hc.col])
+        e_f = _max_exponent(problem.f)
+        e_w = _lifted_exponent(problem.w, P_e)
+        a = -e_M if e_M is not None and abs(e_M) > SAFE_EXPONENT else 0
+        b = -e_H if e_H is not None and abs(e_H) > SAFE_EXPONENT else 0
+        cands = [e for e in ((None if e_f is None else e_f + a), (None if e_w is None else e_w + b)) if e is not None]
+        e_fw = max(cands) if cands else None
+    k = -e_fw if e_fw is not None and abs(e_fw) > SAFE_EXPONENT else 0
+    if a == b == k == 0:
+        return None
+    scaling = BinaryScaling(a, b, k)
+    fields = [("q", problem.local.q)] if local else [("M", problem.M.data), ("H", problem.H.data),
+                                                     ("f", problem.f), ("w", problem.w)]
+    for name, values in fields:
+        if scaling.scale(name, values) is None:
+            x = np.abs(np.asarray(values, dtype=np.float64))
+            nz = x[x > 0]
+            raise InvalidProblemError(
+                name, f"entries span {nz.min():.3g} … {nz.max():.3g}: the data lie beyond float64's safe range "
+                      f"(2^±{SAFE_EXPONENT} after μ and μr multiply H and w), and no exact power-of-two change of "
+                      f"units (here {name}·2^{scaling.exponent(name)}) keeps every entry representable",
+                fix="express the problem in units where its data span less of the float64 range (the smallest "
+                    "entries here would underflow)")
+    return scaling
+
+
+def scaled_problem(problem: Problem, scaling: BinaryScaling) -> Problem:
+    """The problem in scaled units (exactly; equations, provenance and title kept)."""
+    if problem.local is not None:
+        from .problem import LocalForm
+
+        q = scaling.scale("q", problem.local.q)
+        w = scaling.scale("w", problem.w)
+        out = Problem.from_arrays(problem.M, problem.H, problem.f, w, problem.mu, problem.mu_r,
+                                  title=problem.title, max_asymmetry=np.inf, source=problem.source,
+                                  provenance=problem.provenance)
+        local = LocalForm(W=problem.local.W, q=q, significant_digits=problem.local.significant_digits)
+        out = dataclasses.replace(out, local=local, equations=problem.equations)
+    else:
+        M = sp.csc_matrix(problem.M, copy=True)
+        M.data = scaling.scale("M", M.data)
+        H = sp.csc_matrix(problem.H, copy=True)
+        H.data = scaling.scale("H", H.data)
+        out = Problem.from_arrays(M, H, scaling.scale("f", problem.f), scaling.scale("w", problem.w), problem.mu,
+                                  problem.mu_r, title=problem.title, max_asymmetry=np.inf, source=problem.source,
+                                  provenance=problem.provenance)
+        out = out.stored_equations(problem.equations == "stored")
+    return out
