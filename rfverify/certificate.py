@@ -152,14 +152,16 @@ def stored_sentence(proof: Proof) -> str:
     st = proof.stored_equations
     if st is None:
         return ""
+    X = "W" if proof.local else "M"
     if not st.valid:
-        return f". For M as stored (unsymmetric) nothing is proven: {st.failure}"
+        return f". For {X} as stored (unsymmetric) nothing is proven: {st.failure}"
     if st.certified:
-        return f". It is also proven to {st.requested} digits for M as stored (unsymmetric): {st.summary()}"
+        return f". It is also proven to {st.requested} digits for {X} as stored (unsymmetric): {st.summary()}"
     fewest = st.fewest_digits()
     have = "no relative digits" if fewest is None else f"{fewest:.1f} proven digits"
-    return (f". M as stored is unsymmetric and its equations have another solution, of which this answer has "
-            f"{have} ({st.summary()}); --as-stored (as_stored=True) solves and proves those")
+    how = "; --as-stored (as_stored=True) solves and proves those" if X == "M" else ""
+    return (f". {X} as stored is unsymmetric and its equations have another solution, of which this answer has "
+            f"{have} ({st.summary()}){how}")
 
 
 def _stored_dict(st: Proof | None) -> dict | None:

@@ -30,7 +30,7 @@ from .extended.data import ExtendedData
 from .extended.system import choose_backend
 from .problem import SPACEDIM, Problem
 from .compilation import compile_extended_in_background, compile_seconds, float64_kernels_deferred
-from .proof import Point, Proof, ProofContext, validate_digits
+from .proof import Point, Proof, ProofContext, merit, validate_digits
 from .solver import SolveResult, posed, solve
 from .solver.engines import cholmod_available
 from .solver.result import ResultAliases
@@ -173,17 +173,8 @@ class ProofDriver:
 
     @staticmethod
     def score(proof: Proof) -> float:
-        if not proof.valid:
-            return -math.inf
-        vals = []
-        for q in proof.quantities.values():
-            if q.mode == "information":
-                continue
-            if q.certified and q.mode == "absolute":
-                vals.append(math.inf)
-            else:
-                vals.append(q.digits if q.digits is not None else -math.inf)
-        return min(vals) if vals else -math.inf
+        """Fewest proven digits (:func:`rfverify.proof.merit`): which of two proofs says more."""
+        return merit(proof)
 
     @staticmethod
     def _distance_dominates(proof: Proof) -> bool:

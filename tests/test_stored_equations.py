@@ -323,3 +323,27 @@ def test_the_data_scale_that_decides_an_absolute_acceptance_is_exact():
     ctx = ProofContext(p)
     assert ctx.scales["u"] == 0.0
     assert ctx.scales["v"] <= 2.0 ** 60 and ctx.scales["Hr"] == 2.0 ** 60
+
+
+def test_a_local_file_with_an_unsymmetric_W_states_the_stored_equations_digits():
+    """A local problem u = W r + q whose W is unsymmetric, with an exact solution (u*, r*) of its
+    stored equations: the default verdict names (W + Wᵀ)/2 and proves the stored equations'
+    digits of that same answer (the skew part bounded through λmin((W + Wᵀ)/2) > 0)."""
+    from test_proof import _local_problem
+
+    rng = np.random.default_rng(5)
+    X = rng.integers(-1, 2, size=(10, 10)).astype(float)
+    A = np.triu(X, 1) - np.triu(X, 1).T
+    W = 256.0 * np.eye(10) + A                                       # entrywise asymmetry 7.8e-3
+    r = np.array([4.0, 1.0, -0.5, 0.25, 0.0, 0, 0, 0, 0, 0])       # contact 0 sticks (inside K)
+    u = np.array([0.0, 0, 0, 0, 0, 5.0, 1.0, -1.0, 0.5, 0.5])       # contact 1 is open (inside K*)
+    q = u - W @ r                                                    # exact: small dyadic numbers
+    p = _local_problem(W, q, np.array([0.5, 0.5]), np.array([0.25, 0.25]))
+    assert not p.matrix_is_symmetric and "(W + Wᵀ)/2" in p.statement
+    cert = rfverify.certify(p, p.H @ r, u, r, digits=10)
+    assert "(W + Wᵀ)/2" in cert.headline
+    stored = cert.stored_equations
+    assert stored is not None and stored.certified, cert.verdict
+    assert "also proven to 10 digits for W as stored" in cert.verdict
+    # the stored equations' solution is not the symmetrised one: that claim fails
+    assert not cert.certified

@@ -20,7 +20,7 @@ from .bound import (FLOAT64_DIGITS, MAX_CERTIFIABLE_DIGITS, ExactData, Proof, Qu
 from .dyadic import Dyadic
 from .massbounds import MassBounds, verify_mass_matrix
 
-__all__ = ["Proof", "ProofContext", "QuantityBound", "Point", "validate_digits", "FLOAT64_DIGITS",
+__all__ = ["Proof", "ProofContext", "QuantityBound", "Point", "validate_digits", "merit", "FLOAT64_DIGITS",
            "MAX_CERTIFIABLE_DIGITS"]
 
 
@@ -51,6 +51,16 @@ class Point:
         for part in () if self.r_more is None else self.r_more:
             r = r + Dyadic.from_float(part)
         return v, r
+
+
+def merit(proof: Proof) -> float:
+    """Fewest digits over the quantities with a bound (an absolute-mode certified one counts as
+    many as it may), −∞ for an invalid proof: which of two proofs of one answer says more."""
+    if not proof.valid:
+        return -math.inf
+    vals = [math.inf if (q.certified and q.mode == "absolute") else (-math.inf if q.digits is None else q.digits)
+            for q in proof.quantities.values() if q.mode != "information"]
+    return min(vals) if vals else -math.inf
 
 
 class ProofContext:
@@ -107,20 +117,34 @@ class ProofContext:
         """True when a proof of the symmetrised equations of a global problem whose stored M is
         unsymmetric gets a companion: the same point judged by the stored equations."""
         p = self.problem
-        return not self.is_local and p.equations == "symmetrised" and not p.matrix_is_symmetric
+        return p.equations == "symmetrised" and not p.matrix_is_symmetric
 
     def with_companion(self, proof: Proof, point: Point, v, u, r) -> Proof:
         """``proof`` with :attr:`Proof.stored_equations` set where :attr:`has_companion`: the
-        same point and solution proven against the stored, unsymmetric M (how many digits of
-        the stored equations' solution the answer has; DESIGN §6.1).  Costs one proof."""
+        same answer proven against the stored, unsymmetric M (W) — how many digits of the stored
+        equations' solution it has (DESIGN §6.1) — at the proof's point or at the answer itself,
+        whichever proves more (an answer of the stored equations is its own best point).  Costs
+        two proofs."""
         if not self.has_companion or not proof.valid:
             return proof
         stored = self.problem.stored_equations()
-        if self._stored_scales is None:
-            self._stored_scales = data_scales(stored, self.exact, self.mass, self.w_diag)
-        pv, pr = point.exact()
-        proof.stored_equations = _prove(stored, pv, pr, v, u, r, requested=proof.requested, mass=self.mass,
-                                        exact=self.exact, scales=self._stored_scales, w_diag=self.w_diag)
+        candidates = [point, Point(np.asarray(v, dtype=np.float64), np.zeros(np.size(v)),
+                                   np.asarray(r, dtype=np.float64), np.zeros(np.size(r)))]
+        best = None
+        for at in candidates:
+            pv, pr = at.exact()
+            if self.is_local:
+                from .local import prove_local
+
+                st = prove_local(stored, pr, u, r, requested=proof.requested, exact=self.local, scales=self.scales)
+            else:
+                if self._stored_scales is None:
+                    self._stored_scales = data_scales(stored, self.exact, self.mass, self.w_diag)
+                st = _prove(stored, pv, pr, v, u, r, requested=proof.requested, mass=self.mass, exact=self.exact,
+                            scales=self._stored_scales, w_diag=self.w_diag)
+            if best is None or merit(st) > merit(best):
+                best = st
+        proof.stored_equations = best
         return proof
 
     def eps_lower(self, gap: float) -> float:

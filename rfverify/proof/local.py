@@ -91,9 +91,20 @@ class LocalExact:
         self.mu_r = Dyadic.from_float(problem.mu_r)
         self.facts = prove_psd(local.W)
 
-    def u_of(self, r: Dyadic) -> Dyadic:
-        """u = (W + Wᵀ)/2 · r + q, exactly."""
+    def u_of(self, r: Dyadic, stored: bool = False) -> Dyadic:
+        """u = (W + Wᵀ)/2 · r + q, or W r + q with W as stored (``stored``), exactly."""
+        if stored:
+            return self.W.matvec(r) + self.q
         return (self.W.matvec(r) + self.WT.matvec(r)).scale2(-1) + self.q
+
+    def skew_row_norms_upper(self) -> np.ndarray:
+        """Upper bounds of ‖row k of (W − Wᵀ)/2‖₂ (each difference rounded up)."""
+        W = sp.csr_matrix(self.local.W)
+        D = (W - W.T).tocsr()
+        D.data = _up(np.abs(D.data) * 0.5 * (1 + 2.0 ** -52))
+        sq = D.multiply(D)
+        k = int(np.max(np.diff(D.indptr), initial=1)) + 2
+        return _up(np.sqrt(inflate(np.asarray(sq.sum(axis=1)).ravel(), k)))
 
     def quad(self, r: Dyadic) -> Fraction:
         """rᵀ (W + Wᵀ)/2 r = rᵀ W r, exactly."""
@@ -183,7 +194,12 @@ def local_data_scales(problem: Problem) -> dict:
 def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10, exact: LocalExact | None = None,
                 scales: dict | None = None, relative: bool = False) -> Proof:
     """Evaluate the local bound at the point r_p (exact, 5n) and carry it to the returned float64
-    (u (5n,), r (5n,)).  Quantities: u and r (v of the lifting is not a quantity of the file)."""
+    (u (5n,), r (5n,)).  Quantities: u and r (v of the lifting is not a quantity of the file).
+
+    For ``problem.as_stored`` (an unsymmetric W, its stored equations) u = W r + q uses the
+    stored W; (r − r*)ᵀW(r − r*) = (r − r*)ᵀW_s(r − r*), so ε and the r bound are unchanged, and
+    |u_k − u*_k| ≤ √(W_kk)·ε + ‖row k of (W − Wᵀ)/2‖₂·ε/√λmin(W_s), which needs W_s proven definite
+    on every component r may use (else u is reported as information)."""
     t0 = time.perf_counter()
     requested = validate_digits(requested)
     n = problem.n_contacts
@@ -203,7 +219,9 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
     if len(point_r) != SPACEDIM * n:
         raise ValueError("the point does not match the problem's sizes")
 
-    u_p = ex.u_of(point_r)
+    stored = problem.as_stored
+    named = {"statement": problem.statement, "equations": "stored" if stored else "symmetrised"}
+    u_p = ex.u_of(point_r, stored)
     outside = cones_failure(ex, u_p, point_r, "u = Wr + q")
     shifted = None
     if outside:
@@ -228,7 +246,17 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
                  "lam_min_W_lower": lam}
     e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up_times(sqrtW, eps))
     terms.update({"max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)), "W_psd": ex.facts.how})
-    q = {"u": _quantity("u", e_u, u, scales, requested, names=DATA_SCALE_NAMES_LOCAL, relative=relative)}
+    u_note = ""
+    if stored:
+        skew_gain = _skew_gain(problem, ex)
+        if skew_gain is None:
+            u_note = ("W as stored is unsymmetric and (W + Wᵀ)/2 is not proven definite on every component r may "
+                      "use: its skew part is not bounded, u is not")
+            e_u = np.full(e_u.size, np.inf)
+        else:
+            e_u = upper_sum(e_u, _up_times(skew_gain, eps))
+    q = {"u": _quantity("u", e_u, u, scales, requested, names=DATA_SCALE_NAMES_LOCAL, relative=relative,
+                        note=u_note)}
     if shifted is None:
         e_r, note, r_terms = _local_r_bound(problem, ex, u_p, sqrtW * eps, point_r, eps, r)
     else:  # ‖r_p − r*‖₂ ≤ δ on every component
@@ -243,9 +271,28 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         q["r"] = _quantity("r", e_r, r, scales, requested, note=note, names=DATA_SCALE_NAMES_LOCAL,
                            relative=relative)
     return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, theorem=THEOREM_LOCAL,
-                 statement=problem.statement,
+                 statement=problem.statement, equations=named["equations"],
                  arithmetic=("exact dyadic rationals (Python integers) for u = Wr + q, rᵀu and the cones; "
                              "verified float64 (or exact rationals) for W ⪰ 0 and λmin"))
+
+
+def _skew_gain(problem, ex: LocalExact):
+    """‖row k of (W − Wᵀ)/2‖₂ / √λmin(W_s) per row (an upper bound), or None when λmin(W_s) is not
+    proven positive on every component r may use (then ‖r − r*‖₂ is not bounded by ‖·‖_{W_s})."""
+    facts = ex.facts
+    if not facts.lam_lower > 0 or facts.nonzero_rows is None:
+        return None
+    n = problem.n_contacts
+    kept = np.zeros((n, SPACEDIM), dtype=bool)
+    kept[:, 0] = True
+    kept[:, 1:3] = (problem.mu > 0)[:, None]
+    kept[:, 3:5] = (problem.mu_r > 0)[:, None]
+    in_F = np.zeros(SPACEDIM * n, dtype=bool)
+    in_F[facts.nonzero_rows] = True
+    if not np.all(in_F[kept.ravel()]):
+        return None
+    root = float(np.nextafter(np.sqrt(facts.lam_lower) * (1 - 4 * 2.0 ** -53), 0))
+    return _up(ex.skew_row_norms_upper() / root)
 
 
 def _shift_into_dual_cone(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic):
