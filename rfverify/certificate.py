@@ -203,35 +203,23 @@ def unscaled_proof(proof: Proof | None, scaling) -> Proof | None:
 def unscaled_point(point: Point | None, scaling) -> Point | None:
     """The point in the problem's units (None when a term would leave float64's range: the
     point then exists only in the scaled units its proof was made in)."""
-    if point is None:
-        return None
-    parts = {}
-    for key in ("v_hi", "v_lo", "r_hi", "r_lo", "v_more", "r_more"):
-        x = getattr(point, key)
-        if x is None:
-            parts[key] = None
-            continue
-        y = scaling.scale(key[0], x, inverse=True)
-        if y is None:
-            return None
-        parts[key] = y
-    return Point(**parts)
+    return _point_in(point, scaling, inverse=True)
 
 
 def scaled_point(point: Point | None, scaling) -> Point | None:
     """The point in scaled units (None when not exact)."""
+    return _point_in(point, scaling, inverse=False)
+
+
+def _point_in(point: Point | None, scaling, inverse: bool) -> Point | None:
     if point is None:
         return None
     parts = {}
     for key in ("v_hi", "v_lo", "r_hi", "r_lo", "v_more", "r_more"):
         x = getattr(point, key)
-        if x is None:
-            parts[key] = None
-            continue
-        y = scaling.scale(key[0], x)
-        if y is None:
+        parts[key] = None if x is None else scaling.scale(key[0], x, inverse=inverse)
+        if x is not None and parts[key] is None:
             return None
-        parts[key] = y
     return Point(**parts)
 
 
