@@ -455,7 +455,7 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
     if not driver.certified:
         # No proof succeeded: prove the last iterates (the final one may have left a cone
         # after a failed step) so that the verdict reports the best proven digits.
-        for it in reversed(driver.recent[-3:]):
+        for it in driver.recent[-3:]:  # in order, so that the progress lines go forward
             driver(it, force=True)
     return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide)
 

@@ -4,7 +4,9 @@ which runs a command and maps what it raises to an exit code (see :mod:`rfverify
 from __future__ import annotations
 
 import argparse
+import difflib
 import os
+import re
 import sys
 import warnings
 
@@ -18,10 +20,30 @@ COMMANDS = (info, solve, certify, diagnose, bench, report, generate)
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the project's one-line error format and exit code 2."""
+    """argparse with the project's one-line error format and exit code 2: the command, what is
+    wrong, a "did you mean" where a near option or choice exists, and a fix."""
 
     def error(self, message):
+        message = " ".join(str(message).split())
+        choice = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if choice:
+            options = re.findall(r"'([^']*)'", choice.group(2))
+            message += _did_you_mean(choice.group(1), options)
+        if "fix:" not in message:
+            message += f"; fix: see '{self.prog} --help'"
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+    def unrecognized(self, extra: list) -> None:
+        """Exit 2 naming the arguments this command does not take, with the nearest options."""
+        options = [o for action in self._actions for o in action.option_strings]
+        hints = "".join(_did_you_mean(t.split("=")[0], options) for t in extra if t.startswith("-"))
+        what = "argument" if len(extra) == 1 else "arguments"
+        self.error(f"unrecognized {what}: {' '.join(extra)}{hints}")
+
+
+def _did_you_mean(given: str, options) -> str:
+    close = difflib.get_close_matches(given, list(options), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]}?)" if close else ""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for command in COMMANDS:
         command.add_parser(sub)
+    parser.commands = sub.choices  # name -> its parser: unrecognized arguments are its to report
     return parser
 
 
@@ -54,7 +77,9 @@ a shell reports for a program killed by the signal."""
 
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        parser.commands[args.command].unrecognized(extra)
     try:
         with warnings.catch_warnings(record=True) as caught:
             # numpy/matplotlib warnings are not for the user's terminal: they are recorded and

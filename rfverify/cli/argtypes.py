@@ -12,23 +12,23 @@ def number(text: str) -> float:
     try:
         val = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number; fix: give a decimal number, e.g. 1e-10") from None
     if math.isnan(val):
-        raise argparse.ArgumentTypeError("NaN is not allowed")
+        raise argparse.ArgumentTypeError("NaN is not allowed; fix: give a decimal number, e.g. 1e-10")
     return val
 
 
 def nonneg_float(text: str) -> float:
     val = number(text)
     if not val >= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be ≥ 0")
+        raise argparse.ArgumentTypeError(f"{text!r} must be ≥ 0; fix: give a number ≥ 0")
     return val
 
 
 def positive_float(text: str) -> float:
     val = number(text)
     if not val > 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
+        raise argparse.ArgumentTypeError(f"{text!r} must be > 0; fix: give a number > 0, e.g. 1e-10")
     return val
 
 
@@ -36,7 +36,7 @@ def tolerance(text: str) -> float:
     """A tolerance: a finite number > 0 (inf would stop at once and call anything solved)."""
     val = positive_float(text)
     if math.isinf(val):
-        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number > 0, e.g. 1e-10")
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number > 0; fix: give e.g. 1e-10")
     return val
 
 
@@ -44,9 +44,9 @@ def _integer(text: str, *, least: int) -> int:
     try:
         val = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer; fix: give a whole number ≥ {least}") from None
     if val < least:
-        raise argparse.ArgumentTypeError(f"{text!r} must be ≥ {least}")
+        raise argparse.ArgumentTypeError(f"{text!r} must be ≥ {least}; fix: give a whole number ≥ {least}")
     return val
 
 

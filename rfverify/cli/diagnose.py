@@ -39,6 +39,7 @@ def add_parser(sub) -> None:
     diag.add_argument("--dps", type=positive_int, default=40, metavar="D",
                       help="digits of the reference steps (default: %(default)s)")
     diag.add_argument("--json", action="store_true", help="print the diagnosis as JSON")
+    diag.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     add_load_options(diag)
     diag.set_defaults(func=cmd_diagnose)
 

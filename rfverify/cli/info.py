@@ -24,6 +24,8 @@ def add_parser(sub) -> None:
                           epilog=exit_codes("the problem was read (warnings about optional metadata included)"))
     info.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     info.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    info.add_argument("--quiet", action="store_true",
+                      help="accepted by every command; info prints no progress lines anyway (its result is stdout)")
     add_load_options(info)
     info.add_argument("--solution-tol", type=tolerance, default=1e-6, metavar="TOL",
                       help="relative residual up to which a stored solution is called "

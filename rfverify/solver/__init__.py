@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 import time
 
 import numpy as np
@@ -142,7 +143,31 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     c0 = compile_seconds()
     result = _solve(problem, method, tol, max_iter, keep_iterates, callback, **options)
     result.timings["compile"] = compile_seconds() - c0  # numba's, on a cold start (included in total)
-    return judged_on_the_file(problem, result) if problem.local is not None else result
+    result = judged_on_the_file(problem, result) if problem.local is not None else result
+    result.message = one_criterion(result.message, result.measures)
+    if not result.success and tol < DOUBLE_REACH:
+        result.message = (f"tol = {tol:g} is below what double precision can reach (the criterion's own "
+                          f"rounding is about 1e-16; this run reached {result.criterion:.2e}): for more accuracy use "
+                          f"--digits K (rfverify.solve_to_digits), which continues in extended precision and "
+                          f"proves K digits. {result.message}")
+    return result
+
+
+DOUBLE_REACH = 1e-15
+"""Tolerances below this are out of double precision's reach on most problems (the criterion's
+own rounding is about 1e-16): a run that misses one says so and points to the k-digit path."""
+
+
+_STOP_CRITERION = re.compile(r"criterion [0-9.e+-]+ ≤ tol \(worst: \w+\)")
+
+
+def one_criterion(message: str, final) -> str:
+    """``message`` with the stopping test's criterion (of the judged iterate, in its own
+    arithmetic) restated as that of the returned answer (``final``, the one the status and
+    ``criterion`` report), so that a run states one criterion value."""
+    if final is None or not np.isfinite(final.max):
+        return message
+    return _STOP_CRITERION.sub(f"criterion {final.max:.2e} ≤ tol (worst: {final.worst()})", message)
 
 
 def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:

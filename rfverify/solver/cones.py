@@ -136,8 +136,10 @@ class ProductCone:
 
     def _blocks(self, fn, x, op):
         """Diagonal blocks (3×3 per L3 cone, 1 value per L1 cone) as float64, in the order of
-        (bd_rows, bd_cols)."""
-        b = np.asarray(self._call(fn, x, op=op), dtype=np.float64)
+        (bd_rows, bd_cols).  A longdouble entry beyond float64's range becomes ±inf, silently:
+        the factorisation it is for then fails and says so (a NumericalError naming the form)."""
+        with np.errstate(over="ignore"):
+            b = np.asarray(self._call(fn, x, op=op), dtype=np.float64)
         if not (self.n1 and self.n3):
             return b.reshape(-1)
         return np.concatenate((b[: self.n3].reshape(-1), b[self.n3:, 0, 0]))
