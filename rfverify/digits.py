@@ -187,7 +187,7 @@ class ProofDriver:
         return any(not q.certified and own[name] < 1e-3 * q.abs_bound
                    for name, q in proof.quantities.items() if name in own and q.mode != "information")
 
-    def __call__(self, it: ext.Iterate, force: bool = False) -> bool:
+    def __call__(self, it: ext.Iterate, force: bool = False, quiet: bool = False) -> bool:
         if it.mu < 0.5 * self._mu_best:
             self._mu_best, self._since = it.mu, 0
         else:
@@ -223,7 +223,7 @@ class ProofDriver:
         sc = self.score(proof)
         if self.best is None or sc > self.best[0]:
             self.best = (sc, proof, point, sol)
-        if self.progress:
+        if self.progress and not quiet:
             phase = "multiple-precision" if key[0] == "wide" else "extended"
             self.progress(f"proof at {phase} iteration {it.k} (μ = {it.mu:.1e}): {proof.summary()}")
         if proof.certified:
@@ -455,8 +455,14 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
     if not driver.certified:
         # No proof succeeded: prove the last iterates (the final one may have left a cone
         # after a failed step) so that the verdict reports the best proven digits.
-        for it in driver.recent[-3:]:  # in order, so that the progress lines go forward
-            driver(it, force=True)
+        again = [it for it in driver.recent[-3:] if ("dd", it.k) not in driver.proven_at
+                 and ("wide", it.k) not in driver.proven_at]
+        for it in again:
+            driver(it, force=True, quiet=True)
+        if again and driver.best is not None:
+            # one line, not one per iterate: the progress goes forward
+            say(f"the last iterates ({', '.join(str(it.k) for it in again)}) proven too, in case the final one "
+                f"left a cone: best {driver.best[1].summary()}")
     return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide)
 
 
