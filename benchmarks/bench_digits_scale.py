@@ -54,23 +54,24 @@ def load(spec: str):
     return rfverify.load(spec)
 
 
-ENGINES = ("cholmod", "ldl", "default")
+ENGINES = ("cholmod", "ldl", "default", "noncholmod")
 """``factor_engine`` of the double-double phase (the double solve's form is ``auto``'s either
-way, schur by CHOLMOD on the filled problems), or ``default``: the default install, scikit-sparse
-made unimportable in the child, so that every factorisation, the double solve's included, is
-QDLDL's."""
+way, schur by CHOLMOD on the filled problems), or ``default``: the default install (CHOLMOD
+from cvxopt, with the engines chosen by size), or ``noncholmod``: cvxopt made unimportable in the
+child, so that every factorisation, the double solve's included, is QDLDL's (a trimmed install)."""
 
 
 def one(spec: str, engine: str) -> dict:
     """Run the path once in this process; the row as a dict."""
-    if engine == "default":
-        sys.modules["sksparse"] = sys.modules["sksparse.cholmod"] = None  # an import of it now fails
+    if engine == "noncholmod":
+        sys.modules["cvxopt"] = sys.modules["cvxopt.cholmod"] = None  # an import of it now fails
     import rfverify
     from rfverify.solver.engines import schur_engine_name
 
     problem = load(spec)
     t0 = time.perf_counter()
-    out = rfverify.solve_to_digits(problem, digits=10, factor_engine="auto" if engine == "default" else engine)
+    out = rfverify.solve_to_digits(problem, digits=10,
+                                   factor_engine="auto" if engine in ("default", "noncholmod") else engine)
     total = time.perf_counter() - t0
     q = out.certificate.quantities
     digits = {k: (None if x.digits is None else round(x.digits, 2)) for k, x in q.items() if x.mode != "information"}
@@ -93,7 +94,8 @@ def _main(argv=None):
     ap.add_argument("--problems", nargs="*", default=["random:300:1000", "random:1000:3000"])
     ap.add_argument("--engines", nargs="*", default=["cholmod", "ldl"], choices=ENGINES,
                     help="cholmod or ldl: the double-double phase's float64 factor; default: the default "
-                         "install (scikit-sparse unimportable: QDLDL everywhere) (default: cholmod ldl)")
+                         "install's choice; noncholmod: cvxopt unimportable (QDLDL everywhere) "
+                         "(default: cholmod ldl)")
     ap.add_argument("--one", nargs=2, metavar=("PROBLEM", "ENGINE"), help=argparse.SUPPRESS)
     ap.add_argument("--timeout", type=float, default=3600.0, help="seconds per run (default 3600)")
     args = ap.parse_args(argv)

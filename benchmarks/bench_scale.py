@@ -89,7 +89,7 @@ def run_one(kind: str, size: int, seed: int, method: str, tol: float, time_limit
     t_gen = time.perf_counter() - t0
     kernels.warm_up()
     if method == "schur" and cholmod_available():
-        import sksparse.cholmod  # noqa: F401  (its library load is not the solve, as Clarabel's is not)
+        import cvxopt.cholmod  # noqa: F401  (its library load is not the solve, as Clarabel's is not)
     before = _maxrss_bytes()
     t0 = time.perf_counter()
     res = rfverify.solve(problem, method=method, tol=tol, time_limit=time_limit)

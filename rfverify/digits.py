@@ -252,8 +252,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     Stages: the double solve (``method``, ``tol``, ``max_iter``, :data:`DOUBLE_SETTINGS` unless
     ``options`` say otherwise), Algorithm 1 in double-double
     (``extended_max_iter`` iterations at most, Newton back end ``backend``, whose float64
-    factorisation is ``factor_engine``: "auto" (CHOLMOD where scikit-sparse is installed, see
-    :func:`.extended.contactspace.resolve_engine`), "cholmod" or "ldl"), and — only when
+    factorisation is ``factor_engine``: "auto" (CHOLMOD, from cvxopt, on contact-space matrices of
+    at least ``CHOLMOD_MIN_ROWS`` rows, see :func:`.extended.contactspace.resolve_engine`),
+    "cholmod" or "ldl"), and — only when
     that ends without a proof, on a problem whose sparse dof-space factor costs at most
     ``WIDE_MAX_FACTOR_OPS`` — Algorithm 1
     in ``wide_bits``-bit arithmetic (``wide_max_iter`` iterations at most; ``wide_tail=False``
@@ -287,10 +288,11 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         return _unscaled_solution(out, scaled, scaling)
     if factor_engine not in ENGINES:
         raise InvalidArgumentError("factor_engine", f"{factor_engine!r} is not one of {', '.join(ENGINES)}",
-                                   fix="use 'auto' (CHOLMOD where installed), 'cholmod' or 'ldl'")
+                                   fix="use 'auto', 'cholmod' or 'ldl'")
     if factor_engine == "cholmod" and not cholmod_available():
-        raise InvalidArgumentError("factor_engine", "'cholmod' needs scikit-sparse, which is not installed",
-                                   fix="pip install 'rfverify[cholmod]', or use factor_engine='auto'")
+        raise InvalidArgumentError("factor_engine", "'cholmod' needs cvxopt (a dependency of rfverify), which "
+                                                    "does not import here",
+                                   fix="pip install cvxopt, or use factor_engine='auto'")
     if method == "clarabel":
         raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
                                    fix="use method='auto' (default) or an Algorithm 1 form")

@@ -83,13 +83,17 @@ def _mpmath_precision_is_restored():
 
 @pytest.fixture(params=["cholmod", "qdldl"])
 def schur_engine(request, monkeypatch) -> str:
-    """Each test twice, once per engine of the ``schur`` form: CHOLMOD (skipped where the extra
-    ``cholmod`` is not installed) and QDLDL, the default install's (scikit-sparse made
-    unimportable: a None entry in sys.modules stops an import).  The value is the engine's name
-    as the solver log gives it."""
+    """Each test twice, once per engine of the ``schur`` form: CHOLMOD (cvxopt, a dependency:
+    never skipped) and QDLDL, the fallback of an install without cvxopt (made unimportable: a
+    None entry in sys.modules stops an import).  The value is the engine's name as the solver
+    log gives it."""
     if request.param == "cholmod":
-        pytest.importorskip("sksparse.cholmod", reason="scikit-sparse (extra 'cholmod') not installed")
         return "CHOLMOD"
-    monkeypatch.setitem(sys.modules, "sksparse", None)
-    monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
+    block_cvxopt(monkeypatch)
     return "QDLDL"
+
+
+def block_cvxopt(monkeypatch):
+    """Make ``import cvxopt`` fail for one test, as on an install without it."""
+    monkeypatch.setitem(sys.modules, "cvxopt", None)
+    monkeypatch.setitem(sys.modules, "cvxopt.cholmod", None)

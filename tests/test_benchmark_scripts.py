@@ -110,7 +110,7 @@ def test_docs_link_to_results_files_that_exist():
 @pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
 def test_bench_scale_at_a_tiny_size(capsys, _results_elsewhere):
     """The growth benchmark (issue 27) runs end to end at a tiny size: rows for each kind and
-    method (schur skipped, saying why, without scikit-sparse), its table, JSON and plot, and one
+    method (schur by CHOLMOD, from cvxopt), its table, JSON and plot, and one
     run in a child process with its peak memory."""
     import json
 

@@ -96,7 +96,6 @@ def test_a_childs_compilation_is_found_by_another_process(tmp_path):
 def test_a_cholmod_run_calls_every_listed_kernel_too():
     """The list is the same for both float64 factorisation engines (neither is numba code): a
     run that factors with CHOLMOD calls every listed kernel, as the ``ldl`` run above does."""
-    pytest.importorskip("sksparse.cholmod")
     script = textwrap.dedent("""
         import rfverify
         from rfverify import compilation

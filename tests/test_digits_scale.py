@@ -1,5 +1,5 @@
 """The 10-digit path at scale (issue 27 item 4): the CHOLMOD float64 engine of the contact-space
-form refined in double-double, the path without scikit-sparse, and the sparse multiple-precision
+form refined in double-double, the path without cvxopt, and the sparse multiple-precision
 tail against the dense one.  Small problems only; the timings are in
 benchmarks/bench_digits_scale.py."""
 
@@ -31,7 +31,6 @@ from rfverify.random_problems import random_problem
 from test_extended import singular_in_float64
 from test_wide import newton_residual
 
-needs_cholmod = pytest.mark.skipif(not cholmod_available(), reason="scikit-sparse (extra 'cholmod') not installed")
 
 
 def _upper_values(chol, A):
@@ -65,7 +64,6 @@ def _scaled_spd(seed: int, spread: float, n: int = 60):
 
 
 # ---------------------------------------------------------------------- the CHOLMOD engine
-@needs_cholmod
 @settings(max_examples=8, deadline=None)
 @given(seed=st.integers(0, 10**6), spread=st.floats(0.0, 12.0))
 @example(seed=3, spread=12.0)  # condition ~1e24 and more: far beyond float64
@@ -86,7 +84,6 @@ def test_cholmod_engine_solves_to_double_double_accuracy_like_the_ldl_engine(see
     assert np.max(np.abs(d * (out[0] - out[1]))) <= 1e-14 * np.max(np.abs(d * out[1]))
 
 
-@needs_cholmod
 def test_cholmod_engine_falls_back_to_double_double_when_float64_sees_a_singular_matrix():
     """[[1, 1], [1, 1 + 2⁻⁶⁰]] blocks: the float64 part is singular, the exact matrix SPD."""
     n = 40
@@ -100,7 +97,6 @@ def test_cholmod_engine_falls_back_to_double_double_when_float64_sees_a_singular
     assert np.allclose(np.asarray(dd.to_longdouble(xh, xl)[1::2], dtype=float), x1, rtol=1e-12)
 
 
-@needs_cholmod
 def test_cholmod_engine_falls_back_when_refinement_stalls():
     """Condition 1e17 in a random basis: CHOLMOD's float64 factor exists but cannot refine;
     the solve is redone in double-double, and later factorisations stay there."""
@@ -128,7 +124,6 @@ def test_cholmod_engine_falls_back_when_refinement_stalls():
     assert chol.factor(*_upper_values(chol, A)) == -1 and chol.precision == "double-double"
 
 
-@needs_cholmod
 def test_newton_solve_refined_against_the_double_double_matrix_at_an_iterate():
     """At the double solve's last iterate, the contact-space matrix factored by CHOLMOD: each
     solve reaches the double-double backward error, checked by an independent 60-digit
@@ -178,7 +173,6 @@ def test_newton_solve_refined_against_the_double_double_matrix_at_an_iterate():
     assert np.max(np.abs(v1 - v2)) <= 1e-20 * np.max(np.abs(v2))
 
 
-@needs_cholmod
 @pytest.mark.parametrize("seed", [2, 7])
 def test_both_engines_prove_the_same_digits(seed):
     problem = random_problem(20 * seed // 2 + 10, 20 * seed + 10, seed=seed)
@@ -192,24 +186,25 @@ def test_both_engines_prove_the_same_digits(seed):
     assert np.max(np.abs(outs["ldl"].v - outs["cholmod"].v)) <= qa.abs_bound + qb.abs_bound
 
 
-# ---------------------------------------------------------------------- without scikit-sparse
+# ---------------------------------------------------------------------- without cvxopt
 @pytest.fixture
-def no_sksparse(monkeypatch):
-    """Make ``import sksparse`` fail, as on an install without the extra."""
-    monkeypatch.setitem(sys.modules, "sksparse", None)
-    monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
+def no_cvxopt(monkeypatch):
+    """Make ``import cvxopt`` fail, as on an install trimmed of it."""
+    from conftest import block_cvxopt
+
+    block_cvxopt(monkeypatch)
 
 
-def test_without_scikit_sparse_the_ldl_engine_is_taken(no_sksparse):
+def test_without_cvxopt_the_ldl_engine_is_taken(no_cvxopt):
     assert not cholmod_available()
     assert resolve_engine("auto", 10**6) == "ldl"
     problem = random_problem(8, 14, seed=1)
     data = ExtendedData(problem)
     back = choose_backend(data)
     assert type(back.chol) is MixedCholesky and back.engine == "ldl" and "float64 QDLDL factor" in back.name
-    with pytest.raises(ImportError, match="rfverify\\[cholmod\\]"):
+    with pytest.raises(ImportError, match="pip install cvxopt"):
         choose_backend(data, engine="cholmod")
-    with pytest.raises(rfverify.InvalidArgumentError, match="scikit-sparse"):
+    with pytest.raises(rfverify.InvalidArgumentError, match="cvxopt"):
         rfverify.solve_to_digits(problem, digits=10, factor_engine="cholmod")
     out = rfverify.solve_to_digits(problem, digits=10)
     assert out.success, out.certificate.verdict
@@ -293,7 +288,6 @@ def test_sparse_tail_stores_no_dense_matrix():
         assert arrays and all(x.size < data.m * data.m for x in arrays)  # no m × m array anywhere
 
 
-@needs_cholmod
 def test_auto_takes_cholmod_where_it_is_installed():
     data = ExtendedData(random_problem(8, 14, seed=1))
     assert resolve_engine("auto", 1) == "cholmod"

@@ -12,11 +12,7 @@ from hypothesis import given, settings, strategies as st
 
 from rfverify.solver.engines import CholmodEngine, QDLDLEngine, SuperLUEngine
 
-try:
-    import sksparse.cholmod  # noqa: F401
-    HAVE_CHOLMOD = True
-except ImportError:
-    HAVE_CHOLMOD = False
+from conftest import block_cvxopt
 
 
 def quasidefinite(rng, n_pos, n_neg, density=0.3):
@@ -52,13 +48,7 @@ ENGINES = {
 }
 
 
-def engine_params():
-    for name in ENGINES:
-        marks = [] if name != "cholmod" or HAVE_CHOLMOD else [pytest.mark.skip(reason="scikit-sparse not installed")]
-        yield pytest.param(name, marks=marks)
-
-
-@pytest.mark.parametrize("name", list(engine_params()))
+@pytest.mark.parametrize("name", list(ENGINES))
 @settings(max_examples=15, deadline=None)
 @given(n=st.integers(1, 40), seed=st.integers(0, 2**32 - 1))
 def test_an_engine_solves_what_it_factored_and_refactors_on_the_same_pattern(name, n, seed):
@@ -122,7 +112,6 @@ def test_superlu_refuses_a_singular_matrix_and_keeps_no_stale_factor():
         engine.solve(np.ones(3))
 
 
-@pytest.mark.skipif(not HAVE_CHOLMOD, reason="scikit-sparse not installed")
 def test_cholmod_refuses_an_indefinite_matrix_with_an_arithmetic_error():
     engine = CholmodEngine()
     A = sp.csc_matrix(np.array([[1.0, 0.0], [0.0, 2.0]]))
@@ -135,10 +124,9 @@ def test_cholmod_refuses_an_indefinite_matrix_with_an_arithmetic_error():
     assert engine.permutation() is None
 
 
-def test_without_scikit_sparse_the_cholmod_engine_says_what_to_install(monkeypatch):
-    monkeypatch.setitem(sys.modules, "sksparse", None)
-    monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
-    with pytest.raises(ImportError, match=r"the schur form needs CHOLMOD.*rfverify\[cholmod\]"):
+def test_without_cvxopt_the_cholmod_engine_says_what_to_install(monkeypatch):
+    block_cvxopt(monkeypatch)
+    with pytest.raises(ImportError, match=r"the schur form needs CHOLMOD from cvxopt.*pip install cvxopt"):
         CholmodEngine("the schur form")
 
 
@@ -153,13 +141,13 @@ def test_every_form_reaches_its_matrix_through_an_engine():
 
     problem = rfverify.load("bundled:cube")
     lp = lift(problem)
-    expected = {"noscaling": SuperLUEngine, "schur": CholmodEngine if HAVE_CHOLMOD else QDLDLEngine}
+    expected = {"noscaling": SuperLUEngine, "schur": CholmodEngine}
     for name, form in FORMS.items():
         system = form(problem.M_sym, lp.H_t, lp.J, ProductCone(lp.n3, lp.n1))
         assert type(system.engine) is expected.get(name, QDLDLEngine), name
 
 
-def test_without_scikit_sparse_the_schur_form_factors_by_qdldl_on_the_upper_triangle(monkeypatch):
+def test_without_cvxopt_the_schur_form_factors_by_qdldl_on_the_upper_triangle(monkeypatch):
     """The default install's schur: S is handed to QDLDL as the upper triangle QDLDL reads, and
     the solves invert the symmetric matrix that triangle stands for (that it is the right S is
     checked through the whole path: test_solver's schur tests against form (16), per engine)."""
@@ -169,8 +157,7 @@ def test_without_scikit_sparse_the_schur_form_factors_by_qdldl_on_the_upper_tria
     from rfverify.solver.forms import SchurSystem
     from rfverify.solver.kkt import ScalingPoint
 
-    monkeypatch.setitem(sys.modules, "sksparse", None)
-    monkeypatch.setitem(sys.modules, "sksparse.cholmod", None)
+    block_cvxopt(monkeypatch)
     problem = rfverify.load("bundled:cube")
     lp = lift(problem)
     cones = ProductCone(lp.n3, lp.n1)

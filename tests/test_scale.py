@@ -25,7 +25,7 @@ def test_schur_is_declared_once_and_left_out_of_the_bench_defaults():
     assert "schur" not in DEFAULT_METHODS  # form (16)'s iterates by another engine
     sol = build_parser()._subparsers._group_actions[0].choices["solve"]
     method = next(a for a in sol._actions if a.dest == "method")
-    assert "schur" in method.choices and "rfverify[cholmod]" in method.help and "QDLDL" in method.help
+    assert "schur" in method.choices and "CHOLMOD" in method.help and "cvxopt" in method.help
     assert str(AUTO_SCHUR_MIN_CONTACTS) in method.help and f"{AUTO_SCHUR_MIN_FILL:g}" in method.help
     assert "schur" in rfverify.solve.__doc__
 

@@ -35,8 +35,7 @@ def add_parser(sub) -> None:
     sol.add_argument("--method", choices=METHODS, default="auto",
                      help="linear-system form: jqinv (14), qp2 (11), reduced (15), "
                           "reduced_factored (16), noscaling (6), schur ((16) reduced to the dofs and "
-                          "factored by CHOLMOD with pip install 'rfverify[cholmod]' and "
-                          "libsuitesparse-dev, else by QDLDL, about 10x slower at 10^4 contacts; "
+                          "factored by CHOLMOD's supernodal Cholesky (cvxopt, installed with rfverify); "
                           "fastest where the factorisation fills in: large piles, "
                           "beds, random problems); auto, jqinv then reduced then noscaling until one "
                           "is Solved, or, on a problem of at least "
@@ -143,7 +142,12 @@ def cmd_solve(args) -> int:
     if args.json:
         print(dumps(summary, indent=2))
     else:
-        print(f"status {result.status}: {result.message}")
+        hint = result.extras.get("hint")
+        if hint:  # the reason first, the solver's own account after it
+            print(f"status {result.status}: {hint}")
+            print(f"  solver: {result.message[:-len(hint) - 2]}")
+        else:
+            print(f"status {result.status}: {result.message}")
         if problem.statement != "the convex relaxation":
             print(f"problem: {problem.statement}{_stored_hint(problem)}")
         m = result.measures

@@ -374,8 +374,8 @@ which replaced it, spent 20–22 s in float64 factorisations of the 10-digit pat
 
 def resolve_engine(engine: str, rows: int) -> str:
     """"cholmod" or "ldl": the float64 factorisation engine of the contact-space form.
-    ``auto`` takes CHOLMOD (scikit-sparse, optional extra ``cholmod``) when it is importable and
-    the matrix has at least :data:`CHOLMOD_MIN_ROWS` rows, else QDLDL's up-looking LDLᵀ;
+    ``auto`` takes CHOLMOD (cvxopt, a dependency) when it imports and the matrix has at least
+    :data:`CHOLMOD_MIN_ROWS` rows, else QDLDL's up-looking LDLᵀ;
     ``cholmod`` demands it (ImportError, saying what to install, when absent)."""
     if engine not in ENGINES:
         raise ValueError(f"engine {engine!r} is not one of {', '.join(ENGINES)}")

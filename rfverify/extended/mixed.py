@@ -3,7 +3,7 @@
 A float64 factor of a symmetric positive definite matrix given in double-double is the
 "oracle" of an iterative refinement with double-double residuals (as in SoPlex's iterative
 refinement, :func:`refine_in_double_double`): :class:`MixedCholesky` with QDLDL's LDLᵀ,
-:class:`CholmodMixed` with CHOLMOD (scikit-sparse, the optional extra ``cholmod``) — the
+:class:`CholmodMixed` with CHOLMOD (cvxopt's wheel, a dependency) — the
 float64 engines of :mod:`rfverify.solver.engines`, the ones the double solver's forms use.
 Both fall back, for good, to the double-double :class:`.ldl.DDCholesky` where the float64
 factorisation fails or refinement stalls.
@@ -186,7 +186,7 @@ class MixedCholesky(_RefinedFloat64Factor, DDCholesky):
 class CholmodMixed(_RefinedFloat64Factor):
     """The interface of :class:`MixedCholesky` (values aligned with :meth:`positions`,
     ``factor``, ``solve`` to double-double accuracy) with the float64 factorisation done by
-    CHOLMOD's supernodal Cholesky (scikit-sparse, AMD ordering, symbolic analysis once) and
+    CHOLMOD's supernodal Cholesky (cvxopt; AMD or nested dissection, symbolic analysis once) and
     every solve refined against the double-double matrix to a componentwise backward error
     ≤ ``backward_target`` — the same refinement as :class:`MixedCholesky`, only the float64
     oracle differs.  CHOLMOD works on dense supernodes with BLAS-3 where the up-looking LDLᵀ

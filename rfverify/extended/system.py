@@ -84,8 +84,8 @@ def choose_backend(data: ExtendedData, backend: str = "auto", engine: str = "aut
     float64 it is as fast as or faster than the dof-space and hybrid forms on every problem
     measured (docs/DECISIONS.md), and its accuracy does not depend on μ.  ``contact-dd`` factors
     in double-double throughout; ``dof`` and ``hybrid`` are the dof-space forms.  ``engine``
-    (:func:`.contactspace.resolve_engine`) is the float64 factorisation of the contact-space form: CHOLMOD
-    where scikit-sparse is installed ("auto"), or forced ("cholmod", "ldl")."""
+    (:func:`.contactspace.resolve_engine`) is the float64 factorisation of the contact-space form:
+    chosen by size ("auto"), or forced ("cholmod", "ldl")."""
     if data.local and backend in ("dof", "hybrid"):
         from ..errors import InvalidArgumentError
 

@@ -14,7 +14,6 @@ from ..lifting import KIND_NAMES
 from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
 from ..problem import SPACEDIM, Problem
 from .cones import ProductCone
-from .engines import cholmod_available
 from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, TRACE_FIELDS, IterationInfo, Settings, SolveResult, Status,
@@ -38,8 +37,8 @@ def auto_sequence(n_contacts: int, fill=None) -> tuple:
 
 
 def body_fill(problem: Problem) -> float:
-    """Σ(column count)² per contact of the Cholesky factor, under an AMD ordering (CHOLMOD's where
-    scikit-sparse imports, else QDLDL's), of the body graph: one node per body (6 consecutive
+    """Σ(column count)² per contact of the Cholesky factor, under QDLDL's AMD ordering (the same on
+    every install, whatever engine factors), of the body graph: one node per body (6 consecutive
     dofs when every block of M lies in such a group, the rigid-body convention; else one per
     block of M), an edge per pair of bodies sharing a contact.  Proportional to the flops of
     factoring any form of the problem (every form's matrix has this graph, blown up by the dofs
@@ -58,15 +57,10 @@ def body_fill(problem: Problem) -> float:
     used = np.flatnonzero(A.diagonal() > 0)
     A = A[used][:, used]
     A = (A + sp.diags(np.asarray(A.sum(axis=1)).ravel() + 1.0)).tocsc()  # diagonally dominant: SPD
-    if cholmod_available():
-        from sksparse import cholmod
+    import qdldl
 
-        counts = np.diff(cholmod.cholesky(A, ordering_method="amd").L().tocsc().indptr).astype(np.float64)
-    else:
-        import qdldl
-
-        L = qdldl.Solver(A).factors()[0].tocsc()  # strictly lower: the unit diagonal is not stored
-        counts = np.diff(L.indptr).astype(np.float64) + 1.0
+    L = qdldl.Solver(A).factors()[0].tocsc()  # strictly lower: the unit diagonal is not stored
+    counts = np.diff(L.indptr).astype(np.float64) + 1.0
     return float(np.sum(counts * counts)) / max(problem.n_contacts, 1)
 
 
@@ -86,9 +80,8 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur", "auto", "clarabel", "siconos"}
         Linear-system form (DESIGN §4); ``schur`` is form (16) with its identity block
         eliminated, the dof-space matrix M + H̃ᵀG⁻¹H̃ — the same iterates as
-        ``reduced_factored``, factored by CHOLMOD's supernodal Cholesky with the optional extra
-        ``cholmod`` (``pip install 'rfverify[cholmod]'``, built against libsuitesparse-dev), else
-        by QDLDL (about 10× slower on a 10⁴-contact bed, still faster there than the other forms).
+        ``reduced_factored``, factored by CHOLMOD's supernodal Cholesky (cvxopt's wheel, a
+        dependency; QDLDL where cvxopt does not import, 24–44× slower at 10⁴ contacts).
         ``auto`` (default) runs the forms of :func:`auto_sequence` — jqinv, then reduced, then
         noscaling; on a problem of at least ``AUTO_SCHUR_MIN_CONTACTS`` contacts whose
         factorisation fill (:func:`body_fill`) is at least ``AUTO_SCHUR_MIN_FILL`` per contact
@@ -146,10 +139,11 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     result = judged_on_the_file(problem, result) if problem.local is not None else result
     result.message = one_criterion(result.message, result.measures)
     if not result.success and tol < DOUBLE_REACH:
-        result.message = (f"tol = {tol:g} is below what double precision can reach (the criterion's own "
-                          f"rounding is about 1e-16; this run reached {result.criterion:.2e}): for more accuracy use "
-                          f"--digits K (rfverify.solve_to_digits), which continues in extended precision and "
-                          f"proves K digits. {result.message}")
+        hint = (f"tol = {tol:g} is below what double precision can reach (the criterion's own rounding is "
+                f"about 1e-16; this run reached {result.criterion:.2e}): for more accuracy use --digits K "
+                f"(rfverify.solve_to_digits), which continues in extended precision and proves K digits")
+        result.extras["hint"] = hint
+        result.message = f"{result.message}; {hint}"
     return result
 
 

@@ -12,10 +12,10 @@ with the factor.  It knows nothing of contacts, cones or the KKT system.  Three 
 ``SuperLUEngine``  LU with partial pivoting of a general square matrix (SuperLU, a new
                    factorisation each time); the unsymmetric form (6)
 ``CholmodEngine``  supernodal Cholesky of a symmetric positive definite matrix given as its
-                   lower triangle (CHOLMOD through scikit-sparse, the optional extra
-                   ``cholmod``; AMD ordering, symbolic analysis once); the ``schur`` form
-                   (QDLDL without the extra), and the double-double phase's oracle where it
-                   is installed (:class:`rfverify.extended.mixed.CholmodMixed`)
+                   lower triangle (CHOLMOD from cvxopt's wheel, a dependency; AMD, or the
+                   better of AMD and nested dissection on large matrices; symbolic analysis
+                   once); the ``schur`` form, and the double-double phase's float64 oracle on
+                   large contact-space matrices (:class:`rfverify.extended.mixed.CholmodMixed`)
 
 Every factorisation after the first must have the first one's sparsity pattern (same
 ``indptr``/``indices``): the engines that keep a symbolic analysis rely on it.
@@ -118,62 +118,153 @@ class SuperLUEngine:
 def cholmod_missing_message(what: str) -> str:
     """Why ``what`` cannot run without CHOLMOD, and how to install it (one message for the
     ``schur`` form and the ``cholmod`` engine of the double-double phase)."""
-    return (f"{what} needs CHOLMOD through scikit-sparse: pip install 'rfverify[cholmod]' "
-            "(and libsuitesparse-dev, an optimised BLAS such as libopenblas0, to build and run it)")
+    return (f"{what} needs CHOLMOD from cvxopt, a dependency of rfverify that is missing here: "
+            "pip install cvxopt (a wheel: no system library)")
+
+
+ND_MIN_ROWS = 2000
+"""From this order on, the analysis is offered a nested-dissection ordering (METIS, through
+pymetis) beside CHOLMOD's AMD, and CHOLMOD keeps the one with less fill (measured: AMD wins on
+random problems, nested dissection on granular beds, by 5.7× in time and 2.4× in memory on a
+96k-contact bed; docs/DECISIONS.md, "A supernodal Cholesky from a wheel").  Below it the
+ordering costs more than it can save."""
+
+
+def nested_dissection(K: sp.spmatrix) -> np.ndarray | None:
+    """A nested-dissection order of the graph of the symmetric matrix given by one triangle
+    ``K`` (pymetis), or None where pymetis is not installed (a platform without its wheel)."""
+    try:
+        import pymetis
+    except ImportError:
+        return None
+    G = sp.csr_matrix(K, copy=True)
+    G.data[:] = 1.0
+    G = (G + G.T).tocsr()
+    G.setdiag(0)
+    G.eliminate_zeros()
+    G.sort_indices()
+    perm, _ = pymetis.nested_dissection(xadj=G.indptr.astype(np.int64), adjncy=G.indices.astype(np.int64))
+    return np.asarray(perm, dtype=np.int64)
 
 
 class CholmodEngine:
-    """Supernodal Cholesky of a symmetric positive definite matrix given as its lower triangle
-    (CSC), by CHOLMOD (scikit-sparse): AMD ordering and symbolic analysis on the first call,
-    dense BLAS-3 kernels on the supernodes.  A matrix that is not positive definite raises
-    :class:`ArithmeticError` naming CHOLMOD's complaint."""
+    """Supernodal Cholesky LLᵀ of a symmetric positive definite matrix given as its lower
+    triangle (CSC), by CHOLMOD as cvxopt's wheel ships it (SuiteSparse with OpenBLAS inside; no
+    system library): the symbolic analysis on the first call — AMD, or for large matrices the
+    better of AMD and nested dissection (:data:`ND_MIN_ROWS`) — then a numeric refactorisation
+    per call, dense BLAS-3 kernels on the supernodes.  A matrix that is not positive definite
+    raises :class:`ArithmeticError` naming the column CHOLMOD stopped at.
+
+    cvxopt's CHOLMOD options are module-global: each call sets the ones it relies on
+    (supernodal LLᵀ, so that an indefinite matrix is refused rather than given an LDLᵀ) and
+    restores the caller's."""
 
     triangle = "lower"
 
     def __init__(self, what: str = "the cholmod engine"):
         try:
-            import sksparse.cholmod  # noqa: F401  (fails here, with the fix, when absent)
+            import cvxopt.cholmod  # noqa: F401  (fails here, with the fix, when absent)
         except ImportError:
             raise ImportError(cholmod_missing_message(what)) from None
         self._factor = None
+        self._A = None
+        self._pattern = None
         self.factorisations = 0
+        self.ordering = None  # "AMD" or "nested dissection or AMD, the less fill", after the analysis
 
     def factor(self, K: sp.csc_matrix) -> None:
-        from sksparse import cholmod
+        import cvxopt
+        from cvxopt import cholmod
 
-        try:
-            if self._factor is None:
-                self._factor = cholmod.analyze(K, mode="supernodal", ordering_method="amd")
-            self._factor.cholesky_inplace(K)
-        except cholmod.CholmodError as exc:
-            raise ArithmeticError(f"CHOLMOD: {exc}") from None
+        K = sp.csc_matrix(K)
+        K.sort_indices()
+        n = K.shape[0]
+        with _cholmod_options(supernodal=2):
+            try:
+                if self._factor is None:
+                    cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
+                    self._A = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(K.data, dtype=np.float64)),
+                                              cvxopt.matrix(K.indices.astype(np.int64)), cvxopt.matrix(cols),
+                                              (n, n))
+                    self._pattern = (K.indptr.copy(), K.indices.copy())
+                    perm = nested_dissection(K) if n >= ND_MIN_ROWS else None
+                    if perm is None:
+                        self._factor = cholmod.symbolic(self._A, uplo="L")
+                        self.ordering = "AMD"
+                    else:  # CHOLMOD tries the given order and AMD and keeps the one with less fill
+                        self._factor = cholmod.symbolic(self._A, p=cvxopt.matrix(perm.astype(np.int64)), uplo="L")
+                        self.ordering = "nested dissection or AMD, whichever fills less"
+                else:
+                    if not (np.array_equal(K.indptr, self._pattern[0]) and np.array_equal(K.indices, self._pattern[1])):
+                        raise ValueError("CholmodEngine: the matrix's pattern differs from the first one's")
+                    self._A.V = cvxopt.matrix(np.ascontiguousarray(K.data, dtype=np.float64))
+                cholmod.numeric(self._A, self._factor)
+            except ArithmeticError as exc:
+                raise ArithmeticError(f"CHOLMOD: not positive definite (column {exc})") from None
         self.factorisations += 1
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return np.asarray(self._factor(np.asarray(rhs, dtype=np.float64)), dtype=np.float64).reshape(-1)
+        import cvxopt
+        from cvxopt import cholmod
+
+        b = cvxopt.matrix(np.array(rhs, dtype=np.float64).reshape(-1))
+        cholmod.solve(self._factor, b)
+        return np.array(b, dtype=np.float64).reshape(-1)
 
     def permutation(self) -> np.ndarray | None:
-        """CHOLMOD's fill-reducing order, or None before the first analysis (or after
-        :meth:`release`)."""
-        return None if self._factor is None else self._factor.P()
+        """CHOLMOD's fill-reducing order P (L Lᵀ = K[P][:, P]), or None before the first
+        analysis (or after :meth:`release`)."""
+        if self._factor is None:
+            return None
+        import cvxopt
+        from cvxopt import cholmod
+
+        n = self._A.size[0]
+        p = cvxopt.matrix(np.arange(n, dtype=np.float64))
+        cholmod.solve(self._factor, p, sys=7)  # x = P b
+        return np.array(p, dtype=np.float64).reshape(-1).astype(np.int64)
 
     def release(self) -> None:
         """Drop the factor (and its symbolic analysis): the next ``factor`` starts afresh."""
         self._factor = None
+        self._A = None
+        self._pattern = None
+
+
+class _cholmod_options:
+    """Set cvxopt's global CHOLMOD options for a block, restoring the caller's afterwards."""
+
+    def __init__(self, **options):
+        self.options = options
+
+    def __enter__(self):
+        from cvxopt import cholmod
+
+        self.saved = dict(cholmod.options)
+        cholmod.options.update(self.options)
+
+    def __exit__(self, *exc):
+        from cvxopt import cholmod
+
+        cholmod.options.clear()
+        cholmod.options.update(self.saved)
+        return False
 
 
 def cholmod_available() -> bool:
-    """True when scikit-sparse's CHOLMOD imports here (the optional extra ``cholmod``)."""
+    """True when cvxopt's CHOLMOD imports here (a dependency of rfverify; False only on a
+    broken or hand-trimmed install, where the forms fall back to QDLDL)."""
     try:
-        import sksparse.cholmod  # noqa: F401
+        import cvxopt.cholmod  # noqa: F401
     except ImportError:
         return False
     return True
 
 
 def schur_engine() -> FactorEngine:
-    """The engine of the ``schur`` form: CHOLMOD where it imports, else QDLDL (the same
-    factorisation of the same SPD matrix, without supernodes: slower on a factor that fills)."""
+    """The engine of the ``schur`` form: CHOLMOD (cvxopt, a dependency), else QDLDL where cvxopt
+    does not import (the same factorisation of the same SPD matrix, without supernodes: 24–44×
+    slower on a 10⁴-contact factor)."""
     return CholmodEngine("the schur form") if cholmod_available() else QDLDLEngine()
 
 

@@ -241,11 +241,10 @@ class SchurSystem(ReducedFactoredSystem):
 
         S = M + Bᵀ B = M + H̃ᵀ G⁻¹ H̃,   B = L⁻¹ H̃,   G = J Q_{p⁻²} Jᵀ = L Lᵀ,
 
-    symmetric positive definite (M is), factored by CHOLMOD's supernodal Cholesky where the
-    optional extra ``cholmod`` (scikit-sparse) is installed: dense BLAS-3 kernels on the
-    supernodes, where QDLDL's up-looking LDLᵀ, the engine without the extra, works entry by
-    entry (the same path, about 10× slower per factorisation on a 9675-contact bed; still 4×
-    faster than the quasi-definite forms there, whose matrices fill more).  S dv = a − Bᵀ L⁻¹ b′
+    symmetric positive definite (M is), factored by CHOLMOD's supernodal Cholesky (cvxopt's
+    wheel, a dependency): dense BLAS-3 kernels on the supernodes, where QDLDL's up-looking
+    LDLᵀ — the fallback where cvxopt does not import — works entry by entry (24–44× slower per
+    factorisation at 10⁴ contacts).  S dv = a − Bᵀ L⁻¹ b′
     with b′ = b − J Q_{p⁻¹} c, then dr̃ = −L⁻ᵀ (L⁻¹ b′ + B dv) and dz = Q_{p⁻¹}c − Q_{p⁻²}Jᵀdr̃.
     S is M + BᵀB (sparse product) put on the fixed pattern of M + |B|ᵀ|B|, in the triangle the
     engine reads, so that the ordering and symbolic analysis of the first factorisation hold
