@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .proof import Point, Proof
-from .solver.result import ResultAliases
+from .solver.result import ResultAliases, Status
 
 
 @dataclass
@@ -69,9 +69,12 @@ class Certificate(ResultAliases):
         return self.proof.quantities["r"].mode != "information"
 
     @property
-    def status(self) -> str:
-        """"Certified" or "NotCertified"."""
-        return "Certified" if self.certified else "NotCertified"
+    def status(self) -> Status:
+        """``Status.CERTIFIED``, ``NOT_CERTIFIED``, or ``MAX_TIME`` when a time limit ended the
+        search for a proof point short of the requested digits."""
+        if self.certified:
+            return Status.CERTIFIED
+        return Status.MAX_TIME if self.extra.get("time_limit") is not None else Status.NOT_CERTIFIED
 
     @property
     def success(self) -> bool:
@@ -143,6 +146,9 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
         why = f"; {q.note}" if q.digits is None and q.note else ""
         verdict = f"not proven to {req} digits{about}: {worst} has {have} ({proof.summary()}){why}"
     verdict += stored_sentence(proof)
+    limit = (extra or {}).get("time_limit")
+    if limit is not None and not proof.certified:
+        verdict += f" (the search for a proof point stopped at the time limit of {limit:g} s)"
     return Certificate(req, proof.certified, verdict, proof, point, None, dict(extra or {}), seconds)
 
 

@@ -71,7 +71,8 @@ def _solution_arrays(problem: Problem, v, u, r):
 
 def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Point | None = None,
             cross_check: bool = False, dps: int = 50, polish_max_iter: int = 60,
-            relative: bool = False, progress=None, as_stored: bool | None = None) -> Certificate:
+            relative: bool = False, progress=None, as_stored: bool | None = None,
+            time_limit: float | None = None) -> Certificate:
     """Prove how many significant digits of the float64 solution are correct.
 
     Parameters
@@ -90,6 +91,10 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     relative : bool
         Demand relative digits for every quantity: a quantity whose exact value may be zero is
         then not certified (instead of being bounded against its data scale, DESIGN §6.3).
+    time_limit : float, optional
+        Seconds for the search for a proof point (the double solve and each extended
+        iteration check it); when it runs out the best proof reached is returned, with status
+        MaxTime if that falls short of ``digits``.
     as_stored : bool, optional
         True: prove the digits of the solution of the equations with M exactly as stored;
         False: with (M + Mᵀ)/2; None (default): what ``problem.equations`` says (symmetrised
@@ -106,6 +111,11 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     """
     t0 = time.perf_counter()
     digits = validate_digits(digits)
+    if time_limit is not None and not (isinstance(time_limit, (int, float)) and time_limit > 0):
+        from .errors import InvalidArgumentError
+
+        raise InvalidArgumentError("time_limit", f"must be a number of seconds > 0, got {time_limit!r}",
+                                   fix="pass e.g. time_limit=60, or None for no limit")
     from .solver import posed
 
     problem = posed(problem, as_stored)
@@ -123,7 +133,8 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
         if all(x is not None for x in xs) and (point is None or sp_ is not None):
             # Data beyond float64's safe range: proven in exactly scaled units (DESIGN §6.4).
             cert = certify(scaled_problem(problem, scaling), *xs, digits=digits, point=sp_, cross_check=False,
-                           polish_max_iter=polish_max_iter, relative=relative, progress=progress)
+                           polish_max_iter=polish_max_iter, relative=relative, progress=progress,
+                           time_limit=time_limit)
             cert = unscaled_certificate(cert, scaling)
             if cross_check:
                 cert.cross_check = reference_agreement(problem, v, u, r, dps=dps)
@@ -147,7 +158,9 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
         if proof.certified or not ctx.hypotheses_proven:
             point, extra["point_source"] = own, "the candidate itself"
         else:
-            polished, at, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative)
+            deadline = None if time_limit is None else t0 + time_limit
+            polished, at, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative,
+                                                   deadline, time_limit)
             # Keep the better proof: a computed point can bound the candidate worse than itself.
             if ProofDriver.score(polished) >= ProofDriver.score(proof):
                 proof, point = polished, at
@@ -162,7 +175,7 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     return cert
 
 
-def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=False):
+def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=False, deadline=None, time_limit=None):
     """Find an extended-precision point near the solution set and carry its bound to the
     candidate.  The point comes from the k-digit machinery — a double solve, then Algorithm 1
     in double-double — not from the candidate itself: a rounded candidate sits on (or just
@@ -174,17 +187,20 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
     from .solver import solve
 
     compile_extended_in_background()  # on a cold numba cache: the other core compiles the extended kernels
-    double = solve(problem, method="auto", tol=1e-10, **DOUBLE_SETTINGS)
+    limit = {} if deadline is None else {"time_limit": max(deadline - time.perf_counter(), 1e-3)}
+    double = solve(problem, method="auto", tol=1e-10, **DOUBLE_SETTINGS, **limit)
     data = ExtendedData(problem)
     system = choose_backend(data)
-    driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say, relative=relative)
+    driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say, relative=relative, deadline=deadline)
     say(f"extended point: double solve {double.status} in {double.nit} iterations, then double-double "
         f"({system.name})")
     out = extend(data, _start_from(data, double), driver, system, max_iter=max_iter, say=say)
     _, proof, point, _ = driver.best
-    return proof, point, {"point_source": "double solve + " + out.point_source,
-                          "double_iterations": int(double.nit), **out.summary(),
-                          "proof_attempts": driver.attempts}
+    info = {"point_source": "double solve + " + out.point_source, "double_iterations": int(double.nit),
+            **out.summary(), "proof_attempts": driver.attempts}
+    if driver.timed_out and not proof.certified:
+        info["time_limit"] = time_limit
+    return proof, point, info
 
 
 def reference_agreement(problem: Problem, v, u, r, dps: int = 50) -> dict:

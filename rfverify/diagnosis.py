@@ -105,7 +105,9 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     (one record per iteration) and ``timings``; ``to_dict()`` is its JSON.  ``progress(message)`` receives one line per stage and per
     exact step (the steps are the slow part: seconds each at a few hundred contacts).
 
-    ``options`` are solver settings.  Unless ``refine_tol`` is among them, the double run
+    ``options`` are solver settings; ``time_limit`` (seconds) bounds the whole diagnosis: the
+    double run gets it, and the lockstep stops at the first exact step past it (status MaxTime,
+    the steps done so far kept).  Unless ``refine_tol`` is among them, the double run
     refines every linear solve to 4·eps (``refine_tol=None``) instead of the solver's default
     inexact-Newton stop, so that the digits of agreement measure rounding alone (the default
     stops a solve at residuals of 1e-4 of its right-hand side, which this comparison would
@@ -121,6 +123,8 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     from reference import jordan as RJ
 
     t0 = time.perf_counter()
+    time_limit = options.get("time_limit")
+    deadline = None if time_limit is None else t0 + time_limit
     res = solve(problem, method=method, tol=tol, max_iter=max_iter, keep_iterates=True, **options)
     lp = lift(problem, reduce_cones=res.settings.reduce_cones)
     order = np.lexsort((lp.cone_part, lp.cone_contact))
@@ -132,7 +136,13 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     exact = reference.Solver(problem, dps=dps)  # one build for every step of the run
     t2 = time.perf_counter()
     records = []
+    cut = None
     for k in range(len(iterates) - 1):
+        if deadline is not None and time.perf_counter() > deadline:
+            cut = (f"time limit of {time_limit:g} s reached after {k} of {len(iterates) - 1} exact steps "
+                   "(the steps done are kept)")
+            say(cut)
+            break
         say(f"exact step {k + 1} of {len(iterates) - 1}")
         v_k, r_k, z_k = iterates[k]
         v_full = np.array(res.v, dtype=np.longdouble)
@@ -182,7 +192,10 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
             "reference_step": "exact step from the double iterate",
         })
     t3 = time.perf_counter()
-    return Diagnosis(method=method, status=Status(res.status), message=res.message, nit=int(res.nit),
+    status, message = Status(res.status), res.message
+    if cut is not None:
+        status, message = Status.MAX_TIME, f"{message}; {cut}"
+    return Diagnosis(method=method, status=status, message=message, nit=int(res.nit),
                      steps=records, failure=None if res.success else res.message,
                      timings={"double": t1 - t0, "reference": t2 - t1, "steps": t3 - t2, "total": t3 - t0})
 

@@ -31,7 +31,7 @@ from .extended.system import choose_backend
 from .problem import SPACEDIM, Problem
 from .compilation import compile_extended_in_background, compile_seconds, float64_kernels_deferred
 from .proof import Point, Proof, ProofContext, merit, validate_digits
-from .solver import SolveResult, posed, solve
+from .solver import SolveResult, Status, posed, solve
 from .solver.engines import cholmod_available
 from .solver.result import ResultAliases
 
@@ -46,7 +46,8 @@ class DigitsSolution(ResultAliases):
     multiple-precision tail (None when it did not run); ``timings`` seconds per stage
     (``double``, ``setup``, ``extended``, ``wide``, ``proof``, ``total``; proofs excluded from
     the others; ``compile``: numba compiling kernels on a cold start, excluded from the stage
-    it happened in, see :mod:`rfverify.compilation`).
+    it happened in, see :mod:`rfverify.compilation`).  ``timed_out``: the run stopped at its
+    ``time_limit`` (status MaxTime unless what it had proven by then is enough).
     """
 
     v: np.ndarray
@@ -58,15 +59,22 @@ class DigitsSolution(ResultAliases):
     extended: object
     wide: object = None
     timings: dict = field(default_factory=dict)
+    timed_out: bool = False
 
     @property
     def success(self) -> bool:
         return self.certificate.certified
 
     @property
-    def status(self) -> str:
-        """"Certified" or "NotCertified" (what ``solve --digits --json`` prints)."""
-        return "Certified" if self.success else "NotCertified"
+    def status(self) -> Status:
+        """``Status.CERTIFIED``, ``NOT_CERTIFIED``, or ``MAX_TIME`` when the time limit ended the
+        run short of the requested digits (the best proof reached is the certificate)."""
+        return self.certificate.status
+
+    @property
+    def digits(self) -> dict:
+        """Proven digits per quantity (the certificate's; None where a quantity has none)."""
+        return self.certificate.digits
 
     @property
     def message(self) -> str:
@@ -141,7 +149,7 @@ class ProofDriver:
     has stalled for ``stall`` iterations."""
 
     def __init__(self, ctx: ProofContext, data: ExtendedData, requested: int, target=None, stall: int = 4,
-                 progress=None, relative: bool = False):
+                 progress=None, relative: bool = False, deadline: float | None = None):
         self.ctx, self.data, self.requested = ctx, data, requested
         self.relative = relative
         self.target = target  # (v, u, r) to certify; None: the rounding of each point
@@ -158,6 +166,8 @@ class ProofDriver:
         self.invalid_limit = None  # stop after this many invalid proofs in a row (None: never)
         self._invalid_run = 0
         self.gave_up = ""
+        self.deadline = deadline  # time.perf_counter() value past which the run stops (None: never)
+        self.timed_out = False
 
     @property
     def certified(self) -> bool:
@@ -188,6 +198,10 @@ class ProofDriver:
                    for name, q in proof.quantities.items() if name in own and q.mode != "information")
 
     def __call__(self, it: ext.Iterate, force: bool = False, quiet: bool = False) -> bool:
+        if not force and self.deadline is not None and time.perf_counter() > self.deadline:
+            self.timed_out = True  # the time limit: stop here; the best proof so far stands
+            self.recent = (self.recent + [it])[-RECENT:]
+            return True
         if it.mu < 0.5 * self._mu_best:
             self._mu_best, self._since = it.mu, 0
         else:
@@ -244,7 +258,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
                     relative: bool = False, progress=None, factor_engine: str = "auto",
-                    as_stored: bool | None = None, **options) -> DigitsSolution:
+                    as_stored: bool | None = None, time_limit: float | None = None, **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; see :mod:`rfverify.proof.bound` for what "digits" means when a
     quantity is zero).  ``progress(message)`` receives one line per stage.
@@ -262,6 +276,10 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     demands relative digits of every quantity (a quantity that may be zero is then not
     certified; DESIGN §6.3).
 
+    ``time_limit`` (seconds): the whole path stops there — the double solve, the setup, each
+    iteration of the extended phases — and returns the best proof reached so far (status
+    MaxTime when it falls short of ``digits``).
+
     ``as_stored``: True proves the equations with M exactly as stored, False those with
     (M + Mᵀ)/2, None (default) what ``problem.equations`` says (symmetrised unless the problem
     came from :meth:`Problem.stored_equations`); they differ only for an unsymmetric M, and a
@@ -275,6 +293,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     semidefinite as stored) no point can be proven: the path stops after the double solve
     and says why."""
     digits = validate_digits(digits)
+    if time_limit is not None and not (isinstance(time_limit, (int, float)) and time_limit > 0):
+        raise InvalidArgumentError("time_limit", f"must be a number of seconds > 0, got {time_limit!r}",
+                                   fix="pass e.g. time_limit=60, or None for no limit")
     problem = posed(problem, as_stored, method)
     from .scaling import binary_scaling, scaled_problem
 
@@ -284,7 +305,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         out = solve_to_digits(scaled, digits, method, tol, max_iter,
                               extended_max_iter=extended_max_iter, backend=backend, wide_tail=wide_tail,
                               wide_bits=wide_bits, wide_max_iter=wide_max_iter, relative=relative, progress=progress,
-                              factor_engine=factor_engine, **options)
+                              factor_engine=factor_engine, time_limit=time_limit, **options)
         return _unscaled_solution(out, scaled, scaling)
     if factor_engine not in ENGINES:
         raise InvalidArgumentError("factor_engine", f"{factor_engine!r} is not one of {', '.join(ENGINES)}",
@@ -302,7 +323,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     compile_extended_in_background()
     cold = {"compiled_kernels": False} if float64_kernels_deferred() else {}
     t0, c0 = time.perf_counter(), compile_seconds()
-    double = solve(problem, method=method, tol=tol, max_iter=max_iter, **{**DOUBLE_SETTINGS, **cold, **options})
+    deadline = None if time_limit is None else t0 + time_limit
+    limit = {} if time_limit is None else {"time_limit": time_limit}
+    double = solve(problem, method=method, tol=tol, max_iter=max_iter, **{**DOUBLE_SETTINGS, **cold, **limit, **options})
     t_double = time.perf_counter() - t0
     c1 = compile_seconds()
     say(f"double solve ({double.method}{' by auto' if method == 'auto' else ''}): {double.status} in "
@@ -316,39 +339,50 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     point = candidate_point(double.v, double.r)
     v, u, r = ctx.rounded(point)
     proof = ctx.prove(point, v, u, r, requested=digits, relative=relative)
-    if proof.certified or not ctx.hypotheses_proven:
+    out_of_time = deadline is not None and time.perf_counter() > deadline
+    if proof.certified or not ctx.hypotheses_proven or out_of_time:
         if proof.certified:
             say(f"the double solve's answer is proven as it is: {proof.summary()}")
             source, why = "the double solve's answer itself", "not needed"
+        elif out_of_time:
+            say(f"time limit of {time_limit:g} s reached after the double solve: {proof.summary()}")
+            source, why = "the double solve (time limit reached)", f"time limit of {time_limit:g} s reached"
         else:
             say(f"no proof is possible: {proof.failure}")
             source, why = "the double solve (no proof possible)", proof.failure
-        cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra={"point_source": source})
+        extra = {"point_source": source}
+        if out_of_time and not proof.certified:
+            extra["time_limit"] = time_limit
+        cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra=extra)
         return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
                               extended=ext.ExtendedResult(None, None, None, "NotRun", why, 0),
                               timings={"double": t_double - (c1 - c0),
                                        "setup": time.perf_counter() - t1 - (compile_seconds() - c1), "extended": 0.0,
                                        "wide": 0.0, "proof": proof.seconds, "compile": compile_seconds() - c0,
-                                       "total": time.perf_counter() - t0})
+                                       "total": time.perf_counter() - t0},
+                              timed_out=out_of_time and not proof.certified)
     data = ExtendedData(problem)
     system = choose_backend(data, backend, engine=factor_engine)
     t_setup = time.perf_counter() - t1
     c2 = compile_seconds()
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
     start = _start_from(data, double)
-    driver = ProofDriver(ctx, data, digits, progress=say, relative=relative)
+    driver = ProofDriver(ctx, data, digits, progress=say, relative=relative, deadline=deadline)
     c_ext = compile_seconds()  # (what _start_from compiled counts in "compile" only)
     ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
                      wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
     _, proof, point, (v, u, r) = driver.best
-    cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra={"point_source": ext_out.point_source, **ext_out.summary(),
-                                                       "proof_attempts": driver.attempts})
+    extra = {"point_source": ext_out.point_source, **ext_out.summary(), "proof_attempts": driver.attempts}
+    timed_out = driver.timed_out and not proof.certified
+    if timed_out:
+        extra["time_limit"] = time_limit
+    cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra=extra)
     c3 = compile_seconds()  # in extend(): the double-double kernels (the tail and the proofs compile none)
     timings = {"double": t_double - (c1 - c0), "setup": t_setup - (c2 - c1), "extended": ext_out.seconds_dd - (c3 - c_ext),
                "wide": ext_out.seconds_wide, "proof": driver.proof_seconds, "compile": c3 - c0,
                "total": time.perf_counter() - t0}
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
-                          wide=ext_out.wide, timings=timings)
+                          wide=ext_out.wide, timings=timings, timed_out=timed_out)
 
 
 def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsSolution:
@@ -428,7 +462,9 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
     seconds_dd = time.perf_counter() - t0 - (driver.proof_seconds - p0)
     tail, note, hand_k, seconds_wide = None, "not needed", None, 0.0
     if not driver.certified:
-        if not wide_tail:
+        if driver.timed_out:
+            note = "not run (the time limit was reached)"
+        elif not wide_tail:
             note = "not run (switched off)"
         elif driver.hopeless:
             note = "not run (the candidate is farther from the point than any tail could fix)"

@@ -106,3 +106,76 @@ def test_proof_attempts_on_the_last_iterates_print_in_order():
     rfverify.certify(p, res, digits=12, progress=lines.append)
     ks = [int(m.group(1)) for m in (re.search(r"proof at extended iteration (\d+)", x) for x in lines) if m]
     assert ks == sorted(ks), lines
+
+
+# ---------------------------------------------------------------------- time limits on every path
+@pytest.fixture(scope="module")
+def bed2800(tmp_path_factory):
+    """A 2800-contact granular bed: its 10-digit path takes tens of seconds without a limit."""
+    out = tmp_path_factory.mktemp("bed")
+    assert main(["generate", "GranularBed", "--size", "1000", "--out", str(out), "--quiet"]) == 0
+    return next(out.glob("*.hdf5"))
+
+
+def test_a_digits_run_stops_at_its_time_limit_and_writes_the_best_proof(bed2800, tmp_path, capsys):
+    import time
+
+    sol = tmp_path / "sol.hdf5"
+    t0 = time.perf_counter()
+    code = main(["solve", str(bed2800), "--digits", "10", "--time-limit", "2", "--out", str(sol), "--json"])
+    wall = time.perf_counter() - t0
+    s = json.loads(capsys.readouterr().out)
+    # generous: the limit is checked per iteration; without it the path runs far longer
+    assert code == 1 and s["status"] == "MaxTime" and wall < 30, (s["status"], wall)
+    assert "time limit" in s["certificate"]["verdict"]
+    # the written file holds the best answer and a certificate that certify confirms
+    assert main(["certify", str(sol), "--digits", "1", "--quiet", "--json"]) in (0, 1)
+    c = json.loads(capsys.readouterr().out)
+    assert c["stored_certificate"]["matches_solution"] is True
+    for name, q in s["certificate"]["quantities"].items():
+        if q["mode"] == "relative" and q["digits"] is not None:
+            assert c["quantities"][name]["digits"] >= q["digits"] - 1e-9
+
+
+def test_certify_and_diagnose_take_a_time_limit(capsys):
+    p = rfverify.load("bundled:chute")
+    res = rfverify.solve(p, tol=1e-6)
+    cert = rfverify.certify(p, res, digits=12, time_limit=1e-3)
+    assert cert.status in ("MaxTime", "NotCertified") and not cert.certified
+    d = rfverify.diagnose(p, tol=1e-25, time_limit=1e-3)
+    assert d.status == "MaxTime" and "time limit" in d.message
+    code, out, err = run(capsys, "diagnose", "bundled:chute", "--tol", "1e-25", "--time-limit", "0.001", "--json",
+                         "--dps", "20")
+    assert code == 1 and json.loads(out)["status"] == "MaxTime"
+
+
+def test_a_bench_task_stops_its_solver_before_the_kill(tmp_path):
+    """The solver gets a share of the task's limit and the record keeps its answer (MaxTime),
+    instead of the task being killed with nothing."""
+    from rfverify.bench.tasks import SOLVE_SHARE, solver_time_limit
+
+    assert solver_time_limit({"time_limit": 10.0}, SOLVE_SHARE) == {"time_limit": 8.0}
+    assert solver_time_limit({}, SOLVE_SHARE) == {}
+    from rfverify.bench.runner import plan_tasks, discover_problems
+
+    problems = discover_problems(["bundled:chute"])
+    tasks = plan_tasks(problems, ["jqinv"], [1e-8], trajectories=False, digits=0, time_limit=5.0,
+                       sizes={problems[0].key: 4})
+    assert tasks and all(t["time_limit"] == 5.0 for t in tasks)
+    from rfverify.bench.tasks import task_key
+
+    untimed = plan_tasks(problems, ["jqinv"], [1e-8], trajectories=False, digits=0, sizes={problems[0].key: 4})
+    assert task_key(tasks[0]) == task_key(untimed[0])  # more time is the same task
+
+
+def test_a_bench_task_past_its_solver_share_records_max_time_with_its_answer(tmp_path):
+    from rfverify.bench.runner import discover_problems, plan_tasks
+    from rfverify.bench.tasks import run_task
+
+    problems = discover_problems(["bundled:chute"])
+    task = plan_tasks(problems, ["jqinv"], [1e-12], trajectories=False, digits=0, time_limit=1e-3,
+                      sizes={problems[0].key: 4})[0]
+    run_task(task, str(tmp_path))
+    rec = json.loads(next(tmp_path.glob("*.json")).read_text())
+    assert rec["status"] == "MaxTime" and rec["verified"]["finite"] is True
+    assert next(tmp_path.glob("*.npz")).stat().st_size > 0

@@ -122,7 +122,7 @@ def discover_problems(inputs) -> list[ProblemEntry]:
 
 def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=True,
                digits=10, reference_max_contacts=60, sizes=None, max_iter=100, dps=30,
-               as_stored: bool = False) -> list[dict]:
+               as_stored: bool = False, time_limit: float | None = None) -> list[dict]:
     """The task list: a timed solve per (problem, method, tol), a trajectory per (problem,
     Algorithm 1 method), and the mixed-precision path per problem small enough for the
     reference (``n ≤ reference_max_contacts``; 0 disables it)."""
@@ -133,6 +133,8 @@ def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=Tr
                 "max_iter": max_iter, "dps": dps}
         if as_stored:
             base["as_stored"] = True
+        if time_limit:  # not part of the task key: the same task with more time is the same task
+            base["time_limit"] = float(time_limit)
         for method in methods:
             for tol in tols:
                 tasks.append({**base, "kind": "solve", "method": method, "tol": float(tol)})
@@ -149,13 +151,14 @@ def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=Tr
 def is_done(run_dir: Path, task: dict, *, retry_failed: bool = False) -> bool:
     """A task is done when its record is intact, of this schema, has this task's key (same
     problem content, settings, tolerance and rfverify version) and its arrays are intact;
-    with ``retry_failed`` a Timeout/Crashed/Error record does not count as done."""
+    with ``retry_failed`` a Timeout/Crashed/Error record — or one its solver ended at the time
+    limit (MaxTime) — does not count as done."""
     path = record_path(run_dir, task)
     rec = records.is_current(path, task_key(task))
     if rec is None:
         return False
     status = rec.get("status")
-    if status in FAILED_STATUSES:
+    if status in FAILED_STATUSES or status == "MaxTime":
         return not retry_failed
     return npz_intact(path.with_suffix(".npz"))
 
@@ -356,7 +359,8 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     tasks = plan_tasks(problems, methods, sorted(tols, reverse=True), trajectory_tol=trajectory_tol,
                        trajectories=trajectories, digits=digits,
                        reference_max_contacts=reference_max_contacts,
-                       sizes={k: v[0] for k, v in sizes.items()}, max_iter=max_iter, as_stored=as_stored)
+                       sizes={k: v[0] for k, v in sizes.items()}, max_iter=max_iter, as_stored=as_stored,
+                       time_limit=time_limit)
     run_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(run_dir):
         return _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit,

@@ -52,7 +52,10 @@ def add_parser(sub) -> None:
                             "the most runs in flight on the cluster (default: twice its worker "
                             "threads)")
     bench.add_argument("--time-limit", type=positive_float, default=600.0, metavar="S",
-                       help="wall-clock limit per run in seconds (default: %(default)g)")
+                       help="wall-clock limit per run in seconds (default: %(default)g): its solver stops "
+                            "at 80%% of it (a trajectory's at 50%%, which then rechecks every iterate) and the "
+                            "record keeps the best answer with status MaxTime; a run still going at the "
+                            "limit is killed and recorded as Timeout")
     bench.add_argument("--max-iter", type=positive_int, default=100, metavar="K",
                        help="iteration limit of each solve (default: %(default)s)")
     bench.add_argument("--trajectory-tol", type=tolerance, default=1e-14, metavar="T",
@@ -73,7 +76,7 @@ def add_parser(sub) -> None:
                             "tasks (no shared filesystem needed); this process writes the records, "
                             "the same as a local run's. See DISTRIBUTED.md")
     bench.add_argument("--retry-failed", action="store_true",
-                       help="also re-run runs recorded as Timeout, Crashed or Error (e.g. with a "
+                       help="also re-run runs recorded as Timeout, Crashed, Error or MaxTime (e.g. with a "
                             "longer --time-limit); other finished runs are reused as usual")
     bench.add_argument("--quiet", action="store_true", help="no progress output")
     add_equations_option(bench)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .argtypes import digit_count, out_path, positive_int
+from .argtypes import digit_count, out_path, positive_float, positive_int
 from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_equations_option,
                      add_load_options, dumps, is_hdf5_input,
                      load_problem, print_quantities, progress_printer)
@@ -48,6 +48,9 @@ def add_parser(sub) -> None:
                       help="write the problem, the given solution and /certificate (the point, "
                            "exactly and as decimal strings, the bound and every intermediate norm)")
     cert.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    cert.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
+                      help="stop the search for a proof point after S seconds and report the best proof "
+                           "reached (status MaxTime when short of --digits, exit 1)")
     add_equations_option(cert)
     add_load_options(cert)
     cert.set_defaults(func=cmd_certify, check_outputs=check_outputs)
@@ -91,7 +94,7 @@ def cmd_certify(args) -> int:
         raise ProblemFileError(where, "/certificate/point does not match the problem's sizes",
                                location="/certificate/point", fix="certify the solution file written for this problem")
     cert = certify(problem, sol.v, sol.u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
-                   dps=args.dps, relative=args.relative, progress=progress_printer(args))
+                   dps=args.dps, relative=args.relative, progress=progress_printer(args), time_limit=args.time_limit)
     u = sol.u if sol.u is not None else _velocity(problem, sol)
     if args.out:
         _write_certificate(args, problem, sol, u, cert)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..solver.result import ALGORITHM1_METHODS
-from .argtypes import positive_int, tolerance
+from .argtypes import positive_float, positive_int, tolerance
 from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, load_problem,
                      print_warnings, progress_printer, recorded_warnings, warning_summary)
 
@@ -40,6 +40,9 @@ def add_parser(sub) -> None:
                       help="digits of the reference steps (default: %(default)s)")
     diag.add_argument("--json", action="store_true", help="print the diagnosis as JSON")
     diag.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    diag.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
+                      help="stop after S seconds: the double run gets the limit, and the lockstep stops at the "
+                           "first exact step past it, keeping the steps done (status MaxTime, exit 1)")
     add_load_options(diag)
     diag.set_defaults(func=cmd_diagnose)
 
@@ -49,8 +52,9 @@ def cmd_diagnose(args) -> int:
 
     problem = load_problem(args)
     with recorded_warnings() as caught:
+        limit = {} if args.time_limit is None else {"time_limit": args.time_limit}
         d = diagnose(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, dps=args.dps,
-                     progress=progress_printer(args)).to_dict()
+                     progress=progress_printer(args), **limit).to_dict()
     d["numerical_warnings"] = warning_summary(caught)
     # The exit code is the double run's outcome, so scripts can tell a failing run apart.
     code = EXIT_OK if d["status"] == "Solved" else EXIT_NOT_SOLVED

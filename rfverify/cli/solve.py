@@ -65,7 +65,9 @@ def add_parser(sub) -> None:
                      help="print a settings header and each iteration as it happens (every independent "
                           "component, labelled); with --method clarabel, Clarabel's own log")
     sol.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
-                     help="stop after S seconds with the best iterate (status MaxTime, exit 1)")
+                     help="stop after S seconds with the best iterate (status MaxTime, exit 1); with --digits "
+                          "the whole path stops there (each extended iteration checks it) and the best proof "
+                          "reached is the result, written with --out")
     sol.add_argument("--digits", type=digit_count, default=None, metavar="K",
                      help="produce a solution proven right to K significant digits (1-15): the "
                           "double solve, then Algorithm 1 continued in double-double (and, if that "
@@ -179,12 +181,13 @@ def _solve_digits(args, problem, options) -> int:
     say = progress_printer(args)
     t0 = time.perf_counter()
     out = solve_to_digits(problem, digits=args.digits, method=args.method, tol=args.tol,
-                          max_iter=args.max_iter, relative=args.relative, progress=say, **options)
+                          max_iter=args.max_iter, relative=args.relative, progress=say, time_limit=args.time_limit,
+                          **options)
     wall = time.perf_counter() - t0
     cert = out.certificate
     if args.out:
         _write_solution_file(args, problem, out.v, out.u, out.r, certificate=cert)
-    summary = {"status": "Certified" if out.success else "NotCertified",
+    summary = {"status": str(out.status),
                "success": out.success, "digits_requested": args.digits,
                "problem": problem.statement, "equations": problem.equations,
                "certificate": cert.as_dict(), "double_status": str(out.double.status),

@@ -66,8 +66,11 @@ METHODS = ALGORITHM1_METHODS + PORTFOLIO_METHODS + PEER_METHODS
 
 
 class Status(str, enum.Enum):
-    """Termination status (Clarabel-like).  A ``str`` enum: a member equals its printed name
-    (``Status.SOLVED == "Solved"``), so results compare with the names users read."""
+    """The one status type of every result (Clarabel-like).  A ``str`` enum: a member equals
+    its printed name (``Status.SOLVED == "Solved"``), so results compare with the names users
+    read.  A solve ends ``Solved`` or in one of the others; a proof (``Certificate``,
+    ``DigitsSolution``) ends ``Certified``, ``NotCertified`` or — stopped by its time limit
+    short of the requested digits — ``MaxTime``."""
 
     SOLVED = "Solved"
     ALMOST_SOLVED = "AlmostSolved"
@@ -77,6 +80,8 @@ class Status(str, enum.Enum):
     INVALID_INPUT = "InvalidInput"
     MAX_TIME = "MaxTime"
     STOPPED = "Stopped"  # by the user's callback
+    CERTIFIED = "Certified"  # a proof: the requested digits are proven
+    NOT_CERTIFIED = "NotCertified"  # a proof: they are not
 
     def __str__(self) -> str:
         return self.value
