@@ -60,6 +60,7 @@ class DigitsSolution(ResultAliases):
     wide: object = None
     timings: dict = field(default_factory=dict)
     timed_out: bool = False
+    interrupted: bool = False  # Ctrl-C ended the path: the best proof reached is the certificate
 
     @property
     def success(self) -> bool:
@@ -340,10 +341,13 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     v, u, r = ctx.rounded(point)
     proof = ctx.prove(point, v, u, r, requested=digits, relative=relative)
     out_of_time = deadline is not None and time.perf_counter() > deadline
-    if proof.certified or not ctx.hypotheses_proven or out_of_time:
+    interrupted = bool(double.extras.get("interrupted"))
+    if proof.certified or not ctx.hypotheses_proven or out_of_time or interrupted:
         if proof.certified:
             say(f"the double solve's answer is proven as it is: {proof.summary()}")
             source, why = "the double solve's answer itself", "not needed"
+        elif interrupted:
+            source, why = "the double solve (interrupted)", "interrupted (Ctrl-C)"
         elif out_of_time:
             say(f"time limit of {time_limit:g} s reached after the double solve: {proof.summary()}")
             source, why = "the double solve (time limit reached)", f"time limit of {time_limit:g} s reached"
@@ -360,7 +364,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                                        "setup": time.perf_counter() - t1 - (compile_seconds() - c1), "extended": 0.0,
                                        "wide": 0.0, "proof": proof.seconds, "compile": compile_seconds() - c0,
                                        "total": time.perf_counter() - t0},
-                              timed_out=out_of_time and not proof.certified)
+                              timed_out=out_of_time and not proof.certified, interrupted=interrupted)
     data = ExtendedData(problem)
     system = choose_backend(data, backend, engine=factor_engine)
     t_setup = time.perf_counter() - t1
@@ -369,8 +373,14 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     start = _start_from(data, double)
     driver = ProofDriver(ctx, data, digits, progress=say, relative=relative, deadline=deadline)
     c_ext = compile_seconds()  # (what _start_from compiled counts in "compile" only)
-    ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
-                     wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
+    driver.best = (ProofDriver.score(proof), proof, point, (v, u, r))  # the double answer's proof, to beat
+    try:
+        ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
+                         wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
+    except KeyboardInterrupt:  # Ctrl-C: the best proof reached so far is the answer
+        interrupted = True
+        ext_out = Extension(ext.ExtendedResult(None, None, None, "Stopped", "interrupted (Ctrl-C)", 0), None,
+                            "not run (interrupted)", None, time.perf_counter() - t1, 0.0)
     _, proof, point, (v, u, r) = driver.best
     extra = {"point_source": ext_out.point_source, **ext_out.summary(), "proof_attempts": driver.attempts}
     timed_out = driver.timed_out and not proof.certified
@@ -382,7 +392,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                "wide": ext_out.seconds_wide, "proof": driver.proof_seconds, "compile": c3 - c0,
                "total": time.perf_counter() - t0}
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
-                          wide=ext_out.wide, timings=timings, timed_out=timed_out)
+                          wide=ext_out.wide, timings=timings, timed_out=timed_out, interrupted=interrupted)
 
 
 def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsSolution:

@@ -124,6 +124,11 @@ def iterate(precision: Precision, policy, start: tuple, *, n_contacts: int, n_co
             policy.after_step(alpha)
     except Breakdown as exc:
         verdict = policy.breakdown(f"iteration {k}: {exc}")
+    except KeyboardInterrupt:
+        # Ctrl-C: a policy that can return its best iterate does (and says so); else it propagates.
+        if not hasattr(policy, "interrupted"):
+            raise
+        verdict = policy.interrupted(k)
     except Exception as exc:  # a precision's own domain error (e.g. ConeDomainError), if it names one
         message = precision.explain(exc)
         if message is None:

@@ -270,17 +270,54 @@ def read_manifest(run_dir: Path, *, required: bool) -> dict:
 
 # ---------------------------------------------------------------------- workers
 def _worker(task: dict, out_dir: str, parent: int) -> None:
-    """Process target: die with the bench (never an orphan), then run the task."""
+    """Process target: ignore Ctrl-C (the bench decides, and kills its workers), die with the
+    bench (never an orphan), then run the task."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent(parent)
     run_task(task, out_dir)
 
 
-def _stop(procs) -> None:
-    for proc in procs:
-        if proc.is_alive():
-            proc.kill()
+class _Interrupts:
+    """Ctrl-C noted as a flag and acted on at one safe point of the pool's loop.  A
+    KeyboardInterrupt raised wherever the signal lands (inside a lock's release, a finaliser,
+    a fork) can be swallowed there ("Exception ignored in ...") and the bench would carry on.
+    Forked workers inherit this handler until they ignore SIGINT, so a Ctrl-C that reaches one
+    while it starts only sets a flag in the child instead of printing its traceback."""
+
+    def __init__(self):
+        self.seen = False
+        self.previous = None
+
+    def __enter__(self):
+        self.previous = signal.signal(signal.SIGINT, self._note)
+        return self
+
+    def _note(self, signum, frame):
+        self.seen = True
+
+    def check(self):
+        """Raise KeyboardInterrupt here if Ctrl-C came since the last check."""
+        if self.seen:
+            raise KeyboardInterrupt
+
+    def __exit__(self, *exc):
+        signal.signal(signal.SIGINT, self.previous)
+        return False
+
+
+def _stop(procs, run_dir: Path | None = None) -> None:
+    """Kill the workers still running and remove the temporary files they were writing (a
+    record is written to ``.<name>.<pid>.tmp`` and renamed: a killed writer leaves its
+    temporary behind, never a half record under the final name)."""
+    killed = [proc for proc in procs if proc.is_alive()]
+    for proc in killed:
+        proc.kill()
     for proc in procs:
         proc.join(timeout=5)
+    if run_dir is not None:
+        for proc in killed:
+            for tmp in Path(run_dir).rglob(f".*.{proc.pid}.tmp"):
+                tmp.unlink(missing_ok=True)
 
 
 def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
@@ -438,37 +475,40 @@ def _run_local(run_dir: Path, todo: list, jobs: int, time_limit: float, bar) -> 
     running = {}
     timeouts = 0
     pending = list(todo)
-    try:
-        while pending or running:
-            while pending and len(running) < jobs:
-                task = pending.pop(0)
-                out = problem_dir(run_dir, task["problem"])
-                out.mkdir(parents=True, exist_ok=True)
-                # The attempt id tells this run's record from an outdated one left in place.
-                task = {**task, "attempt": os.urandom(8).hex()}
-                proc = ctx.Process(target=_worker, args=(task, str(out), os.getpid()), daemon=True)
-                proc.start()
-                running[proc] = (task, time.monotonic())
-            time.sleep(0.02)
-            for proc in list(running):
-                task, started = running[proc]
-                elapsed = time.monotonic() - started
-                if proc.is_alive() and elapsed <= time_limit:
-                    continue
-                if proc.is_alive():
-                    proc.kill()
-                    proc.join()
-                    timeouts += 1
-                    record_failure(run_dir, task, "Timeout", timeout_message(time_limit))
-                else:
-                    proc.join()
-                    rec = read_record(record_path(run_dir, task))
-                    if rec is None or rec.get("attempt") != task["attempt"]:
-                        record_failure(run_dir, task, "Crashed", crash_message(proc.exitcode))
-                del running[proc]
-                bar.advance(f"{task_label(task)}: {outcome(run_dir, task)}")
-    finally:
-        _stop(list(running))  # interrupted or killed by SIGTERM: no worker outlives the bench
+    with _Interrupts() as interrupts:
+        try:
+            while pending or running:
+                interrupts.check()
+                while pending and len(running) < jobs:
+                    task = pending.pop(0)
+                    out = problem_dir(run_dir, task["problem"])
+                    out.mkdir(parents=True, exist_ok=True)
+                    # The attempt id tells this run's record from an outdated one left in place.
+                    task = {**task, "attempt": os.urandom(8).hex()}
+                    proc = ctx.Process(target=_worker, args=(task, str(out), os.getpid()), daemon=True)
+                    proc.start()
+                    running[proc] = (task, time.monotonic())
+                time.sleep(0.02)
+                for proc in list(running):
+                    task, started = running[proc]
+                    elapsed = time.monotonic() - started
+                    if proc.is_alive() and elapsed <= time_limit:
+                        continue
+                    if proc.is_alive():
+                        proc.kill()
+                        proc.join()
+                        timeouts += 1
+                        record_failure(run_dir, task, "Timeout", timeout_message(time_limit))
+                    else:
+                        proc.join()
+                        rec = read_record(record_path(run_dir, task))
+                        if rec is None or rec.get("attempt") != task["attempt"]:
+                            record_failure(run_dir, task, "Crashed", crash_message(proc.exitcode))
+                    del running[proc]
+                    bar.advance(f"{task_label(task)}: {outcome(run_dir, task)}")
+            interrupts.check()  # a Ctrl-C during the last runs still ends the bench with 130
+        finally:
+            _stop(list(running), run_dir)  # interrupted or killed by SIGTERM: no worker outlives the bench
     return timeouts
 
 

@@ -76,8 +76,13 @@ a shell reports for a program killed by the signal."""
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args, extra = parser.parse_known_args(argv)
+    try:
+        parser = build_parser()
+        args, extra = parser.parse_known_args(argv)
+    except KeyboardInterrupt:  # before the parser has named the command: its first word does
+        words = [a for a in (sys.argv[1:] if argv is None else argv) if not str(a).startswith("-")]
+        print(f"rfverify{' ' + str(words[0]) if words else ''}: interrupted", file=sys.stderr)
+        return 130
     if extra:
         parser.commands[args.command].unrecognized(extra)
     try:
@@ -104,7 +109,7 @@ def main(argv=None) -> int:
         print(f"rfverify {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print("rfverify: interrupted", file=sys.stderr)
+        print(f"rfverify {args.command}: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # a bug, not bad input: say so in one line unless debugging
         if os.environ.get("RFVERIFY_DEBUG"):

@@ -162,6 +162,8 @@ def cmd_solve(args) -> int:
             print(f"solution written to {args.out}")
         print_warnings(summary["numerical_warnings"], "during the solve (the status above is "
                         "judged by the recomputed criterion, not by these)")
+    if result.extras.get("interrupted"):
+        return _interrupted("the best iterate so far is reported above" + (f" and written to {args.out}" if args.out else ""))
     return EXIT_OK if result.success else EXIT_NOT_SOLVED
 
 
@@ -212,7 +214,17 @@ def _solve_digits(args, problem, options) -> int:
         print(f"time {wall:.2f} s ({compile_time}double {t['double']:.2f}, extended {t['setup'] + t['extended']:.2f}"
               f"{wide_time}, proof {t['proof']:.2f})"
               + (f"; solution and certificate written to {args.out}" if args.out else ""))
+    if out.interrupted:
+        return _interrupted("the best proof so far is reported above" + (f" and written to {args.out}" if args.out else ""))
     return EXIT_OK if out.success else EXIT_NOT_SOLVED
+
+
+def _interrupted(what: str) -> int:
+    """Ctrl-C ended the solve after it had something to show: one line on stderr, exit 130."""
+    import sys
+
+    print(f"rfverify solve: interrupted ({what})", file=sys.stderr)
+    return 130
 
 
 def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:

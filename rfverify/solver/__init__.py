@@ -359,6 +359,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
                 "unregularised_factorisations": sum(o.unregularised_factorisations for o in runs),
                 "extended_from": [o.extended_from for o in runs],
                 "r_t": r_t, "z": z,
+                "interrupted": any(o.interrupted for o in runs),
                 "n_cones": {"L3": lp.n3, "L1": lp.n1},
                 "component_runs": [{"status": o.status, "message": o.message, "nit": o.nit, "trace": o.trace}
                                    for o in runs] if len(groups) > 1 else [],

@@ -54,6 +54,8 @@ class RunResult(Outcome):
     iterates: list = field(default_factory=list)
     # Iteration from which the run used the extended arithmetic (None: float64 throughout).
     extended_from: int | None = None
+    # True when Ctrl-C ended the run (status Stopped, the last judged iterate returned).
+    interrupted: bool = False
 
 
 def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, settings: Settings,
@@ -126,7 +128,8 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                      pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o), measures=judged_o,
                      trace=trace, timings=timings,
                      factorisations=system.factor_count, unregularised_factorisations=system.unregularised_count,
-                     tol=settings.tol, iterates=policy.iterates, extended_from=policy.extended_from)
+                     tol=settings.tol, iterates=policy.iterates, extended_from=policy.extended_from,
+                     interrupted=getattr(policy, "was_interrupted", False))
 
 
 class _NumpySpace:
@@ -314,6 +317,11 @@ class _DoublePolicy:
     @staticmethod
     def breakdown(message):
         return Verdict(Status.NUMERICAL_ERROR, message)
+
+    def interrupted(self, k):
+        """Ctrl-C at iteration k: stop, returning the last iterate judged (Stopped)."""
+        self.was_interrupted = True
+        return Verdict(Status.STOPPED, f"interrupted (Ctrl-C) at iteration {k}")
 
 
 # Data entries above this start the run in the extended arithmetic: their products and squares
