@@ -104,12 +104,15 @@ class Certificate(ResultAliases):
         return self.verdict.split(". ")[0]
 
     def __repr__(self) -> str:
-        return f"Certificate(status={self.status!r}, requested={self.requested}, seconds={self.seconds:.3g},\n" \
+        return f"Certificate(status={self.status}, requested={self.requested}, nit={self.nit}, time={self.time:.3g} s,\n" \
                f"    {self.headline!r})"
 
     def as_dict(self) -> dict:
+        """The JSON-able certificate ``rfverify certify --json`` prints."""
         p = self.proof
-        return {"requested_digits": self.requested, "certified": self.certified, "verdict": self.verdict,
+        return {"status": str(self.status), "success": self.success, "message": self.message,
+                "nit": self.nit, "time": self.time,
+                "requested_digits": self.requested, "certified": self.certified, "verdict": self.verdict,
                 "method": "proof" if p is not None else None,
                 "valid_proof": None if p is None else p.valid,
                 "failure": None if p is None else (p.failure or None),

@@ -69,8 +69,9 @@ class Diagnosis(ResultAliases):
         """The steps with at least one flag (a λ2 underflow, a sign lost, no exact step)."""
         return [s for s in self.steps if s["flags"]]
 
-    def __getitem__(self, key):  # OptimizeResult-style access, as SolveResult
-        return getattr(self, key)
+    def as_dict(self) -> dict:
+        """The JSON-able dict ``rfverify diagnose --json`` prints (:meth:`to_dict`)."""
+        return self.to_dict()
 
     def to_dict(self) -> dict:
         """The JSON-able dict ``rfverify diagnose --json`` prints: ``method``, ``status`` (its

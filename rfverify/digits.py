@@ -92,9 +92,22 @@ class DigitsSolution(ResultAliases):
     def proof(self) -> Proof | None:
         return self.certificate.proof
 
+    def as_dict(self) -> dict:
+        """The JSON-able summary ``rfverify solve --digits K --json`` prints (its stages, the
+        certificate, timings)."""
+        ext, wide = self.extended, self.wide
+        return {"status": str(self.status), "success": self.success, "message": self.message, "nit": self.nit,
+                "time": self.time, "digits_requested": self.certificate.requested, "digits": self.digits,
+                "certificate": self.certificate.as_dict(), "double_status": str(self.double.status),
+                "double_iterations": self.double.nit, "extended_iterations": ext.nit,
+                "extended_status": ext.status, "backend": ext.backend,
+                "wide_iterations": None if wide is None else wide.nit,
+                "wide_status": None if wide is None else wide.status,
+                "wide_bits": None if wide is None else wide.bits,
+                "timings": dict(self.timings), "timed_out": self.timed_out, "interrupted": self.interrupted}
+
     def __repr__(self) -> str:
-        total = self.timings.get("total", float("nan"))
-        return (f"DigitsSolution(status={self.status!r}, nit={self.nit}, time={total:.3g} s,\n"
+        return (f"DigitsSolution(status={self.status}, nit={self.nit}, time={self.time:.3g} s,\n"
                 f"    {self.certificate.headline!r})")
 
 

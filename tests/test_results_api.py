@@ -55,3 +55,51 @@ def test_diagnosis_is_typed_and_its_dict_is_the_cli_json():
     d = json.loads(json.dumps(diag.to_dict()))
     assert d["status"] == "MaxIterations" and d["nit"] == 3 and d["iterations"] == diag.steps
     assert repr(diag).startswith("Diagnosis(method='jqinv', status=MaxIterations, nit=3")
+
+
+def _results_table():
+    """docs/RESULTS.md's table: {field: {class name: cell text}}."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "RESULTS.md").read_text(encoding="utf-8")
+    rows = [line for line in text.splitlines() if line.startswith("| ")]
+    head = [c.strip() for c in rows[0].strip("|").split("|")]
+    classes = [c.split()[0].strip("`") for c in head[1:5]]
+    table = {}
+    for line in rows[1:]:  # (the |---| line is not among them)
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        table[cells[0]] = dict(zip(classes, cells[1:5]))
+    return table
+
+
+def test_docs_results_table_matches_the_code():
+    import re
+
+    p = rfverify.load("bundled:chute")
+    objs = {"SolveResult": rfverify.solve(p), "DigitsSolution": rfverify.solve_to_digits(p, digits=6),
+            "Certificate": None, "Diagnosis": rfverify.diagnose(rfverify.load("bundled:sphere"), max_iter=3)}
+    objs["Certificate"] = rfverify.certify(p, objs["SolveResult"], digits=6)
+    table = _results_table()
+    # every field named as `name` in its own row exists on every result whose cell is not "—"
+    for field, cells in table.items():
+        name = re.fullmatch(r"`(\w+)`", field)
+        if not name:
+            continue
+        for cls, cell in cells.items():
+            if cell != "—":
+                assert hasattr(objs[cls], name.group(1)), (cls, field)
+    for cls, cell in table["`status`"].items():  # every status listed is a Status, and the object's is one
+        assert cell.startswith("`Status`"), cls
+        for s in re.findall(r'`"(\w+)"`', cell):
+            assert Status(s).value == s
+        assert isinstance(objs[cls].status, Status)
+    for cls, obj in objs.items():
+        assert isinstance(obj.as_dict(), dict) and obj["nit"] == obj.nit and obj.time == obj.timings["total"]
+        assert obj.solve_time == obj.time
+    # nit of a solve split into components is the most any component needed, as the table says
+    res = objs["SolveResult"]
+    runs = res.extras.get("component_runs") or []
+    assert "the most any independent component needed" in table["`nit`"]["SolveResult"]
+    if runs:
+        assert res.nit == max(r["nit"] for r in runs)
+    assert objs["DigitsSolution"].digits == objs["DigitsSolution"].certificate.digits

@@ -189,16 +189,8 @@ def _solve_digits(args, problem, options) -> int:
     cert = out.certificate
     if args.out:
         _write_solution_file(args, problem, out.v, out.u, out.r, certificate=cert)
-    summary = {"status": str(out.status),
-               "success": out.success, "digits_requested": args.digits,
-               "problem": problem.statement, "equations": problem.equations,
-               "certificate": cert.as_dict(), "double_status": str(out.double.status),
-               "double_iterations": out.double.nit, "extended_iterations": out.extended.nit,
-               "extended_status": out.extended.status, "backend": out.extended.backend,
-               "wide_iterations": None if out.wide is None else out.wide.nit,
-               "wide_status": None if out.wide is None else out.wide.status,
-               "wide_bits": None if out.wide is None else out.wide.bits,
-               "timings": out.timings, "time": wall, "out": args.out}
+    summary = {**out.as_dict(), "problem": problem.statement, "equations": problem.equations,
+               "time": wall, "out": args.out}
     if args.json:
         print(dumps(summary, indent=2))
     else:

@@ -290,10 +290,23 @@ class IterationInfo:
 
 
 class ResultAliases:
-    """Aliases that give every result (:class:`SolveResult`, :class:`rfverify.Certificate`,
-    :class:`rfverify.diagnosis.Diagnosis`) the names of Clarabel's solution where they mean the
-    same thing (docs/RESULTS.md): ``iterations`` is ``nit``, ``solve_time`` is
-    ``timings["total"]`` in seconds (NaN when not recorded)."""
+    """What every result (:class:`SolveResult`, :class:`rfverify.DigitsSolution`,
+    :class:`rfverify.Certificate`, :class:`rfverify.diagnosis.Diagnosis`) offers the same way
+    (docs/RESULTS.md): ``time`` is ``timings["total"]`` in seconds, ``iterations`` (Clarabel's
+    name) is ``nit``, ``solve_time`` (Clarabel's) is ``time``; ``result["name"]`` is
+    ``result.name`` (SciPy's ``OptimizeResult`` is a dict); ``as_dict()`` is the JSON-able dict
+    the CLI prints with ``--json``."""
+
+    @property
+    def time(self) -> float:
+        """Wall time of the call in seconds, ``timings["total"]`` (NaN when not recorded)."""
+        return float(self.timings.get("total", float("nan")))
+
+    def __getitem__(self, key):  # OptimizeResult-style access, the same on every result
+        try:
+            return getattr(self, key)
+        except AttributeError:
+            raise KeyError(key) from None
 
     @property
     def iterations(self) -> int:
@@ -302,8 +315,8 @@ class ResultAliases:
 
     @property
     def solve_time(self) -> float:
-        """Clarabel's name for ``timings["total"]`` (seconds)."""
-        return float(self.timings.get("total", float("nan")))
+        """Clarabel's name for ``time`` (``timings["total"]``, seconds)."""
+        return self.time
 
 
 @dataclass
@@ -364,10 +377,17 @@ class SolveResult(Outcome, ResultAliases):
         """``measures.max`` (NaN when not computed)."""
         return float("nan") if self.measures is None else self.measures.max
 
-    def __getitem__(self, key):  # OptimizeResult-style access
-        return getattr(self, key)
+    def as_dict(self) -> dict:
+        """The JSON-able summary (``rfverify solve --json`` prints it with CLI details added):
+        status, success, message, method, nit, time, criterion, measures, the paper's measures,
+        timings, presolve; the vectors v, u, r as lists."""
+        return {"status": str(self.status), "success": self.success, "message": self.message,
+                "method": self.method, "nit": self.nit, "time": self.time, "criterion": self.criterion,
+                "measures": None if self.measures is None else self.measures.as_dict(),
+                "pinfeas": self.pinfeas, "dinfeas": self.dinfeas, "mu": self.mu, "timings": dict(self.timings),
+                "presolve": self.presolve, "v": self.v.tolist(), "u": self.u.tolist(), "r": self.r.tolist()}
 
     def __repr__(self) -> str:
         return (f"SolveResult(method={self.method!r}, status={self.status}, nit={self.nit}, "
-                f"criterion={self.criterion:.2e}, pinfeas={self.pinfeas:.2e}, dinfeas={self.dinfeas:.2e}, "
-                f"mu={self.mu:.2e})")
+                f"time={self.time:.3g} s, criterion={self.criterion:.2e}, pinfeas={self.pinfeas:.2e}, "
+                f"dinfeas={self.dinfeas:.2e}, mu={self.mu:.2e})")
