@@ -33,14 +33,21 @@ from numba.core import event as _event
 
 _lock = threading.Lock()
 _state = {"total": 0.0, "depth": 0, "start": 0.0}
+_announce = {"say": None, "said": False}
+COMPILING = "compiling numba kernels (the first run on this machine: seconds, then cached for every later run)"
 
 
 class _CompileClock(_event.Listener):
     def on_start(self, event):
+        say = None
         with _lock:
             if _state["depth"] == 0:
                 _state["start"] = time.perf_counter()
+                if _announce["say"] is not None and not _announce["said"]:
+                    say, _announce["said"] = _announce["say"], True
             _state["depth"] += 1
+        if say is not None:
+            say(COMPILING)
 
     def on_end(self, event):
         with _lock:
@@ -50,6 +57,24 @@ class _CompileClock(_event.Listener):
 
 
 _event.register("numba:compile", _CompileClock())
+
+
+class announcing:
+    """``with announcing(say):`` — the first numba compilation inside the block (a cold cache)
+    is named by one progress line, ``say(COMPILING)``, as it starts, instead of a silent pause
+    named only in the timings at the end.  Once per process."""
+
+    def __init__(self, say):
+        self.say = say
+
+    def __enter__(self):
+        self.previous = _announce["say"]
+        _announce["say"] = self.say
+        return self
+
+    def __exit__(self, *exc):
+        _announce["say"] = self.previous
+        return False
 
 
 def compile_seconds() -> float:

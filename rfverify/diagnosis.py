@@ -73,12 +73,38 @@ class Diagnosis(ResultAliases):
         """The JSON-able dict ``rfverify diagnose --json`` prints (:meth:`to_dict`)."""
         return self.to_dict()
 
+    @property
+    def conclusion(self) -> str:
+        """The diagnosis in words: what broke, where, why, and what to do (or that nothing did)."""
+        steps = [s for s in self.steps if np.isfinite(s.get("digits_v", np.nan))]
+        worst = min(steps, key=lambda s: min(s["digits_v"], s["digits_r_t"], s["digits_z"]), default=None)
+        flagged = self.flagged
+        if flagged:
+            f = flagged[0]
+            return (f"Double precision broke at iteration {f['iter']}: {f['flags'][0]}. Why: at μ = {f['mu']:.1e} "
+                    f"the NT scaling's condition cond(Q_p) = {f['max_cond_Qp']:.1e} "
+                    f"{'exceeds' if f['max_cond_Qp'] > 1 / np.finfo(float).eps else 'nears'} 1/eps ≈ 4.5e15, so rounding "
+                    "moves the iterate across the cone boundary that the exact step keeps. What to do: ask for "
+                    "a tolerance the run reached before that (its criterion is in `rfverify solve --verbose`), or "
+                    "`rfverify solve --digits K`, which continues in double-double and proves K digits.")
+        if worst is None:
+            return f"No exact step could be compared: {self.message}"
+        low = min(worst["digits_v"], worst["digits_r_t"], worst["digits_z"])
+        where = f"(fewest {low:.1f} digits, at iteration {worst['iter']}, cond(Q_p) = {worst['max_cond_Qp']:.1e})"
+        if self.success:
+            return (f"Healthy: every double iterate agreed with the exact step from the same point {where}, and "
+                    "the run reached its tolerance; nothing to fix.")
+        return (f"The double run ended {self.status} without a rounding failure: its iterates agreed with the "
+                f"exact steps {where}, so double precision is not the cause. What to do: more --max-iter, "
+                "another --method, or `rfverify solve --verbose` to see which measure stalls.")
+
     def to_dict(self) -> dict:
         """The JSON-able dict ``rfverify diagnose --json`` prints: ``method``, ``status`` (its
         name), ``message``, ``nit``, ``iterations`` (the list of :attr:`steps`), ``failure``,
         ``timings``."""
         return {"method": self.method, "status": str(self.status), "message": self.message, "nit": self.nit,
-                "iterations": list(self.steps), "failure": self.failure, "timings": dict(self.timings)}
+                "iterations": list(self.steps), "failure": self.failure, "timings": dict(self.timings),
+                "conclusion": self.conclusion}
 
     def __repr__(self) -> str:
         flagged = self.flagged

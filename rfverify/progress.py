@@ -14,8 +14,10 @@ class Progress:
     """``Progress(total, label)``; call :meth:`advance` once per finished item, :meth:`close` at
     the end."""
 
-    def __init__(self, total: int, label: str = "", *, quiet: bool = False, stream=None, width: int = 30):
+    def __init__(self, total: int, label: str = "", *, quiet: bool = False, stream=None, width: int = 30,
+                 percent: bool = False):
         self.total = max(int(total), 0)
+        self.percent = percent  # show "25%" (work measured as a fraction) rather than "25/100"
         self.label = label
         self.quiet = quiet
         self.stream = stream if stream is not None else sys.stderr
@@ -34,9 +36,14 @@ class Progress:
         frac = self.done / self.total if self.total else 1.0
         filled = int(round(frac * self.width))
         bar = "#" * filled + "." * (self.width - filled)
-        line = f"\r{self.label} [{bar}] {self.done}/{self.total} {self._elapsed()} {note}"
+        line = f"\r{self.label} [{bar}] {self._count()} {self._elapsed()} {note}"
         self.stream.write(line[:200].ljust(120))
         self.stream.flush()
+
+    def _count(self) -> str:
+        if self.percent:
+            return f"{100 * self.done // max(self.total, 1)}%"
+        return f"{self.done}/{self.total}"
 
     def advance(self, note: str = "", n: int = 1) -> None:
         self.done += n
@@ -59,7 +66,7 @@ class Progress:
         if self.tty:
             self._draw(note)
         elif crossed:
-            self.stream.write(f"{self.label} [{self.done}/{self.total}] {self._elapsed()} {note}\n")
+            self.stream.write(f"{self.label} {self._count()} {self._elapsed()} {note}\n")
             self.stream.flush()
 
     def close(self) -> None:

@@ -66,6 +66,7 @@ def check_outputs(args) -> None:
 
 def cmd_certify(args) -> int:
     from ..certification import certify
+    from ..compilation import announcing
     from ..errors import ProblemFileError
     from ..io import load
     from ..io.certificate import read_point, read_stored_certificate
@@ -93,8 +94,10 @@ def cmd_certify(args) -> int:
     if point is not None and (point.v_hi.size != problem.n_dofs or point.r_hi.size != 5 * problem.n_contacts):
         raise ProblemFileError(where, "/certificate/point does not match the problem's sizes",
                                location="/certificate/point", fix="certify the solution file written for this problem")
-    cert = certify(problem, sol.v, sol.u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
-                   dps=args.dps, relative=args.relative, progress=progress_printer(args), time_limit=args.time_limit)
+    say = progress_printer(args)
+    with announcing(say):  # a cold cache's compilation is named as it starts
+        cert = certify(problem, sol.v, sol.u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
+                       dps=args.dps, relative=args.relative, progress=say, time_limit=args.time_limit)
     u = sol.u if sol.u is not None else _velocity(problem, sol)
     if args.out:
         _write_certificate(args, problem, sol, u, cert)

@@ -91,7 +91,7 @@ def cmd_generate(args) -> int:
             raise SceneError(f"--param {item!r}: expected KEY=VALUE")
         params[key.strip()] = val.strip()
     scene_parameters(args.scene, args.size, **params)  # bad names/values fail before any work
-    bar = Progress(100, f"generate {args.scene} (%)", quiet=args.quiet or args.json)
+    bar = Progress(100, f"generate {args.scene}", quiet=args.quiet or args.json, percent=True)
     t0 = time.perf_counter()
     try:
         problems = generate(args.scene, count=args.count, seed=args.seed, size=args.size,

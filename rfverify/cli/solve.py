@@ -178,13 +178,15 @@ def _stored_hint(problem) -> str:
 def _solve_digits(args, problem, options) -> int:
     import time
 
+    from ..compilation import announcing
     from ..digits import solve_to_digits
 
     say = progress_printer(args)
     t0 = time.perf_counter()
-    out = solve_to_digits(problem, digits=args.digits, method=args.method, tol=args.tol,
-                          max_iter=args.max_iter, relative=args.relative, progress=say, time_limit=args.time_limit,
-                          **options)
+    with announcing(say):  # a cold cache's compilation is named as it starts
+        out = solve_to_digits(problem, digits=args.digits, method=args.method, tol=args.tol,
+                              max_iter=args.max_iter, relative=args.relative, progress=say,
+                              time_limit=args.time_limit, **options)
     wall = time.perf_counter() - t0
     cert = out.certificate
     if args.out:
@@ -206,6 +208,9 @@ def _solve_digits(args, problem, options) -> int:
         print(f"time {wall:.2f} s ({compile_time}double {t['double']:.2f}, extended {t['setup'] + t['extended']:.2f}"
               f"{wide_time}, proof {t['proof']:.2f})"
               + (f"; solution and certificate written to {args.out}" if args.out else ""))
+        if out.success and args.digits < 10:
+            print(f"note: the path stops at the first point that proves {args.digits} digits, so the digits above "
+                  f"are that point's; a larger --digits iterates further and proves more")
     if out.interrupted:
         return _interrupted("the best proof so far is reported above" + (f" and written to {args.out}" if args.out else ""))
     return EXIT_OK if out.success else EXIT_NOT_SOLVED
