@@ -179,3 +179,50 @@ def test_a_bench_task_past_its_solver_share_records_max_time_with_its_answer(tmp
     rec = json.loads(next(tmp_path.glob("*.json")).read_text())
     assert rec["status"] == "MaxTime" and rec["verified"]["finite"] is True
     assert next(tmp_path.glob("*.npz")).stat().st_size > 0
+
+
+# ---------------------------------------------------------------------- words and progress
+def test_diagnose_explains_its_columns_and_ends_with_a_sentence(capsys):
+    code, out, err = run(capsys, "diagnose", "bundled:sphere", "--quiet", "--dps", "20")
+    lines = out.splitlines()
+    assert lines[1].startswith("columns:") and "r~ (the lifted reactions" in lines[1]
+    assert lines[-1].startswith("Healthy:") and "nothing to fix" in lines[-1]
+    code, out, err = run(capsys, "diagnose", "bundled:chute", "--tol", "1e-25", "--quiet", "--dps", "20")
+    last = out.splitlines()[-1]
+    assert code == 1 and last.startswith("Double precision broke at iteration") and "What to do:" in last
+    assert "--digits K" in last
+
+
+def test_generate_reports_progress_as_a_percentage(capsys):
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        code, out, err = run(capsys, "generate", "SpheresPile", "--size", "20", "--steps", "3", "--out", d)
+    progress = [x for x in err.splitlines() if x.startswith("generate SpheresPile")]
+    assert code == 0 and progress and all(re.match(r"generate SpheresPile \d+% ", x) for x in progress), err
+    assert "(%)" not in err and "/100]" not in err
+
+
+def test_a_compilation_is_named_as_it_starts(monkeypatch):
+    import numba
+
+    from rfverify import compilation
+
+    monkeypatch.setitem(compilation._announce, "said", False)
+    lines = []
+
+    @numba.njit
+    def fresh(x):  # never compiled before this call
+        return x * 2 + 1
+
+    with compilation.announcing(lines.append):
+        fresh(3)
+        fresh(4.5)  # a second compilation is not named again
+    assert lines == [compilation.COMPILING]
+
+
+def test_fewer_digits_asked_for_are_explained(capsys):
+    code, out, err = run(capsys, "solve", "bundled:chute", "--digits", "5", "--quiet")
+    assert code == 0 and out.splitlines()[-1].startswith("note: the path stops at the first point that proves 5")
+    code, out, err = run(capsys, "solve", "bundled:chute", "--digits", "10", "--quiet")
+    assert "note:" not in out
