@@ -336,6 +336,9 @@ def proven_digits_time(data: RunData, out: Path) -> Path | None:
             med.append((float(np.median([x for x, _ in at])), float(np.median([y for _, y in at]))))
         ax.plot([max(x, 1e-4) for x, _ in med], [y for _, y in med], color=color, marker=marker, ms=7, lw=1.6,
                 label=f"{m} ({len(xs)} answers; line: medians per tolerance)")
+        for (x, y), tol in zip(med, sorted(set(tols), reverse=True)):  # which median is which tolerance
+            ax.annotate(f"{tol:g}", (max(x, 1e-4), y), textcoords="offset points", xytext=(4, 3), fontsize=6,
+                        color=color)
     if path_pts:
         xs, ys = zip(*path_pts)
         ax.scatter(xs, ys, color="black", marker="*", s=70, label=f"{k}-digit path ({len(xs)} problems)", zorder=5)
