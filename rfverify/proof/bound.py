@@ -45,8 +45,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
-from fractions import Fraction
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
