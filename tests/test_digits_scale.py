@@ -5,7 +5,6 @@ benchmarks/bench_digits_scale.py."""
 
 from __future__ import annotations
 
-
 import gmpy2
 import mpmath
 import numpy as np

@@ -3,7 +3,6 @@ factors the matrix it is handed and solves with it to float64 accuracy, factors 
 same pattern, counts only the factorisations that succeeded, and refuses a matrix it cannot
 factor by raising, never by returning a wrong answer."""
 
-
 import numpy as np
 import pytest
 import scipy.sparse as sp

@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-
 import h5py
 import mpmath
 import numpy as np
