@@ -135,18 +135,20 @@ def available_methods(methods):
 
 def table(rows, tol) -> str:
     """The markdown table: one line per run, with the time ratio to Clarabel on the same problem."""
-    clar = {(r["kind"], r["contacts"]): r["time"] for r in rows if r["method"] == "clarabel"}
+    clar = {(r["kind"], r.get("contacts", r.get("size"))): r.get("time") for r in rows if r["method"] == "clarabel"}
     head = ("| kind | contacts | dofs | method | status | it | time [s] | factor [s] | /Clarabel | "
             f"criterion (≤ {tol:g}?) | solve peak [MB] | bytes/contact |")
     lines = [head, "|" + "---|" * 12]
-    for r in rows:
-        c = clar.get((r["kind"], r.get("contacts")))
-        ratio = f"{r['time'] / c:.2f}" if c and r["method"] != "clarabel" and math.isfinite(r["time"]) else ""
+    for r in rows:  # a killed or failed child's row has only kind, size, method, status and a message
+        c = clar.get((r["kind"], r.get("contacts", r.get("size"))))
+        t = r.get("time", float("nan"))
+        ratio = f"{t / c:.2f}" if c and r["method"] != "clarabel" and math.isfinite(t) else ""
         mem = r.get("solve_rss")
+        crit = r.get("criterion")
         lines.append("| " + " | ".join([
-            r["kind"], str(r.get("contacts", "")), str(r.get("dofs", "")), r["method"], r["status"],
-            str(r["iterations"]), f"{r['time']:.2f}", f"{r.get('factor_time', float('nan')):.2f}", ratio,
-            f"{r['criterion']:.1e} ({'yes' if r['verified'] else 'no'})",
+            r["kind"], str(r.get("contacts", f"≈{r.get('size')}")), str(r.get("dofs", "")), r["method"], r["status"],
+            str(r.get("iterations", "")), f"{t:.2f}", f"{r.get('factor_time', float('nan')):.2f}", ratio,
+            "" if crit is None else f"{crit:.1e} ({'yes' if r['verified'] else 'no'})",
             f"{mem / 1e6:.0f}" if mem is not None else "", f"{mem / r['contacts']:.0f}" if mem else ""]) + " |")
     return "\n".join(lines)
 
@@ -162,11 +164,12 @@ def plot(rows, path: Path) -> bool:
         return False
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     styles = {"bed": "-", "random": "--"}
-    colors = {"jqinv": "tab:blue", "schur": "tab:green", "clarabel": "tab:red"}
+    colors = {"jqinv": "tab:blue", "schur": "tab:green", "clarabel": "tab:red", "auto": "tab:purple"}
     for kind in KINDS:
         for method in dict.fromkeys(r["method"] for r in rows):
             pts = sorted((r["contacts"], r["time"], r["verified"]) for r in rows
-                         if r["kind"] == kind and r["method"] == method and math.isfinite(r["time"]))
+                         if r["kind"] == kind and r["method"] == method and "contacts" in r
+                         and math.isfinite(r.get("time", float("nan"))))
             if pts:
                 x, y, ok = zip(*pts)
                 color = colors.get(method, "black")

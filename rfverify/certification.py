@@ -75,6 +75,14 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
             time_limit: float | None = None) -> Certificate:
     """Prove how many significant digits of the float64 solution are correct.
 
+    Example
+    -------
+    >>> import rfverify
+    >>> p = rfverify.load("bundled:chute")
+    >>> cert = rfverify.certify(p, rfverify.solve(p, tol=1e-8), digits=5)
+    >>> cert.status, cert.digits                    # doctest: +SKIP
+    (<Status.CERTIFIED: 'Certified'>, {'v': 6.0, 'u': 5.1, 'Hr': 6.0, 'r': 5.7})
+
     Parameters
     ----------
     problem : Problem

@@ -274,8 +274,21 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                     relative: bool = False, progress=None, factor_engine: str = "auto",
                     as_stored: bool | None = None, time_limit: float | None = None, **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
-    significant digits (1 … 15; see :mod:`rfverify.proof.bound` for what "digits" means when a
-    quantity is zero).  ``progress(message)`` receives one line per stage.
+    significant digits (1 … 15; DESIGN §6.3 says what "digits" means when a quantity is zero).
+    ``progress(message)`` receives one line per stage.
+
+    Example
+    -------
+    >>> import rfverify
+    >>> ten = rfverify.solve_to_digits(rfverify.load("bundled:chute"), digits=10)
+    >>> ten.status, ten.digits                      # doctest: +SKIP
+    (<Status.CERTIFIED: 'Certified'>, {'v': 11.4, 'u': 10.4, 'Hr': 11.8, 'r': 11.6})
+    >>> ten.message                                 # doctest: +SKIP
+    'proven to 10 digits (v 11.4 digits, ...) for the convex relaxation with (M + Mᵀ)/2. ...'
+
+    ``ten.v``, ``ten.u``, ``ten.r`` are the proven answer (float64); ``ten.certificate`` holds the
+    proof (recheck it with :func:`rfverify.certify`, or write it with ``rfverify solve --digits
+    10 --out``).
 
     Stages: the double solve (``method``, ``tol``, ``max_iter``, :data:`DOUBLE_SETTINGS` unless
     ``options`` say otherwise), Algorithm 1 in double-double

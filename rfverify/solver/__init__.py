@@ -67,62 +67,63 @@ def body_fill(problem: Problem) -> float:
 def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: int = 100,
           keep_iterates: bool = False, callback=None, *, as_stored: bool | None = None,
           **options) -> SolveResult:
-    """Solve a rolling-friction problem with Algorithm 1 (or the Clarabel peer).
+    """Solve a rolling-friction problem (its convex relaxation, DESIGN §1) with Algorithm 1, or
+    hand it to a peer solver, and judge the answer by rfverify's criterion (DESIGN §4.5).
 
-    For a problem read from a local file (``problem.local``) the iterations run on its lifting
-    (DESIGN §1.1) and the returned answer is then judged on the *file's* problem: u = W r + q
-    of the file, and the criterion of that (v, u, r) decides the status
-    (:func:`judged_on_the_file`).
+    Example
+    -------
+    >>> import rfverify
+    >>> p = rfverify.load("bundled:chute")
+    >>> res = rfverify.solve(p, tol=1e-10)
+    >>> res.status, res.criterion <= 1e-10          # doctest: +SKIP
+    (<Status.SOLVED: 'Solved'>, True)
+    >>> res.v.shape, res.u.shape, res.r.shape       # velocities, contact velocities, reactions
+    ((768,), (20,), (20,))
+
+    For digits that are *proven* right, use :func:`rfverify.solve_to_digits` instead.
 
     Parameters
     ----------
     problem : Problem
-    method : {"jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur", "auto", "clarabel", "siconos"}
-        Linear-system form (DESIGN §4); ``schur`` is form (16) with its identity block
-        eliminated, the dof-space matrix M + H̃ᵀG⁻¹H̃ — the same iterates as
-        ``reduced_factored``, factored by CHOLMOD's supernodal Cholesky (cvxopt's wheel, a
-        dependency; QDLDL where cvxopt does not import, 24–44× slower at 10⁴ contacts).
-        ``auto`` (default) runs the forms of :func:`auto_sequence` — jqinv, then reduced, then
-        noscaling; on a problem of at least ``AUTO_SCHUR_MIN_CONTACTS`` contacts whose
-        factorisation fill (:func:`body_fill`) is at least ``AUTO_SCHUR_MIN_FILL`` per contact
-        (result.py), schur, then jqinv, then noscaling (large granular piles and beds: yes;
-        thin chute flows: no), with or without CHOLMOD — each from the start, while
-        the previous one stalled or broke down, and returns the Solved run or else the answer
-        with the smallest criterion — ``extras["attempts"]`` lists every run and ``method``
-        names the form returned; ``clarabel`` hands the same convex problem to Clarabel;
-        ``siconos`` runs Siconos's GRFC3D_IPM (the paper's own implementation) in a child process,
-        its answer unscaled and judged by the same criterion (:mod:`rfverify.solver.siconos_peer`;
-        needs ``benchmarks/peers/siconos/build.sh`` and ``RFVERIFY_SICONOS``).
+        From :func:`rfverify.load` or :meth:`Problem.from_arrays`.  A problem read from a local
+        file is solved through a lifting to global form and its answer judged on the file's own
+        u = W r + q.
+    method : {"auto", "jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur", "clarabel", "siconos"}
+        The linear system Algorithm 1 factors at each iteration (DESIGN §4.2).  ``auto`` (default)
+        picks by the problem's size and fill — ``schur`` (the dof-space Schur complement, factored
+        by CHOLMOD's supernodal Cholesky) on large problems whose factor fills in (granular piles
+        and beds, random problems), ``jqinv`` otherwise — and tries the next form while one
+        stalls; ``extras["attempts"]`` lists the runs and ``method`` names the one returned.
+        ``clarabel`` hands the same convex problem to Clarabel; ``siconos`` runs the paper's own
+        GRFC3D_IPM in a child process (it needs ``bash benchmarks/peers/siconos/build.sh`` and
+        ``RFVERIFY_SICONOS``).  Both peers are judged by the same criterion.
     tol : float
-        Stop when the criterion of :mod:`rfverify.measures` on the returned (v, u, r) is at
-        most tol; the paper's pinfeas, dinfeas and μ = zᵀJᵀr̃/n (DESIGN §4) are reported
-        beside it.
+        Solved means the criterion of the returned (v, u, r) is at most ``tol`` (dimensionless;
+        about 1e-16 is the floor double precision reaches).  The paper's pinfeas, dinfeas and μ
+        are reported beside it.
     max_iter : int
     keep_iterates : bool
-        Store every iterate in ``extras["iterates"]`` as (v, r̃, z) with v on
-        ``extras["active_dofs"]`` (for lockstep diagnosis; implies no component splitting).
+        Store every iterate in ``extras["iterates"]`` (for :func:`rfverify.diagnose`).
     as_stored : bool, optional
-        True: solve the equations with M exactly as stored (unsymmetric M); False: with
-        (M + Mᵀ)/2, the convention of Siconos and FCLIB; None (default): what
-        ``problem.equations`` says ("symmetrised" unless the problem came from
-        :meth:`Problem.stored_equations`).  They differ only for an unsymmetric M; the status
-        judges the chosen equations.  Not for ``clarabel`` or ``siconos`` (they solve
-        (M + Mᵀ)/2 only) nor for a local file with an unsymmetric W.
+        True: solve the equations with an unsymmetric M exactly as stored; False: with
+        (M + Mᵀ)/2, the convention of Siconos and FCLIB; None (default): the problem object's own
+        choice (symmetrised unless it came from :meth:`Problem.stored_equations`).  The two differ
+        only for an unsymmetric M.  Not for the peers, nor for a local file with an unsymmetric W.
     callback : callable, optional
-        ``callback(info)`` with an :class:`IterationInfo` once per iteration (of every
-        independent component); returning True stops the run with status ``Stopped`` and
-        its best iterate.  Not available for ``clarabel``.
+        ``callback(info)`` once per iteration; returning True stops the run (status Stopped, its
+        best iterate returned).  Not for the peers.
     **options
-        Any other :class:`Settings` field (``verbose``, ``time_limit``, ``sigma_rule``,
-        ``extended_jordan``, ``refine_max``, ``reduce_cones``, ``drop_free_bodies``, ...).
-        ``verbose=True`` prints a settings header and one row per iteration as it happens
-        (Clarabel's own log for ``clarabel``).
+        Solver settings (:class:`Settings`): ``time_limit`` (seconds; status MaxTime with the
+        best iterate), ``verbose=True`` (one printed row per iteration), and the algorithm's
+        knobs (``sigma_rule``, ``refine_max``, ...).
 
     Returns
     -------
     SolveResult
-        v (m,), u = Hᵀv + w (5n,), r (5n,) in the original variables, with status, message,
-        trace and timings.
+        ``v`` (m,), ``u`` = Hᵀv + w (5n,), ``r`` (5n,) in the file's units and layout (FCLIB: 5
+        per contact, N, T1, T2, R1, R2), with ``status``, ``message``, ``criterion``, ``nit``,
+        ``time``, ``trace`` (docs/RESULTS.md).  Ctrl-C during the iterations returns the best
+        iterate so far with status Stopped and ``extras["interrupted"]``.
     """
     problem = posed(problem, as_stored, method)
     from ..scaling import binary_scaling
