@@ -366,18 +366,20 @@ def hard_iterations(picks: list, out: Path, method: str = "jqinv") -> Path | Non
     plt = _plt()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.4))
     cmap = plt.get_cmap("tab10")
+    markers = (".", "s", "^", "v", "D")  # beyond ten families colours repeat: the marker tells them apart
     for i, p in enumerate(picks):
+        color, mark = cmap(i % 10), markers[(i // 10) % len(markers)]
         its = p["trajectory"]["iterates"]
         k = np.arange(len(its))
         cond = np.array([it.get("max_cond_Qp") or np.nan for it in its], dtype=float)
         lam = np.array([min((x for x in (it.get("min_lam2_z"), it.get("min_lam2_s")) if x is not None),
                             default=np.nan) for it in its], dtype=float)
         label = f"{p['family']}: {p['problem'].rsplit('/', 1)[-1]}"
-        ax1.plot(k, cond, color=cmap(i % 10), marker=".", lw=1.2, label=label)
-        ax2.plot(k, np.where(lam > 0, lam, np.nan), color=cmap(i % 10), marker=".", lw=1.2)
+        ax1.plot(k, cond, color=color, marker=mark, ms=4, lw=1.2, label=label)
+        ax2.plot(k, np.where(lam > 0, lam, np.nan), color=color, marker=mark, ms=4, lw=1.2)
         bad = np.flatnonzero(~(lam > 1e-300) & np.isfinite(lam))
         if bad.size:
-            ax2.plot(k[bad], np.full(bad.size, 1e-300), "x", color=cmap(i % 10), ms=8)
+            ax2.plot(k[bad], np.full(bad.size, 1e-300), "x", color=color, ms=8)
     ax1.axhline(1e15, color="gray", ls="--", lw=1)
     ax1.set_yscale("log")
     ax1.set_xlabel("iteration")
