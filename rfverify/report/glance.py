@@ -40,12 +40,13 @@ def in_words(data: RunData, proven: dict) -> list:
         text = (f"In short: for {k} proven digits use the {k}-digit path (`rfverify solve --digits {k}`): it proved "
                 f"{path['reach']} of {path['runs']} problems")
         if cost["n_certified"] and cost["median_ratio"] is not None:
-            text += (f", in a median {sec(cost['median_time'])} s, {fmt(cost['median_ratio'], '.1f')}× the time of a "
-                     "double solve")
-        missed = [key for key, d in data.digits.items() if not d.get("certified")]
-        if missed:
-            text += f" (not: {', '.join(sorted(missed)[:4])}{'…' if len(missed) > 4 else ''}; table 'The {k}-digit path')"
+            text += (f", in a median {sec(cost['median_time'])} s ({fmt(cost['median_ratio'], '.1f')}× the time of a "
+                     "double solve)")
         out.append(text + ".")
+        missed = sorted((key, _why_not(d)) for key, d in data.digits.items() if not d.get("certified"))
+        if missed:
+            out.append(f"The {len(missed)} it did not: " + "; ".join(f"{key}, {why}" for key, why in missed[:4])
+                       + ("; …" if len(missed) > 4 else "") + f" (table 'The {k}-digit path').")
     doubles = [r for m, r in rows.items() if not m.endswith("path") and r["runs"]]
     if doubles:
         best = max(doubles, key=lambda r: r["reach"])
@@ -70,6 +71,20 @@ def in_words(data: RunData, proven: dict) -> list:
                    + ", ".join(f"{m}'s claim failed the independent recheck on {n} runs" for m, n in by.items())
                    + " (table 'Refuted claims').")
     return out
+
+
+def _why_not(record: dict) -> str:
+    """Why a k-digit path did not certify, in a few words, from its verdict."""
+    msg = str(record.get("message") or record.get("status") or "")
+    if "not positive semidefinite" in msg:
+        return "its W is indefinite as stored: the file's problem is not convex"
+    if "not in the cones" in msg:
+        return "no point strictly inside the cones was found"
+    if "not proven to" in msg:
+        return "fewer digits proven"
+    if record.get("status") in ("Timeout", "Crashed", "Error"):
+        return str(record["status"]).lower()
+    return msg[:60]
 
 
 def _names(methods) -> str:
