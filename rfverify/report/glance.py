@@ -40,8 +40,8 @@ def in_words(data: RunData, proven: dict) -> list:
         text = (f"In short: for {k} proven digits use the {k}-digit path (`rfverify solve --digits {k}`): it proved "
                 f"{path['reach']} of {path['runs']} problems")
         if cost["n_certified"] and cost["median_ratio"] is not None:
-            text += (f", in a median {sec(cost['median_time'])} s ({fmt(cost['median_ratio'], '.1f')}× the time of a "
-                     "double solve)")
+            text += (f", in a median {sec(cost['median_time'])} s (per problem, a median {fmt(cost['median_ratio'], '.1f')}× "
+                     f"the time of the bench's jqinv solve at {fmt(cost['base_tol'], 'g')})")
         out.append(text + ".")
         missed = sorted((key, _why_not(d)) for key, d in data.digits.items() if not d.get("certified"))
         if missed:
@@ -50,8 +50,10 @@ def in_words(data: RunData, proven: dict) -> list:
     doubles = [r for m, r in rows.items() if not m.endswith("path") and r["runs"]]
     if doubles:
         best = max(doubles, key=lambda r: r["reach"])
-        out.append(f"Double precision alone rarely gets there: the best method, {best['method']}, gives {k} proven "
-                   f"digits on {best['reach']} of {best['runs']} answers.")
+        out.append(f"Double precision alone rarely gets there provably: the best method, {best['method']}, gives {k} "
+                   f"proven digits on {best['reach']} of {best['runs']} answers (a run pushed to 1e-14 may pass through "
+                   "an iterate with more correct digits, table 'How far double precision gets', but nothing tells "
+                   "which iterate without a proof).")
     br = double_breaks(data)
     if br["n"]:
         why = ""
@@ -62,6 +64,10 @@ def in_words(data: RunData, proven: dict) -> list:
                    "removes exactly that.")
         out.append(f"Where it stops: the best double answer of a problem is proven to a median of "
                    f"{dig(br['median_best'])} digits.{why}")
+    out.append("Terms: v are the bodies' velocities, u the contact velocities, r the contact reactions and Hr "
+               "the forces they put on the bodies (a proven digit is a correct significant digit, proven by a "
+               "rigorous error bound); jqinv, qp2, reduced and noscaling are Algorithm 1 with different linear "
+               "systems, the k-digit path is Algorithm 1 continued in extended precision until the proof succeeds.")
     refuted = refuted_runs(data)
     if refuted:
         by = {}
@@ -77,9 +83,11 @@ def _why_not(record: dict) -> str:
     """Why a k-digit path did not certify, in a few words, from its verdict."""
     msg = str(record.get("message") or record.get("status") or "")
     if "not positive semidefinite" in msg:
-        return "its W is indefinite as stored: the file's problem is not convex"
+        return ("its W is indefinite as stored, so the file's problem is not convex (certify the global problem it "
+                "was made from instead)")
     if "not in the cones" in msg:
-        return "no point strictly inside the cones was found"
+        return ("no point strictly inside the cones was found (the feasible set may have no interior; an exact "
+                "answer can still be certified with rfverify certify)")
     if "not proven to" in msg:
         return "fewer digits proven"
     if record.get("status") in ("Timeout", "Crashed", "Error"):
