@@ -130,3 +130,22 @@ def test_report_of_algorithm1_forms_only_without_trajectories(tmp_path, capsys):
     assert machine["scipy"] == scipy.__version__ and "qdldl" in machine and "clarabel" in machine
     summary = (run / "summary.md").read_text()
     assert f"scipy {scipy.__version__}" in summary
+
+
+def test_the_first_screen_answers_in_plain_words(tmp_path):
+    """Issue 39: the first screen says, in sentences, which method gives k proven digits on which
+    problems, names the problems it did not prove with a reason and a next step, says where
+    double precision stops, and defines its terms."""
+    from rfverify.cli import main
+
+    run = tmp_path / "run"
+    assert main(["bench", "bundled:sphere", "bundled:cube", "--methods", "jqinv,clarabel", "--tol", "1e-8",
+                 "--no-trajectories", "--out", str(run), "--quiet"]) == 0
+    assert main(["report", str(run), "--quiet"]) == 0
+    summary = (run / "summary.md").read_text()
+    first = summary.split("## At a glance", 1)[1].split("![", 1)[0]
+    assert first.strip().startswith("In short: for 10 proven digits use the 10-digit path")
+    assert "it proved 1 of 2 problems" in first
+    assert "The 1 it did not: bundled/cube, its W is indefinite as stored" in first
+    assert "certify the global problem it was made from instead" in first
+    assert "Terms: v are the bodies' velocities" in first
