@@ -52,7 +52,7 @@ class Progress:
         if self.tty:
             self._draw(note)
         else:
-            self.stream.write(f"{self.label} [{self.done}/{self.total}] {self._elapsed()} {note}\n")
+            self.stream.write(f"{self.label} [{self._count()}] {self._elapsed()} {note}\n")
             self.stream.flush()
 
     def update_fraction(self, fraction: float, note: str = "") -> None:
@@ -66,7 +66,7 @@ class Progress:
         if self.tty:
             self._draw(note)
         elif crossed:
-            self.stream.write(f"{self.label} {self._count()} {self._elapsed()} {note}\n")
+            self.stream.write(f"{self.label} [{self._count()}] {self._elapsed()} {note}\n")
             self.stream.flush()
 
     def close(self) -> None:

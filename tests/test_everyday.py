@@ -198,7 +198,7 @@ def test_generate_reports_progress_as_a_percentage(capsys):
     with tempfile.TemporaryDirectory() as d:
         code, out, err = run(capsys, "generate", "SpheresPile", "--size", "20", "--steps", "3", "--out", d)
     progress = [x for x in err.splitlines() if x.startswith("generate SpheresPile")]
-    assert code == 0 and progress and all(re.match(r"generate SpheresPile \d+% ", x) for x in progress), err
+    assert code == 0 and progress and all(re.match(r"generate SpheresPile \[\d+%\] ", x) for x in progress), err
     assert "(%)" not in err and "/100]" not in err
 
 
