@@ -293,3 +293,54 @@ def test_auto_takes_cholmod_where_it_is_installed():
     assert back.engine == "cholmod" and isinstance(back.chol, CholmodMixed)
     # the hybrid's contact-space half takes the same engine
     assert isinstance(choose_backend(data, "hybrid").contact.chol, CholmodMixed)
+
+
+# ------------------------------------------- one refinement: the Newton driver's, not the factor's
+def test_the_extended_run_refines_each_solve_once_and_is_as_accurate():
+    """Under the extended IPM the contact-space solves are float64-accurate
+    (NEWTON_REFINED_TARGET) and the Newton driver's refinement against the unreduced system does
+    the rest: the same iterations, μ and residual floors as with solves refined to 1e-29, with
+    fewer float64 solves in all.  (The iterates themselves agree to ~12 digits, not 20: both
+    runs' solves sit on the same floor of relative residuals, 1e-29 to 1e-22, and a step to the
+    boundary of a Lorentz cone has a square-root sensitivity to it.)"""
+    from rfverify.digits import _start_from
+    from rfverify.extended import ipm as X
+    from rfverify.extended.contactspace import NEWTON_REFINED_TARGET
+
+    problem = random_problem(40, 90, seed=23)
+    data = ExtendedData(problem)
+    start = _start_from(data, rfverify.solve(problem, tol=1e-10))
+    light = choose_backend(data)
+    assert light.chol.backward_target == NEWTON_REFINED_TARGET
+    strict = ContactSpace(data)
+    assert strict.chol.backward_target == 1e-29
+    runs = {name: X.run(data, start, max_iter=9, backend=b) for name, b in (("light", light), ("strict", strict))}
+    assert runs["light"].nit == runs["strict"].nit == 9
+    for key in ("mu", "pinfeas", "dinfeas"):
+        a, b = (np.array(runs[n].trace[key]) for n in ("light", "strict"))
+        assert np.all(np.abs(np.log10(a / b)) < 0.5), key  # within a factor of ~3 at every iterate
+    assert runs["light"].trace["pinfeas"][-1] < 1e-26 and runs["light"].trace["mu"][-1] < 1e-20
+    assert max(runs["light"].trace["solve_residual"]) < 1e-21
+    for key in ("v", "r_t", "z"):
+        a, b = (getattr(runs[n], key).longdouble() for n in ("light", "strict"))
+        assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max(), key
+    steps = {n: runs[n].stats["refinement_steps"] for n in runs}
+    assert steps["light"] < 0.6 * steps["strict"], steps
+    assert light.tightened_at is None
+
+
+def test_a_badly_refined_newton_solve_makes_the_solves_double_double_again():
+    """The safety net: one Newton solve left above STRICT_AFTER (a float64 factor too poor for
+    one-step solves) makes every later solve refine to 1e-29, and the back end says so."""
+    from rfverify.extended.contactspace import STRICT_AFTER
+
+    back = choose_backend(ExtendedData(random_problem(8, 14, seed=1)))
+    back.observe(3, 1e-20, STRICT_AFTER / 10)
+    back.observe(4, 1e-21, None)
+    assert back.tightened_at is None and back.chol.backward_target > 1e-29
+    back.observe(5, 1e-22, STRICT_AFTER * 10)
+    assert back.tightened_at == 5 and back.chol.backward_target == 1e-29 and back.chol.stop_at == pytest.approx(1e-31)
+    assert "double-double accuracy from iteration 5" in back.name
+    nan = choose_backend(ExtendedData(random_problem(8, 14, seed=1)))
+    nan.observe(2, 1e-20, float("nan"))
+    assert nan.tightened_at == 2

@@ -9,7 +9,9 @@ the double solver in three places, each for a reason measured on the reference (
   Jordan algebra, factorisation (:mod:`.ldl`), residuals;
 * each Newton solve is refined against the unreduced three-block system (dual, primal,
   complementarity rows).  Without it the primal residual grew like μ^-0.45 and left the
-  cones at μ ≈ 1e-28 in 32-digit arithmetic; with one step it stayed at 1e-34;
+  cones at μ ≈ 1e-28 in 32-digit arithmetic; with one step it stayed at 1e-34.  Since it
+  corrects whatever the reduction and the factor lose, the back end's own solves need only
+  about float64 accuracy (:data:`.contactspace.NEWTON_REFINED_TARGET`);
 * the run stops when the *proof* succeeds (``until`` callback), not at a fixed μ.
 
 The Newton system is solved by a back end of :mod:`.system` (by default the scaled
@@ -274,12 +276,14 @@ class _DDBackend:
 
 
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, backend=None,
-        refine_max: int = 3, gamma_max: float = 0.99, progress=None) -> ExtendedResult:
+        refine_max: int = 12, gamma_max: float = 0.99, progress=None) -> ExtendedResult:
     """Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) in double-double from ``start`` =
     {"v", "r_t", "z"} (any float dtype; converted exactly).  ``until(iterate)`` is called at
     every iterate (before the step); returning True stops the run with status "Stopped".
     ``gamma_max`` caps the step-to-boundary fraction γ = 0.9 + 0.09α (the paper's rule) from
-    above."""
+    above.  ``refine_max`` bounds the refinement steps of each Newton solve against the
+    unreduced system: about four where the back end's solves are float64-accurate
+    (:data:`.contactspace.NEWTON_REFINED_TARGET`), one or two where they are double-double."""
     t0 = time.perf_counter()
     backend = backend or choose_backend(data)
     space = _DDSpace(data)

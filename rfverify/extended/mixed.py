@@ -49,11 +49,11 @@ def _symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl, ax):
     return worst
 
 
-def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int):
+def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int, stop_at: float = 1e-31):
     """Iterative refinement of A x = b to double-double accuracy with a float64 ``oracle``
     (``oracle(r)`` ≈ A⁻¹r in float64: a factor of A rounded to double), as in SoPlex's
     iterative refinement.  ``A`` = (high, low) values of the upper triangle in CSC (``Ap``,
-    ``Ai``); b = (bh, bl).  Stops at a componentwise backward error below 1e-31, after
+    ``Ai``); b = (bh, bl).  Stops at a componentwise backward error below ``stop_at``, after
     ``max_steps``, or when a step does not halve it (stalled or NaN: the best iterate is kept).
     Returns (best backward error, (xh, xl), steps taken)."""
     n = Ap.size - 1
@@ -71,7 +71,7 @@ def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int):
             best = min(best, backward) if backward == backward else best
             break
         best, best_x = backward, (nh, nl)
-        if backward < 1e-31:
+        if backward < stop_at:
             break
     return best, best_x, steps
 
@@ -79,7 +79,8 @@ def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int):
 class _RefinedFloat64Factor:
     """The part :class:`MixedCholesky` and :class:`CholmodMixed` share: a float64 factor whose
     solves are refined against the double-double matrix (:func:`refine_in_double_double`) to
-    a componentwise backward error ≤ ``backward_target``, and the fallback, for good, to a
+    a componentwise backward error ≤ ``backward_target`` (refinement goes on to a hundredth of it,
+    for headroom), and the fallback, for good, to a
     double-double factor where the float64 factorisation fails or refinement stalls
     (:attr:`precision` says which is in use, :attr:`fallback_reason` why).
 
@@ -90,7 +91,7 @@ class _RefinedFloat64Factor:
     the stored upper triangle ``Ap``, ``Ai``)."""
 
     def _init_refinement(self, backward_target: float, max_steps: int) -> None:
-        self.backward_target = backward_target
+        self.set_backward_target(backward_target)
         self.max_steps = max_steps
         self.precision = "mixed"
         self.fallback_reason = ""
@@ -99,6 +100,13 @@ class _RefinedFloat64Factor:
         self.solves = 0  # statistics: solves and refinement steps so far
         self.refinement_steps = 0
         self._A = None
+
+    def set_backward_target(self, backward_target: float) -> None:
+        """Solves are refined to a componentwise backward error ≤ ``backward_target`` (1e-29:
+        double-double accuracy; up to ~1e-10 where the caller refines against a larger system
+        itself, so that one float64 solve usually suffices)."""
+        self.backward_target = float(backward_target)
+        self.stop_at = self.backward_target / 100
 
     def _fall_back(self, reason: str) -> int:
         self.precision = "double-double"
@@ -123,7 +131,7 @@ class _RefinedFloat64Factor:
         if self.precision == "double-double":
             return self._dd_solve(bh, bl)
         best, best_x, steps = refine_in_double_double(self.Ap, self.Ai, self._A, *self._to_stored(bh, bl),
-                                                      self._float64_solve, self.max_steps)
+                                                      self._float64_solve, self.max_steps, self.stop_at)
         self.last_backward_error, self.last_steps = best, steps
         self.solves += 1
         self.refinement_steps += steps

@@ -25,7 +25,7 @@ solve_residual)``, once per iteration.  :func:`choose_backend` builds one.
 
 from __future__ import annotations
 
-from .contactspace import ContactSpace
+from .contactspace import NEWTON_REFINED_TARGET, ContactSpace
 from .data import ExtendedData
 from .dofspace import DofSpace
 from .factored import FactoredBackend
@@ -60,6 +60,8 @@ class Hybrid(FactoredBackend):
 
     def observe(self, k: int, mu: float, solve_residual: float | None):
         """Called by the driver once per iteration (before the factorisation)."""
+        if self.current is self.contact:
+            self.contact.observe(k, mu, solve_residual)
         if self._mu0 is None:
             self._mu0 = mu
         if self.current is self.dof and (mu < self.switch * self._mu0
@@ -85,7 +87,9 @@ def choose_backend(data: ExtendedData, backend: str = "auto", engine: str = "aut
     measured (docs/DECISIONS.md), and its accuracy does not depend on μ.  ``contact-dd`` factors
     in double-double throughout; ``dof`` and ``hybrid`` are the dof-space forms.  ``engine``
     (:func:`.contactspace.resolve_engine`) is the float64 factorisation of the contact-space form:
-    chosen by size ("auto"), or forced ("cholmod", "ldl")."""
+    chosen by size ("auto"), or forced ("cholmod", "ldl").  The contact-space solves are refined
+    only to :data:`.contactspace.NEWTON_REFINED_TARGET`: the back end serves the extended IPM,
+    whose Newton driver refines each solve against the unreduced system."""
     if data.local and backend in ("dof", "hybrid"):
         from ..errors import InvalidArgumentError
 
@@ -94,9 +98,9 @@ def choose_backend(data: ExtendedData, backend: str = "auto", engine: str = "aut
     if backend == "dof":
         return DofSpace(data, max_local_dofs=10**9)
     if backend in ("auto", "contact"):
-        return ContactSpace(data, engine=engine)
+        return ContactSpace(data, engine=engine, backward_target=NEWTON_REFINED_TARGET)
     if backend == "contact-dd":
         return ContactSpace(data, mixed=False)
     if backend == "hybrid":
-        return Hybrid(data, contact=ContactSpace(data, engine=engine))
+        return Hybrid(data, contact=ContactSpace(data, engine=engine, backward_target=NEWTON_REFINED_TARGET))
     raise ValueError(f"backend {backend!r} is not one of auto, contact, contact-dd, hybrid, dof")
