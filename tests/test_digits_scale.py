@@ -166,7 +166,7 @@ def test_newton_solve_refined_against_the_double_double_matrix_at_an_iterate():
                       zip(S_hi.data[S_hi.indptr[i]:S_hi.indptr[i + 1]], S_hi.indices[S_hi.indptr[i]:S_hi.indptr[i + 1]]))
             worst = max(worst, float(abs(acc)) / (den + abs(rhs[i])))
     assert worst <= 1e-28
-    (dv1, dr1), (dv2, dr2) = sols["cholmod"], sols["ldl"]
+    (dv1, _), (dv2, _) = sols["cholmod"], sols["ldl"]
     v1, v2 = dd.to_longdouble(*dv1), dd.to_longdouble(*dv2)
     assert np.max(np.abs(v1 - v2)) <= 1e-20 * np.max(np.abs(v2))
 

@@ -14,7 +14,6 @@ eigenvalue drop back into the proof must fail these checks.
 from __future__ import annotations
 
 import dataclasses
-import math
 import types
 
 import h5py
