@@ -17,7 +17,9 @@ class ReducedNewton:
 
     (``backend.update(scaling) -> bool``, ``backend.solve(a, t) -> (dv, dr)`` in the space's
     vectors, ``backend.name``; optionally ``backend.observe(k, mu, last_residual)`` before each
-    update).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
+    update, and ``backend.retry_solve(residual) -> bool``, asked after a solve that stopped above
+    ``floor``: True when the back end has made its solves more accurate, and the system is
+    solved again).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
     dz = Q_{p⁻¹}(c − Q_{p⁻¹} Jᵀ dr̃), and the primal row H̃ dv − J dz = b then reads
     H̃ dv + G dr̃ = t with t = b + J Q_{p⁻¹} c.  ``scaling.quad(k, y)`` applies Q_{p^k}.  Refinement: at most ``refine_max`` steps, down
     to the relative residual ``floor`` (about the precision's unit roundoff)."""
@@ -59,6 +61,12 @@ class ReducedNewton:
     def solve(self, a, b, c, phase: str) -> Direction:
         dv, dr, dz, steps, res = refined_newton(self._core, self._unreduced_residual, a, b, c, inf=self.inf,
                                                 refine_max=self.refine_max, floor=self.floor)
+        retry = getattr(self.backend, "retry_solve", None)
+        if not res <= self.floor and retry is not None and retry(res):
+            # the back end made its solves more accurate: solve this system again
+            dv, dr, dz, more, res = refined_newton(self._core, self._unreduced_residual, a, b, c, inf=self.inf,
+                                                   refine_max=self.refine_max, floor=self.floor)
+            steps += more
         if not math.isfinite(res):
             raise Breakdown(f"the {self.name} solve failed")
         self._residual = res if self._residual is None else max(self._residual, res)

@@ -25,8 +25,9 @@ the Newton driver refines every solve against the unreduced three-block system a
 (:func:`rfverify.algorithm.rules.refined_newton`), so one float64 solve each, not five to reach
 double-double accuracy twice over, is what it needs (docs/DECISIONS.md, "Refinement once")."""
 STRICT_AFTER = 1e-18
-"""A Newton solve whose refined relative residual stays above this makes the contact-space
-solves refine to double-double accuracy again (``backward_target`` 1e-29), for good.  The
+"""A Newton solve whose refined relative residual stays above this is solved again with the
+contact-space solves refined to double-double accuracy (``backward_target`` 1e-29), as are all
+later ones.  The
 attainable relative residual grows as μ falls (the right-hand side shrinks, the error floor
 does not): from ~1e-29 to ~1e-21 at μ ≈ 1e-30 on a bed, a Chute and a random problem, the same
 with one-step and with fully refined solves; a float64 factor that fails leaves ~1e-16."""
@@ -154,7 +155,7 @@ class ContactSpace(FactoredBackend):
             how = f"float64 {engine} factor refined in double-double"
         reason = getattr(self.chol, "fallback_reason", "")
         if self.tightened_at is not None and not reason:
-            reason = f"solves refined to double-double accuracy from iteration {self.tightened_at}"
+            reason = f"solves refined to double-double accuracy from factorisation {self.tightened_at}"
         form = "I + F⁻¹W̃F⁻ᵀ, W̃ = P W P of the local file" if self.data.local else "I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ"
         return f"contact-space, scaled ({form}), {how}" + (f" ({reason})" if reason else "")
 
@@ -163,7 +164,7 @@ class ContactSpace(FactoredBackend):
         """``backward_target``: the componentwise backward error the float64 factor's solves are
         refined to (:meth:`.mixed._RefinedFloat64Factor.set_backward_target`): 1e-29, double-double
         accuracy, by default; :data:`NEWTON_REFINED_TARGET` under a driver that refines each
-        Newton solve itself (:func:`.system.choose_backend`), which :meth:`observe` tightens
+        Newton solve itself (:func:`.system.choose_backend`), which :meth:`retry_solve` tightens
         to 1e-29 if a Newton solve then refines badly."""
         from scipy.sparse.csgraph import connected_components
 
@@ -208,7 +209,7 @@ class ContactSpace(FactoredBackend):
             self.chol = CholmodMixed(pattern, backward_target=backward_target)
         else:
             self.chol = MixedCholesky(pattern, backward_target=backward_target)
-        self.tightened_at = None  # the iteration from which solves refine to 1e-29 again
+        self.tightened_at = None  # the factorisation from which solves refine to 1e-29 again
         self.pos = np.full(valid.shape, -1, dtype=np.int64)
         self.pos[take] = self.chol.positions(gi[take], gj[take])
         self._W = None
@@ -341,16 +342,18 @@ class ContactSpace(FactoredBackend):
         scatter_add(pos, np.ascontiguousarray(mh[keep]), np.ascontiguousarray(ml[keep]), h, lo)
         return h, lo
 
-    def observe(self, k: int, mu: float, solve_residual: float | None) -> None:
-        """Called by the Newton driver once per iteration: a Newton solve of the last iteration
-        whose refinement against the unreduced system stopped above :data:`STRICT_AFTER`
-        (a float64 factor too inaccurate for one-step solves) makes every later solve refine
-        to double-double accuracy."""
+    def retry_solve(self, residual: float) -> bool:
+        """Asked by the Newton driver after a solve whose refinement against the unreduced
+        system stopped at relative residual ``residual``: above :data:`STRICT_AFTER` (a float64
+        factor too inaccurate for one-step solves), every solve from now on — this one again
+        included — is refined to double-double accuracy (and falls back to a double-double
+        factor where that stalls).  True when that changed anything."""
         chol = self.chol
-        if (solve_residual is not None and not solve_residual <= STRICT_AFTER
-                and getattr(chol, "backward_target", 0.0) > 1e-29):
-            chol.set_backward_target(1e-29)
-            self.tightened_at = k
+        if residual <= STRICT_AFTER or not getattr(chol, "backward_target", 0.0) > 1e-29:
+            return False
+        chol.set_backward_target(1e-29)
+        self.tightened_at = self.factorisations
+        return True
 
     def update(self, ph, pl, pih, pil, spec) -> bool:
         d = self.data

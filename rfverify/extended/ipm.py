@@ -264,8 +264,9 @@ class _DDBackend:
     def __init__(self, backend):
         self.backend = backend
         self.name = backend.name
-        if hasattr(backend, "observe"):
-            self.observe = backend.observe
+        for hook in ("observe", "retry_solve"):
+            if hasattr(backend, hook):
+                setattr(self, hook, getattr(backend, hook))
 
     def update(self, sc: _DDScaling) -> bool:
         return self.backend.update(sc.ph, sc.pl, sc.pih, sc.pil, sc.spec)

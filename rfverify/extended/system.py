@@ -19,8 +19,10 @@ A back end has ``name`` (str); ``update(ph, pl, pih, pil, spec) -> bool``, which
 the NT point p, p⁻¹ and p's spectral data (:func:`.cones.nt_scaling`) and is False when the
 matrix is not positive definite or a contact block is singular; ``solve(a, t)`` →
 ((dv_hi, dv_lo), (dr_hi, dr_lo)), with a, t given as (hi, lo) float64 pairs; ``stats()``
-(:class:`.factored.FactoredBackend`); and, the hybrid only, ``observe(k, mu,
-solve_residual)``, once per iteration.  :func:`choose_backend` builds one.
+(:class:`.factored.FactoredBackend`); the hybrid only, ``observe(k, mu, solve_residual)``,
+once per iteration; and the contact-space forms, ``retry_solve(residual) -> bool``, after a
+Newton solve that refined badly (:class:`.algorithm.newton.ReducedNewton`).
+:func:`choose_backend` builds one.
 """
 
 from __future__ import annotations
@@ -60,14 +62,16 @@ class Hybrid(FactoredBackend):
 
     def observe(self, k: int, mu: float, solve_residual: float | None):
         """Called by the driver once per iteration (before the factorisation)."""
-        if self.current is self.contact:
-            self.contact.observe(k, mu, solve_residual)
         if self._mu0 is None:
             self._mu0 = mu
         if self.current is self.dof and (mu < self.switch * self._mu0
                                           or (solve_residual is not None and solve_residual > self.bad_solve)):
             self.current = self.contact
             self.switched_at = k
+
+    def retry_solve(self, residual: float) -> bool:
+        """The contact-space form's safety net (:meth:`.ContactSpace.retry_solve`) while it is in use."""
+        return self.current is self.contact and self.contact.retry_solve(residual)
 
     def update(self, ph, pl, pih, pil, spec) -> bool:
         ok = self.current.update(ph, pl, pih, pil, spec)
