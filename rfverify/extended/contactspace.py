@@ -27,10 +27,10 @@ double-double accuracy twice over, is what it needs (docs/DECISIONS.md, "Refinem
 STRICT_AFTER = 1e-18
 """A Newton solve whose refined relative residual stays above this is solved again with the
 contact-space solves refined to double-double accuracy (``backward_target`` 1e-29), as are all
-later ones.  The
-attainable relative residual grows as μ falls (the right-hand side shrinks, the error floor
-does not): from ~1e-29 to ~1e-21 at μ ≈ 1e-30 on a bed, a Chute and a random problem, the same
-with one-step and with fully refined solves; a float64 factor that fails leaves ~1e-16."""
+later ones.  The attainable relative residual grows as μ falls (the right-hand side shrinks,
+the error floor does not): from ~1e-29 to ~1e-21 at μ ≈ 1e-30 on a bed, a Chute and a random
+problem, the same with one-step and with fully refined solves; a float64 factor that fails
+leaves ~1e-16 or worse."""
 DENSE_BLOCK = 200  # blocks of M up to this size are inverted densely when forming W̃
 DENSE_Y_ENTRIES = 2e7  # largest m × nk of a dense Y = blockdiag(L_b⁻¹)Hᵀ (2 float64 each: 320 MB)
 
