@@ -57,6 +57,11 @@ def test_ctrl_c_at_random_moments_always_stops_the_bench(tmp_path):
         codes.append(proc.returncode)
         if proc.returncode == 0:  # the bench had already finished: nothing to interrupt
             continue
+        if proc.returncode == -signal.SIGINT and err == "" and "runs done" in out.decode():
+            # Finished too: the signal landed in the interpreter's last instants, after its
+            # finalisation put SIGINT back to the default action (CPython's _PySignal_Fini).
+            # Seen once in ~100 trials; anything else killed by SIGINT fails below.
+            continue
         assert proc.returncode == 130, (trial, proc.returncode, err)
         assert err == "rfverify bench: interrupted\n", (trial, err)
         deadline = time.monotonic() + 10
