@@ -360,3 +360,17 @@ def test_without_the_retry_the_stored_equations_case_fails(monkeypatch):
     monkeypatch.setattr(CS, "retry_solve", lambda self, residual: False)
     with pytest.raises(AssertionError):
         check_stored_solution(7, 9)
+
+
+def test_the_badly_refined_solve_itself_is_solved_again():
+    """Tightening alone would fix the later solves; the retry also re-solves the bad one, so no
+    iteration steps along a direction with relative residual above STRICT_AFTER (without the
+    re-solve, this case takes one at 1e-2 and still proves: only the trace shows it)."""
+    from exact_problems import exact_problem
+    from rfverify.extended.contactspace import STRICT_AFTER
+
+    p, *_ = exact_problem(7, 9, asymmetry=12)
+    out = rfverify.solve_to_digits(p, digits=10, as_stored=True)
+    assert out.success, out.message
+    assert "double-double" in out.certificate.extra["backend"]  # the safety net did act here
+    assert max(out.extended.trace["solve_residual"]) <= STRICT_AFTER, out.extended.trace["solve_residual"]
