@@ -297,12 +297,14 @@ def test_auto_takes_cholmod_where_it_is_installed():
 
 # ------------------------------------------- one refinement: the Newton driver's, not the factor's
 def test_the_extended_run_refines_each_solve_once_and_is_as_accurate():
-    """Under the extended IPM the contact-space solves are float64-accurate
-    (NEWTON_REFINED_TARGET) and the Newton driver's refinement against the unreduced system does
-    the rest: the same iterations, μ and residual floors as with solves refined to 1e-29, with
-    fewer float64 solves in all.  (The iterates themselves agree to ~12 digits, not 20: both
-    runs' solves sit on the same floor of relative residuals, 1e-29 to 1e-22, and a step to the
-    boundary of a Lorentz cone has a square-root sensitivity to it.)"""
+    """Under the extended IPM each contact-space solve is one unchecked float64 solve
+    (NEWTON_REFINED_TARGET = inf) and the Newton driver's refinement against the unreduced
+    system does the rest, stopping once each block meets NEWTON_ENOUGH: the same iterations, μ
+    and residual floors as with solves refined to 1e-29 and refinement to the floor, with
+    fewer float64 solves in all.  (The iterates themselves agree to ~12 digits, not 20: a step
+    to the boundary of a Lorentz cone has a square-root sensitivity to the solves' differences.)"""
+    import math
+
     from rfverify.digits import _start_from
     from rfverify.extended import ipm as X
     from rfverify.extended.contactspace import NEWTON_REFINED_TARGET
@@ -311,31 +313,102 @@ def test_the_extended_run_refines_each_solve_once_and_is_as_accurate():
     data = ExtendedData(problem)
     start = _start_from(data, rfverify.solve(problem, tol=1e-10))
     light = choose_backend(data)
-    assert light.chol.backward_target == NEWTON_REFINED_TARGET
+    assert light.chol.backward_target == NEWTON_REFINED_TARGET == math.inf
     strict = ContactSpace(data)
     assert strict.chol.backward_target == 1e-29
-    runs = {name: X.run(data, start, max_iter=9, backend=b) for name, b in (("light", light), ("strict", strict))}
+    runs = {"light": X.run(data, start, max_iter=9, backend=light),
+            "strict": X.run(data, start, max_iter=9, backend=strict, enough=None)}
     assert runs["light"].nit == runs["strict"].nit == 9
     for key in ("mu", "pinfeas", "dinfeas"):
         a, b = (np.array(runs[n].trace[key]) for n in ("light", "strict"))
         assert np.all(np.abs(np.log10(a / b)) < 0.5), key  # within a factor of ~3 at every iterate
     assert runs["light"].trace["pinfeas"][-1] < 1e-26 and runs["light"].trace["mu"][-1] < 1e-20
-    assert max(runs["light"].trace["solve_residual"]) < 1e-21
+    assert max(runs["light"].trace["solve_residual"]) < 1e-18
     for key in ("v", "r_t", "z"):
         a, b = (getattr(runs[n], key).longdouble() for n in ("light", "strict"))
         assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max(), key
     steps = {n: runs[n].stats["refinement_steps"] for n in runs}
-    assert steps["light"] < 0.6 * steps["strict"], steps
+    assert steps["light"] < 0.5 * steps["strict"], steps
+    assert steps["light"] == runs["light"].stats["solves"]  # one float64 solve per contact-space solve
     assert light.tightened_at is None
 
 
-def test_a_badly_refined_newton_solve_is_solved_again_in_double_double():
-    """The safety net: a Newton solve left above STRICT_AFTER (a float64 factor too poor for
-    one-step solves) is solved again, and every later one, with solves refined to 1e-29; the
-    back end says so.  Measured need: an unsymmetric M solved as stored (seed 7, 9 contacts) took
-    a direction with relative residual 2e-2 without it and ended unproven."""
+def _diagonal_newton(error):
+    """A three-block 'Newton system' x = rhs with an inexact core ``error(a, b, c)`` (what the core
+    gets wrong) and the exact residual, for :func:`refined_newton`."""
+    def core(a, b, c):
+        ea, eb, ec = error(a, b, c)
+        return a + ea, b + eb, c + ec
+
+    def residual(a, b, c, x, y, z):
+        return a - x, b - y, c - z
+
+    return core, residual
+
+
+def test_refinement_stops_when_each_block_meets_its_own_right_hand_side():
+    """η is per block: an error of 1e-12 in the b rows is 1e-12 of the largest right-hand side
+    but 1e-2 of b's own (1e-10), so the inexact solve is refined once, not accepted; with η the
+    loop stops there, without it at the floor; a core that gains less than half per step
+    stalls and says so (settled False)."""
+    from rfverify.algorithm.rules import refined_newton
+
+    inf = lambda x: float(np.max(np.abs(x)))  # noqa: E731
+    a, b, c = np.ones(4), np.full(4, 1e-10), np.ones(4)
+    # the b rows pick up 1e-12 of a (a coupling the exact residual sees), otherwise exact
+    core, residual = _diagonal_newton(lambda a, b, c: (0 * a, 1e-12 * a, 0 * c))
+    *_, steps, res, settled = refined_newton(core, residual, a, b, c, inf=inf, refine_max=12, floor=1e-31,
+                                             enough=1e-8)
+    assert (steps, settled) == (1, True) and res == 0.0
+    # a relative error of 1e-3 everywhere: η = 1e-8 needs three residuals (1e-3, 1e-6, 1e-9)
+    core, residual = _diagonal_newton(lambda a, b, c: (-1e-3 * a, -1e-3 * b, -1e-3 * c))
+    *_, steps, res, settled = refined_newton(core, residual, a, b, c, inf=inf, refine_max=12, floor=1e-31,
+                                             enough=1e-8)
+    assert (steps, settled) == (2, True) and 1e-10 < res <= 1e-8
+    *_, steps_floor, res, settled = refined_newton(core, residual, a, b, c, inf=inf, refine_max=12,
+                                                   floor=1e-31, enough=None)
+    assert steps_floor > steps and res < 1e-20
+    core, residual = _diagonal_newton(lambda a, b, c: (-0.75 * a, -0.75 * b, -0.75 * c))
+    *_, steps, res, settled = refined_newton(core, residual, a, b, c, inf=inf, refine_max=12, floor=1e-31,
+                                             enough=1e-8)
+    assert (steps, settled) == (1, False) and res == pytest.approx(0.75 ** 2)  # 0.75, then 0.5625: stalled
+
+
+def test_an_unchecked_solve_is_one_float64_solve():
+    """backward_target = inf: the float64 factor's answer as it is (the driver checks it)."""
+    import math
+
+    from rfverify.digits import _start_from
+    from rfverify.extended import ipm as X
+
+    problem = random_problem(8, 14, seed=1)
+    data = ExtendedData(problem)
+    back = choose_backend(data)
+    assert back.chol.backward_target == math.inf
+    X.run(data, _start_from(data, rfverify.solve(problem, tol=1e-10)), max_iter=1, backend=back)
+    chol = back.chol
+    rng = np.random.default_rng(0)
+    bh = rng.standard_normal(chol.n)
+    before = chol.solves
+    xh, xl = chol.solve(bh, np.zeros_like(bh))
+    assert chol.solves == before + 1 and chol.last_steps == 1 and not np.any(xl)
+    np.testing.assert_array_equal(xh, chol._engine.solve(bh))
+
+
+def _bad_float64_factor(monkeypatch):
+    """Every float64 contact-space solve returns a quarter of the right answer: refinement
+    against the unreduced system gains less than half per step and stalls at once."""
+    original = CholmodMixed._float64_solve
+    monkeypatch.setattr(CholmodMixed, "_float64_solve", lambda self, r: 0.25 * original(self, r))
+
+
+def test_a_badly_refined_newton_solve_is_solved_again_in_double_double(monkeypatch):
+    """The safety net: a Newton solve whose refinement stalls above STRICT_AFTER (a float64
+    factor too poor for unchecked solves) is solved again, and every later one, with checked
+    solves refined to 1e-29, which fall back to a double-double factor where they stall; the
+    back end says so, the solve that stalled is solved again (no direction above STRICT_AFTER
+    is taken) and the problem is proven."""
     from rfverify.extended.contactspace import STRICT_AFTER
-    from test_stored_equations import check_stored_solution
 
     back = choose_backend(ExtendedData(random_problem(8, 14, seed=1)))
     assert not back.retry_solve(STRICT_AFTER / 10)
@@ -349,28 +422,30 @@ def test_a_badly_refined_newton_solve_is_solved_again_in_double_double():
     assert not hybrid.retry_solve(1.0)  # the dof-space form has its own switch
     hybrid.current = hybrid.contact
     assert hybrid.retry_solve(1.0) and hybrid.contact.chol.backward_target == 1e-29
-    check_stored_solution(7, 9)
+
+    _bad_float64_factor(monkeypatch)
+    out = rfverify.solve_to_digits(random_problem(20, 40, seed=3), digits=10)
+    assert out.success, out.message
+    assert "double-double factor (refinement stalled" in out.certificate.extra["backend"]
+    assert max(out.extended.trace["solve_residual"]) <= STRICT_AFTER, out.extended.trace["solve_residual"]
 
 
-def test_without_the_retry_the_stored_equations_case_fails(monkeypatch):
-    """The retry is what proves that case (the test above would pass without it otherwise)."""
+def test_without_the_retry_a_bad_float64_factor_goes_unproven(monkeypatch):
+    """The retry is what proves that case (the test above would pass without it otherwise):
+    with unchecked solves and no retry, every direction is wrong by O(1) and nothing is proven."""
     from rfverify.extended.contactspace import ContactSpace as CS
+
+    _bad_float64_factor(monkeypatch)
+    monkeypatch.setattr(CS, "retry_solve", lambda self, residual: False)
+    out = rfverify.solve_to_digits(random_problem(20, 40, seed=3), digits=10)
+    assert not out.success
+    assert min(out.extended.trace["solve_residual"]) > 1e-3
+
+
+def test_the_stored_equations_case_is_proven_with_inexact_newton_solves():
+    """An unsymmetric M solved as stored: the reduction uses (M + Mᵀ)/2 and refinement the stored
+    M, so each solve takes many steps; the per-block test ends them as soon as the direction is
+    accurate enough, and the stored equations' solution is proven to 10 digits."""
     from test_stored_equations import check_stored_solution
 
-    monkeypatch.setattr(CS, "retry_solve", lambda self, residual: False)
-    with pytest.raises(AssertionError):
-        check_stored_solution(7, 9)
-
-
-def test_the_badly_refined_solve_itself_is_solved_again():
-    """Tightening alone would fix the later solves; the retry also re-solves the bad one, so no
-    iteration steps along a direction with relative residual above STRICT_AFTER (without the
-    re-solve, this case takes one at 1e-2 and still proves: only the trace shows it)."""
-    from exact_problems import exact_problem
-    from rfverify.extended.contactspace import STRICT_AFTER
-
-    p, *_ = exact_problem(7, 9, asymmetry=12)
-    out = rfverify.solve_to_digits(p, digits=10, as_stored=True)
-    assert out.success, out.message
-    assert "double-double" in out.certificate.extra["backend"]  # the safety net did act here
-    assert max(out.extended.trace["solve_residual"]) <= STRICT_AFTER, out.extended.trace["solve_residual"]
+    check_stored_solution(7, 9)

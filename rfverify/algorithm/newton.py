@@ -17,19 +17,22 @@ class ReducedNewton:
 
     (``backend.update(scaling) -> bool``, ``backend.solve(a, t) -> (dv, dr)`` in the space's
     vectors, ``backend.name``; optionally ``backend.observe(k, mu, last_residual)`` before each
-    update, and ``backend.retry_solve(residual) -> bool``, asked after a solve that stopped above
-    ``floor``: True when the back end has made its solves more accurate, and the system is
-    solved again).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
+    update, and ``backend.retry_solve(residual) -> bool``, asked after a solve whose refinement
+    stalled above ``floor`` short of ``enough``: True when the back end has made its solves more
+    accurate, and the system is solved again).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
     dz = Q_{p⁻¹}(c − Q_{p⁻¹} Jᵀ dr̃), and the primal row H̃ dv − J dz = b then reads
-    H̃ dv + G dr̃ = t with t = b + J Q_{p⁻¹} c.  ``scaling.quad(k, y)`` applies Q_{p^k}.  Refinement: at most ``refine_max`` steps, down
-    to the relative residual ``floor`` (about the precision's unit roundoff)."""
+    H̃ dv + G dr̃ = t with t = b + J Q_{p⁻¹} c.  ``scaling.quad(k, y)`` applies Q_{p^k}.
+    Refinement: at most ``refine_max`` steps, down to the relative residual ``floor`` (about the
+    precision's unit roundoff) or, with ``enough`` = η, until each block's residual is at most η
+    times its right-hand side (:func:`.rules.refined_newton`)."""
 
-    def __init__(self, space, backend, *, refine_max: int, floor: float, inf):
+    def __init__(self, space, backend, *, refine_max: int, floor: float, inf, enough: float | None = None):
         self.space = space
         self.backend = backend
         self.name = backend.name
         self.refine_max = refine_max
         self.floor = floor
+        self.enough = enough
         self.inf = inf
         self.scaling = None
         self._last_residual = None  # the largest relative residual of the last iteration's solves
@@ -58,14 +61,16 @@ class ReducedNewton:
         return (a - sp.M @ dv + sp.HT @ dr, b - sp.velocity(dv, dr) + sp.J @ dz,
                 c - q(1, dz) - q(-1, sp.JT @ dr))
 
+    def _refined(self, a, b, c):
+        return refined_newton(self._core, self._unreduced_residual, a, b, c, inf=self.inf,
+                              refine_max=self.refine_max, floor=self.floor, enough=self.enough)
+
     def solve(self, a, b, c, phase: str) -> Direction:
-        dv, dr, dz, steps, res = refined_newton(self._core, self._unreduced_residual, a, b, c, inf=self.inf,
-                                                refine_max=self.refine_max, floor=self.floor)
+        dv, dr, dz, steps, res, settled = self._refined(a, b, c)
         retry = getattr(self.backend, "retry_solve", None)
-        if not res <= self.floor and retry is not None and retry(res):
+        if not settled and retry is not None and retry(res):
             # the back end made its solves more accurate: solve this system again
-            dv, dr, dz, more, res = refined_newton(self._core, self._unreduced_residual, a, b, c, inf=self.inf,
-                                                   refine_max=self.refine_max, floor=self.floor)
+            dv, dr, dz, more, res, settled = self._refined(a, b, c)
             steps += more
         if not math.isfinite(res):
             raise Breakdown(f"the {self.name} solve failed")

@@ -44,23 +44,34 @@ def step_fraction(alpha: float, slope: float, cap: float | None = None) -> float
     return gamma if cap is None else min(cap, gamma)
 
 
-def refined_newton(core, residual, a, b, c, *, inf, refine_max: int, floor: float):
-    """(dv, dr̃, dz, steps, relative residual): ``core(a, b, c)`` solves the Newton system
-    (through a reduced form), then each step refines against the unreduced three-block system
-    — ``residual(a, b, c, dv, dr, dz)`` returns its three residual blocks — while the relative
-    residual max‖e‖∞ / max(‖a‖∞, ‖b‖∞, ‖c‖∞) at least halves and is above ``floor``.  Any
-    vector type with + and a norm ``inf`` works (double-double pairs, mpfr arrays)."""
+def refined_newton(core, residual, a, b, c, *, inf, refine_max: int, floor: float, enough: float | None = None):
+    """(dv, dr̃, dz, steps, relative residual, settled): ``core(a, b, c)`` solves the Newton
+    system (through a reduced form), then each step refines against the unreduced three-block
+    system — ``residual(a, b, c, dv, dr, dz)`` returns its three residual blocks — while the
+    relative residual max‖e‖∞ / max(‖a‖∞, ‖b‖∞, ‖c‖∞) at least halves and is above ``floor``.
+    With ``enough`` = η it also stops once every block's residual is at most η times its own
+    right-hand side (‖e_a‖ ≤ η‖a‖, ‖e_b‖ ≤ η‖b‖, ‖e_c‖ ≤ η‖c‖), or below the floor: an inexact
+    Newton direction that accurate changes the next iterate's residuals, (1 − α)·rhs + α·e, by a
+    relative η only.  ``settled``: the loop stopped at the floor or on that test, not because
+    refinement stalled or ran out of steps.  Any vector type with + and a norm ``inf`` works
+    (double-double pairs, mpfr arrays)."""
     dv, dr, dz = core(a, b, c)
-    scale = max(inf(a), inf(b), inf(c), 1e-300)
-    best, steps = math.inf, 0
+    sizes = (inf(a), inf(b), inf(c))
+    scale = max(*sizes, 1e-300)
+    best, steps, settled = math.inf, 0, False
     for _ in range(refine_max):
         e1, e2, e3 = residual(a, b, c, dv, dr, dz)
-        res = max(inf(e1), inf(e2), inf(e3)) / scale
-        if not res < 0.5 * best or res < floor:
+        errors = (inf(e1), inf(e2), inf(e3))
+        res = max(errors) / scale
+        if res < floor or (enough is not None
+                           and all(e <= max(enough * s, floor * scale) for e, s in zip(errors, sizes))):
+            best, settled = min(best, res), True
+            break
+        if not res < 0.5 * best:
             best = min(best, res)
             break
         best = res
         ddv, ddr, ddz = core(e1, e2, e3)
         dv, dr, dz = dv + ddv, dr + ddr, dz + ddz
         steps += 1
-    return dv, dr, dz, steps, best
+    return dv, dr, dz, steps, best, settled

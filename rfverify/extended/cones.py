@@ -74,7 +74,7 @@ def min_lambda2(n3, xh, xl):
 @njit
 def nt_scaling(n3, zh, zl, sh, sl, ph, pl, pih, pil, lh, ll, spec):
     """NT point p (Q_p z = Q_{p⁻¹} s = λ), p⁻¹ and λ for every cone, and the spectral data of
-    p used by :func:`quad_pow`: ``spec[c] = (a, a_lo, b, b_lo, d1, d1_lo, d2, d2_lo)`` with
+    p used by :func:`quad_apply`: ``spec[c] = (a, a_lo, b, b_lo, d1, d1_lo, d2, d2_lo)`` with
     a = λ1(p) = q·λ1(v), b = λ2(p) = q/λ1(v) (det v = 1, so no cancellation) and
     (d1, d2) = v̄/‖v̄‖ (L1 cones: a = b = p).  Returns the index of the first cone where z or
     s is not strictly interior, or -1."""
@@ -297,14 +297,26 @@ def _spectral_coeffs(spec, c, k):
 
 
 @njit
-def quad_pow(n3, k, spec, yh, yl, oh, ol):
-    """o = Q_{p^k} y for k in {-2, -1, 1, 2}, from the spectral decomposition
-    Q_{p^k} = A·q1q1ᵀ + B·q2q2ᵀ + C·q3q3ᵀ: a sum of positive semidefinite terms, so small
-    eigenvalues keep their relative accuracy (the formula 2(xᵀy)x − det(x)Ry loses them to
-    cancellation once cond(Q) exceeds 1/eps)."""
+def spectral_table(n3, k, spec, table):
+    """The eigenvalues of Q_{p^k} for every cone, for :func:`quad_apply`: ``table[c] = (A, A_lo,
+    B, B_lo, C, C_lo)`` (:func:`_spectral_coeffs`; L1 cones: A = p^{2k} only).  Computed once per
+    scaling and k: for k < 0 they cost three double-double divisions per cone, more than the
+    product itself."""
+    for c in range(n3):
+        table[c, 0], table[c, 1], table[c, 2], table[c, 3], table[c, 4], table[c, 5] = _spectral_coeffs(spec, c, k)
+    for j in range(spec.shape[0] - n3):
+        table[n3 + j, 0], table[n3 + j, 1] = _pow_int(spec[n3 + j, 0], spec[n3 + j, 1], 2 * k)
+
+
+@njit
+def quad_apply(n3, table, spec, yh, yl, oh, ol):
+    """o = Q_{p^k} y from the spectral decomposition Q_{p^k} = A·q1q1ᵀ + B·q2q2ᵀ + C·q3q3ᵀ
+    (eigenvalues from :func:`spectral_table`, frame from ``spec``): a sum of positive
+    semidefinite terms, so small eigenvalues keep their relative accuracy (the formula
+    2(xᵀy)x − det(x)Ry loses them to cancellation once cond(Q) exceeds 1/eps)."""
     for c in range(n3):
         i = 3 * c
-        Ah, Al, Bh, Bl, Ch, Cl = _spectral_coeffs(spec, c, k)
+        Ah, Al, Bh, Bl, Ch, Cl = table[c, 0], table[c, 1], table[c, 2], table[c, 3], table[c, 4], table[c, 5]
         d1h, d1l, d2h, d2l = spec[c, 4], spec[c, 5], spec[c, 6], spec[c, 7]
         t, tl = dd.mul(d1h, d1l, yh[i + 1], yl[i + 1])
         t, tl = dd.fma_acc(t, tl, d2h, d2l, yh[i + 2], yl[i + 2])  # v̂·ȳ
@@ -325,13 +337,19 @@ def quad_pow(n3, k, spec, yh, yl, oh, ol):
         oh[i + 2], ol[i + 2] = dd.fma_acc(t, tl, c3, c3l, d1h, d1l)
     for j in range(yh.size - 3 * n3):
         i = 3 * n3 + j
-        Ah, Al = _pow_int(spec[n3 + j, 0], spec[n3 + j, 1], 2 * k)
-        oh[i], ol[i] = dd.mul(Ah, Al, yh[i], yl[i])
+        oh[i], ol[i] = dd.mul(table[n3 + j, 0], table[n3 + j, 1], yh[i], yl[i])
+
+
+def quad_pow(n3, k, spec, yh, yl, oh, ol):
+    """o = Q_{p^k} y for k in {-2, -1, 1, 2} (:func:`spectral_table` then :func:`quad_apply`)."""
+    table = np.zeros((spec.shape[0], 6))
+    spectral_table(n3, k, spec, table)
+    quad_apply(n3, table, spec, yh, yl, oh, ol)
 
 
 @njit
 def quad_pow_matrix(c, k, spec, Qh, Ql):
-    """Q_{p^k} of L3 cone c as a 3×3 matrix (same spectral sum as :func:`quad_pow`)."""
+    """Q_{p^k} of L3 cone c as a 3×3 matrix (same spectral sum as :func:`quad_apply`)."""
     Ah, Al, Bh, Bl, Ch, Cl = _spectral_coeffs(spec, c, k)
     d = ((1.0, 0.0), (spec[c, 4], spec[c, 5]), (spec[c, 6], spec[c, 7]))
     y = ((0.0, 0.0), (-spec[c, 6], -spec[c, 7]), (spec[c, 4], spec[c, 5]))

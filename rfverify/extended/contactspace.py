@@ -6,6 +6,8 @@ double-double throughout (:mod:`.ldl`)."""
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 import scipy.sparse as sp
@@ -19,11 +21,12 @@ from ..solver.engines import cholmod_available, cholmod_missing_message
 from .mixed import CholmodMixed, MixedCholesky
 
 njit = numba.njit(cache=True)
-NEWTON_REFINED_TARGET = 1e-10
+NEWTON_REFINED_TARGET = math.inf
 """Componentwise backward error to which the extended IPM's contact-space solves are refined:
-the Newton driver refines every solve against the unreduced three-block system anyway
-(:func:`rfverify.algorithm.rules.refined_newton`), so one float64 solve each, not five to reach
-double-double accuracy twice over, is what it needs (docs/DECISIONS.md, "Refinement once")."""
+none — one float64 solve each, unchecked.  The Newton driver refines every solve against the
+unreduced three-block system and checks each residual itself
+(:func:`rfverify.algorithm.rules.refined_newton`); a solve it cannot refine is solved again
+with checked solves (:meth:`ContactSpace.retry_solve`; docs/DECISIONS.md, "Refinement once")."""
 STRICT_AFTER = 1e-18
 """A Newton solve whose refined relative residual stays above this is solved again with the
 contact-space solves refined to double-double accuracy (``backward_target`` 1e-29), as are all

@@ -215,6 +215,7 @@ class _DDScaling:
         self.n3, self.e, self.z, self.s = n3, e, z, s
         self.ph, self.pl, self.pih, self.pil, lh, ll = (np.zeros(nz) for _ in range(6))
         self.spec = np.zeros((n_cones, 8))
+        self._tables = {}  # k → eigenvalues of Q_{p^k} (cones.spectral_table)
         try:
             bad = C.nt_scaling(n3, z.h, z.l, s.h, s.l, self.ph, self.pl, self.pih, self.pil, lh, ll, self.spec)
         except ZeroDivisionError:  # a cone's determinant is exactly 0: the iterate reached the boundary
@@ -232,8 +233,12 @@ class _DDScaling:
         return out
 
     def quad(self, k: int, y: V) -> V:
+        table = self._tables.get(k)
+        if table is None:
+            table = self._tables[k] = np.zeros((self.spec.shape[0], 6))
+            C.spectral_table(self.n3, k, self.spec, table)
         out = V.zeros(y.h.size)
-        C.quad_pow(self.n3, k, self.spec, y.h, y.l, out.h, out.l)
+        C.quad_apply(self.n3, table, self.spec, y.h, y.l, out.h, out.l)
         return out
 
     def affine_rhs(self):
@@ -276,8 +281,14 @@ class _DDBackend:
         return V(*dv), V(*dr)
 
 
+NEWTON_ENOUGH = 1e-8
+"""η of the inexact Newton solves (:func:`rfverify.algorithm.rules.refined_newton`): refinement
+of a Newton solve stops once each block's residual is at most η times its right-hand side."""
+
+
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, backend=None,
-        refine_max: int = 12, gamma_max: float = 0.99, progress=None) -> ExtendedResult:
+        refine_max: int = 12, gamma_max: float = 0.99, progress=None,
+        enough: float | None = NEWTON_ENOUGH) -> ExtendedResult:
     """Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) in double-double from ``start`` =
     {"v", "r_t", "z"} (any float dtype; converted exactly).  ``until(iterate)`` is called at
     every iterate (before the step); returning True stops the run with status "Stopped".
@@ -289,7 +300,8 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
     t0 = time.perf_counter()
     backend = backend or choose_backend(data)
     space = _DDSpace(data)
-    newton = ReducedNewton(space, _DDBackend(backend), refine_max=refine_max, floor=1e-31, inf=V.inf)
+    newton = ReducedNewton(space, _DDBackend(backend), refine_max=refine_max, floor=1e-31, inf=V.inf,
+                           enough=enough)
     policy = UntilPolicy(until, progress, max_iter,
                          lambda k, it, res: Iterate(k, *it, res.mu, res.pinfeas, res.dinfeas),
                          gamma_max, "accepted")

@@ -103,8 +103,8 @@ class _RefinedFloat64Factor:
 
     def set_backward_target(self, backward_target: float) -> None:
         """Solves are refined to a componentwise backward error ≤ ``backward_target`` (1e-29:
-        double-double accuracy; up to ~1e-10 where the caller refines against a larger system
-        itself, so that one float64 solve usually suffices)."""
+        double-double accuracy); ``math.inf``: one float64 solve each, unchecked, for a caller
+        that refines against a larger system itself and checks what it gets."""
         self.backward_target = float(backward_target)
         self.stop_at = self.backward_target / 100
 
@@ -127,9 +127,16 @@ class _RefinedFloat64Factor:
         return -1
 
     def solve(self, bh: np.ndarray, bl: np.ndarray):
-        """x = A⁻¹ b to double-double accuracy (b and x in the pattern's own order)."""
+        """x = A⁻¹ b to double-double accuracy (b and x in the pattern's own order); with an
+        infinite ``backward_target``, one float64 solve of the high part, unchecked."""
         if self.precision == "double-double":
             return self._dd_solve(bh, bl)
+        if self.backward_target == math.inf:
+            x = self._float64_solve(np.ascontiguousarray(self._to_stored(bh, bl)[0], dtype=np.float64))
+            self.solves += 1
+            self.refinement_steps += 1  # one float64 solve, as the counts of refined solves mean
+            self.last_steps, self.last_backward_error = 1, math.nan
+            return self._from_stored(x, np.zeros_like(x))
         best, best_x, steps = refine_in_double_double(self.Ap, self.Ai, self._A, *self._to_stored(bh, bl),
                                                       self._float64_solve, self.max_steps, self.stop_at)
         self.last_backward_error, self.last_steps = best, steps
