@@ -95,7 +95,7 @@ EXTENDED_KERNELS = (
     ("cones", "max_step", "(int64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("blocks", "block_apply", "(int64, int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("ldl", "_solve", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
-    ("cones", "quad_apply", "(int64, float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("cones", "quad_spectral", "(int64, float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "spectral_table", "(int64, int64, float64[:, ::1], float64[:, ::1])"),
     ("contactspace", "_scaled_blocks", "(int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[:, :, ::1], float64[::1], float64[::1])"),
     ("blocks", "contact_factor_inverse", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1])"),

@@ -74,7 +74,7 @@ def min_lambda2(n3, xh, xl):
 @njit
 def nt_scaling(n3, zh, zl, sh, sl, ph, pl, pih, pil, lh, ll, spec):
     """NT point p (Q_p z = Q_{p⁻¹} s = λ), p⁻¹ and λ for every cone, and the spectral data of
-    p used by :func:`quad_apply`: ``spec[c] = (a, a_lo, b, b_lo, d1, d1_lo, d2, d2_lo)`` with
+    p used by :func:`quad_spectral`: ``spec[c] = (a, a_lo, b, b_lo, d1, d1_lo, d2, d2_lo)`` with
     a = λ1(p) = q·λ1(v), b = λ2(p) = q/λ1(v) (det v = 1, so no cancellation) and
     (d1, d2) = v̄/‖v̄‖ (L1 cones: a = b = p).  Returns the index of the first cone where z or
     s is not strictly interior, or -1."""
@@ -298,7 +298,7 @@ def _spectral_coeffs(spec, c, k):
 
 @njit
 def spectral_table(n3, k, spec, table):
-    """The eigenvalues of Q_{p^k} for every cone, for :func:`quad_apply`: ``table[c] = (A, A_lo,
+    """The eigenvalues of Q_{p^k} for every cone, for :func:`quad_spectral`: ``table[c] = (A, A_lo,
     B, B_lo, C, C_lo)`` (:func:`_spectral_coeffs`; L1 cones: A = p^{2k} only).  Computed once per
     scaling and k: for k < 0 they cost three double-double divisions per cone, more than the
     product itself."""
@@ -309,7 +309,7 @@ def spectral_table(n3, k, spec, table):
 
 
 @njit
-def quad_apply(n3, table, spec, yh, yl, oh, ol):
+def quad_spectral(n3, table, spec, yh, yl, oh, ol):
     """o = Q_{p^k} y from the spectral decomposition Q_{p^k} = A·q1q1ᵀ + B·q2q2ᵀ + C·q3q3ᵀ
     (eigenvalues from :func:`spectral_table`, frame from ``spec``): a sum of positive
     semidefinite terms, so small eigenvalues keep their relative accuracy (the formula
@@ -341,15 +341,15 @@ def quad_apply(n3, table, spec, yh, yl, oh, ol):
 
 
 def quad_pow(n3, k, spec, yh, yl, oh, ol):
-    """o = Q_{p^k} y for k in {-2, -1, 1, 2} (:func:`spectral_table` then :func:`quad_apply`)."""
+    """o = Q_{p^k} y for k in {-2, -1, 1, 2} (:func:`spectral_table` then :func:`quad_spectral`)."""
     table = np.zeros((spec.shape[0], 6))
     spectral_table(n3, k, spec, table)
-    quad_apply(n3, table, spec, yh, yl, oh, ol)
+    quad_spectral(n3, table, spec, yh, yl, oh, ol)
 
 
 @njit
 def quad_pow_matrix(c, k, spec, Qh, Ql):
-    """Q_{p^k} of L3 cone c as a 3×3 matrix (same spectral sum as :func:`quad_apply`)."""
+    """Q_{p^k} of L3 cone c as a 3×3 matrix (same spectral sum as :func:`quad_spectral`)."""
     Ah, Al, Bh, Bl, Ch, Cl = _spectral_coeffs(spec, c, k)
     d = ((1.0, 0.0), (spec[c, 4], spec[c, 5]), (spec[c, 6], spec[c, 7]))
     y = ((0.0, 0.0), (-spec[c, 6], -spec[c, 7]), (spec[c, 4], spec[c, 5]))

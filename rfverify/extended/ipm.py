@@ -238,7 +238,7 @@ class _DDScaling:
             table = self._tables[k] = np.zeros((self.spec.shape[0], 6))
             C.spectral_table(self.n3, k, self.spec, table)
         out = V.zeros(y.h.size)
-        C.quad_apply(self.n3, table, self.spec, y.h, y.l, out.h, out.l)
+        C.quad_spectral(self.n3, table, self.spec, y.h, y.l, out.h, out.l)
         return out
 
     def affine_rhs(self):
