@@ -24,15 +24,19 @@ class ReducedNewton:
     H̃ dv + G dr̃ = t with t = b + J Q_{p⁻¹} c.  ``scaling.quad(k, y)`` applies Q_{p^k}.
     Refinement: at most ``refine_max`` steps, down to the relative residual ``floor`` (about the
     precision's unit roundoff) or, with ``enough`` = η, until each block's residual is at most η
-    times its right-hand side (:func:`.rules.refined_newton`)."""
+    times its right-hand side (:func:`.rules.refined_newton`); the predictor's solves with
+    ``predictor_enough`` where given (its direction only sets σ and the corrector's second-order
+    term)."""
 
-    def __init__(self, space, backend, *, refine_max: int, floor: float, inf, enough: float | None = None):
+    def __init__(self, space, backend, *, refine_max: int, floor: float, inf, enough: float | None = None,
+                 predictor_enough: float | None = None):
         self.space = space
         self.backend = backend
         self.name = backend.name
         self.refine_max = refine_max
         self.floor = floor
         self.enough = enough
+        self.predictor_enough = enough if predictor_enough is None else predictor_enough
         self.inf = inf
         self.scaling = None
         self._last_residual = None  # the largest relative residual of the last iteration's solves
@@ -61,16 +65,17 @@ class ReducedNewton:
         return (a - sp.M @ dv + sp.HT @ dr, b - sp.velocity(dv, dr) + sp.J @ dz,
                 c - q(1, dz) - q(-1, sp.JT @ dr))
 
-    def _refined(self, a, b, c):
+    def _refined(self, a, b, c, enough):
         return refined_newton(self._core, self._unreduced_residual, a, b, c, inf=self.inf,
-                              refine_max=self.refine_max, floor=self.floor, enough=self.enough)
+                              refine_max=self.refine_max, floor=self.floor, enough=enough)
 
     def solve(self, a, b, c, phase: str) -> Direction:
-        dv, dr, dz, steps, res, settled = self._refined(a, b, c)
+        enough = self.predictor_enough if phase == "predictor" else self.enough
+        dv, dr, dz, steps, res, settled = self._refined(a, b, c, enough)
         retry = getattr(self.backend, "retry_solve", None)
         if not settled and retry is not None and retry(res):
             # the back end made its solves more accurate: solve this system again
-            dv, dr, dz, more, res, settled = self._refined(a, b, c)
+            dv, dr, dz, more, res, settled = self._refined(a, b, c, enough)
             steps += more
         if not math.isfinite(res):
             raise Breakdown(f"the {self.name} solve failed")
