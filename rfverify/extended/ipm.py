@@ -10,8 +10,10 @@ the double solver in three places, each for a reason measured on the reference (
 * each Newton solve is refined against the unreduced three-block system (dual, primal,
   complementarity rows).  Without it the primal residual grew like μ^-0.45 and left the
   cones at μ ≈ 1e-28 in 32-digit arithmetic; with one step it stayed at 1e-34.  Since it
-  corrects whatever the reduction and the factor lose, the back end's own solves need only
-  about float64 accuracy (:data:`.contactspace.NEWTON_REFINED_TARGET`);
+  corrects whatever the reduction and the factor lose, the back end's own solves are one
+  unchecked float64 solve each (:data:`.contactspace.NEWTON_REFINED_TARGET`), and it stops
+  once each block's residual is :data:`NEWTON_ENOUGH` (:data:`PREDICTOR_ENOUGH` for the
+  predictor) of its right-hand side: an inexact Newton method;
 * the run stops when the *proof* succeeds (``until`` callback), not at a fixed μ.
 
 The Newton system is solved by a back end of :mod:`.system` (by default the scaled
