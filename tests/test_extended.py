@@ -99,8 +99,9 @@ def _compare_kernels(ctx, n3, n1, z, s, y, ph, pl, lh, ll, spec):
         assert max(abs(_mp(ph[sl][i], pl[sl][i]) - p_ref[i]) for i in range(len(zc))) <= tol * float(max(abs(x) for x in p_ref))
         assert max(abs(_mp(lh[sl][i], ll[sl][i]) - lam_ref[i]) for i in range(len(zc))) <= tol * scale
         for k in (1, -1, 2, -2):
-            oh, ol = np.zeros(nz), np.zeros(nz)
-            C.quad_pow(n3, k, spec, y, zero, oh, ol)
+            oh, ol, table = np.zeros(nz), np.zeros(nz), np.zeros((spec.shape[0], 6))
+            C.spectral_table(n3, k, spec, table)  # what the double-double phase applies
+            C.quad_spectral(n3, table, spec, y, zero, oh, ol)
             want = RJ.quad_apply(RJ.power(p_ref, k), yc)
             big = float(max(abs(x) for x in want)) + float(RJ.cond_quad(RJ.power(p_ref, k))) ** 0.5 * 1e-300
             ref_scale = max(big, float(max(abs(x) for x in yc)) * float(max(RJ.spectral_values(RJ.power(p_ref, k)))) ** 2)

@@ -310,7 +310,7 @@ def spectral_table(n3, k, spec, table):
 
 @njit
 def quad_spectral(n3, table, spec, yh, yl, oh, ol):
-    """o = Q_{p^k} y from the spectral decomposition Q_{p^k} = A·q1q1ᵀ + B·q2q2ᵀ + C·q3q3ᵀ
+    """o = Q_{p^k} y (k ∈ {-2, -1, 1, 2}, the k of ``table``) from the spectral decomposition Q_{p^k} = A·q1q1ᵀ + B·q2q2ᵀ + C·q3q3ᵀ
     (eigenvalues from :func:`spectral_table`, frame from ``spec``): a sum of positive
     semidefinite terms, so small eigenvalues keep their relative accuracy (the formula
     2(xᵀy)x − det(x)Ry loses them to cancellation once cond(Q) exceeds 1/eps)."""
@@ -338,13 +338,6 @@ def quad_spectral(n3, table, spec, yh, yl, oh, ol):
     for j in range(yh.size - 3 * n3):
         i = 3 * n3 + j
         oh[i], ol[i] = dd.mul(table[n3 + j, 0], table[n3 + j, 1], yh[i], yl[i])
-
-
-def quad_pow(n3, k, spec, yh, yl, oh, ol):
-    """o = Q_{p^k} y for k in {-2, -1, 1, 2} (:func:`spectral_table` then :func:`quad_spectral`)."""
-    table = np.zeros((spec.shape[0], 6))
-    spectral_table(n3, k, spec, table)
-    quad_spectral(n3, table, spec, yh, yl, oh, ol)
 
 
 @njit

@@ -28,9 +28,9 @@ unreduced three-block system and checks each residual itself
 (:func:`rfverify.algorithm.rules.refined_newton`); a solve it cannot refine is solved again
 with checked solves (:meth:`ContactSpace.retry_solve`; docs/DECISIONS.md, "Refinement once")."""
 STRICT_AFTER = 1e-18
-"""A Newton solve whose refined relative residual stays above this is solved again with the
-contact-space solves refined to double-double accuracy (``backward_target`` 1e-29), as are all
-later ones.  The attainable relative residual grows as μ falls (the right-hand side shrinks,
+"""A Newton solve whose refinement stalls short of its η (:data:`.ipm.NEWTON_ENOUGH`) with a
+relative residual above this is solved again with the contact-space solves refined to
+double-double accuracy (``backward_target`` 1e-29), as are all later ones.  The attainable relative residual grows as μ falls (the right-hand side shrinks,
 the error floor does not): from ~1e-29 to ~1e-21 at μ ≈ 1e-30 on a bed, a Chute and a random
 problem, the same with one-step and with fully refined solves; a float64 factor that fails
 leaves ~1e-16 or worse."""
