@@ -225,6 +225,28 @@ def test_the_tail_proves_ten_digits_of_the_lattice_and_they_are_true(lattice):
             assert q.own_scale <= scale and err <= 1e-10 * scale
 
 
+def test_the_tail_solves_its_newton_systems_as_inexactly_as_double_double(lattice, monkeypatch):
+    """The tail's Newton solves stop at the same per-block η as the double-double phase's
+    (predictor 1e-2, corrector 1e-8), each against its own floor; the proof above checks the
+    digits that come of it against the reference."""
+    import rfverify.algorithm.newton as N
+    from rfverify.algorithm import rules
+
+    problem, _ = lattice
+    asked = []
+
+    def spy(*args, floor, enough, **kw):
+        asked.append((floor, enough))
+        return rules.refined_newton(*args, floor=floor, enough=enough, **kw)
+
+    monkeypatch.setattr(N, "refined_newton", spy)
+    out = rfverify.solve_to_digits(problem, digits=10)
+    assert out.success and out.wide is not None
+    tail = [enough for floor, enough in asked if floor == 2.0 ** (24 - BITS)]
+    assert len(tail) >= 2 * out.wide.nit > 0
+    assert set(tail[0::2]) == {N.PREDICTOR_ENOUGH} and set(tail[1::2]) == {N.NEWTON_ENOUGH}
+
+
 @pytest.mark.parametrize("digit", [9, 11])
 def test_a_perturbed_lattice_solution_is_judged_by_the_tails_point(lattice, digit):
     """The tail's point certifies the returned v but not v changed in its 9th digit."""

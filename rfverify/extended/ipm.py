@@ -29,7 +29,7 @@ import numpy as np
 
 from ..algorithm.interfaces import Breakdown
 from ..algorithm.loop import Precision, iterate
-from ..algorithm.newton import ReducedNewton
+from ..algorithm.newton import NEWTON_ENOUGH, PREDICTOR_ENOUGH, ReducedNewton
 from ..algorithm.policy import UntilPolicy, extended_trace
 from . import cones as C
 from . import dd
@@ -281,18 +281,6 @@ class _DDBackend:
     def solve(self, a: V, t: V):
         dv, dr = self.backend.solve((a.h, a.l), (t.h, t.l))
         return V(*dv), V(*dr)
-
-
-NEWTON_ENOUGH = 1e-8
-"""η of the inexact Newton solves (:func:`rfverify.algorithm.rules.refined_newton`): refinement
-of a Newton solve stops once each block's residual is at most η times its right-hand side.  The
-step is taken along the corrector, so its residual changes the next iterate's residuals by a
-relative η; the floor of refinement (1e-31 relative) is not needed for that."""
-PREDICTOR_ENOUGH = 1e-2
-"""η of the predictor solve: its direction only sets σ (through α_aff and μ_aff) and the
-second-order term of the corrector's right-hand side, and the corrector is solved to
-:data:`NEWTON_ENOUGH` for whatever right-hand side it gets.  Same iterations, steps and proven
-digits as with 1e-8 on the beds measured, 16% fewer float64 solves (docs/DECISIONS.md)."""
 
 
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, backend=None,

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..algorithm.interfaces import Breakdown
 from ..algorithm.loop import Precision, iterate
-from ..algorithm.newton import ReducedNewton
+from ..algorithm.newton import NEWTON_ENOUGH, PREDICTOR_ENOUGH, ReducedNewton
 from ..algorithm.policy import UntilPolicy, extended_trace
 from ..jordan.mpfr import arrow_solve, centrality, identity, max_step, nt_scaling, product, quad_pow
 from .data import ExtendedData
@@ -185,12 +185,14 @@ class _WideBackend:
 
 
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits: int = DEFAULT_BITS,
-        refine_max: int = 8, gamma_max: float = 0.99, perm=None, progress=None, sparse: bool = True) -> WideResult:
+        refine_max: int = 8, gamma_max: float = 0.99, perm=None, progress=None, sparse: bool = True,
+        enough: float | None = NEWTON_ENOUGH, predictor_enough: float | None = PREDICTOR_ENOUGH) -> WideResult:
     """Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) in ``bits``-bit arithmetic from
     ``start`` = {"v", "r_t", "z"}, each a (hi, lo) pair of float64 arrays (a double-double
     iterate) or an mpfr array.  ``until(WideIterate)`` is called at every iterate; True stops
     the run ("Stopped").  Same policy as :func:`.ipm.run` (the paper's σ rule, the capped step
-    rule).  ``perm``: the factor's ordering from :func:`.wide_factor.dof_space_ordering`, if
+    rule) and the same inexact Newton solves (``enough``, ``predictor_enough``; None refines
+    every solve to the floor, 2^(24 − bits)).  ``perm``: the factor's ordering from :func:`.wide_factor.dof_space_ordering`, if
     the caller computed it.  ``sparse``: the factor's engine is :class:`SparseWideCholesky`
     (default; memory O(nnz(L))), else :class:`DenseWideCholesky` (m × m; kept as the reference
     the sparse one is tested against)."""
@@ -201,7 +203,8 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
         factor = WideDofSpace(data, W, SparseWideCholesky if sparse else DenseWideCholesky, perm=perm)
         space = _WideSpace(W)
         newton = ReducedNewton(space, _WideBackend(factor), refine_max=refine_max, floor=2.0 ** (-bits + 24),
-                               inf=inf_norm)
+                               inf=inf_norm, enough=enough,
+                               predictor_enough=None if enough is None else predictor_enough)
         policy = UntilPolicy(until, progress, max_iter,
                              lambda k, it, res: WideIterate(k, *it, res.mu, res.pinfeas, res.dinfeas, bits, W),
                              gamma_max, "stopped by the proof driver")
