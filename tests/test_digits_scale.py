@@ -382,9 +382,12 @@ def test_refinement_stops_when_each_block_meets_its_own_right_hand_side():
     assert (steps, settled) == (1, False) and res == pytest.approx(0.75 ** 2)  # 0.75, then 0.5625: stalled
 
 
-def test_an_unchecked_solve_is_one_float64_solve():
-    """backward_target = inf: the float64 factor's answer as it is (the driver checks it)."""
+def test_an_unchecked_solve_is_one_float64_solve(monkeypatch):
+    """backward_target = inf: the float64 factor's answer as it is, with no double-double
+    residual of S' (the driver checks it)."""
     import math
+
+    from rfverify.extended import mixed
 
     from rfverify.digits import _start_from
     from rfverify.extended import ipm as X
@@ -398,6 +401,11 @@ def test_an_unchecked_solve_is_one_float64_solve():
     rng = np.random.default_rng(0)
     bh = rng.standard_normal(chol.n)
     before = chol.solves
+
+    def no_residual(*args):
+        raise AssertionError("an unchecked solve computed a double-double residual")
+
+    monkeypatch.setattr(mixed, "_symmetric_residual", no_residual)
     xh, xl = chol.solve(bh, np.zeros_like(bh))
     assert chol.solves == before + 1 and chol.last_steps == 1 and not np.any(xl)
     np.testing.assert_array_equal(xh, chol._engine.solve(bh))
