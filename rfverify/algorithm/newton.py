@@ -48,7 +48,8 @@ class ReducedNewton:
         self.refine_max = refine_max
         self.floor = floor
         self.enough = enough
-        self.predictor_enough = enough if predictor_enough is None else predictor_enough
+        # no η (refine to the floor) holds for the predictor too
+        self.predictor_enough = None if enough is None else (predictor_enough or enough)
         self.inf = inf
         self.scaling = None
         self._last_residual = None  # the largest relative residual of the last iteration's solves

@@ -300,7 +300,7 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
     backend = backend or choose_backend(data)
     space = _DDSpace(data)
     newton = ReducedNewton(space, _DDBackend(backend), refine_max=refine_max, floor=1e-31, inf=V.inf,
-                           enough=enough, predictor_enough=None if enough is None else predictor_enough)
+                           enough=enough, predictor_enough=predictor_enough)
     policy = UntilPolicy(until, progress, max_iter,
                          lambda k, it, res: Iterate(k, *it, res.mu, res.pinfeas, res.dinfeas),
                          gamma_max, "accepted")

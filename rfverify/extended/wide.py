@@ -204,7 +204,7 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
         space = _WideSpace(W)
         newton = ReducedNewton(space, _WideBackend(factor), refine_max=refine_max, floor=2.0 ** (-bits + 24),
                                inf=inf_norm, enough=enough,
-                               predictor_enough=None if enough is None else predictor_enough)
+                               predictor_enough=predictor_enough)
         policy = UntilPolicy(until, progress, max_iter,
                              lambda k, it, res: WideIterate(k, *it, res.mu, res.pinfeas, res.dinfeas, bits, W),
                              gamma_max, "stopped by the proof driver")
