@@ -19,8 +19,9 @@ import numpy as np
 
 from . import cones as C
 from . import dd
+from .workers import split
 
-njit = numba.njit(cache=True)
+njit = numba.njit(cache=True, nogil=True)  # nogil: run on threads by .workers
 
 
 @njit
@@ -235,3 +236,26 @@ def contact_factor_inverse(n, kinds, fric, roll, normal, spec, Fh, Fl):
             for b in range(5):
                 Fh[c, a, b], Fl[c, a, b] = Rh[a, b], Rl[a, b]
     return -1
+
+
+# The contact-by-contact kernels over the threads (:mod:`.workers`): contacts lo … hi as one
+# call on array views, bit for bit the single call's result.
+
+def block_apply_threaded(n, row_start, row_count, Fh, Fl, transpose, xh, xl, oh, ol) -> None:
+    """:func:`block_apply` over the threads."""
+    def run(lo, hi):
+        block_apply(hi - lo, row_start[lo:hi], row_count[lo:hi], Fh[lo:hi], Fl[lo:hi], transpose, xh, xl, oh, ol)
+
+    split(n, run, min_items=8192)  # 0.2 µs a contact
+
+
+def contact_factor_inverse_threaded(n, kinds, fric, roll, normal, spec, Fh, Fl) -> int:
+    """:func:`contact_factor_inverse` over the threads: the first contact whose factor is
+    singular, or -1."""
+    def run(lo, hi):
+        bad = contact_factor_inverse(hi - lo, kinds[lo:hi], fric[lo:hi], roll[lo:hi], normal[lo:hi], spec,
+                                     Fh[lo:hi], Fl[lo:hi])
+        return lo + bad if bad >= 0 else -1
+
+    found = [b for b in split(n, run, min_items=512) if b >= 0]  # 4 µs a contact
+    return min(found) if found else -1

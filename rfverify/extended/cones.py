@@ -16,8 +16,9 @@ import numba
 import numpy as np
 
 from . import dd
+from .workers import split
 
-njit = numba.njit(cache=True)
+njit = numba.njit(cache=True, nogil=True)  # nogil: run on threads by .workers
 
 
 @dd.jit
@@ -356,3 +357,56 @@ def quad_pow_matrix(c, k, spec, Qh, Ql):
             vh, vl = dd.add(ah, al, bh, bl)
             wh, wl = dd.mul(y[r][0], y[r][1], y[t][0], y[t][1])
             Qh[r, t], Ql[r, t] = dd.fma_acc(vh, vl, Ch, Cl, wh, wl)
+
+
+# The kernels above over the threads (:mod:`.workers`): cones lo … hi as calls on array views,
+# bit for bit the single call's result.  Each is split from about 1 ms of work (measured per
+# cone: nt_scaling 0.7 µs, max_step 0.15 µs, quad_spectral 0.05 µs).
+
+def _pieces(n3: int, lo: int, hi: int):
+    """Cones lo … hi of n3 L3 cones followed by L1 cones, as (L3 count, cone rows, entries):
+    one piece for the L3 part and one (L3 count 0) for the L1 part, where non-empty."""
+    out = []
+    a, b = min(lo, n3), min(hi, n3)
+    if b > a:
+        out.append((b - a, slice(a, b), slice(3 * a, 3 * b)))
+    a, b = max(lo, n3), max(hi, n3)
+    if b > a:  # L1 cone c holds entry 3·n3 + (c − n3)
+        out.append((0, slice(a, b), slice(2 * n3 + a, 2 * n3 + b)))
+    return out
+
+
+def _n_cones(n3: int, size: int) -> int:
+    return n3 + (size - 3 * n3)
+
+
+def nt_scaling_threaded(n3, zh, zl, sh, sl, ph, pl, pih, pil, lh, ll, spec) -> int:
+    """:func:`nt_scaling` over the threads: the first cone where z or s is not strictly
+    interior, or -1."""
+    def run(lo, hi):
+        for k3, c, e in _pieces(n3, lo, hi):
+            bad = nt_scaling(k3, zh[e], zl[e], sh[e], sl[e], ph[e], pl[e], pih[e], pil[e], lh[e], ll[e], spec[c])
+            if bad >= 0:
+                return c.start + bad
+        return -1
+
+    found = [b for b in split(_n_cones(n3, zh.size), run, min_items=2048) if b >= 0]
+    return min(found) if found else -1
+
+
+def quad_spectral_threaded(n3, table, spec, yh, yl, oh, ol) -> None:
+    """:func:`quad_spectral` over the threads."""
+    def run(lo, hi):
+        for k3, c, e in _pieces(n3, lo, hi):
+            quad_spectral(k3, table[c], spec[c], yh[e], yl[e], oh[e], ol[e])
+
+    split(_n_cones(n3, yh.size), run, min_items=16384)
+
+
+def max_step_threaded(n3, xh, xl, dxh, dxl) -> float:
+    """:func:`max_step` over the threads."""
+    def run(lo, hi):
+        return min((max_step(k3, xh[e], xl[e], dxh[e], dxl[e]) for k3, _, e in _pieces(n3, lo, hi)),
+                   default=math.inf)
+
+    return min(split(_n_cones(n3, xh.size), run, min_items=8192))

@@ -13,14 +13,15 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import dd
-from .blocks import block_apply, contact_factor_inverse, scatter_add
+from .blocks import block_apply_threaded, contact_factor_inverse_threaded, scatter_add
 from .data import ExtendedData
 from .factored import FactoredBackend
 from .ldl import DDCholesky
 from ..solver.engines import cholmod_available, cholmod_missing_message
 from .mixed import CholmodMixed, MixedCholesky
+from .workers import split
 
-njit = numba.njit(cache=True)
+njit = numba.njit(cache=True, nogil=True)  # nogil: run on threads by .workers
 NEWTON_REFINED_TARGET = math.inf
 """Componentwise backward error to which the extended IPM's contact-space solves are refined:
 none — one float64 solve each, unchecked.  The Newton driver refines every solve against the
@@ -437,12 +438,18 @@ class ContactSpace(FactoredBackend):
             if self.Mchol is not None and self.Mchol.factor(*self._M_upper()) >= 0:
                 raise ArithmeticError("M is not positive definite in double-double")
             self._build_W()
-        if contact_factor_inverse(d.n, d.kinds, d.fric_cone, d.roll_cone, d.normal_cone, spec,
-                                  self.Fh, self.Fl) >= 0:
+        if contact_factor_inverse_threaded(d.n, d.kinds, d.fric_cone, d.roll_cone, d.normal_cone, spec,
+                                           self.Fh, self.Fl) >= 0:
             return False
         Sh = np.zeros(self.chol.nnz_upper)
         Sl = np.zeros(self.chol.nnz_upper)
-        _scaled_blocks(self.pc, self.pd, self._W[0], self._W[1], d.row_count, self.Fh, self.Fl, self.pos, Sh, Sl)
+        Wh, Wl = self._W
+
+        def pairs(lo, hi):  # block pairs lo … hi write disjoint entries of S'
+            _scaled_blocks(self.pc[lo:hi], self.pd[lo:hi], Wh[lo:hi], Wl[lo:hi], d.row_count, self.Fh, self.Fl,
+                           self.pos[lo:hi], Sh, Sl)
+
+        split(self.pc.size, pairs, min_items=512)
         self.factorisations += 1
         return self.chol.factor(Sh, Sl) < 0
 
@@ -450,10 +457,10 @@ class ContactSpace(FactoredBackend):
         """S⁻¹ r = F⁻ᵀ S'⁻¹ F⁻¹ r."""
         d = self.data
         yh, yl = np.empty(d.nk), np.empty(d.nk)
-        block_apply(d.n, d.row_start, d.row_count, self.Fh, self.Fl, False, rh, rl, yh, yl)
+        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, False, rh, rl, yh, yl)
         xh, xl = self.chol.solve(yh, yl)
         oh, ol = np.empty(d.nk), np.empty(d.nk)
-        block_apply(d.n, d.row_start, d.row_count, self.Fh, self.Fl, True, xh, xl, oh, ol)
+        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, True, xh, xl, oh, ol)
         return oh, ol
 
     def solve(self, a, t):

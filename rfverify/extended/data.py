@@ -9,12 +9,19 @@ assemble from.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
 
 from ..lifting import lift
 from ..problem import SPACEDIM, Problem
 from . import dd
+from .workers import split
+
+MATVEC_SPLIT_NNZ = 100_000
+"""Fewest stored entries a double-double matrix-vector product is split over threads for (about
+1 ms of work; :mod:`.workers`)."""
 
 
 def _two_prod_np(a, b):
@@ -71,10 +78,15 @@ class DDMatrix:
         return DDMatrix((self.shape[1], self.shape[0]), indptr, rows[order], self.hi[order], self.lo[order])
 
     def matvec(self, xh, xl):
+        """A x for x = xh + xl (double-double), rows split over the threads (:mod:`.workers`)."""
         oh = np.empty(self.shape[0])
         ol = np.empty(self.shape[0])
-        dd.csr_matvec(self.indptr, self.indices, self.hi, self.lo, np.ascontiguousarray(xh),
-                      np.ascontiguousarray(xl), oh, ol)
+        xh, xl = np.ascontiguousarray(xh), np.ascontiguousarray(xl)
+
+        def rows(lo, hi):
+            dd.csr_matvec(self.indptr[lo:hi + 1], self.indices, self.hi, self.lo, xh, xl, oh[lo:hi], ol[lo:hi])
+
+        split(self.shape[0], rows, min_items=0 if self.indices.size >= MATVEC_SPLIT_NNZ else math.inf)
         return oh, ol
 
 

@@ -191,7 +191,7 @@ def vnorm2(ah, al):
     return mul_d(rh, rl, big)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)  # nogil: run on threads by .workers
 def csr_matvec(indptr, indices, dh, dl, xh, xl, oh, ol):
     """o = A x for a CSR matrix with double-double entries (dh, dl)."""
     for i in range(indptr.size - 1):

@@ -219,7 +219,7 @@ class _DDScaling:
         self.spec = np.zeros((n_cones, 8))
         self._tables = {}  # k → eigenvalues of Q_{p^k} (cones.spectral_table)
         try:
-            bad = C.nt_scaling(n3, z.h, z.l, s.h, s.l, self.ph, self.pl, self.pih, self.pil, lh, ll, self.spec)
+            bad = C.nt_scaling_threaded(n3, z.h, z.l, s.h, s.l, self.ph, self.pl, self.pih, self.pil, lh, ll, self.spec)
         except ZeroDivisionError:  # a cone's determinant is exactly 0: the iterate reached the boundary
             bad = max(0, min(C.min_lambda2(n3, z.h, z.l), C.min_lambda2(n3, s.h, s.l))[1])
         if bad >= 0:
@@ -240,7 +240,7 @@ class _DDScaling:
             table = self._tables[k] = np.zeros((self.spec.shape[0], 6))
             C.spectral_table(self.n3, k, self.spec, table)
         out = V.zeros(y.h.size)
-        C.quad_spectral(self.n3, table, self.spec, y.h, y.l, out.h, out.l)
+        C.quad_spectral_threaded(self.n3, table, self.spec, y.h, y.l, out.h, out.l)
         return out
 
     def affine_rhs(self):
@@ -252,8 +252,8 @@ class _DDScaling:
         return self._cone(C.arrow_solve, self.lam, xi)
 
     def max_step(self, dz, ds) -> float:
-        return min(C.max_step(self.n3, self.z.h, self.z.l, dz.h, dz.l),
-                   C.max_step(self.n3, self.s.h, self.s.l, ds.h, ds.l))
+        return min(C.max_step_threaded(self.n3, self.z.h, self.z.l, dz.h, dz.l),
+                   C.max_step_threaded(self.n3, self.s.h, self.s.l, ds.h, ds.l))
 
 
 class _DDCones:
