@@ -4,7 +4,10 @@ Each (problem, engine) runs ``solve_to_digits(problem, digits=10, factor_engine=
 child process of its own, so that its peak resident memory (``ru_maxrss`` of the child) is
 the path's alone.  One row per run:
 
-    contacts, dofs, engine, stage times (double, setup, extended, wide, proof, total),
+    contacts, dofs, engine, stage times (double, setup, extended, wide, proof, total), the path's
+    total over its own double solve (/dbl: tol 1e-10, the paper's centring rule) and over a plain
+    ``rfverify.solve(problem)`` timed after it in the same child (plain, /pln: what
+    ``rfverify solve FILE`` runs: tol 1e-10, the default centring rule),
     extended iterations, the contact-space matrix (order, nnz of its upper triangle, nnz(L),
     Σ c_j² of L in the engine's order), factorisations, solves, refinement steps, the update
     (assembly + factorisation) seconds, peak memory (MB and kB per contact), proven digits.
@@ -73,12 +76,16 @@ def one(spec: str, engine: str) -> dict:
     out = rfverify.solve_to_digits(problem, digits=10,
                                    factor_engine="auto" if engine in ("default", "noncholmod") else engine)
     total = time.perf_counter() - t0
+    rss_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # the path's peak, before the plain solve
+    t1 = time.perf_counter()
+    plain = rfverify.solve(problem)  # what `rfverify solve FILE` runs: the other yardstick of the path's cost
+    plain_seconds = time.perf_counter() - t1
     q = out.certificate.quantities
     digits = {k: (None if x.digits is None else round(x.digits, 2)) for k, x in q.items() if x.mode != "information"}
     ext = out.extended
-    rss_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return {"problem": spec, "contacts": problem.n_contacts, "dofs": problem.n_dofs, "engine": engine,
             "timings": {k: round(v, 2) for k, v in out.timings.items()}, "wall": round(total, 2),
+            "plain_double": round(plain_seconds, 2), "plain_status": str(plain.status),
             "ext_iterations": int(getattr(ext, "nit", 0) or 0),
             "update_seconds": round(getattr(ext, "factor_seconds", 0.0), 2),
             "stats": getattr(ext, "stats", {}), "wide": None if out.wide is None else int(out.wide.nit),
@@ -103,7 +110,7 @@ def _main(argv=None):
         print(json.dumps(one(*args.one)), flush=True)
         return 0
     head = (f"{'problem':<28} {'n':>6} {'m':>6} {'engine':>7} {'double':>7} {'ext':>7} {'mp':>6} {'total':>7} "
-            f"{'it':>3} {'order':>7} {'nnz(L)':>10} {'Σc²':>8} {'solves':>6} {'steps':>6} {'update':>7} "
+            f"{'/dbl':>5} {'plain':>6} {'/pln':>5} {'it':>3} {'order':>7} {'nnz(L)':>10} {'Σc²':>8} {'solves':>6} {'steps':>6} {'update':>7} "
             f"{'MB':>7} {'kB/c':>6}  proven")
     print(head)
     print("-" * len(head), flush=True)
@@ -126,7 +133,8 @@ def _main(argv=None):
             mp = "–" if r["wide"] is None else f"{t['wide']:.1f}"
             dig = "/".join(f"{k} {v}" for k, v in r["digits"].items())
             print(f"{r['problem'][-28:]:<28} {r['contacts']:>6} {r['dofs']:>6} {engine:>7} {t['double']:>7.1f} "
-                  f"{t['setup'] + t['extended']:>7.1f} {mp:>6} {t['total']:>7.1f} {r['ext_iterations']:>3} "
+                  f"{t['setup'] + t['extended']:>7.1f} {mp:>6} {t['total']:>7.1f} {t['total'] / t['double']:>5.2f} "
+                  f"{r['plain_double']:>6.1f} {t['total'] / r['plain_double']:>5.2f} {r['ext_iterations']:>3} "
                   f"{s.get('order', 0):>7} {s.get('nnz_L', 0):>10} {s.get('sum_c2', 0):>8.1e} "
                   f"{s.get('solves', 0):>6} {s.get('refinement_steps', 0):>6} {r['update_seconds']:>7.1f} "
                   f"{r['peak_MB']:>7.0f} {r['peak_kB_per_contact']:>6.1f}  "

@@ -28,6 +28,7 @@ from .extended import wide, wide_factor
 from .extended.contactspace import ENGINES
 from .extended.data import ExtendedData
 from .extended.system import choose_backend
+from .extended.workers import threads
 from .problem import SPACEDIM, Problem
 from .compilation import compile_extended_in_background, compile_seconds, float64_kernels_deferred
 from .proof import Point, Proof, ProofContext, merit, validate_digits
@@ -132,7 +133,9 @@ them).  Its iterate is a start, not an answer: the extended phase continues the 
 from it, so the paper's centring rule is kept here — from the default (hybrid) rule's
 iterate the hyperstatic Lattice 474's double-double phase stalled at μ = 1e-18 and its
 multiple-precision tail took 74 s in all, against μ = 3e-40 and 40 s (measured,
-docs/DECISIONS.md).  The double solve is ≤ 1% of the path's time either way."""
+docs/DECISIONS.md).  It costs the path some time: 25 iterations against the default rule's 23 on
+the 9675-contact GranularBed, whose double solve is about half of the path (docs/DECISIONS.md, "The
+double-double kernels on both cores")."""
 
 RECENT = 8
 """Iterates the driver keeps: candidates for the wide tail's start, and the last three are
@@ -334,6 +337,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                               wide_bits=wide_bits, wide_max_iter=wide_max_iter, relative=relative, progress=progress,
                               factor_engine=factor_engine, time_limit=time_limit, **options)
         return _unscaled_solution(out, scaled, scaling)
+    threads()  # a bad RFVERIFY_THREADS is refused now, not after the double solve
     if factor_engine not in ENGINES:
         raise InvalidArgumentError("factor_engine", f"{factor_engine!r} is not one of {', '.join(ENGINES)}",
                                    fix="use 'auto', 'cholmod' or 'ldl'")

@@ -146,7 +146,7 @@ def test_a_non_interior_cone_is_reported_by_its_own_index_from_any_range(monkeyp
     else:
         z[3 * n3 + bad - n3] = -1.0
     zero = np.zeros(z.size)
-    out = lambda: [np.zeros(z.size) for _ in range(6)] + [np.zeros((n3 + n1, 8))]  # noqa: E731
+    out = lambda: [np.zeros(z.size) for _ in range(6)] + [np.zeros((n3 + n1, 8))]
     single = C.nt_scaling(n3, z, zero, s, zero, *out())
     monkeypatch.setattr(C, "split", lambda n, run, min_items=0: W.split(n, run, min_items=1, parts=3))
     assert single == bad and C.nt_scaling_threaded(n3, z, zero, s, zero, *out()) == bad
@@ -168,7 +168,7 @@ def test_contact_factors_split_are_the_single_call_and_name_the_first_singular_c
     spec = np.zeros((nc, 8))
     assert C.nt_scaling(data.n3, zh, zl, sh, sl, ph, pl, pih, pil, lh, ll, spec) == -1
     assert np.any(data.kinds == 0)  # full contacts: the Householder blocks
-    F = lambda: (np.zeros((data.n, 5, 5)), np.zeros((data.n, 5, 5)))  # noqa: E731
+    F = lambda: (np.zeros((data.n, 5, 5)), np.zeros((data.n, 5, 5)))
     args = (data.n, data.kinds, data.fric_cone, data.roll_cone, data.normal_cone)
     monkeypatch.setattr(B, "split", lambda n, run, min_items=0: W.split(n, run, min_items=1, parts=3))
     F1, F2 = F(), F()
@@ -197,3 +197,13 @@ def test_the_ten_digit_path_is_the_same_bit_for_bit_on_one_thread_and_on_three(m
         assert out.certificate.certified and out.extended.nit > 0
         points.append(np.concatenate([out.point.v_hi, out.point.v_lo, out.point.r_hi, out.point.r_lo]))
     assert np.array_equal(points[0], points[1])
+
+
+def test_the_cli_refuses_a_bad_thread_count_in_one_line_before_solving(monkeypatch, capsys):
+    from rfverify.cli import main
+
+    monkeypatch.setenv("RFVERIFY_THREADS", "0")
+    code = main(["solve", "bundled:chute", "--digits", "10"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "RFVERIFY_THREADS" in err and "fix:" in err
