@@ -453,6 +453,17 @@ class ContactSpace(FactoredBackend):
         self.factorisations += 1
         return self.chol.factor(Sh, Sl) < 0
 
+    def apply_G_inverse(self, eh, el):
+        """G⁻¹ e = F⁻ᵀ F⁻¹ e (double-double (hi, lo), kept rows) at the current scaling: for the
+        Newton driver's projection of a primal residual (:meth:`.ReducedNewton._core`)."""
+        d = self.data
+        yh, yl = np.empty(d.nk), np.empty(d.nk)
+        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, False, np.ascontiguousarray(eh),
+                             np.ascontiguousarray(el), yh, yl)
+        oh, ol = np.empty(d.nk), np.empty(d.nk)
+        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, True, yh, yl, oh, ol)
+        return oh, ol
+
     def _S_solve(self, rh, rl):
         """S⁻¹ r = F⁻ᵀ S'⁻¹ F⁻¹ r."""
         d = self.data

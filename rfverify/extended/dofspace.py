@@ -86,6 +86,14 @@ class DofSpace(FactoredBackend):
         self.factorisations += 1
         return self.chol.factor(Sh, Sl) < 0
 
+    def apply_G_inverse(self, eh, el):
+        """G⁻¹ e (double-double (hi, lo)) from the closed-form blocks of the current scaling."""
+        d = self.data
+        oh, ol = np.empty(d.nk), np.empty(d.nk)
+        block_apply(d.n, d.row_start, d.row_count, self.Gih, self.Gil, False, np.ascontiguousarray(eh),
+                    np.ascontiguousarray(el), oh, ol)
+        return oh, ol
+
     def solve(self, a, t):
         """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t (local form: (W̃ + G) dr̃ = t)."""
         d = self.data

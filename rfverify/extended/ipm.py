@@ -274,6 +274,8 @@ class _DDBackend:
         for hook in ("observe", "retry_solve"):
             if hasattr(backend, hook):
                 setattr(self, hook, getattr(backend, hook))
+        if hasattr(backend, "apply_G_inverse"):
+            self.apply_G_inverse = lambda e: V(*backend.apply_G_inverse(e.h, e.l))
 
     def update(self, sc: _DDScaling) -> bool:
         return self.backend.update(sc.ph, sc.pl, sc.pih, sc.pil, sc.spec)

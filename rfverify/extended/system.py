@@ -19,7 +19,8 @@ A back end has ``name`` (str); ``update(ph, pl, pih, pil, spec) -> bool``, which
 the NT point p, p⁻¹ and p's spectral data (:func:`.cones.nt_scaling`) and is False when the
 matrix is not positive definite or a contact block is singular; ``solve(a, t)`` →
 ((dv_hi, dv_lo), (dr_hi, dr_lo)), with a, t given as (hi, lo) float64 pairs; ``stats()``
-(:class:`.factored.FactoredBackend`); the hybrid only, ``observe(k, mu, solve_residual)``,
+(:class:`.factored.FactoredBackend`); ``apply_G_inverse(eh, el)`` → G⁻¹e at the current scaling
+(for the Newton driver's projection of the primal residual); the hybrid only, ``observe(k, mu, solve_residual)``,
 once per iteration; and the contact-space forms, ``retry_solve(residual) -> bool``, after a
 Newton solve that refined badly (:class:`.algorithm.newton.ReducedNewton`).
 :func:`choose_backend` builds one.
@@ -82,6 +83,9 @@ class Hybrid(FactoredBackend):
 
     def solve(self, a, t):
         return self.current.solve(a, t)
+
+    def apply_G_inverse(self, eh, el):
+        return self.current.apply_G_inverse(eh, el)
 
 
 def choose_backend(data: ExtendedData, backend: str = "auto", engine: str = "auto"):
