@@ -65,6 +65,8 @@ def _executor(helpers: int) -> ThreadPoolExecutor:
     global _pool, _pool_size
     with _lock:
         if _pool is None or _pool_size != helpers:
+            if _pool is not None:  # RFVERIFY_THREADS changed: let the old threads go now
+                _pool.shutdown(wait=False)
             _pool = ThreadPoolExecutor(max_workers=helpers, thread_name_prefix="rfverify-kernel")
             _pool_size = helpers
         return _pool
