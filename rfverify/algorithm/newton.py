@@ -31,7 +31,9 @@ class ReducedNewton:
     vectors, ``backend.name``; optionally ``backend.observe(k, mu, last_residual)`` before each
     update, and ``backend.retry_solve(residual) -> bool``, asked after a solve whose refinement
     stalled above ``floor`` short of ``enough``: True when the back end has made its solves more
-    accurate, and the system is solved again).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
+    accurate, and the system is solved again; and ``backend.apply_G_inverse(e) -> G⁻¹e``, with
+    which each reduced solve's primal residual is projected away, :meth:`_project_primal` — the
+    double-double back ends have it, the multiple-precision tail's does not).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
     dz = Q_{p⁻¹}(c − Q_{p⁻¹} Jᵀ dr̃), and the primal row H̃ dv − J dz = b then reads
     H̃ dv + G dr̃ = t with t = b + J Q_{p⁻¹} c.  ``scaling.quad(k, y)`` applies Q_{p^k}.
     Refinement: at most ``refine_max`` steps, down to the relative residual ``floor`` (about the
