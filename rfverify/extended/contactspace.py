@@ -453,26 +453,22 @@ class ContactSpace(FactoredBackend):
         self.factorisations += 1
         return self.chol.factor(Sh, Sl) < 0
 
+    def _F_inverse(self, xh, xl, transpose: bool):
+        """F⁻¹x, or F⁻ᵀx with ``transpose`` (double-double (hi, lo), kept rows)."""
+        d = self.data
+        oh, ol = np.empty(d.nk), np.empty(d.nk)
+        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, transpose, np.ascontiguousarray(xh),
+                             np.ascontiguousarray(xl), oh, ol)
+        return oh, ol
+
     def apply_G_inverse(self, eh, el):
         """G⁻¹ e = F⁻ᵀ F⁻¹ e (double-double (hi, lo), kept rows) at the current scaling: for the
         Newton driver's projection of a primal residual (:meth:`.ReducedNewton._core`)."""
-        d = self.data
-        yh, yl = np.empty(d.nk), np.empty(d.nk)
-        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, False, np.ascontiguousarray(eh),
-                             np.ascontiguousarray(el), yh, yl)
-        oh, ol = np.empty(d.nk), np.empty(d.nk)
-        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, True, yh, yl, oh, ol)
-        return oh, ol
+        return self._F_inverse(*self._F_inverse(eh, el, False), True)
 
     def _S_solve(self, rh, rl):
         """S⁻¹ r = F⁻ᵀ S'⁻¹ F⁻¹ r."""
-        d = self.data
-        yh, yl = np.empty(d.nk), np.empty(d.nk)
-        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, False, rh, rl, yh, yl)
-        xh, xl = self.chol.solve(yh, yl)
-        oh, ol = np.empty(d.nk), np.empty(d.nk)
-        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, True, xh, xl, oh, ol)
-        return oh, ol
+        return self._F_inverse(*self.chol.solve(*self._F_inverse(rh, rl, False)), True)
 
     def solve(self, a, t):
         """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t (local form: (W̃ + G) dr̃ = t)."""

@@ -19,10 +19,6 @@ import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-MIN_ITEMS = 2048
-"""Fewest items a kernel is split over threads for, unless its caller says otherwise."""
-
-
 def _count() -> int:
     raw = os.environ.get("RFVERIFY_THREADS", "").strip()
     if raw:
@@ -78,13 +74,15 @@ def ranges(n_items: int, parts: int) -> list[tuple[int, int]]:
     return [(bounds[i], bounds[i + 1]) for i in range(parts) if bounds[i + 1] > bounds[i]]
 
 
-def split(n_items: int, run, min_items: float = MIN_ITEMS, parts: int | None = None) -> list:
+def split(n_items: int, run, min_items: float, parts: int | None = None) -> list:
     """``run(lo, hi)`` over contiguous ranges of ``range(n_items)``, the first range in this
     thread and the others in the pool; the list of their return values, in range order.  One
-    call ``run(0, n_items)`` when there is one thread or fewer than ``min_items`` items
-    (``math.inf``: always one call)."""
+    call ``run(0, n_items)`` when there are fewer than ``min_items`` items (``math.inf``: always
+    one call; the caller knows its kernel's cost per item) or one thread."""
+    if n_items < min_items:
+        return [run(0, n_items)]
     parts = threads() if parts is None else parts
-    if parts <= 1 or n_items < min_items:
+    if parts <= 1:
         return [run(0, n_items)]
     chunks = ranges(n_items, parts)
     pool = _executor(parts - 1)
