@@ -15,10 +15,12 @@ The proof is tried only at iterates where a cheap necessary condition holds
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from .certificate import Certificate, candidate_point, certificate_from_proof
 from .errors import InvalidArgumentError
@@ -30,7 +32,8 @@ from .extended.data import ExtendedData
 from .extended.system import choose_backend
 from .extended.workers import threads
 from .problem import SPACEDIM, Problem
-from .compilation import compile_extended_in_background, compile_seconds, float64_kernels_deferred
+from .compilation import (compile_extended_in_background, compile_seconds, extended_cache_is_cold,
+                          float64_kernels_deferred)
 from .proof import Point, Proof, ProofContext, merit, validate_digits
 from .solver import SolveResult, Status, posed, solve
 from .solver.engines import cholmod_available
@@ -158,6 +161,128 @@ machine), for the estimate the certificate states when the tail is skipped."""
 WIDE_GIVE_UP = 5
 """The tail stops after this many invalid proofs in a row (measured: a Chute whose wedge
 contacts leave no strictly feasible point stays outside K* at every one of 40 iterations)."""
+
+
+def preparing_beside() -> bool:
+    """True when the k-digit path builds its double-double phase's set-up on a second thread
+    during the double solve (:class:`Preparation`): two threads are allowed
+    (``RFVERIFY_THREADS``) and CHOLMOD factors without the GIL here
+    (:mod:`.solver.cholmod_nogil`), so that the double solve's factorisations leave the
+    interpreter to the set-up."""
+    from .solver import cholmod_nogil
+
+    return threads() >= 2 and cholmod_nogil.factorizer() is not None
+
+
+class Preparation:
+    """The double-double phase's set-up: the proof's per-problem pieces (:class:`ProofContext`),
+    the extended data, the Newton back end and what its first update needs no iterate for
+    (``prepare()``, e.g. :meth:`.extended.contactspace.ContactSpace.prepare`).
+
+    With ``background`` they are built on a second thread as soon as the object is made — the
+    double solve runs meanwhile, and its CHOLMOD factorisations release the GIL — and without it
+    here, when asked for, as before.  The results are the same either way.  An error is raised
+    where the serial path raises it: ProofContext's by :meth:`context`, the extended data's and
+    back end's by :meth:`system`; a failure of ``prepare()`` is left to the first update, which
+    repeats the step and reports it where it always did.  :meth:`cancel` (the path ends early)
+    stops the thread at its next step."""
+
+    def __init__(self, problem: Problem, backend: str, engine: str, background: bool):
+        self.problem, self.backend, self.engine = problem, backend, engine
+        self._ctx = self._ctx_error = None
+        self._system = self._system_error = None
+        self._ctx_ready = threading.Event()
+        self._cancelled = False
+        self._thread = None
+        if background:
+            self._thread = threading.Thread(target=self._build, name="rfverify-prepare", daemon=True)
+            self._thread.start()
+
+    @property
+    def in_background(self) -> bool:
+        return self._thread is not None
+
+    def _build(self) -> None:
+        try:
+            self._ctx = ProofContext(self.problem)
+        except BaseException as exc:  # noqa: BLE001 — raised again in the caller's thread, by context()
+            self._ctx_error = exc
+        finally:
+            self._ctx_ready.set()
+        if self._cancelled or self._ctx_error is not None:
+            return
+        try:
+            data = ExtendedData(self.problem)
+            system = None if self._cancelled else choose_backend(data, self.backend, engine=self.engine)
+        except BaseException as exc:  # noqa: BLE001 — raised again in the caller's thread, by system()
+            self._system_error = exc
+            return
+        if system is None:
+            return
+        self._system = (data, system)
+        if not self._cancelled and hasattr(system, "prepare"):
+            try:
+                system.prepare()
+            except Exception:  # noqa: BLE001, S110 — the first update repeats the step and reports it
+                pass
+
+    def context(self) -> ProofContext:
+        if self._thread is None:
+            if self._ctx is None:
+                self._ctx = ProofContext(self.problem)
+            return self._ctx
+        self._ctx_ready.wait()
+        if self._ctx_error is not None:
+            raise self._ctx_error
+        return self._ctx
+
+    def system(self):
+        """(ExtendedData, back end)."""
+        if self._thread is not None:
+            self._thread.join()
+            if self._system_error is not None:
+                raise self._system_error
+        if self._system is None:  # serial, or the thread was cancelled before it got here
+            data = ExtendedData(self.problem)
+            self._system = (data, choose_backend(data, self.backend, engine=self.engine))
+        return self._system
+
+    def cancel(self) -> None:
+        self._cancelled = True
+
+
+def double_answer_may_certify(ctx: ProofContext, problem: Problem, v, r, requested: int) -> bool:
+    """:meth:`ProofContext.may_certify` for the double solve's answer (v, r), from its duality
+    gap rᵀu (u = Hᵀv + w, or W r + q for a local problem) computed in long double and lowered by
+    twice a bound of that computation's rounding error, (k + N + 3)·ε·Σ|r_i|(|Hᵀ||v| + |w|)_i
+    (k entries per column of H, N entries of r, ε long double's unit roundoff: float64's where
+    the platform has no wider type), so that an exact answer (gap 0) is always proven.  False:
+    no proof of this answer can certify ``requested`` digits (the proof's ε is at least √(rᵀu))."""
+    ld = np.longdouble
+    r = np.asarray(r, dtype=ld)
+    with np.errstate(all="ignore"):
+        if problem.local is not None:
+            A, x, c = sp.csr_matrix(problem.local.W, dtype=ld), r, np.asarray(problem.local.q, dtype=ld)
+            v_inf = 0.0
+        else:
+            A, x, c = sp.csr_matrix(problem.H.T, dtype=ld), np.asarray(v, dtype=ld), np.asarray(problem.w, dtype=ld)
+            v_inf = float(np.max(np.abs(x), initial=0.0))
+        u = A @ x + c
+        size = abs(A) @ np.abs(x) + np.abs(c)  # ≥ |u_i|, and what u_i's rounding error is relative to
+        k = int(np.max(np.diff(A.indptr), initial=0))
+        gap = float(np.sum(r * u))
+        slack = float(2 * (k + r.size + 3) * np.finfo(ld).eps * np.sum(np.abs(r) * size))
+        u_inf = float(np.max(np.abs(u), initial=0.0))
+    if not (math.isfinite(gap) and math.isfinite(slack) and math.isfinite(u_inf) and math.isfinite(v_inf)):
+        return True  # let the proof say what it can
+    return ctx.may_certify(ctx.eps_lower(max(gap - slack, 0.0)), v_inf, u_inf, requested)
+
+
+def _proven_answer(ctx: ProofContext, point: Point, digits: int, relative: bool):
+    """(proof, (v, u, r)) of a float64 answer's point, its (v, u, r) rounded as the proof
+    judges them."""
+    v, u, r = ctx.rounded(point)
+    return ctx.prove(point, v, u, r, requested=digits, relative=relative), (v, u, r)
 
 
 class ProofDriver:
@@ -351,28 +476,45 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     say = progress or (lambda msg: None)
     # On a cold numba cache the other core compiles the kernels, and the double solve runs its
     # cone operations in numpy (bit for bit the compiled ones) instead of compiling them first.
-    compile_extended_in_background()
+    compiling = compile_extended_in_background()
     cold = {"compiled_kernels": False} if float64_kernels_deferred() else {}
     t0, c0 = time.perf_counter(), compile_seconds()
+    prepared = Preparation(problem, backend, factor_engine,
+                           background=not compiling and not extended_cache_is_cold() and preparing_beside())
     deadline = None if time_limit is None else t0 + time_limit
     limit = {} if time_limit is None else {"time_limit": time_limit}
-    double = solve(problem, method=method, tol=tol, max_iter=max_iter, **{**DOUBLE_SETTINGS, **cold, **limit, **options})
+    try:
+        double = solve(problem, method=method, tol=tol, max_iter=max_iter,
+                       **{**DOUBLE_SETTINGS, **cold, **limit, **options})
+    except BaseException:
+        prepared.cancel()
+        raise
     t_double = time.perf_counter() - t0
     c1 = compile_seconds()
     say(f"double solve ({double.method}{' by auto' if method == 'auto' else ''}): {double.status} in "
         f"{double.nit} iterations, {t_double:.2f} s")
     t1 = time.perf_counter()
-    ctx = ProofContext(problem)
+    try:
+        ctx = prepared.context()
+    except BaseException:
+        prepared.cancel()
+        raise
 
     # The double answer itself first: an exact one (a wedge, an all-open scene) is proven here
     # at O(nnz) cost, and where the feasible set has no interior no iterate could do better.
     # Where a hypothesis fails on the data themselves (M, W) no point can be proven: stop here.
+    # Where its duality gap alone rules out the digits asked for (the usual case) the proof
+    # waits: it is made after the extended phase, only if no iterate was proven.
     point = candidate_point(double.v, double.r)
-    v, u, r = ctx.rounded(point)
-    proof = ctx.prove(point, v, u, r, requested=digits, relative=relative)
     out_of_time = deadline is not None and time.perf_counter() > deadline
     interrupted = bool(double.extras.get("interrupted"))
-    if proof.certified or not ctx.hypotheses_proven or out_of_time or interrupted:
+    first = None
+    if (out_of_time or interrupted or not ctx.hypotheses_proven
+            or double_answer_may_certify(ctx, problem, double.v, double.r, digits)):
+        first = _proven_answer(ctx, point, digits, relative)
+    if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted):
+        prepared.cancel()
+        proof, (v, u, r) = first
         if proof.certified:
             say(f"the double solve's answer is proven as it is: {proof.summary()}")
             source, why = "the double solve's answer itself", "not needed"
@@ -395,15 +537,15 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                                        "wide": 0.0, "proof": proof.seconds, "compile": compile_seconds() - c0,
                                        "total": time.perf_counter() - t0},
                               timed_out=out_of_time and not proof.certified, interrupted=interrupted)
-    data = ExtendedData(problem)
-    system = choose_backend(data, backend, engine=factor_engine)
+    data, system = prepared.system()
     t_setup = time.perf_counter() - t1
     c2 = compile_seconds()
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
     start = _start_from(data, double)
     driver = ProofDriver(ctx, data, digits, progress=say, relative=relative, deadline=deadline)
     c_ext = compile_seconds()  # (what _start_from compiled counts in "compile" only)
-    driver.best = (ProofDriver.score(proof), proof, point, (v, u, r))  # the double answer's proof, to beat
+    if first is not None:  # the double answer's proof, to beat
+        driver.best = (ProofDriver.score(first[0]), first[0], point, first[1])
     try:
         ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
                          wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
@@ -411,6 +553,12 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         interrupted = True
         ext_out = Extension(ext.ExtendedResult(None, None, None, "Stopped", "interrupted (Ctrl-C)", 0), None,
                             "not run (interrupted)", None, time.perf_counter() - t1, 0.0)
+    if first is None and not driver.certified:  # the double answer's proof, left until now
+        t_first = time.perf_counter()
+        first = _proven_answer(ctx, point, digits, relative)
+        driver.proof_seconds += time.perf_counter() - t_first
+        if driver.best is None or ProofDriver.score(first[0]) >= driver.best[0]:  # ties: the double answer, as
+            driver.best = (ProofDriver.score(first[0]), first[0], point, first[1])  # when it was proven first
     _, proof, point, (v, u, r) = driver.best
     extra = {"point_source": ext_out.point_source, **ext_out.summary(), "proof_attempts": driver.attempts}
     timed_out = driver.timed_out and not proof.certified

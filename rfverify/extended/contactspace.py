@@ -432,6 +432,19 @@ class ContactSpace(FactoredBackend):
         self.tightened_at = self.factorisations
         return True
 
+    def prepare(self) -> None:
+        """What the first :meth:`update` does that needs no iterate — M factored in
+        double-double, W̃ = H̃M⁻¹H̃ᵀ, the float64 engine's symbolic analysis — done ahead (the
+        k-digit path runs it beside the double solve, :mod:`rfverify.digits`).  Optional: an
+        update does whatever is still missing, and where M fails here it stops (no W̃), so that
+        the update meets the failure again and reports it where it always did."""
+        if self._W is None:
+            if self.Mchol is not None and self.Mchol.factor(*self._M_upper()) >= 0:
+                return
+            self._build_W()
+        if hasattr(self.chol, "prepare"):
+            self.chol.prepare()
+
     def update(self, ph, pl, pih, pil, spec) -> bool:
         d = self.data
         if self._W is None:

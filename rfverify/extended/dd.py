@@ -153,20 +153,20 @@ def to_longdouble(hi, lo) -> np.ndarray:
     return np.asarray(hi, dtype=np.longdouble) + np.asarray(lo, dtype=np.longdouble)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def vadd(ah, al, bh, bl, oh, ol):
     for i in range(ah.size):
         oh[i], ol[i] = add(ah[i], al[i], bh[i], bl[i])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def vaxpy(alpha_h, alpha_l, xh, xl, yh, yl):
     """y += α x in place."""
     for i in range(xh.size):
         yh[i], yl[i] = fma_acc(yh[i], yl[i], alpha_h, alpha_l, xh[i], xl[i])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def vdot(ah, al, bh, bl):
     sh, sl = 0.0, 0.0
     for i in range(ah.size):
@@ -174,7 +174,7 @@ def vdot(ah, al, bh, bl):
     return sh, sl
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def vnorm2(ah, al):
     """‖a‖₂ in double-double (scaled by the largest |hi| to avoid overflow)."""
     big = 0.0
@@ -203,19 +203,19 @@ def csr_matvec(indptr, indices, dh, dl, xh, xl, oh, ol):
         ol[i] = sl
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def vsub(ah, al, bh, bl, oh, ol):
     for i in range(ah.size):
         oh[i], ol[i] = add(ah[i], al[i], -bh[i], -bl[i])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def vscale(alpha_h, alpha_l, xh, xl, oh, ol):
     for i in range(xh.size):
         oh[i], ol[i] = mul(alpha_h, alpha_l, xh[i], xl[i])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def vmul_d(d, xh, xl, oh, ol):
     """o = d ∘ x with a float64 vector d (entrywise)."""
     for i in range(xh.size):

@@ -47,7 +47,7 @@ def _symbolic(n, Ap, Ai):
     return parent, Lp
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _symbolic_kernel(n, Ap, Ai, parent, flag, lnz, Lp):
     for k in range(n):
         flag[k] = k
@@ -69,7 +69,7 @@ def _workspace(n):
     return np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _row_pattern(k, Ap, Ai, parent, flag, pattern, n):
     """The nonzero pattern of row k of L (the columns reached from column k's upper entries
     along the elimination tree), in topological order in pattern[top:n]; returns top."""
@@ -92,7 +92,7 @@ def _row_pattern(k, Ap, Ai, parent, flag, pattern, n):
     return top
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _numeric(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl, yh, yl, flag, pattern, lnz):
     """Returns -1 on success, else the index of the first non-positive pivot.  Work arrays:
     yh, yl zero (n,); flag, pattern, lnz from :func:`_workspace`."""
@@ -127,7 +127,7 @@ def _numeric(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl, yh, yl, flag
     return -1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _solve(n, Lp, Li, Lxh, Lxl, Dh, Dl, xh, xl):
     """In place: x ← (L D Lᵀ)⁻¹ x (x already permuted)."""
     for j in range(n):

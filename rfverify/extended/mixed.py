@@ -22,7 +22,7 @@ from ..solver.engines import CholmodEngine, QDLDLEngine
 from .ldl import DDCholesky, _symbolic, symmetric_pattern, upper_csc, upper_positions
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl, ax):
     """r = b − A x in double-double, A symmetric given by its upper triangle in CSC; returns
     the componentwise backward error max_i |r_i| / (|A||x| + |b|)_i (Oettli–Prager), which,
@@ -233,6 +233,13 @@ class CholmodMixed(_RefinedFloat64Factor):
     @property
     def nnz_upper(self) -> int:
         return int(self.Ai.size)
+
+    def prepare(self) -> None:
+        """CHOLMOD's symbolic analysis of the pattern (it needs no values), done before the
+        first :meth:`factor` — on another thread while the double solve runs
+        (:mod:`rfverify.digits`)."""
+        ones = np.ones(self._lower_indices.size)
+        self._engine.analyse(sp.csc_matrix((ones, self._lower_indices, self._lower_indptr), shape=(self.n, self.n)))
 
     @property
     def Lp(self) -> np.ndarray:

@@ -28,6 +28,8 @@ from typing import Protocol
 import numpy as np
 import scipy.sparse as sp
 
+from . import cholmod_nogil
+
 
 class FactorEngine(Protocol):
     """What a form asks of a factorisation engine.
@@ -143,7 +145,11 @@ def nested_dissection(K: sp.spmatrix) -> np.ndarray | None:
     G.setdiag(0)
     G.eliminate_zeros()
     G.sort_indices()
-    perm, _ = pymetis.nested_dissection(xadj=G.indptr.astype(np.int64), adjncy=G.indices.astype(np.int64))
+    xadj, adjncy = G.indptr.astype(np.int64), G.indices.astype(np.int64)
+    if hasattr(pymetis, "CSRAdjacency"):  # pymetis 2025: xadj=/adjncy= are deprecated, to be removed in 2027
+        perm, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(xadj, adjncy))
+    else:
+        perm, _ = pymetis.nested_dissection(xadj=xadj, adjncy=adjncy)
     return np.asarray(perm, dtype=np.int64)
 
 
@@ -169,38 +175,76 @@ class CholmodEngine:
         self._factor = None
         self._A = None
         self._pattern = None
+        self._pattern64 = None  # (indptr, indices) as int64, for the GIL-free call
+        self._numeric = False  # a numeric factorisation has succeeded since the analysis
+        self._nogil = cholmod_nogil.factorizer()  # None: cvxopt's own call (it holds the GIL)
         self.factorisations = 0
         self.ordering = None  # "AMD" or "nested dissection or AMD, the less fill", after the analysis
+
+    @property
+    def releases_gil(self) -> bool:
+        """True when the numeric factorisations run without the GIL
+        (:mod:`.cholmod_nogil`): other threads of the process run meanwhile."""
+        return self._nogil is not None
+
+    def analyse(self, K: sp.csc_matrix) -> None:
+        """The symbolic analysis (fill-reducing order, supernodes) of the pattern of ``K``'s
+        lower triangle, values ignored; the first :meth:`factor` of a matrix with this pattern
+        then only factors.  Does nothing once analysed."""
+        if self._factor is None:
+            self._analyse(self._lower(K))
+
+    @staticmethod
+    def _lower(K) -> sp.csc_matrix:
+        K = sp.csc_matrix(K)
+        K.sort_indices()
+        return K
+
+    def _analyse(self, K: sp.csc_matrix) -> None:
+        import cvxopt
+        from cvxopt import cholmod
+
+        n = K.shape[0]
+        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
+        A = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(K.data, dtype=np.float64)),
+                            cvxopt.matrix(K.indices.astype(np.int64)), cvxopt.matrix(cols), (n, n))
+        perm = nested_dissection(K) if n >= ND_MIN_ROWS else None
+        with _cholmod_options(supernodal=2):
+            if perm is None:
+                factor = cholmod.symbolic(A, uplo="L")
+                ordering = "AMD"
+            else:  # CHOLMOD tries the given order and AMD and keeps the one with less fill
+                factor = cholmod.symbolic(A, p=cvxopt.matrix(perm.astype(np.int64)), uplo="L")
+                ordering = "nested dissection or AMD, whichever fills less"
+        self._A, self._factor, self.ordering = A, factor, ordering
+        self._numeric = False
+        self._pattern = (K.indptr.copy(), K.indices.copy())
+        self._pattern64 = (K.indptr.astype(np.int64), K.indices.astype(np.int64))
 
     def factor(self, K: sp.csc_matrix) -> None:
         import cvxopt
         from cvxopt import cholmod
 
-        K = sp.csc_matrix(K)
-        K.sort_indices()
+        K = self._lower(K)
         n = K.shape[0]
-        with _cholmod_options(supernodal=2):
-            try:
-                if self._factor is None:
-                    cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
-                    self._A = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(K.data, dtype=np.float64)),
-                                              cvxopt.matrix(K.indices.astype(np.int64)), cvxopt.matrix(cols),
-                                              (n, n))
-                    self._pattern = (K.indptr.copy(), K.indices.copy())
-                    perm = nested_dissection(K) if n >= ND_MIN_ROWS else None
-                    if perm is None:
-                        self._factor = cholmod.symbolic(self._A, uplo="L")
-                        self.ordering = "AMD"
-                    else:  # CHOLMOD tries the given order and AMD and keeps the one with less fill
-                        self._factor = cholmod.symbolic(self._A, p=cvxopt.matrix(perm.astype(np.int64)), uplo="L")
-                        self.ordering = "nested dissection or AMD, whichever fills less"
-                else:
-                    if not (np.array_equal(K.indptr, self._pattern[0]) and np.array_equal(K.indices, self._pattern[1])):
-                        raise ValueError("CholmodEngine: the matrix's pattern differs from the first one's")
-                    self._A.V = cvxopt.matrix(np.ascontiguousarray(K.data, dtype=np.float64))
-                cholmod.numeric(self._A, self._factor)
-            except ArithmeticError as exc:
-                raise ArithmeticError(f"CHOLMOD: not positive definite (column {exc})") from None
+        if self._factor is None:
+            self._analyse(K)
+        elif not (np.array_equal(K.indptr, self._pattern[0]) and np.array_equal(K.indices, self._pattern[1])):
+            raise ValueError("CholmodEngine: the matrix's pattern differs from the first one's")
+        values = np.ascontiguousarray(K.data, dtype=np.float64)
+        column = None
+        if self._nogil is not None:
+            column = self._nogil.factorize(self._factor, *self._pattern64, values)
+        if column is None:  # cvxopt's own call: no GIL-free path, or CHOLMOD reported an error (it says which)
+            self._A.V = cvxopt.matrix(values)
+            with _cholmod_options(supernodal=2):
+                try:
+                    cholmod.numeric(self._A, self._factor)
+                except ArithmeticError as exc:
+                    raise ArithmeticError(f"CHOLMOD: not positive definite (column {exc})") from None
+        elif column < n:
+            raise ArithmeticError(f"CHOLMOD: not positive definite (column {column})")
+        self._numeric = True
         self.factorisations += 1
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
@@ -213,8 +257,8 @@ class CholmodEngine:
 
     def permutation(self) -> np.ndarray | None:
         """CHOLMOD's fill-reducing order P (L Lᵀ = K[P][:, P]), or None before the first
-        analysis (or after :meth:`release`)."""
-        if self._factor is None:
+        numeric factorisation (or after :meth:`release`)."""
+        if self._factor is None or not self._numeric:  # cvxopt solves only with a numeric factor
             return None
         import cvxopt
         from cvxopt import cholmod
@@ -229,6 +273,8 @@ class CholmodEngine:
         self._factor = None
         self._A = None
         self._pattern = None
+        self._pattern64 = None
+        self._numeric = False
 
 
 class _cholmod_options:

@@ -1,0 +1,213 @@
+"""The k-digit path's set-up beside the double solve (rfverify.digits.Preparation) and the double
+answer's proof left until it is needed (double_answer_may_certify): the same answers as the
+serial path, errors raised where the serial path raises them, and the gate a true necessary
+condition — where it says no proof of the double answer can certify, none does."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from exact_problems import exact_problem
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
+
+import rfverify
+from rfverify import digits as D
+from rfverify.certificate import candidate_point
+from rfverify.extended.contactspace import ContactSpace
+from rfverify.proof import ProofContext
+from rfverify.random_problems import random_problem
+from rfverify.scenes import generate
+
+
+def _point(out):
+    return np.concatenate([out.point.v_hi, out.point.v_lo, out.point.r_hi, out.point.r_lo])
+
+
+@pytest.fixture
+def beside(monkeypatch):
+    """Force the set-up onto the second thread (True) or into the caller's (False); returns the
+    list of Preparation objects made."""
+    made = []
+    real = D.Preparation
+
+    def force(flag):
+        monkeypatch.setattr(D, "preparing_beside", lambda: flag)
+
+        class Spy(real):
+            def __init__(self, *a, **k):
+                super().__init__(*a, **k)
+                made.append(self)
+        monkeypatch.setattr(D, "Preparation", Spy)
+        return made
+    return force
+
+
+@pytest.mark.parametrize("make", [lambda: generate("GranularBed", count=1, seed=3, size=125)[0],
+                                  lambda: rfverify.load("bundled:chute"),
+                                  lambda: random_problem(25, 70, seed=11)])
+def test_set_up_beside_the_double_solve_gives_the_serial_answer_bit_for_bit(beside, make):
+    problem = make()
+    runs = {}
+    for flag in (True, False):
+        made = beside(flag)
+        out = rfverify.solve_to_digits(problem, digits=10)
+        assert made[-1].in_background is flag
+        runs[flag] = out
+    a, b = runs[True], runs[False]
+    assert np.array_equal(_point(a), _point(b))
+    assert a.certificate.verdict == b.certificate.verdict and a.digits == b.digits
+    assert a.extended.nit == b.extended.nit > 0
+
+
+@pytest.mark.parametrize("flag", [True, False])
+def test_a_proof_context_error_is_raised_as_in_the_serial_path(beside, monkeypatch, flag):
+    beside(flag)
+
+    def broken(problem):
+        raise RuntimeError("proof context broke")
+    monkeypatch.setattr(D, "ProofContext", broken)
+    with pytest.raises(RuntimeError, match="proof context broke"):
+        rfverify.solve_to_digits(random_problem(10, 25, seed=2), digits=10)
+
+
+@pytest.mark.parametrize("flag", [True, False])
+def test_a_back_end_error_is_raised_only_where_the_serial_path_needs_the_back_end(beside, monkeypatch, flag):
+    beside(flag)
+
+    def broken(*a, **k):
+        raise MemoryError("no room for the back end")
+    monkeypatch.setattr(D, "choose_backend", broken)
+    with pytest.raises(MemoryError, match="no room"):
+        rfverify.solve_to_digits(random_problem(10, 25, seed=2), digits=10)
+    # an exact answer is proven from the double solve: the back end is never needed
+    out = rfverify.solve_to_digits(_wedge(), digits=10)
+    assert out.certificate.certified and out.extended.status == "NotRun"
+
+
+def _wedge():
+    """M = 1, H = e_N, f = −1: the exact answer v = 0, r = e_N, with no strictly feasible point."""
+    H = sp.csc_matrix(np.array([[1.0, 0, 0, 0, 0]]))
+    return rfverify.Problem.from_arrays(sp.identity(1, format="csc"), H, np.array([-1.0]), np.zeros(5),
+                                        np.zeros(1), np.zeros(1))
+
+
+def test_a_failed_prepare_is_left_to_the_first_update(beside, monkeypatch):
+    problem = generate("GranularBed", count=1, seed=3, size=125)[0]
+    beside(False)
+    serial = rfverify.solve_to_digits(problem, digits=10)
+    made = beside(True)
+
+    def broken(self):
+        raise RuntimeError("prepare broke")
+    monkeypatch.setattr(ContactSpace, "prepare", broken)
+    out = rfverify.solve_to_digits(problem, digits=10)
+    assert made[-1].in_background and out.certificate.certified
+    assert np.array_equal(_point(out), _point(serial))
+
+
+def test_a_cancelled_preparation_builds_what_is_asked_for_afterwards():
+    problem = random_problem(8, 20, seed=4)
+    prep = D.Preparation(problem, "auto", "auto", background=True)
+    prep.cancel()
+    ctx = prep.context()
+    data, system = prep.system()
+    assert ctx.hypotheses_proven and data.n == problem.n_contacts and system is prep.system()[1]
+
+
+# ---- the gate: a necessary condition for the double answer's proof to certify
+
+
+def _gate_and_proof(problem, v, r, digits=10):
+    ctx = ProofContext(problem)
+    point = candidate_point(v, r)
+    vv, uu, rr = ctx.rounded(point)
+    proof = ctx.prove(point, vv, uu, rr, requested=digits)
+    return D.double_answer_may_certify(ctx, problem, v, r, digits), proof
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("scale", [1.0, 2.0 ** 400, 2.0 ** -400])
+def test_an_exact_answer_always_passes_the_gate_and_is_proven(seed, scale):
+    problem, v, _, r = exact_problem(seed, n_contacts=6, asymmetry=0)
+    if scale != 1.0:  # M, f scaled by a power of two: the same v*, and r* scaled (exactly)
+        problem = rfverify.Problem(problem.M * scale, problem.H, problem.f * scale, problem.w, problem.mu,
+                                   problem.mu_r)
+        r = r * scale
+    may, proof = _gate_and_proof(problem, v, r)
+    assert may and proof.certified, proof.summary()
+
+
+def test_the_wedges_exact_double_answer_passes_the_gate():
+    may, proof = _gate_and_proof(_wedge(), np.zeros(1), np.array([1.0, 0, 0, 0, 0]), digits=15)
+    assert may and proof.certified
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 50), tol_exp=st.integers(4, 12), digits=st.integers(2, 10))
+@example(seed=3, tol_exp=12, digits=6)
+@example(seed=5, tol_exp=10, digits=4)
+def test_where_the_gate_says_no_the_proof_does_not_certify(seed, tol_exp, digits):
+    """Double answers of fresh random problems solved to 1e-4 … 1e-12, asked for 2 … 10 digits:
+    the gate may let through a proof that fails, never stop one that would certify."""
+    problem = rfverify.solver.posed(random_problem(6, 14, seed=seed), None, "auto")
+    double = rfverify.solve(problem, tol=10.0 ** -tol_exp)
+    may, proof = _gate_and_proof(problem, double.v, double.r, digits)
+    assert may or not proof.certified, (proof.summary(), tol_exp, digits)
+
+
+def test_the_gate_lets_through_the_double_answers_that_certify():
+    """Not vacuous: some of those answers certify (and pass), some are stopped by the gate."""
+    seen = set()
+    for seed in range(6):
+        problem = rfverify.solver.posed(random_problem(6, 14, seed=seed), None, "auto")
+        for tol_exp in (6, 12):
+            double = rfverify.solve(problem, tol=10.0 ** -tol_exp)
+            for digits in (3, 10):
+                may, proof = _gate_and_proof(problem, double.v, double.r, digits)
+                seen.add((may, proof.certified))
+    assert (True, True) in seen and (False, False) in seen
+
+
+def test_the_gate_skips_a_granular_beds_double_answer_and_its_proof_would_not_certify():
+    problem = rfverify.solver.posed(generate("GranularBed", count=1, seed=3, size=216)[0], None, "auto")
+    double = rfverify.solve(problem, tol=1e-10, **D.DOUBLE_SETTINGS)
+    may, proof = _gate_and_proof(problem, double.v, double.r)
+    assert not may and not proof.certified
+
+
+def test_the_double_answers_proof_stands_where_no_iterate_beats_it():
+    """The extended phase gets no iteration: the double answer, proven at the end, is the answer."""
+    problem = generate("GranularBed", count=1, seed=3, size=125)[0]
+    out = rfverify.solve_to_digits(problem, digits=10, extended_max_iter=0, wide_tail=False)
+    posed = rfverify.solver.posed(problem, None, "auto")
+    _, own = _gate_and_proof(posed, out.double.v, out.double.r)
+    assert out.certificate.proof.summary() == own.summary()
+    assert np.array_equal(out.point.v_hi, out.double.v) and np.array_equal(out.point.r_hi, out.double.r)
+
+
+def test_on_a_tie_the_double_answers_proof_is_the_one_reported(monkeypatch):
+    """As when it was proven first and an iterate had to beat it: with every proof scored alike,
+    the double answer (proven last now) is the answer."""
+    monkeypatch.setattr(D.ProofDriver, "score", staticmethod(lambda proof: 0.0))
+    problem = generate("GranularBed", count=1, seed=3, size=125)[0]
+    out = rfverify.solve_to_digits(problem, digits=15, extended_max_iter=3, wide_tail=False)
+    assert out.extended.nit > 0 and not out.certificate.certified
+    assert np.array_equal(out.point.v_hi, out.double.v) and np.array_equal(out.point.r_hi, out.double.r)
+
+
+def test_an_exact_answer_whose_gap_rounds_up_still_passes_the_gate():
+    """u_N = 2⁶⁴ + 3 − 2⁶⁴ − 3 = 0 exactly, but 2⁶⁴ + 3 rounds up even in long double: the
+    computed gap is 1, not 0.  The rounding allowance keeps the exact answer (v = 1, r = e_N,
+    ε = 0) from being stopped."""
+    big = 2.0 ** 64
+    H = sp.csc_matrix(np.array([[big, 0, 0, 0, 0], [3.0, 0, 0, 0, 0], [-big, 0, 0, 0, 0]]))
+    M = sp.diags([big, 4.0, big], format="csc")
+    v, r = np.ones(3), np.array([1.0, 0, 0, 0, 0])
+    w = np.array([-3.0, 0, 0, 0, 0])
+    problem = rfverify.Problem.from_arrays(M, H, M @ v - H @ r, w, np.array([0.5]), np.array([0.1]))
+    u = np.asarray(sp.csr_matrix(H.T, dtype=np.longdouble) @ v.astype(np.longdouble) + w)
+    assert float(r @ u) == 1.0  # the rounding this test is about
+    may, proof = _gate_and_proof(problem, v, r)
+    assert may and proof.certified, proof.summary()
