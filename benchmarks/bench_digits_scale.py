@@ -5,9 +5,11 @@ child process of its own, so that its peak resident memory (``ru_maxrss`` of the
 the path's alone.  One row per run:
 
     contacts, dofs, engine, stage times (double, setup, extended, wide, proof, total), the path's
-    total over its own double solve (/dbl: tol 1e-10, the paper's centring rule) and over a plain
-    ``rfverify.solve(problem)`` timed after it in the same child (plain, /pln: what
-    ``rfverify solve FILE`` runs: tol 1e-10, the default centring rule),
+    total over its own double solve (/dbl: tol 1e-10, the paper's centring rule, as timed inside
+    the path, where the set-up of the double-double phase runs beside it on two CPUs), over a
+    plain ``rfverify.solve(problem)`` timed after it in the same child (plain, /pln: what
+    ``rfverify solve FILE`` runs: tol 1e-10, the default centring rule) and over the path's own
+    double solve run alone after that (alone, /aln: nothing beside it),
     extended iterations, the contact-space matrix (order, nnz of its upper triangle, nnz(L),
     Σ c_j² of L in the engine's order), factorisations, solves, refinement steps, the update
     (assembly + factorisation) seconds, peak memory (MB and kB per contact), proven digits.
@@ -80,12 +82,18 @@ def one(spec: str, engine: str) -> dict:
     t1 = time.perf_counter()
     plain = rfverify.solve(problem)  # what `rfverify solve FILE` runs: the other yardstick of the path's cost
     plain_seconds = time.perf_counter() - t1
+    from rfverify.digits import DOUBLE_SETTINGS
+
+    t2 = time.perf_counter()
+    rfverify.solve(problem, **DOUBLE_SETTINGS)  # the path's double solve with nothing beside it
+    alone_seconds = time.perf_counter() - t2
     q = out.certificate.quantities
     digits = {k: (None if x.digits is None else round(x.digits, 2)) for k, x in q.items() if x.mode != "information"}
     ext = out.extended
     return {"problem": spec, "contacts": problem.n_contacts, "dofs": problem.n_dofs, "engine": engine,
             "timings": {k: round(v, 2) for k, v in out.timings.items()}, "wall": round(total, 2),
             "plain_double": round(plain_seconds, 2), "plain_status": str(plain.status),
+            "alone_double": round(alone_seconds, 2),
             "ext_iterations": int(getattr(ext, "nit", 0) or 0),
             "update_seconds": round(getattr(ext, "factor_seconds", 0.0), 2),
             "stats": getattr(ext, "stats", {}), "wide": None if out.wide is None else int(out.wide.nit),
@@ -110,7 +118,7 @@ def _main(argv=None):
         print(json.dumps(one(*args.one)), flush=True)
         return 0
     head = (f"{'problem':<28} {'n':>6} {'m':>6} {'engine':>7} {'double':>7} {'ext':>7} {'mp':>6} {'total':>7} "
-            f"{'/dbl':>5} {'plain':>6} {'/pln':>5} {'it':>3} {'order':>7} {'nnz(L)':>10} {'Σc²':>8} {'solves':>6} {'steps':>6} {'update':>7} "
+            f"{'/dbl':>5} {'plain':>6} {'/pln':>5} {'alone':>6} {'/aln':>5} {'it':>3} {'order':>7} {'nnz(L)':>10} {'Σc²':>8} {'solves':>6} {'steps':>6} {'update':>7} "
             f"{'MB':>7} {'kB/c':>6}  proven")
     print(head)
     print("-" * len(head), flush=True)
@@ -134,7 +142,8 @@ def _main(argv=None):
             dig = "/".join(f"{k} {v}" for k, v in r["digits"].items())
             print(f"{r['problem'][-28:]:<28} {r['contacts']:>6} {r['dofs']:>6} {engine:>7} {t['double']:>7.1f} "
                   f"{t['setup'] + t['extended']:>7.1f} {mp:>6} {t['total']:>7.1f} {t['total'] / t['double']:>5.2f} "
-                  f"{r['plain_double']:>6.1f} {t['total'] / r['plain_double']:>5.2f} {r['ext_iterations']:>3} "
+                  f"{r['plain_double']:>6.1f} {t['total'] / r['plain_double']:>5.2f} "
+                  f"{r['alone_double']:>6.1f} {t['total'] / r['alone_double']:>5.2f} {r['ext_iterations']:>3} "
                   f"{s.get('order', 0):>7} {s.get('nnz_L', 0):>10} {s.get('sum_c2', 0):>8.1e} "
                   f"{s.get('solves', 0):>6} {s.get('refinement_steps', 0):>6} {r['update_seconds']:>7.1f} "
                   f"{r['peak_MB']:>7.0f} {r['peak_kB_per_contact']:>6.1f}  "

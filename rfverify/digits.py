@@ -9,7 +9,11 @@
    no longer decreasing).
 
 The proof is tried only at iterates where a cheap necessary condition holds
-(:meth:`ProofContext.may_certify`), so it costs O(nnz) a few times per run.
+(:meth:`ProofContext.may_certify`), so it costs O(nnz) a few times per run; the double answer
+too (:func:`double_answer_may_certify`), whose proof otherwise waits until no later point is
+proven.  With two CPUs the set-up of stage 2 is built on the second one during stage 1
+(:class:`Preparation`): CHOLMOD's factorisations there release the GIL
+(:mod:`.solver.cholmod_nogil`).
 """
 
 from __future__ import annotations
@@ -49,7 +53,8 @@ class DigitsSolution(ResultAliases):
     verdict; ``double`` the double solve; ``extended`` the double-double run; ``wide`` the
     multiple-precision tail (None when it did not run); ``timings`` seconds per stage
     (``double``, ``setup``, ``extended``, ``wide``, ``proof``, ``total``; proofs excluded from
-    the others; ``compile``: numba compiling kernels on a cold start, excluded from the stage
+    the others; ``setup`` is what the double-double phase's set-up still took after the double
+    solve — on two CPUs it is built beside it, :class:`Preparation`; ``compile``: numba compiling kernels on a cold start, excluded from the stage
     it happened in, see :mod:`rfverify.compilation`).  ``timed_out``: the run stopped at its
     ``time_limit`` (status MaxTime unless what it had proven by then is enough).
     """

@@ -76,8 +76,9 @@ def add_parser(sub) -> None:
                           "rigorous error bound of DESIGN §6 proves K digits of v, u and Hr "
                           "(and r where it is unique); exit code 0 only when proven. With --out the "
                           "file also gets /certificate (the point and the bound, to recheck with "
-                          "'rfverify certify'). The double-double phase uses every CPU available; "
-                          "RFVERIFY_THREADS=N sets how many (the answer is the same bit for bit)")
+                          "'rfverify certify'). The double-double phase uses every CPU available (and "
+                          "with two or more is set up beside the double solve); RFVERIFY_THREADS=N "
+                          "sets how many (the answer is the same bit for bit)")
     sol.add_argument("--relative", action="store_true",
                      help="with --digits: demand K relative (significant) digits of every quantity; a "
                           "quantity whose exact value may be zero is then not certified, instead of being "

@@ -247,6 +247,9 @@ class CholmodMixed(_RefinedFloat64Factor):
         of the double-double factor after a fallback."""
         if self._dd is not None:
             return self._dd.Lp
+        counts = self._engine.column_counts() if self._engine.permutation() is not None else None
+        if counts is not None:  # CHOLMOD's own symbolic counts: no analysis of ours
+            return np.concatenate(([0], np.cumsum(counts)))
         perm = self._engine.permutation()
         perm = np.arange(self.n) if perm is None else perm
         Ap, Ai, _ = upper_csc(self.pattern[perm][:, perm])

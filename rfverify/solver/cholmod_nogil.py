@@ -150,3 +150,24 @@ def factorizer() -> Factorizer | None:
     module's docstring)."""
     lib = _library()
     return None if lib is None else Factorizer(lib)
+
+
+def factor_counts(factor) -> tuple[np.ndarray, np.ndarray] | None:
+    """(P, column counts of L) of cvxopt's analysed CHOLMOD factor ``factor``, copied from the
+    factor itself (``L->Perm``, ``L->ColCount``: int64 arrays of the order n; the leading fields
+    of ``cholmod_factor`` since CHOLMOD 1), or None where the GIL-free library is not in use
+    here.  The counts include the diagonal: nnz(L) is their sum."""
+    if _library() is None:
+        return None
+    name = _capsule_name(factor)
+    if name not in (b"CHOLMOD FACTOR D L", b"CHOLMOD FACTOR D U"):
+        raise TypeError(f"not cvxopt's factor of a 'd' matrix: {name!r}")
+    L = _capsule_pointer(factor, name)
+    word = ctypes.sizeof(ctypes.c_size_t)
+    n = ctypes.c_size_t.from_address(L).value
+    perm_at, count_at = (ctypes.c_void_p.from_address(L + k * word).value for k in (2, 3))
+    if not perm_at or not count_at:
+        return None
+    perm = np.ctypeslib.as_array((ctypes.c_int64 * n).from_address(perm_at)).copy()
+    counts = np.ctypeslib.as_array((ctypes.c_int64 * n).from_address(count_at)).copy()
+    return perm, counts

@@ -255,11 +255,24 @@ class CholmodEngine:
         cholmod.solve(self._factor, b)
         return np.array(b, dtype=np.float64).reshape(-1)
 
+    def column_counts(self) -> np.ndarray | None:
+        """Nonzeros per column of L below the diagonal, in CHOLMOD's order (statistics: nnz(L),
+        Σ c_j²), read from the analysed factor itself; None before the analysis, after
+        :meth:`release`, or where the factor's fields cannot be read here
+        (:func:`.cholmod_nogil.factor_counts`)."""
+        if self._factor is None or self._nogil is None:
+            return None
+        found = cholmod_nogil.factor_counts(self._factor)
+        return None if found is None else found[1] - 1
+
     def permutation(self) -> np.ndarray | None:
         """CHOLMOD's fill-reducing order P (L Lᵀ = K[P][:, P]), or None before the first
         numeric factorisation (or after :meth:`release`)."""
         if self._factor is None or not self._numeric:  # cvxopt solves only with a numeric factor
             return None
+        found = cholmod_nogil.factor_counts(self._factor) if self._nogil is not None else None
+        if found is not None:
+            return found[0]
         import cvxopt
         from cvxopt import cholmod
 
