@@ -184,9 +184,10 @@ class Preparation:
     the extended data, the Newton back end and what its first update needs no iterate for
     (``prepare()``, e.g. :meth:`.extended.contactspace.ContactSpace.prepare`).
 
-    With ``background`` they are built on a second thread as soon as the object is made — the
-    double solve runs meanwhile, and its CHOLMOD factorisations release the GIL — and without it
-    here, when asked for, as before.  The results are the same either way.  An error is raised
+    With ``background`` they are built on a second thread — begun at the double solve's first
+    CHOLMOD factorisation, which releases the GIL (before it the solve sets itself up in Python
+    and GIL-holding calls, and a thread beside it measurably slowed it), or when the results are
+    asked for — and without it here, when asked for, as before.  The results are the same either way.  An error is raised
     where the serial path raises it: ProofContext's by :meth:`context`, the extended data's and
     back end's by :meth:`system`; a failure of ``prepare()`` is left to the first update, which
     repeats the step and reports it where it always did.  :meth:`cancel` (the path ends early)
@@ -197,9 +198,13 @@ class Preparation:
         self._ctx = self._ctx_error = None
         self._system = self._system_error = None
         self._ctx_ready = threading.Event()
+        self._go = threading.Event()  # start: at the double solve's first GIL-free factorisation, or when asked
         self._cancelled = False
         self._thread = None
         if background:
+            from .solver import cholmod_nogil
+
+            cholmod_nogil.when_factoring(self._go)
             self._thread = threading.Thread(target=self._build, name="rfverify-prepare", daemon=True)
             self._thread.start()
 
@@ -207,7 +212,21 @@ class Preparation:
     def in_background(self) -> bool:
         return self._thread is not None
 
+    def _start(self) -> None:
+        """Let the thread begin now (the caller needs its results, or it is cancelled)."""
+        if not self._go.is_set():
+            from .solver import cholmod_nogil
+
+            cholmod_nogil.forget(self._go)
+            self._go.set()
+
     def _build(self) -> None:
+        # Waiting for the double solve's first factorisation keeps this thread off the GIL while
+        # the solve sets itself up (patterns, orderings: Python and GIL-holding calls).
+        self._go.wait()
+        if self._cancelled:
+            self._ctx_ready.set()
+            return
         try:
             self._ctx = ProofContext(self.problem)
         except BaseException as exc:  # noqa: BLE001 — raised again in the caller's thread, by context()
@@ -236,14 +255,18 @@ class Preparation:
             if self._ctx is None:
                 self._ctx = ProofContext(self.problem)
             return self._ctx
+        self._start()
         self._ctx_ready.wait()
         if self._ctx_error is not None:
             raise self._ctx_error
+        if self._ctx is None:  # cancelled before it began
+            self._ctx = ProofContext(self.problem)
         return self._ctx
 
     def system(self):
         """(ExtendedData, back end)."""
         if self._thread is not None:
+            self._start()
             self._thread.join()
             if self._system_error is not None:
                 raise self._system_error
@@ -254,6 +277,7 @@ class Preparation:
 
     def cancel(self) -> None:
         self._cancelled = True
+        self._start()
 
 
 def double_answer_may_certify(ctx: ProofContext, problem: Problem, v, r, requested: int) -> bool:
