@@ -7,9 +7,9 @@ the path's alone.  One row per run:
     contacts, dofs, engine, stage times (double, setup, extended, wide, proof, total), the path's
     total over its own double solve (/dbl: tol 1e-10, the paper's centring rule, as timed inside
     the path, where the set-up of the double-double phase runs beside it on two CPUs), over a
-    plain ``rfverify.solve(problem)`` timed after it in the same child (plain, /pln: what
-    ``rfverify solve FILE`` runs: tol 1e-10, the default centring rule) and over the path's own
-    double solve run alone after that (alone, /aln: nothing beside it),
+    plain ``rfverify.solve(problem)`` (plain, /pln: what ``rfverify solve FILE`` runs: tol 1e-10,
+    the default centring rule) and over the path's own double solve with nothing beside it
+    (alone, /aln) — each yardstick in a fresh child of its own, as the path was,
     extended iterations, the contact-space matrix (order, nnz of its upper triangle, nnz(L),
     Σ c_j² of L in the engine's order), factorisations, solves, refinement steps, the update
     (assembly + factorisation) seconds, peak memory (MB and kB per contact), proven digits.
@@ -78,22 +78,13 @@ def one(spec: str, engine: str) -> dict:
     out = rfverify.solve_to_digits(problem, digits=10,
                                    factor_engine="auto" if engine in ("default", "noncholmod") else engine)
     total = time.perf_counter() - t0
-    rss_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # the path's peak, before the plain solve
-    t1 = time.perf_counter()
-    plain = rfverify.solve(problem)  # what `rfverify solve FILE` runs: the other yardstick of the path's cost
-    plain_seconds = time.perf_counter() - t1
-    from rfverify.digits import DOUBLE_SETTINGS
-
-    t2 = time.perf_counter()
-    rfverify.solve(problem, **DOUBLE_SETTINGS)  # the path's double solve with nothing beside it
-    alone_seconds = time.perf_counter() - t2
+    rss_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # the path's peak
     q = out.certificate.quantities
     digits = {k: (None if x.digits is None else round(x.digits, 2)) for k, x in q.items() if x.mode != "information"}
     ext = out.extended
     return {"problem": spec, "contacts": problem.n_contacts, "dofs": problem.n_dofs, "engine": engine,
             "timings": {k: round(v, 2) for k, v in out.timings.items()}, "wall": round(total, 2),
-            "plain_double": round(plain_seconds, 2), "plain_status": str(plain.status),
-            "alone_double": round(alone_seconds, 2),
+
             "ext_iterations": int(getattr(ext, "nit", 0) or 0),
             "update_seconds": round(getattr(ext, "factor_seconds", 0.0), 2),
             "stats": getattr(ext, "stats", {}), "wide": None if out.wide is None else int(out.wide.nit),
@@ -104,6 +95,26 @@ def one(spec: str, engine: str) -> dict:
             "backend": out.certificate.extra.get("backend", "")}
 
 
+def yardstick(spec: str, which: str) -> dict:
+    """A double solve alone, in a fresh process as the path's row was (the same first-call
+    costs): "plain" = ``rfverify.solve(problem)``, what ``rfverify solve FILE`` runs; "alone" =
+    the path's own double solve (``digits.DOUBLE_SETTINGS``) with nothing beside it."""
+    import rfverify
+    from rfverify.digits import DOUBLE_SETTINGS
+
+    problem = load(spec)
+    t0 = time.perf_counter()
+    out = rfverify.solve(problem, **(DOUBLE_SETTINGS if which == "alone" else {}))
+    return {"seconds": round(time.perf_counter() - t0, 2), "status": str(out.status)}
+
+
+def _child(args: list, timeout: float) -> dict:
+    run = subprocess.run([sys.executable, __file__, *args], capture_output=True, text=True, timeout=timeout)
+    if run.returncode != 0:
+        raise RuntimeError(run.stderr[-2000:])
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
 def _main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--problems", nargs="*", default=["random:300:1000", "random:1000:3000"])
@@ -112,10 +123,14 @@ def _main(argv=None):
                          "install's choice; noncholmod: cvxopt unimportable (QDLDL everywhere) "
                          "(default: cholmod ldl)")
     ap.add_argument("--one", nargs=2, metavar=("PROBLEM", "ENGINE"), help=argparse.SUPPRESS)
+    ap.add_argument("--yardstick", nargs=2, metavar=("PROBLEM", "WHICH"), help=argparse.SUPPRESS)
     ap.add_argument("--timeout", type=float, default=3600.0, help="seconds per run (default 3600)")
     args = ap.parse_args(argv)
     if args.one:
         print(json.dumps(one(*args.one)), flush=True)
+        return 0
+    if args.yardstick:
+        print(json.dumps(yardstick(*args.yardstick)), flush=True)
         return 0
     head = (f"{'problem':<28} {'n':>6} {'m':>6} {'engine':>7} {'double':>7} {'ext':>7} {'mp':>6} {'total':>7} "
             f"{'/dbl':>5} {'plain':>6} {'/pln':>5} {'alone':>6} {'/aln':>5} {'it':>3} {'order':>7} {'nnz(L)':>10} {'Σc²':>8} {'solves':>6} {'steps':>6} {'update':>7} "
@@ -126,17 +141,17 @@ def _main(argv=None):
     for spec in args.problems:
         for engine in args.engines:
             try:
-                run = subprocess.run([sys.executable, __file__, "--one", spec, engine], capture_output=True,
-                                     text=True, timeout=args.timeout)
+                r = _child(["--one", spec, engine], args.timeout)
+                r["plain_double"] = _child(["--yardstick", spec, "plain"], args.timeout)["seconds"]
+                r["alone_double"] = _child(["--yardstick", spec, "alone"], args.timeout)["seconds"]
             except subprocess.TimeoutExpired:
                 print(f"{spec:<28} {engine:>7}  did not finish in {args.timeout:.0f} s", flush=True)
                 ok = False
                 continue
-            if run.returncode != 0:
-                print(f"{spec:<28} {engine:>7}  failed:\n{run.stderr[-2000:]}", flush=True)
+            except RuntimeError as exc:
+                print(f"{spec:<28} {engine:>7}  failed:\n{exc}", flush=True)
                 ok = False
                 continue
-            r = json.loads(run.stdout.strip().splitlines()[-1])
             t, s = r["timings"], r["stats"]
             mp = "–" if r["wide"] is None else f"{t['wide']:.1f}"
             dig = "/".join(f"{k} {v}" for k, v in r["digits"].items())
