@@ -54,8 +54,9 @@ class DigitsSolution(ResultAliases):
     multiple-precision tail (None when it did not run); ``timings`` seconds per stage
     (``double``, ``setup``, ``extended``, ``wide``, ``proof``, ``total``; proofs excluded from
     the others; ``setup`` is what the double-double phase's set-up still took after the double
-    solve — on two CPUs it is built beside it, :class:`Preparation`; ``compile``: numba compiling kernels on a cold start, excluded from the stage
-    it happened in, see :mod:`rfverify.compilation`).  ``timed_out``: the run stopped at its
+    solve — on two CPUs it is built beside it, :class:`Preparation`; ``compile``: numba
+    compiling kernels on a cold start, excluded from the stage it happened in, see
+    :mod:`rfverify.compilation`).  ``timed_out``: the run stopped at its
     ``time_limit`` (status MaxTime unless what it had proven by then is enough).
     """
 
@@ -187,11 +188,11 @@ class Preparation:
     With ``background`` they are built on a second thread — begun at the double solve's first
     CHOLMOD factorisation, which releases the GIL (before it the solve sets itself up in Python
     and GIL-holding calls, and a thread beside it measurably slowed it), or when the results are
-    asked for — and without it here, when asked for, as before.  The results are the same either way.  An error is raised
-    where the serial path raises it: ProofContext's by :meth:`context`, the extended data's and
-    back end's by :meth:`system`; a failure of ``prepare()`` is left to the first update, which
-    repeats the step and reports it where it always did.  :meth:`cancel` (the path ends early)
-    stops the thread at its next step."""
+    asked for — and without it here, when asked for, as before.  The results are the same
+    either way.  An error is raised where the serial path raises it: ProofContext's by
+    :meth:`context`, the extended data's and back end's by :meth:`system`; a failure of
+    ``prepare()`` is left to the first update, which repeats the step and reports it where it
+    always did.  :meth:`cancel` (the path ends early) stops the thread at its next step."""
 
     def __init__(self, problem: Problem, backend: str, engine: str, background: bool):
         self.problem, self.backend, self.engine = problem, backend, engine

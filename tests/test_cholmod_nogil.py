@@ -170,3 +170,33 @@ def test_the_factors_own_order_and_column_counts_are_those_of_the_pattern():
         full = (K + sp.tril(K, -1).T).tocsc()
         Ap, Ai, _ = upper_csc(full[perm][:, perm])
         assert np.array_equal(ours.column_counts(), np.diff(_symbolic(n, Ap, Ai)[1]))
+
+
+def test_cvxopts_global_options_are_set_by_one_block_at_a_time():
+    """The set-up thread analyses while the double solve may call cvxopt: two option blocks must
+    not interleave, or one restores the other's settings and leaks them into the user's cvxopt."""
+    from cvxopt import cholmod
+
+    from rfverify.solver.engines import _cholmod_options
+
+    original = dict(cholmod.options)
+    inside, order = threading.Event(), []
+
+    def first():
+        with _cholmod_options(supernodal=1):
+            order.append("first in")
+            inside.set()
+            time.sleep(0.3)
+            order.append("first out")
+
+    def second():
+        inside.wait()
+        with _cholmod_options(supernodal=0):
+            order.append("second in")
+
+    threads = [threading.Thread(target=first), threading.Thread(target=second)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert order == ["first in", "first out", "second in"] and dict(cholmod.options) == original

@@ -23,6 +23,7 @@ Every factorisation after the first must have the first one's sparsity pattern (
 
 from __future__ import annotations
 
+import threading
 from typing import Protocol
 
 import numpy as np
@@ -290,8 +291,13 @@ class CholmodEngine:
         self._numeric = False
 
 
+_options_lock = threading.RLock()
+
+
 class _cholmod_options:
-    """Set cvxopt's global CHOLMOD options for a block, restoring the caller's afterwards."""
+    """Set cvxopt's global CHOLMOD options for a block, restoring the caller's afterwards; one
+    block at a time in the process (the k-digit path analyses on a second thread), so that two
+    blocks cannot restore each other's settings."""
 
     def __init__(self, **options):
         self.options = options
@@ -299,14 +305,22 @@ class _cholmod_options:
     def __enter__(self):
         from cvxopt import cholmod
 
-        self.saved = dict(cholmod.options)
-        cholmod.options.update(self.options)
+        _options_lock.acquire()
+        try:
+            self.saved = dict(cholmod.options)
+            cholmod.options.update(self.options)
+        except BaseException:
+            _options_lock.release()
+            raise
 
     def __exit__(self, *exc):
         from cvxopt import cholmod
 
-        cholmod.options.clear()
-        cholmod.options.update(self.saved)
+        try:
+            cholmod.options.clear()
+            cholmod.options.update(self.saved)
+        finally:
+            _options_lock.release()
         return False
 
 
