@@ -177,7 +177,7 @@ def preparing_beside() -> bool:
     interpreter to the set-up."""
     from .solver import cholmod_nogil
 
-    return threads() >= 2 and cholmod_nogil.factorizer() is not None
+    return threads() >= 2 and cholmod_nogil.available()
 
 
 class Preparation:

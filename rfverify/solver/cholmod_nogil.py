@@ -173,6 +173,11 @@ class Factorizer:
         return int(ctypes.c_size_t.from_address(L + ctypes.sizeof(ctypes.c_size_t)).value)
 
 
+def available() -> bool:
+    """True when the GIL-free call can be used here (see the module's docstring)."""
+    return _library() is not None
+
+
 def factorizer() -> Factorizer | None:
     """A :class:`Factorizer`, or None where the GIL-free call is not available here (see the
     module's docstring)."""
