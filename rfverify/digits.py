@@ -237,14 +237,11 @@ class Preparation:
         if self._cancelled or self._ctx_error is not None:
             return
         try:
-            data = ExtendedData(self.problem)
-            system = None if self._cancelled else choose_backend(data, self.backend, engine=self.engine)
+            self._system = self._new_system()
         except BaseException as exc:  # noqa: BLE001 — raised again in the caller's thread, by system()
             self._system_error = exc
             return
-        if system is None:
-            return
-        self._system = (data, system)
+        system = self._system[1]
         if not self._cancelled and hasattr(system, "prepare"):
             try:
                 system.prepare()
@@ -272,9 +269,12 @@ class Preparation:
             if self._system_error is not None:
                 raise self._system_error
         if self._system is None:  # serial, or the thread was cancelled before it got here
-            data = ExtendedData(self.problem)
-            self._system = (data, choose_backend(data, self.backend, engine=self.engine))
+            self._system = self._new_system()
         return self._system
+
+    def _new_system(self):
+        data = ExtendedData(self.problem)
+        return data, choose_backend(data, self.backend, engine=self.engine)
 
     def cancel(self) -> None:
         self._cancelled = True

@@ -438,19 +438,24 @@ class ContactSpace(FactoredBackend):
         k-digit path runs it beside the double solve, :mod:`rfverify.digits`).  Optional: an
         update does whatever is still missing, and where M fails here it stops (no W̃), so that
         the update meets the failure again and reports it where it always did."""
-        if self._W is None:
-            if self.Mchol is not None and self.Mchol.factor(*self._M_upper()) >= 0:
-                return
-            self._build_W()
+        if not self._ensure_W():
+            return
         if hasattr(self.chol, "prepare"):
             self.chol.prepare()
 
-    def update(self, ph, pl, pih, pil, spec) -> bool:
-        d = self.data
+    def _ensure_W(self) -> bool:
+        """M factored in double-double and W̃ built, once; False when M is not positive
+        definite in double-double (nothing is kept, so that a later call meets it again)."""
         if self._W is None:
             if self.Mchol is not None and self.Mchol.factor(*self._M_upper()) >= 0:
-                raise ArithmeticError("M is not positive definite in double-double")
+                return False
             self._build_W()
+        return True
+
+    def update(self, ph, pl, pih, pil, spec) -> bool:
+        d = self.data
+        if not self._ensure_W():
+            raise ArithmeticError("M is not positive definite in double-double")
         if contact_factor_inverse_threaded(d.n, d.kinds, d.fric_cone, d.roll_cone, d.normal_cone, spec,
                                            self.Fh, self.Fl) >= 0:
             return False
