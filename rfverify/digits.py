@@ -430,7 +430,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
                     relative: bool = False, progress=None, factor_engine: str = "auto",
-                    as_stored: bool | None = None, time_limit: float | None = None, **options) -> DigitsSolution:
+                    as_stored: bool | None = None, time_limit: float | None = None, _face_depth: int = 0,
+                    **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; DESIGN §6.3 says what "digits" means when a quantity is zero).
     ``progress(message)`` receives one line per stage.
@@ -589,8 +590,20 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         driver.proof_seconds += time.perf_counter() - t_first
         if driver.best is None or ProofDriver.score(first[0]) >= driver.best[0]:  # ties: the double answer, as
             driver.best = (ProofDriver.score(first[0]), first[0], point, first[1])  # when it was proven first
+    face_note = None
+    if not driver.certified and not interrupted and not driver.timed_out and _face_depth < MAX_FACE_DEPTH:
+        face_note = _solve_on_face(problem, ctx, driver, digits, relative, say, deadline,
+                                   dict(method=method, tol=tol, max_iter=max_iter, extended_max_iter=extended_max_iter,
+                                        backend=backend, wide_tail=wide_tail, wide_bits=wide_bits,
+                                        wide_max_iter=wide_max_iter, factor_engine=factor_engine, **options),
+                                   _face_depth)
     _, proof, point, (v, u, r) = driver.best
     extra = {"point_source": ext_out.point_source, **ext_out.summary(), "proof_attempts": driver.attempts}
+    if face_note is not None:
+        extra["face"] = face_note
+        if driver.best[2] is face_note.get("_point"):
+            extra["point_source"] = "the problem reduced to the face of its self-stresses (DESIGN §6.5), lifted back"
+        face_note.pop("_point", None)
     timed_out = driver.timed_out and not proof.certified
     if timed_out:
         extra["time_limit"] = time_limit
@@ -601,6 +614,55 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                "total": time.perf_counter() - t0}
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
                           wide=ext_out.wide, timings=timings, timed_out=timed_out, interrupted=interrupted)
+
+
+MAX_FACE_DEPTH = 2
+"""Facial reductions nested at most this deep (a reduced problem with a self-stress of its own)."""
+
+
+def _solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digits: int, relative: bool, say,
+                   deadline, settings: dict, depth: int) -> dict | None:
+    """Where verified self-stresses leave the feasible set no interior (DESIGN §6.5): the problem
+    reduced to their face (:mod:`.proof.reduction`) is solved to ``digits`` + 2 digits by this same
+    path, its point lifted back and proven on ``problem`` itself; the proof replaces the driver's
+    best when it says more.  Returns what was done (for the certificate), or None when no
+    self-stress is known."""
+    from .proof.reduction import reduce_to_face
+
+    stresses = ctx.self_stresses()
+    if not stresses:
+        return None
+    t0 = time.perf_counter()
+    reduction = reduce_to_face(problem, stresses)
+    note = {"self_stresses": [s.as_dict() for s in stresses]}
+    if reduction is None:
+        note["reduction"] = "not possible (the face leaves those bodies no motion, or stresses share bodies)"
+        say(f"self-stress found ({stresses[0].describe()}); the problem could not be reduced to its face")
+        return note
+    sub_digits = min(digits + 2, 15)
+    say(f"self-stress: {'; '.join(s.describe() for s in stresses)}. Solving the problem on that face "
+        f"({reduction.problem.n_dofs} dofs, {reduction.problem.n_contacts} contacts) to {sub_digits} digits")
+    limit = None if deadline is None else deadline - time.perf_counter()
+    if limit is not None and limit <= 0:
+        note["reduction"] = "not solved (the time limit was reached)"
+        return note
+    sub = solve_to_digits(reduction.problem, sub_digits, progress=(lambda msg: say("  (on the face) " + msg)),
+                          relative=relative, time_limit=limit, _face_depth=depth + 1, **settings)
+    point = reduction.lift(sub.point) if sub.point is not None else None
+    note.update(reduction=f"solved on the face: {sub.status} ({sub.certificate.headline})",
+                seconds=time.perf_counter() - t0, reduced_dofs=reduction.problem.n_dofs,
+                reduced_contacts=reduction.problem.n_contacts)
+    if point is None:
+        return note
+    t1 = time.perf_counter()
+    sol = ctx.rounded(point)
+    proof = ctx.prove(point, *sol, requested=digits, relative=relative)
+    driver.proof_seconds += time.perf_counter() - t1
+    say(f"proof of the face's solution, lifted back: {proof.summary()}")
+    if driver.best is None or ProofDriver.score(proof) > driver.best[0]:
+        driver.best = (ProofDriver.score(proof), proof, point, sol)
+        note["_point"] = point
+    return note
 
 
 def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsSolution:
@@ -688,6 +750,9 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             note = "not run (the candidate is farther from the point than any tail could fix)"
         elif data.local:
             note = "not run (the tail works in the dofs of a global problem; a local problem has none)"
+        elif driver.ctx.self_stresses():
+            note = ("not run (a self-stress leaves the feasible set no interior: more precision cannot help, "
+                    "the problem is solved on its face instead)")
         elif (ordering := wide_factor.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:
             ops = ordering[1]
             note = (f"not run (its factorisation would take {ops:.1e} multiply-subtract pairs > "

@@ -327,16 +327,35 @@ def test_help_states_the_tails_limits(capsys):
     assert f"at most {D.WIDE_MAX_FACTOR_OPS:.0e}".replace("e+0", "e") in text
 
 
-def test_the_tail_gives_up_where_no_point_can_be_proven():
-    """A Chute whose wedge contacts leave no strictly feasible point: every proof is invalid,
-    and the tail stops after WIDE_GIVE_UP of them instead of running its 40 iterations."""
+def test_the_tail_gives_up_where_no_point_can_be_proven(monkeypatch):
+    """A Chute whose wedge contacts leave no strictly feasible point: without the face step
+    (issue 45) every proof is invalid, and the tail stops after WIDE_GIVE_UP of them instead of
+    running its 40 iterations."""
     from pathlib import Path
 
+    from rfverify.proof import face
+
+    monkeypatch.setattr(face, "find_self_stress", lambda *a, **k: [])
     problem = rfverify.load(Path(__file__).parent / "data" / "hard" / "Chute-ndof-24-nc-4-0.hdf5")
     out = rfverify.solve_to_digits(problem, digits=10)
     assert not out.success and not out.certificate.proof.valid
     assert out.wide is not None and out.wide.nit < D.WIDE_GIVE_UP + 2
     assert f"{D.WIDE_GIVE_UP} proofs in a row were invalid" in out.certificate.extra["wide_tail"]
+    assert "no self-stress" in out.message  # the verdict says what was looked for
+
+
+def test_the_wedge_chute_is_proven_on_its_face():
+    """The same Chute with the face step: its self-stress (contacts 2 and 3) is found and
+    verified exactly, the point moved onto the face, and 10 digits proven; r is not unique."""
+    from pathlib import Path
+
+    problem = rfverify.load(Path(__file__).parent / "data" / "hard" / "Chute-ndof-24-nc-4-0.hdf5")
+    out = rfverify.solve_to_digits(problem, digits=10)
+    assert out.success, out.message
+    face = out.certificate.proof.face
+    assert face is not None and [list(s.contacts) for s in face.stresses] == [[2, 3]]
+    assert out.certificate.proof.quantities["r"].mode == "information"
+    assert "self-stress" in out.certificate.proof.quantities["r"].note
 
 
 def test_certify_without_a_stored_point_goes_on_to_the_tail(lattice):

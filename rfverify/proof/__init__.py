@@ -147,6 +147,12 @@ class ProofContext:
         proof.stored_equations = best
         return proof
 
+    def self_stresses(self) -> list:
+        """The verified, feasible self-stresses its proofs have found so far (DESIGN §6.5)."""
+        if self.is_local:
+            return []
+        return [s for s in self.exact.face_search.found if not s.infeasible]
+
     def eps_lower(self, gap: float) -> float:
         """The smallest ε a point with duality gap rᵀu = ``gap`` can give (√gap: the theorem's
         ε with g = 0, globally and for the local theorem)."""

@@ -51,7 +51,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..problem import SPACEDIM, Problem
-from .dyadic import Dyadic, DyadicCSR, fraction_upper_float, sqrt_upper
+from .dyadic import Dyadic, DyadicCSR, Quotient, divide_upper, fraction_upper_float, sqrt_upper
 from .massbounds import MassBounds, gamma, inflate, upper_sum, verify_lambda_min_sparse, verify_mass_matrix
 
 FLOAT64_DIGITS = 53 * math.log10(2)  # ≈ 15.95: what a float64 can carry relative to its norm
@@ -173,6 +173,9 @@ class Proof:
     """The problem this proof is about, in words (:meth:`rfverify.Problem.statement`)."""
     equations: str = "symmetrised"
     """"symmetrised" ((M + Mᵀ)/2) or "stored" (M as stored): the matrix of the posed equations."""
+    face: object = None
+    """A :class:`.face.FaceRepair` when the point was moved exactly onto the face that a verified
+    self-stress forces (DESIGN §6.5), else None."""
     stored_equations: "Proof | None" = None
     """For a proof of the symmetrised equations of a problem whose stored M is unsymmetric: the
     same point and solution proven against the stored equations (how many digits of *their*
@@ -223,6 +226,9 @@ class ExactData:
         self.mu_r = Dyadic.from_float(problem.mu_r)
         self._row_quad = None
         self._skew_norm = None
+        from .face import FaceSearch
+
+        self.face_search = FaceSearch()  # self-stresses found near failing contacts, per problem
 
     def M_sym_apply(self, v: Dyadic) -> Dyadic:
         """(M + Mᵀ)/2 · v exactly."""
@@ -356,22 +362,41 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     # ---- exact residuals of the point
     u_p = exact.HT.matvec(point_v) + exact.w
     outside = cones_failure(exact, u_p, point_r, "u(v) = Hᵀv + w")
+    face = None
     if outside:
-        return _invalid(requested, outside, t0, **named)
+        face, why = _onto_face(problem, exact, point_v, point_r, u_p)
+        if face is None:
+            return _invalid(requested, outside + why, t0, **named)
+        point_v = face.point_v
+    # A point moved onto a face is rational, v' = V / den (den = 1 otherwise): cone membership is
+    # decided on the numerators (K and K* are cones), and every bound is divided by den upwards.
+    V, den = (point_v.num, point_v.den) if isinstance(point_v, Quotient) else (point_v, 1)
+    u_num = u_p if face is None else exact.HT.matvec(V) + exact.w.times_int(den)
+    if face is not None:
+        bad_dual, bad_primal = cone_violations(exact, u_num, point_r)
+        shifted = np.concatenate([face.stresses[i].contacts for i in face.shifts] or [np.zeros(0, dtype=np.int64)])
+        bad_primal = np.setdiff1d(bad_primal, shifted)  # r + τy ∈ K there, proven by the face step
+        if bad_dual.size or bad_primal.size:  # the move left a neighbour outside its cone
+            what = [f"u(v') = Hᵀv' + w ∉ K* at {bad_dual.size} contact(s), first {int(bad_dual[0])}"] if bad_dual.size else []
+            what += [f"r ∉ K at {bad_primal.size} contact(s), first {int(bad_primal[0])}"] if bad_primal.size else []
+            return _invalid(requested, f"the point is not in the cones after it was moved onto a face ({'; '.join(what)}; "
+                                       f"{face.describe()})", t0, **named)
     Hr_p = exact.H.matvec(point_r)
-    g = exact.M_apply(point_v, stored) - Hr_p - exact.f
-    gap = point_r.dot(u_p)  # ≥ 0: a sum of products of cone-dual pairs
-    q_g = gMinvg_upper(g, mass)
+    g_num = exact.M_apply(V, stored) - (Hr_p + exact.f).times_int(den)
+    gap = point_r.dot(u_num) / den  # ≥ 0: a sum of products of cone-dual pairs
+    q_g = float(divide_upper(divide_upper(gMinvg_upper(g_num, mass), den), den))
     gap_up = fraction_upper_float(gap)
     eps = eps_M_upper(q_g, gap_up)
 
     # ---- carry to the returned solution
     vd = Dyadic.from_float(v)
-    e_v = upper_sum((vd - point_v).abs_upper(), _up_times(_up(np.sqrt(mass.minv_diag_upper)), eps))
+    e_v = upper_sum(divide_upper((vd.times_int(den) - V).abs_upper(), den),
+                    _up_times(_up(np.sqrt(mass.minv_diag_upper)), eps))
     sqrtW = _up(np.sqrt(w_diag))
-    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up_times(sqrtW, eps))
+    e_u = upper_sum(divide_upper((Dyadic.from_float(u).times_int(den) - u_num).abs_upper(), den),
+                    _up_times(sqrtW, eps))
     Hr_ret = exact.H.matvec(Dyadic.from_float(r))
-    g_abs = g.abs_upper()
+    g_abs = divide_upper(g_num.abs_upper(), den)
     # |e_iᵀM d| ≤ √(m_iᵀM_s⁻¹m_i)·ε; for a symmetric M that is √(M_ii)·ε
     row_norm = _up(np.sqrt(exact.row_quad_upper(mass))) if stored else _up(np.sqrt(mass.m_diag_upper))
     e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up_times(row_norm, eps))
@@ -389,15 +414,57 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     Hr_float = Hr_ret.nearest()
     q["Hr"] = _quantity("Hr", e_Hr, Hr_float, scales, requested, relative=relative)
 
+    if face is not None:
+        terms["face_moved_v_inf"] = face.moved
     # ---- r, where it is unique
-    e_r, r_note, r_terms = _r_bound(problem, exact, mass, u_p, sqrtW * eps, point_r, Hr_p, g, eps, r, stored)
+    if face is not None:
+        e_r, r_note, r_terms = None, (f"r is not unique: the self-stress on contacts "
+                                      f"{', '.join(s.contact_list() for s in face.stresses)} can be added to any "
+                                      "solution's r (Hr is unique)"), {}
+    else:
+        e_r, r_note, r_terms = _r_bound(problem, exact, mass, Quotient(u_num, den), sqrtW * eps, point_r, Hr_p,
+                                        g_num.square().total() / (den * den), eps, r, stored)
     terms.update(r_terms)
     if e_r is None:
         q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
                                DATA_SCALE_NAMES["r"], None, "information", False, r_note)
     else:
         q["r"] = _quantity("r", e_r, r, scales, requested, note=r_note, relative=relative)
-    return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, **named)
+    return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, face=face, **named)
+
+
+def _onto_face(problem, exact, point_v, point_r, u_p):
+    """(FaceRepair, "") when verified self-stresses explain why the point is not in the cones
+    and the point, moved onto their face (and r shifted along them where needed), may be; else
+    (None, why not: words for the verdict).  The caller still tests the moved point exactly."""
+    from .face import FaceRepair, find_self_stress, restore, shift_into_K
+
+    bad_dual, bad_primal = cone_violations(exact, u_p, point_r)
+    if not isinstance(point_v, Dyadic):
+        return None, ""
+    stresses = find_self_stress(problem, np.union1d(bad_dual, bad_primal), exact.face_search)
+    if not stresses:
+        return None, ("; no self-stress (y ∈ K, Hy = 0, wᵀy = 0) was found near those contacts: the feasible set "
+                      "may have an interior thinner than this point's accuracy")
+    infeasible = [s for s in stresses if s.infeasible]
+    if infeasible:
+        return None, "; " + infeasible[0].describe()
+    shifts = {}
+    for i, s in enumerate(stresses):
+        if np.intersect1d(bad_primal, s.contacts).size:
+            tau = shift_into_K(problem, s, point_r)
+            if tau is None:
+                return None, f"; {s.describe()}, but r + τy ∉ K there for every τ ≥ 0 tried"
+            shifts[i] = tau
+    if bad_dual.size:
+        repair = restore(problem, exact, point_v, stresses)
+        if repair is None:
+            return None, ("; " + "; ".join(s.describe() for s in stresses)
+                          + ", but the point could not be moved onto that face exactly")
+    else:
+        repair = FaceRepair(list(stresses), Quotient(point_v, 1), 0.0)
+    repair.shifts = shifts
+    return repair, ""
 
 
 def cones_failure(data, u_p: Dyadic, point_r: Dyadic, u_name: str) -> str:
@@ -507,7 +574,7 @@ def proven_open(u_p: Dyadic, u_radius, mu, mur, n: int) -> np.ndarray:
     return lhs > rhs
 
 
-def _r_bound(problem, exact, mass, u_p: Dyadic, u_radius, point_r, Hr_p, g, eps, r, stored: bool = False):
+def _r_bound(problem, exact, mass, u_p, u_radius, point_r, Hr_p, g_sq, eps, r, stored: bool = False):
     """Per-component bound on r − r* when r* is unique on the loaded contacts, else None."""
     n = problem.n_contacts
     mu, mur = problem.mu, problem.mu_r
@@ -538,7 +605,7 @@ def _r_bound(problem, exact, mass, u_p: Dyadic, u_radius, point_r, Hr_p, g, eps,
     r_S[cols] = r[cols]
     d = exact.H.matvec(Dyadic.from_float(r_S)) - Hr_p
     dist = sqrt_upper(d.square().total())
-    gnorm = sqrt_upper(g.square().total())
+    gnorm = sqrt_upper(g_sq)
     # ‖M d‖₂ ≤ √λmax(M_s)·ε, plus ‖A‖₂‖d‖₂ ≤ ‖A‖₂ ε/√λmin(M_s) for the skew part A of a stored M
     gain = float(_up(math.sqrt(mass.lam_max_upper)))
     if stored:

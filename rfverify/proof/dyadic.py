@@ -143,6 +143,10 @@ class Dyadic:
         """Multiply by 2**k (exact)."""
         return Dyadic(self.ints, self.exp + k)
 
+    def times_int(self, k: int) -> "Dyadic":
+        """Multiply by the integer ``k`` (exact)."""
+        return self if k == 1 else Dyadic(self.ints * k, self.exp)
+
     def square(self) -> "Dyadic":
         return Dyadic(self.ints * self.ints, 2 * self.exp)
 
@@ -319,3 +323,67 @@ def sqrt_upper(q: Fraction) -> float:
     while Fraction(f) ** 2 < q:  # never more than a step or two
         f = math.nextafter(f, math.inf)
     return f
+
+
+@dataclass(frozen=True)
+class Quotient:
+    """A vector of exact rationals ``num / den``: a :class:`Dyadic` numerator over one common
+    positive integer denominator (odd, or 1).  A point moved exactly onto a face of the cones
+    (:mod:`.face`) is rational but not dyadic; cone membership, being homogeneous, is decided on
+    the numerator, and the proof divides its bounds by ``den`` with outward rounding."""
+
+    num: Dyadic
+    den: int
+
+    def __post_init__(self):
+        if not (isinstance(self.den, int) and self.den >= 1):
+            raise ValueError(f"the denominator must be a positive integer, got {self.den!r}")
+
+    def __len__(self) -> int:
+        return len(self.num)
+
+    @staticmethod
+    def from_fractions(values) -> "Quotient":
+        """Exact image of a sequence of Fractions (common denominator: the lcm of their odd parts)."""
+        values = [Fraction(q) for q in values]
+        den = 1
+        for q in values:
+            d = q.denominator
+            d >>= (d & -d).bit_length() - 1  # odd part
+            den = den * d // math.gcd(den, d)
+        return Quotient(Dyadic.from_fractions_exact([q * den for q in values]) if values else Dyadic.zeros(0), den)
+
+    def fractions(self) -> list:
+        return [q / self.den for q in self.num.fractions()]
+
+    def _shifted_floor(self, ints) -> tuple[np.ndarray, int]:
+        """floor(ints·2^K / den) and K, K large enough to keep 64 bits beyond den's."""
+        k = 64 + self.den.bit_length()
+        return (np.asarray(ints, dtype=object) * (1 << k)) // self.den, k
+
+    def upper(self) -> np.ndarray:
+        """float64 numbers ≥ the exact values."""
+        if self.den == 1:
+            return self.num.upper()
+        neg_floor, k = self._shifted_floor(-self.num.ints)  # −floor(−x) = ceil(x)
+        return _directed(-neg_floor, self.num.exp - k, up=True)
+
+    def lower(self) -> np.ndarray:
+        """float64 numbers ≤ the exact values."""
+        if self.den == 1:
+            return self.num.lower()
+        fl, k = self._shifted_floor(self.num.ints)
+        return -_directed(-fl, self.num.exp - k, up=True)
+
+    def abs_upper(self) -> np.ndarray:
+        """float64 upper bounds of |x_i|."""
+        return np.maximum(self.upper(), -self.lower())
+
+
+def divide_upper(x, den: int) -> np.ndarray:
+    """float64 ≥ x / den for float64 x ≥ 0 (rounded up) and a positive integer ``den``."""
+    x = np.asarray(x, dtype=np.float64)
+    if den == 1:
+        return x
+    lo = fraction_lower_float(Fraction(den))  # ≤ den, so x / lo ≥ x / den
+    return np.nextafter(x / lo, np.inf)

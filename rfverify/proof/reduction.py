@@ -1,0 +1,287 @@
+"""The problem restricted to the face that verified self-stresses force (facial reduction),
+and the map of its points back to the problem's own variables (DESIGN §6.5).
+
+Where a self-stress y exists, every feasible velocity keeps u_F (the contacts y touches) in
+the face Φ = {G s + G₀ t : s ≥ 0} of K*_F (:mod:`.face`: G the face's edges, G₀ its free
+directions).  The problem is then the same as
+
+    min ½vᵀMv − fᵀv   s.t.  u_j(v) ∈ K*_j (j ∉ F),   P (H_Fᵀv + w_F) = 0,   s(v) ≥ 0,
+
+with P's rows spanning the complement of range[G G₀] and s(v) = C (H_Fᵀv + w_F) the edge
+coefficients (C the rows of [G G₀]⁺ that belong to G).  The equalities touch only the dofs D
+of the bodies those contacts act on; with Z_D a basis of the null space of E = P H_{F,D}ᵀ and
+E v₀ = −P w_F, v = v₀ + Z ξ (Z the identity off D).  The reduced problem, in ξ, is an
+ordinary rolling-friction problem: M' = ZᵀMZ, f' = Zᵀ(f − Mv₀), the other contacts with
+H' = ZᵀH and w' = w + Hᵀv₀, and one frictionless contact (μ = μr = 0) per edge, with normal
+column Zᵀ H_{F,D} cⱼ and w_N = cⱼᵀ(w_F + H_Fᵀ v₀).  It has an interior, so Algorithm 1
+converges on it as on any problem.
+
+Its data are float64 roundings (Z, P and C are computed in floating point), so it is a
+device for finding points, never the subject of a proof: :func:`FaceReduction.lift` maps its
+points back (v = v₀ + Zξ; r on F from the edge multipliers ρ and the equalities' multipliers λ,
+r_F = Σ cⱼ ρⱼ + Pᵀλ, λ by least squares with exact residuals), and the proof
+(:func:`.bound.prove`) moves the lifted point onto the exact face and adds a multiple of y to r
+before it evaluates the theorem on the file's own data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..problem import SPACEDIM, Problem
+from . import Point
+from .dyadic import Dyadic
+from .face import SelfStress
+
+NULL_TOL = 1e-9
+"""Singular values of E below this fraction of its largest count as zero (the self-stress makes
+E rank deficient by one at least; everything else it has is of order one in these units)."""
+
+
+def _frac_matrix(rows) -> np.ndarray:
+    return np.array([[float(x) for x in row] for row in rows], dtype=np.float64).reshape(len(rows), -1)
+
+
+@dataclass
+class _Block:
+    """The reduction of one self-stress: its contacts' columns, the dofs D, Z_D, v₀_D, P, C."""
+
+    cols: np.ndarray
+    dofs: np.ndarray
+    Z: np.ndarray       # (|D|, k_D)
+    v0: np.ndarray      # (|D|,)
+    P: np.ndarray       # (p, 5|F|)
+    C: np.ndarray       # (e, 5|F|) edge-coefficient rows
+    HtD: np.ndarray     # H_{F,D}ᵀ (5|F|, |D|)
+    edges: list         # per row of C: (contact index in F, the edge as 5 exact Fractions)
+    mu: np.ndarray
+    mu_r: np.ndarray
+
+
+def _block(problem: Problem, stress: SelfStress) -> _Block | None:
+    contacts = stress.contacts
+    cols = (SPACEDIM * contacts[:, None] + np.arange(SPACEDIM)).ravel()
+    Hc = sp.csc_matrix(problem.H)[:, cols]
+    dofs = np.unique(Hc.indices)
+    HtD = Hc[dofs].T.toarray()
+    nF = cols.size
+    edges, free, exact_edges = [], [], []
+    for i in range(contacts.size):
+        for g in stress.edges[i]:
+            vec = np.zeros(nF)
+            vec[SPACEDIM * i:SPACEDIM * i + SPACEDIM] = [float(x) for x in g]
+            edges.append(vec)
+            exact_edges.append((i, g))
+        for g in stress.free[i]:
+            vec = np.zeros(nF)
+            vec[SPACEDIM * i:SPACEDIM * i + SPACEDIM] = [float(x) for x in g]
+            free.append(vec)
+    G_all = np.array(edges + free, dtype=np.float64).reshape(-1, nF).T  # (5|F|, e + f)
+    if G_all.shape[1]:
+        U, sv, _ = np.linalg.svd(G_all, full_matrices=True)
+        rank = int(np.sum(sv > 1e-12 * sv[0]))
+        P = U[:, rank:].T
+        C = np.linalg.pinv(G_all)[:len(edges)]
+    else:
+        P = np.eye(nF)
+        C = np.zeros((0, nF))
+    E = P @ HtD
+    e = -P @ problem.w[cols]
+    _, sv, Vt = np.linalg.svd(E, full_matrices=True)
+    rank = int(np.sum(sv > NULL_TOL * (sv[0] if sv.size else 1.0)))
+    Z = Vt[rank:].T
+    if Z.shape[1] == 0:
+        return None  # the face allows these bodies no motion at all: nothing to reduce to
+    v0 = np.linalg.lstsq(E, e, rcond=None)[0] if np.any(e) else np.zeros(dofs.size)
+    return _Block(cols, dofs, Z, v0, P, C, HtD, exact_edges, problem.mu[contacts], problem.mu_r[contacts])
+
+
+@dataclass
+class FaceReduction:
+    """The reduced problem (:attr:`problem`) and the data to map its points back."""
+
+    original: Problem
+    problem: Problem
+    stresses: list
+    blocks: list
+    Z: sp.csc_matrix          # (m, m') v = v₀ + Z ξ
+    v0: np.ndarray            # (m,)
+    kept_contacts: np.ndarray  # the original contacts that stay, in order (the first of the reduced ones)
+    edge_owner: list           # per reduced edge contact: (block index, edge index)
+
+    def lift(self, point: Point) -> Point:
+        """A point of the reduced problem as a point of the original one (double-double)."""
+        orig = self.original
+        m, n = orig.n_dofs, orig.n_contacts
+        xi_h, xi_l = point.v_hi, point.v_lo
+        Z = self.Z
+        # v = v₀ + Z ξ in double-double: Z's columns off D are unit vectors (copied exactly)
+        vh = self.v0 + Z @ xi_h
+        vl = Z @ xi_l + _two_sum_error(self.v0, Z, xi_h, vh)
+        rh = np.zeros(SPACEDIM * n)
+        rl = np.zeros(SPACEDIM * n)
+        kept_cols = (SPACEDIM * self.kept_contacts[:, None] + np.arange(SPACEDIM)).ravel()
+        nk = kept_cols.size
+        rh[kept_cols], rl[kept_cols] = point.r_hi[:nk], point.r_lo[:nk]
+        # r on F: Σ cⱼρⱼ + Pᵀλ, λ fitting the force the reduced solution leaves on D
+        vd = Dyadic.from_dd(vh, vl)
+        rd_kept = Dyadic.from_dd(rh, rl)
+        exact_res = _force_residual(orig, vd, rd_kept)  # M v − f − H r (r zero on F), exact
+        rho = point.r_hi[nk::SPACEDIM] + point.r_lo[nk::SPACEDIM]
+        k0 = 0
+        for b in self.blocks:
+            ne = b.C.shape[0]
+            base = b.C.T @ rho[k0:k0 + ne] if ne else np.zeros(b.cols.size)
+            k0 += ne
+            # R_D = H_{F,D}(Σcρ) + H_{F,D}Pᵀλ: λ by least squares, refined on exact residuals
+            A = b.HtD.T @ b.P.T  # (|D|, p)
+            parts_h = base.copy()
+            parts_l = np.zeros_like(base)
+            target = exact_res[b.dofs]
+            resid = _residual_on(target, b.HtD, parts_h, parts_l)
+            for _ in range(3):
+                lam = np.linalg.lstsq(A, resid.nearest(), rcond=None)[0]
+                step = b.P.T @ lam
+                parts_h, parts_l = _dd_add(parts_h, parts_l, step)
+                resid = _residual_on(target, b.HtD, parts_h, parts_l)
+            for j, (i, g) in enumerate(b.edges):
+                sl = slice(SPACEDIM * i, SPACEDIM * i + SPACEDIM)
+                parts_h[sl], parts_l[sl] = _edge_positive(parts_h[sl], parts_l[sl], g, rho[k0 - ne + j])
+            rh[b.cols], rl[b.cols] = parts_h, parts_l
+            for i, c in enumerate(b.cols):
+                comp = i % SPACEDIM
+                contact = i // SPACEDIM
+                if (comp in (1, 2) and b.mu[contact] == 0) or (comp in (3, 4) and b.mu_r[contact] == 0):
+                    rh[c] = rl[c] = 0.0  # K forces these to 0 exactly
+        return Point(vh, vl, rh, rl)
+
+
+EDGE_FLOOR = 2.0 ** -90
+"""Least gᵀr kept on an edge, relative to ‖r_i‖: a lifted r_F must have gᵀr_i > 0 on each edge g
+for r + τy ∈ K to hold for some τ (:func:`.face.shift_into_K`); the edge multiplier ρ is
+tiny where the contact slides (ρ → 0), so rounding could make it negative."""
+
+
+def _edge_positive(hi: np.ndarray, lo: np.ndarray, g, rho: float):
+    """r_i (double-double, 5 entries) changed along the edge g so that gᵀr_i lies in
+    [t, 2t] exactly, t = max(ρ, floor): positive (so r + τy ∈ K for some τ), and no larger than
+    the edge multiplier says (gᵀr_i·s is this contact's part of the duality gap once u_i = g s).
+    The change is of the order of the rounding of r_i, or of ρ where ρ is that small."""
+    from fractions import Fraction
+
+    gf = np.array([float(x) for x in g])
+    target = Fraction(max(float(rho), EDGE_FLOOR * float(np.max(np.abs(hi)))))
+    for _ in range(6):
+        have = sum((gk * (Fraction(float(a)) + Fraction(float(b))) for gk, a, b in zip(g, hi, lo) if gk), Fraction(0))
+        if target <= have <= 2 * target:
+            break
+        alpha = float(Fraction(3, 2) * target - have) / float(gf @ gf)
+        hi, lo = _dd_add(hi, lo, alpha * gf)
+    return hi, lo
+
+
+def _two_sum_error(v0, Z, xi, vh) -> np.ndarray:
+    """The rounding error of vh = v₀ + Z ξ (float64), in float64 (good to double-double)."""
+    exact = Dyadic.from_float(v0) + _exact_sparse_matvec(Z, xi)
+    return (exact - Dyadic.from_float(vh)).nearest()
+
+
+def _exact_sparse_matvec(Z: sp.csc_matrix, x: np.ndarray) -> Dyadic:
+    from .dyadic import DyadicCSR
+
+    return DyadicCSR.from_scipy(Z).matvec(Dyadic.from_float(x))
+
+
+def _force_residual(problem: Problem, v: Dyadic, r: Dyadic) -> Dyadic:
+    from .dyadic import DyadicCSR
+
+    M = DyadicCSR.from_scipy(problem.M_eq)
+    H = DyadicCSR.from_scipy(problem.H)
+    return M.matvec(v) - H.matvec(r) - Dyadic.from_float(problem.f)
+
+
+def _residual_on(target: Dyadic, HtD: np.ndarray, hi: np.ndarray, lo: np.ndarray) -> Dyadic:
+    """target − H_{F,D}(hi + lo), exact."""
+    from .dyadic import DyadicCSR
+
+    A = DyadicCSR.from_scipy(sp.csr_matrix(HtD.T))
+    return target - A.matvec(Dyadic.from_dd(hi, lo))
+
+
+def _dd_add(hi: np.ndarray, lo: np.ndarray, x: np.ndarray):
+    s = hi + x
+    bb = s - hi
+    err = (hi - (s - bb)) + (x - bb)
+    lo = lo + err
+    h2 = s + lo
+    return h2, lo - (h2 - s)
+
+
+def reduce_to_face(problem: Problem, stresses: list) -> FaceReduction | None:
+    """The reduced problem of ``stresses`` (verified, feasible, on disjoint bodies), or None when
+    the face leaves their bodies no motion or the problem is local."""
+    if problem.local is not None or not stresses:
+        return None
+    blocks = []
+    for s in stresses:
+        b = _block(problem, s)
+        if b is None:
+            return None
+        blocks.append(b)
+    m, n = problem.n_dofs, problem.n_contacts
+    in_D = np.zeros(m, dtype=bool)
+    for b in blocks:
+        if np.any(in_D[b.dofs]):
+            return None  # two stresses on shared bodies: not reduced (not met so far)
+        in_D[b.dofs] = True
+    kept_dofs = np.flatnonzero(~in_D)
+    # Z: identity on the kept dofs (first), then each block's Z_D
+    rows, cols, vals = [kept_dofs], [np.arange(kept_dofs.size)], [np.ones(kept_dofs.size)]
+    col0 = kept_dofs.size
+    v0 = np.zeros(m)
+    for b in blocks:
+        r_idx, c_idx = np.nonzero(np.ones_like(b.Z, dtype=bool))
+        rows.append(b.dofs[r_idx])
+        cols.append(col0 + c_idx)
+        vals.append(b.Z[r_idx, c_idx])
+        col0 += b.Z.shape[1]
+        v0[b.dofs] = b.v0
+    Z = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, col0))
+    Z.eliminate_zeros()
+    F = np.zeros(n, dtype=bool)
+    for s in stresses:
+        F[s.contacts] = True
+    kept_contacts = np.flatnonzero(~F)
+    kept_cols = (SPACEDIM * kept_contacts[:, None] + np.arange(SPACEDIM)).ravel()
+    H = sp.csc_matrix(problem.H)
+    M = sp.csc_matrix(problem.M)
+    M_red = (Z.T @ M @ Z).tocsc()
+    f_red = Z.T @ (problem.f - M @ v0)
+    H_kept = (Z.T @ H[:, kept_cols]).tocsc()
+    w_kept = problem.w[kept_cols] + H[:, kept_cols].T @ v0
+    edge_cols, edge_w, owner = [], [], []
+    for bi, b in enumerate(blocks):
+        for j in range(b.C.shape[0]):
+            a = np.zeros(m)
+            a[b.dofs] = b.HtD.T @ b.C[j]
+            edge_cols.append(Z.T @ a)
+            edge_w.append(float(b.C[j] @ (problem.w[b.cols] + b.HtD @ b.v0)))
+            owner.append((bi, j))
+    ne = len(edge_cols)
+    blocks_H = [H_kept]
+    if ne:
+        E = np.zeros((Z.shape[1], SPACEDIM * ne))
+        for j, col in enumerate(edge_cols):
+            E[:, SPACEDIM * j] = col
+        blocks_H.append(sp.csc_matrix(E))
+    H_red = sp.hstack(blocks_H, format="csc")
+    w_red = np.concatenate([w_kept] + [np.array([wj, 0, 0, 0, 0]) for wj in edge_w])
+    mu = np.concatenate([problem.mu[kept_contacts], np.zeros(ne)])
+    mu_r = np.concatenate([problem.mu_r[kept_contacts], np.zeros(ne)])
+    reduced = Problem.from_arrays(M_red, H_red, f_red, w_red, mu, mu_r, title=f"{problem.title} (on the face)",
+                                  max_asymmetry=np.inf, source=getattr(problem, "source", ""))
+    reduced = reduced.stored_equations(problem.equations == "stored")
+    return FaceReduction(problem, reduced, list(stresses), blocks, Z, v0, kept_contacts, owner)
