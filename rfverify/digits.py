@@ -655,7 +655,10 @@ def _solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, dig
     if point is None:
         return note
     t1 = time.perf_counter()
-    sol = ctx.rounded(point)
+    from .proof.face import returned_reactions
+
+    v, u, r = ctx.rounded(point)
+    sol = (v, u, returned_reactions(problem, stresses, r))  # r in K: r₀ + τy, Hr unchanged
     proof = ctx.prove(point, *sol, requested=digits, relative=relative)
     driver.proof_seconds += time.perf_counter() - t1
     say(f"proof of the face's solution, lifted back: {proof.summary()}")
@@ -750,7 +753,9 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             note = "not run (the candidate is farther from the point than any tail could fix)"
         elif data.local:
             note = "not run (the tail works in the dofs of a global problem; a local problem has none)"
-        elif driver.ctx.self_stresses():
+        elif driver.ctx.self_stresses() or (driver.recent and not isinstance(driver.recent[-1], wide.WideIterate)
+                                            and driver.ctx.look_for_self_stress(point_from_iterate(
+                                                data, driver.recent[-1].v, driver.recent[-1].r_t).r_hi)):
             note = ("not run (a self-stress leaves the feasible set no interior: more precision cannot help, "
                     "the problem is solved on its face instead)")
         elif (ordering := wide_factor.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:

@@ -153,6 +153,21 @@ class ProofContext:
             return []
         return [s for s in self.exact.face_search.found if not s.infeasible]
 
+    def look_for_self_stress(self, r, seeds: int = 8) -> list:
+        """Search for self-stresses near the ``seeds`` contacts with the largest r_N in ``r``
+        (5n,): an interior-point run's reactions grow without bound along a self-stress, so
+        its contacts are among the most loaded ones.  Returns :meth:`self_stresses`."""
+        if self.is_local:
+            return []
+        from .face import find_self_stress
+
+        rN = np.asarray(r, dtype=np.float64)[::5]
+        top = np.argsort(-rN, kind="stable")[:seeds]
+        top = top[rN[top] > 0]
+        if top.size:
+            find_self_stress(self.problem, top, self.exact.face_search)
+        return self.self_stresses()
+
     def eps_lower(self, gap: float) -> float:
         """The smallest ε a point with duality gap rᵀu = ``gap`` can give (√gap: the theorem's
         ε with g = 0, globally and for the local theorem)."""

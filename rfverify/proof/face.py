@@ -209,7 +209,7 @@ def _components(H: sp.csc_matrix, contacts: np.ndarray) -> list[np.ndarray]:
     touch = (per_contact @ incidence.T).astype(bool).astype(np.int8)
     graph = touch @ touch.T
     ncomp, labels = connected_components(graph, directed=False)
-    return [contacts[labels == c] for c in range(ncomp)]
+    return [contacts[labels == c].astype(np.int64) for c in range(ncomp)]
 
 
 def _exact_stress(problem, H: sp.csc_matrix, contacts: np.ndarray, y_float: np.ndarray,
@@ -443,3 +443,43 @@ def restore(problem, exact, point_v: Dyadic, stresses: list) -> FaceRepair | Non
         num = num + Dyadic(ints, step_q.num.exp)
     moved = float(np.max(step_q.abs_upper(), initial=0.0))
     return FaceRepair(list(stresses), Quotient(num, step_q.den), moved)
+
+
+RETURNED_CONE_TOL = 1e-11
+"""Relative cone violation accepted in the float64 r returned on self-stressed contacts: 1e-11,
+below the 1e-10 of the paper's criterion, while τ stays small enough (~1e5 on the generated
+Chutes) that the rounding of τ·y costs Hr about one digit of sixteen (measured: 1e-13 needed
+τ ~ 8e5 and left Hr 10.0 digits)."""
+
+
+def returned_reactions(problem, stresses: list, r: np.ndarray) -> np.ndarray:
+    """The float64 r to return where self-stresses make r* non-unique and possibly unattained:
+    r + τ·y on each stress's contacts, with the first τ = 0, τ₀, 2τ₀, … at which the rounded
+    result is in K to a relative ``RETURNED_CONE_TOL`` (exact membership may need τ ~ 1e26
+    where a contact slides: the reactions then grow without bound as the accuracy does, as an
+    interior-point iterate's do).  Hr changes only by the rounding of τ·y (H y = 0 exactly);
+    rᵀu does not change where u is on the face (yᵀu(v) = 0 for every v)."""
+    out = np.array(r, dtype=np.float64, copy=True)
+    for s in stresses:
+        cols = (SPACEDIM * s.contacts[:, None] + np.arange(SPACEDIM)).ravel()
+        y = np.array([float(x) for x in s.y])
+        base = out[cols].copy()
+        mu, mur = problem.mu[s.contacts], problem.mu_r[s.contacts]
+
+        def fits(cand):
+            c = cand.reshape(-1, SPACEDIM)
+            scale = np.maximum(np.abs(c).max(axis=1), np.finfo(float).tiny)
+            tol = RETURNED_CONE_TOL * scale
+            return bool(np.all(c[:, 0] >= -tol) and np.all(np.hypot(c[:, 1], c[:, 2]) - mu * c[:, 0] <= tol)
+                        and np.all(np.hypot(c[:, 3], c[:, 4]) - mur * c[:, 0] <= tol))
+
+        if fits(base):
+            continue
+        tau = float(np.max(np.abs(base))) / float(np.min(y[::SPACEDIM]))
+        for _ in range(200):
+            cand = base + tau * y
+            if fits(cand):
+                out[cols] = cand
+                break
+            tau *= 2
+    return out

@@ -166,17 +166,19 @@ tiny where the contact slides (ρ → 0), so rounding could make it negative."""
 
 
 def _edge_positive(hi: np.ndarray, lo: np.ndarray, g, rho: float):
-    """r_i (double-double, 5 entries) changed along the edge g so that gᵀr_i lies in
-    [t, 2t] exactly, t = max(ρ, floor): positive (so r + τy ∈ K for some τ), and no larger than
-    the edge multiplier says (gᵀr_i·s is this contact's part of the duality gap once u_i = g s).
-    The change is of the order of the rounding of r_i, or of ρ where ρ is that small."""
+    """r_i (double-double, 5 entries) changed along the edge g, where needed, so that gᵀr_i lies
+    in [floor, 2t] exactly, t = max(ρ, floor), floor = EDGE_FLOOR·‖r_i‖∞: positive (so r + τy ∈
+    K for some τ), and not much larger than the edge multiplier ρ says (gᵀr_i·s is this contact's
+    part of the duality gap once u_i = g s).  Where it is changed, the change is of the order of
+    the rounding of r_i, or of ρ where ρ is that small."""
     from fractions import Fraction
 
     gf = np.array([float(x) for x in g])
-    target = Fraction(max(float(rho), EDGE_FLOOR * float(np.max(np.abs(hi)))))
+    lower = Fraction(EDGE_FLOOR * float(np.max(np.abs(hi))))
+    target = max(Fraction(float(rho)), lower)
     for _ in range(6):
         have = sum((gk * (Fraction(float(a)) + Fraction(float(b))) for gk, a, b in zip(g, hi, lo) if gk), Fraction(0))
-        if target <= have <= 2 * target:
+        if lower <= have <= 2 * target:
             break
         alpha = float(Fraction(3, 2) * target - have) / float(gf @ gf)
         hi, lo = _dd_add(hi, lo, alpha * gf)
