@@ -30,7 +30,7 @@ import mpmath
 import numpy as np
 
 from .errors import InvalidProblemError
-from .digits import DOUBLE_SETTINGS, ProofDriver, _start_from, extend
+from .digits import DOUBLE_SETTINGS, ProofDriver, _start_from, extend, solve_on_face
 from .problem import SPACEDIM, Problem
 from .proof import FLOAT64_DIGITS, Point, ProofContext, validate_digits
 from .certificate import Certificate, candidate_point, certificate_from_proof
@@ -203,9 +203,17 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
     say(f"extended point: double solve {double.status} in {double.nit} iterations, then double-double "
         f"({system.name})")
     out = extend(data, _start_from(data, double), driver, system, max_iter=max_iter, say=say)
+    face = None
+    if not driver.certified and not driver.timed_out:  # no interior (a self-stress): solve on its face
+        face = solve_on_face(problem, ctx, driver, digits, relative, say, deadline,
+                             dict(method="auto", tol=1e-10, extended_max_iter=max_iter), depth=0)
     _, proof, point, _ = driver.best
     info = {"point_source": "double solve + " + out.point_source, "double_iterations": int(double.nit),
             **out.summary(), "proof_attempts": driver.attempts}
+    if face is not None:
+        if face.pop("_point", None) is point:
+            info["point_source"] = "the problem reduced to the face of its self-stresses (DESIGN §6.5), lifted back"
+        info["face"] = face
     if driver.timed_out and not proof.certified:
         info["time_limit"] = time_limit
     return proof, point, info

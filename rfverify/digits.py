@@ -592,7 +592,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
             driver.best = (ProofDriver.score(first[0]), first[0], point, first[1])  # when it was proven first
     face_note = None
     if not driver.certified and not interrupted and not driver.timed_out and _face_depth < MAX_FACE_DEPTH:
-        face_note = _solve_on_face(problem, ctx, driver, digits, relative, say, deadline,
+        face_note = solve_on_face(problem, ctx, driver, digits, relative, say, deadline,
                                    dict(method=method, tol=tol, max_iter=max_iter, extended_max_iter=extended_max_iter,
                                         backend=backend, wide_tail=wide_tail, wide_bits=wide_bits,
                                         wide_max_iter=wide_max_iter, factor_engine=factor_engine, **options),
@@ -620,12 +620,14 @@ MAX_FACE_DEPTH = 2
 """Facial reductions nested at most this deep (a reduced problem with a self-stress of its own)."""
 
 
-def _solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digits: int, relative: bool, say,
+def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digits: int, relative: bool, say,
                    deadline, settings: dict, depth: int) -> dict | None:
     """Where verified self-stresses leave the feasible set no interior (DESIGN §6.5): the problem
     reduced to their face (:mod:`.proof.reduction`) is solved to ``digits`` + 2 digits by this same
-    path, its point lifted back and proven on ``problem`` itself; the proof replaces the driver's
-    best when it says more.  Returns what was done (for the certificate), or None when no
+    path, its point lifted back and proven on ``problem`` itself — for the driver's target (a
+    solution being certified) or, without one, for the point's own rounding with r moved along
+    the self-stresses into K (:func:`.proof.face.returned_reactions`); the proof replaces the
+    driver's best when it says more.  Returns what was done (for the certificate), or None when no
     self-stress is known."""
     from .proof.reduction import reduce_to_face
 
@@ -657,8 +659,11 @@ def _solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, dig
     t1 = time.perf_counter()
     from .proof.face import returned_reactions
 
-    v, u, r = ctx.rounded(point)
-    sol = (v, u, returned_reactions(problem, stresses, r))  # r in K: r₀ + τy, Hr unchanged
+    if driver.target is not None:  # certifying a given solution: the lifted point is its proof point
+        sol = driver.target
+    else:
+        v, u, r = ctx.rounded(point)
+        sol = (v, u, returned_reactions(problem, stresses, r))  # r in K: r₀ + τy, Hr unchanged
     proof = ctx.prove(point, *sol, requested=digits, relative=relative)
     driver.proof_seconds += time.perf_counter() - t1
     say(f"proof of the face's solution, lifted back: {proof.summary()}")

@@ -188,10 +188,12 @@ def float_self_stress(problem, contacts: np.ndarray) -> np.ndarray | None:
     return y
 
 
-def _unit_direction(a: float, b: float, max_den: int) -> tuple[Fraction, Fraction]:
+def _unit_direction(a: float, b: float, max_den: int) -> tuple[Fraction, Fraction] | None:
     """An exactly unit rational vector near (a, b)/‖(a, b)‖: ((1 − t²), 2t)/(1 + t²) with t
     a rational approximation of tan(θ/2) (of the opposite vector where a < 0, so t stays small)."""
     norm = math.hypot(a, b)
+    if not norm > 0:
+        return None
     sign = 1 if a >= 0 else -1
     t = Fraction(sign * b / (norm + abs(a))).limit_denominator(max_den)
     d = 1 + t * t
@@ -224,6 +226,8 @@ def _exact_stress(problem, H: sp.csc_matrix, contacts: np.ndarray, y_float: np.n
     kinds, bounds = [], []
     mu_f = [Fraction(float(x)) for x in problem.mu[contacts]]
     mur_f = [Fraction(float(x)) for x in problem.mu_r[contacts]]
+    if np.any(y_float[::SPACEDIM] <= 0):
+        return None  # a self-stress pushes (y_N > 0) on every contact it touches
     for i in range(k):
         yN, yT, yR = y_float[SPACEDIM * i], y_float[SPACEDIM * i + 1:SPACEDIM * i + 3], y_float[SPACEDIM * i + 3:SPACEDIM * i + 5]
         on = {}
@@ -236,6 +240,8 @@ def _exact_stress(problem, H: sp.csc_matrix, contacts: np.ndarray, y_float: np.n
                 continue
             if math.hypot(*ys) >= (1 - BOUNDARY_TOL) * float(coef) * yN:
                 d = _unit_direction(float(ys[0]), float(ys[1]), max_den)
+                if d is None:
+                    return None
                 on[part] = (off, d)
                 for j in (0, 1):  # y_part = coef · y_N · d exactly
                     row = [Fraction(0)] * n
