@@ -325,6 +325,7 @@ class ProofDriver:
         self.ctx, self.data, self.requested = ctx, data, requested
         self.relative = relative
         self.target = target  # (v, u, r) to certify; None: the rounding of each point
+        self.face = None  # (FaceReduction, stresses): iterates of the reduced problem, proven lifted back
         self.best: tuple | None = None  # (score, proof, point, (v, u, r))
         self.proof_seconds = 0.0
         self.attempts = 0
@@ -344,6 +345,16 @@ class ProofDriver:
     @property
     def certified(self) -> bool:
         return self.best is not None and self.best[1].certified
+
+    def answer(self, point: Point):
+        """The float64 (v, u, r) a point stands for: its rounding, with r moved along the
+        self-stresses into K where the point came from a face (DESIGN §6.5)."""
+        v, u, r = self.ctx.rounded(point)
+        if self.face is not None:
+            from .proof.face import returned_reactions
+
+            r = returned_reactions(self.ctx.problem, self.face[1], r)
+        return v, u, r
 
     def restart(self, invalid_limit: int | None = None):
         """Forget the stall counter and the recent iterates (a new phase begins); with
@@ -402,7 +413,9 @@ class ProofDriver:
             return False
         self.proven_at.add(key)
         t0 = time.perf_counter()
-        sol = self.target if self.target is not None else self.ctx.rounded(point)
+        if self.face is not None:  # an iterate of the problem on a face: proven on the problem itself
+            point = self.face[0].lift(point)
+        sol = self.target if self.target is not None else self.answer(point)
         proof = self.ctx.prove(point, *sol, requested=self.requested, relative=self.relative)
         self.proof_seconds += time.perf_counter() - t0
         self.attempts += 1
@@ -431,7 +444,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
                     relative: bool = False, progress=None, factor_engine: str = "auto",
                     as_stored: bool | None = None, time_limit: float | None = None, _face_depth: int = 0,
-                    **options) -> DigitsSolution:
+                    _on_face=None, **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; DESIGN §6.3 says what "digits" means when a quantity is zero).
     ``progress(message)`` receives one line per stage.
@@ -486,7 +499,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     from .scaling import binary_scaling, scaled_problem
 
     scaling = binary_scaling(problem)
-    if scaling is not None:  # data beyond float64's safe range: the whole path in scaled units
+    if scaling is not None and _on_face is None:  # data beyond float64's safe range: the whole path in scaled units
         scaled = scaled_problem(problem, scaling)
         out = solve_to_digits(scaled, digits, method, tol, max_iter,
                               extended_max_iter=extended_max_iter, backend=backend, wide_tail=wide_tail,
@@ -530,6 +543,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     except BaseException:
         prepared.cancel()
         raise
+    if _on_face is not None:  # this problem is another's on a face: prove that one (solve_on_face)
+        ctx = _on_face[0]
 
     # The double answer itself first: an exact one (a wedge, an all-open scene) is proven here
     # at O(nnz) cost, and where the feasible set has no interior no iterate could do better.
@@ -540,8 +555,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     out_of_time = deadline is not None and time.perf_counter() > deadline
     interrupted = bool(double.extras.get("interrupted"))
     first = None
-    if (out_of_time or interrupted or not ctx.hypotheses_proven
-            or double_answer_may_certify(ctx, problem, double.v, double.r, digits)):
+    if _on_face is None and (out_of_time or interrupted or not ctx.hypotheses_proven
+                             or double_answer_may_certify(ctx, problem, double.v, double.r, digits)):
         first = _proven_answer(ctx, point, digits, relative)
     if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted):
         prepared.cancel()
@@ -574,6 +589,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
     start = _start_from(data, double)
     driver = ProofDriver(ctx, data, digits, progress=say, relative=relative, deadline=deadline)
+    if _on_face is not None:
+        driver.face, driver.target = _on_face[1:3], _on_face[3]
     c_ext = compile_seconds()  # (what _start_from compiled counts in "compile" only)
     if first is not None:  # the double answer's proof, to beat
         driver.best = (ProofDriver.score(first[0]), first[0], point, first[1])
@@ -584,14 +601,15 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         interrupted = True
         ext_out = Extension(ext.ExtendedResult(None, None, None, "Stopped", "interrupted (Ctrl-C)", 0), None,
                             "not run (interrupted)", None, time.perf_counter() - t1, 0.0)
-    if first is None and not driver.certified:  # the double answer's proof, left until now
+    if first is None and not driver.certified and _on_face is None:  # the double answer's proof, left until now
         t_first = time.perf_counter()
         first = _proven_answer(ctx, point, digits, relative)
         driver.proof_seconds += time.perf_counter() - t_first
         if driver.best is None or ProofDriver.score(first[0]) >= driver.best[0]:  # ties: the double answer, as
             driver.best = (ProofDriver.score(first[0]), first[0], point, first[1])  # when it was proven first
     face_note = None
-    if not driver.certified and not interrupted and not driver.timed_out and _face_depth < MAX_FACE_DEPTH:
+    if (not driver.certified and not interrupted and not driver.timed_out and _face_depth < MAX_FACE_DEPTH
+            and _on_face is None):
         face_note = solve_on_face(problem, ctx, driver, digits, relative, say, deadline,
                                    dict(method=method, tol=tol, max_iter=max_iter, extended_max_iter=extended_max_iter,
                                         backend=backend, wide_tail=wide_tail, wide_bits=wide_bits,
@@ -612,6 +630,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     timings = {"double": t_double - (c1 - c0), "setup": t_setup - (c2 - c1), "extended": ext_out.seconds_dd - (c3 - c_ext),
                "wide": ext_out.seconds_wide, "proof": driver.proof_seconds, "compile": c3 - c0,
                "total": time.perf_counter() - t0}
+    if face_note is not None and face_note.get("seconds"):
+        timings["face"] = face_note["seconds"]  # the solve on the face (its final proof is in "proof")
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
                           wide=ext_out.wide, timings=timings, timed_out=timed_out, interrupted=interrupted)
 
@@ -623,11 +643,13 @@ MAX_FACE_DEPTH = 2
 def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digits: int, relative: bool, say,
                    deadline, settings: dict, depth: int) -> dict | None:
     """Where verified self-stresses leave the feasible set no interior (DESIGN §6.5): the problem
-    reduced to their face (:mod:`.proof.reduction`) is solved to ``digits`` + 2 digits by this same
-    path, its point lifted back and proven on ``problem`` itself — for the driver's target (a
-    solution being certified) or, without one, for the point's own rounding with r moved along
-    the self-stresses into K (:func:`.proof.face.returned_reactions`); the proof replaces the
-    driver's best when it says more.  Returns what was done (for the certificate), or None when no
+    reduced to their face (:mod:`.proof.reduction`) is solved by this same path, each of its
+    iterates lifted back and proven on ``problem`` itself (a reduced iterate's own proof would be
+    about rounded data: contacts sticking beside the face sit ~1e-29 inside their cones there,
+    less than that rounding) — for the driver's target (a solution being certified) or, without
+    one, for the point's own rounding with r moved along the self-stresses into K
+    (:func:`.proof.face.returned_reactions`); the result replaces the driver's best when it says
+    more.  Returns what was done (for the certificate), or None when no
     self-stress is known."""
     from .proof.reduction import reduce_to_face
 
@@ -636,38 +658,31 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
         return None
     t0 = time.perf_counter()
     reduction = reduce_to_face(problem, stresses)
-    note = {"self_stresses": [s.as_dict() for s in stresses]}
+    note = {"self_stresses": [s.as_dict() for s in stresses],
+            "description": "; ".join(s.describe() for s in stresses)}
     if reduction is None:
         note["reduction"] = "not possible (the face leaves those bodies no motion, or stresses share bodies)"
         say(f"self-stress found ({stresses[0].describe()}); the problem could not be reduced to its face")
         return note
-    sub_digits = min(digits + 2, 15)
     say(f"self-stress: {'; '.join(s.describe() for s in stresses)}. Solving the problem on that face "
-        f"({reduction.problem.n_dofs} dofs, {reduction.problem.n_contacts} contacts) to {sub_digits} digits")
+        f"({reduction.problem.n_dofs} dofs, {reduction.problem.n_contacts} contacts), each of its points "
+        "proven on the problem itself")
     limit = None if deadline is None else deadline - time.perf_counter()
     if limit is not None and limit <= 0:
         note["reduction"] = "not solved (the time limit was reached)"
         return note
-    sub = solve_to_digits(reduction.problem, sub_digits, progress=(lambda msg: say("  (on the face) " + msg)),
-                          relative=relative, time_limit=limit, _face_depth=depth + 1, **settings)
-    point = reduction.lift(sub.point) if sub.point is not None else None
-    note.update(reduction=f"solved on the face: {sub.status} ({sub.certificate.headline})",
+    sub = solve_to_digits(reduction.problem, digits, progress=(lambda msg: say("  (on the face) " + msg)),
+                          relative=relative, time_limit=limit, _face_depth=depth + 1,
+                          _on_face=(ctx, reduction, stresses, driver.target), **settings)
+    note.update(reduction=f"solved there, each point proven on the problem itself: {sub.status}",
                 seconds=time.perf_counter() - t0, reduced_dofs=reduction.problem.n_dofs,
-                reduced_contacts=reduction.problem.n_contacts)
-    if point is None:
+                reduced_contacts=reduction.problem.n_contacts, reduced_iterations=sub.nit)
+    proof, point = sub.certificate.proof, sub.point
+    if proof is None or point is None:
         return note
-    t1 = time.perf_counter()
-    from .proof.face import returned_reactions
-
-    if driver.target is not None:  # certifying a given solution: the lifted point is its proof point
-        sol = driver.target
-    else:
-        v, u, r = ctx.rounded(point)
-        sol = (v, u, returned_reactions(problem, stresses, r))  # r in K: r₀ + τy, Hr unchanged
-    proof = ctx.prove(point, *sol, requested=digits, relative=relative)
-    driver.proof_seconds += time.perf_counter() - t1
-    say(f"proof of the face's solution, lifted back: {proof.summary()}")
+    say(f"the face's points, lifted back: {proof.summary()}")
     if driver.best is None or ProofDriver.score(proof) > driver.best[0]:
+        sol = driver.target if driver.target is not None else (sub.v, sub.u, sub.r)
         driver.best = (ProofDriver.score(proof), proof, point, sol)
         note["_point"] = point
     return note
@@ -758,9 +773,9 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             note = "not run (the candidate is farther from the point than any tail could fix)"
         elif data.local:
             note = "not run (the tail works in the dofs of a global problem; a local problem has none)"
-        elif driver.ctx.self_stresses() or (driver.recent and not isinstance(driver.recent[-1], wide.WideIterate)
+        elif driver.face is None and (driver.ctx.self_stresses() or (driver.recent and not isinstance(driver.recent[-1], wide.WideIterate)
                                             and driver.ctx.look_for_self_stress(point_from_iterate(
-                                                data, driver.recent[-1].v, driver.recent[-1].r_t).r_hi)):
+                                                data, driver.recent[-1].v, driver.recent[-1].r_t).r_hi))):
             note = ("not run (a self-stress leaves the feasible set no interior: more precision cannot help, "
                     "the problem is solved on its face instead)")
         elif (ordering := wide_factor.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:
