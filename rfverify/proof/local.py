@@ -46,6 +46,7 @@ from fractions import Fraction
 import numpy as np
 import scipy.sparse as sp
 
+from ..definiteness import exact_ldlt
 from ..problem import SPACEDIM, LocalForm, Problem
 from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cone_violations,
                     cones_failure, eps_M_upper, _up_times,
@@ -159,28 +160,11 @@ def prove_psd(W: sp.spmatrix) -> LocalFacts:
 def exact_psd(A: sp.spmatrix) -> str:
     """"definite", "semidefinite" or "indefinite" for the exact (A + Aᵀ)/2 of a small float
     matrix: LDLᵀ in rationals with the largest remaining diagonal as pivot (a PSD matrix whose
-    largest remaining diagonal is 0 has a zero remainder)."""
+    largest remaining diagonal is 0 has a zero remainder; :func:`rfverify.definiteness.exact_ldlt`)."""
     D = np.asarray(sp.csr_matrix(A).toarray(), dtype=np.float64)
     n = D.shape[0]
     F = [[(Fraction(float(D[i, j])) + Fraction(float(D[j, i]))) / 2 for j in range(n)] for i in range(n)]
-    left = list(range(n))
-    while left:
-        p = max(left, key=lambda i: F[i][i])
-        piv = F[p][p]
-        if piv < 0:
-            return "indefinite"
-        if piv == 0:
-            return "semidefinite" if all(F[i][j] == 0 for i in left for j in left) else "indefinite"
-        left.remove(p)
-        row = F[p]
-        for i in left:
-            if F[i][p] != 0:
-                f = F[i][p] / piv
-                Fi = F[i]
-                for j in left:
-                    if row[j] != 0:
-                        Fi[j] -= f * row[j]
-    return "definite"
+    return exact_ldlt(F)[0]
 
 
 def local_data_scales(problem: Problem) -> dict:
