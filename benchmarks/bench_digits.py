@@ -120,7 +120,7 @@ def run_one(label, problem, digits: int, workdir: Path):
     t_path = time.perf_counter() - t1
     path = workdir / f"{abs(hash(label))}.h5"
     save(problem.with_solution(StoredSolution(v=out.v, u=out.u, r=out.r)), path,
-         extra=lambda fh: write_certificate(fh, out.certificate))
+         extra=lambda fh: write_certificate(fh, out.certificate, problem))
     t2 = time.perf_counter()
     stored = rfverify.load(path).solution
     recheck = rfverify.certify(problem, stored, digits=digits, point=read_point(path))

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
+from .definiteness import DENSE_LIMIT, Definiteness, verify_definite
 from .errors import InvalidProblemError
 
-DENSE_BLOCK_LIMIT = 400
-"""Diagonal blocks of M up to this size are checked for definiteness by batched dense
-eigenvalues; larger blocks by a symmetric-ordering LDLᵀ (sparse LU without pivoting)."""
+DENSE_BLOCK_LIMIT = DENSE_LIMIT
+"""Diagonal blocks of M up to this size are verified densely (batched by size); larger blocks
+by a sparse LDLᵀ (:mod:`rfverify.definiteness`)."""
 
 
 @dataclass(frozen=True)
@@ -93,24 +93,10 @@ def _round_up_2(x: float) -> str:
     return text
 
 
-@dataclass(frozen=True)
-class BlockStructure:
-    """Connected components of the sparsity graph of M (bodies, for rigid-body problems).
-
-    ``labels[j]`` is the block of dof j; ``sizes[b]`` the number of dofs of block b;
-    ``min_eigenvalues[b]`` the smallest eigenvalue of the symmetrised block (NaN when the
-    block was checked by factorisation only, in which case ``min_pivots[b]`` is set).
-    """
-
-    labels: np.ndarray
-    sizes: np.ndarray
-    min_eigenvalues: np.ndarray
-    min_pivots: np.ndarray
-
-    @property
-    def count(self) -> int:
-        return int(self.sizes.size)
-
+BlockStructure = Definiteness
+"""Connected components of the sparsity graph of M (bodies, for rigid-body problems) and the
+verified facts about each: :class:`rfverify.definiteness.Definiteness` (``labels``,
+``sizes``, ``count``, the equilibration ``exponents``, ``lam_scaled`` and ``lam_lower``)."""
 
 
 def symmetrise(M: sp.spmatrix) -> sp.csc_matrix:
@@ -139,53 +125,28 @@ def symmetry_report(M: sp.spmatrix) -> SymmetryReport:
     return SymmetryReport(float(rel[k]), frob, int(A.row[k]), int(A.col[k]))
 
 
-def block_structure_and_definiteness(M_sym: sp.csc_matrix) -> BlockStructure:
-    """Split symmetric ``M_sym`` into the connected components of its sparsity graph and check
-    each for positive definiteness.
-
-    Small blocks (≤ DENSE_BLOCK_LIMIT dofs) are grouped by size and their eigenvalues computed
-    in one batched call per size (rigid bodies give thousands of 6×6 blocks); large blocks are
-    factored by sparse LU with a symmetric fill-reducing ordering and no off-diagonal
-    pivoting, which is an LDLᵀ factorisation whose pivots are all positive exactly when the
-    block is positive definite (Sylvester).
+def block_structure_and_definiteness(M_sym: sp.csc_matrix, M_raw: sp.spmatrix | None = None) -> BlockStructure:
+    """Split symmetric ``M_sym`` = (M_raw + M_rawᵀ)/2 (rounded to float64) into the connected
+    components of its sparsity graph and prove each positive definite, whatever its scale:
+    :func:`rfverify.definiteness.verify_definite` (the Jacobi-equilibrated block, verified in
+    floating point with a-priori rounding-error bounds; an exact rational LDLᵀ for small
+    blocks where that cannot decide).  ``M_raw`` None: ``M_sym`` is the data itself.
 
     Raises
     ------
     InvalidProblemError
-        field ``"M"``, index = the failing block and its dof range.
+        field ``"M"``, index = the failing block and its dof range: "is not positive definite"
+        only on an exact proof (a non-positive diagonal entry, a non-positive pivot of the
+        exact LDLᵀ, a 2×2 minor or xᵀMx ≤ 0 evaluated exactly), else "could not verify
+        positive definiteness" with what was tried.
     """
     check_positive_diagonal(M_sym)
-    n_blocks, labels = connected_components(M_sym, directed=False)
-    sizes = np.bincount(labels, minlength=n_blocks)
-    min_eig = np.full(n_blocks, np.nan)
-    min_piv = np.full(n_blocks, np.nan)
-    order = np.argsort(labels, kind="stable")  # dofs grouped by block, increasing within
-    starts = np.concatenate(([0], np.cumsum(sizes)))
-    csr = M_sym.tocsr()
-    for size in np.unique(sizes):
-        ids = np.flatnonzero(sizes == size)
-        if size <= DENSE_BLOCK_LIMIT:
-            # Gather every block of this size into one (count, size, size) stack.
-            dofs = order[starts[ids][:, None] + np.arange(size)[None, :]]
-            stack = _gather_blocks(csr, dofs)
-            eig = np.linalg.eigvalsh(stack)[:, 0]
-            min_eig[ids] = eig
-            # Relative threshold: an eigenvalue below eps·‖block‖ is zero to working accuracy.
-            norms = np.abs(stack).max(axis=(1, 2))
-            fail = np.flatnonzero(~(eig > 8 * np.finfo(float).eps * size * norms))
-            if fail.size:
-                b = int(ids[fail[0]])
-                _raise_not_pd(b, order[starts[b]:starts[b + 1]], f"smallest eigenvalue "
-                              f"{eig[fail[0]]:.3e} (block norm {norms[fail[0]]:.3e})")
-        else:
-            for b in ids:
-                dofs = order[starts[b]:starts[b + 1]]
-                block = csr[dofs][:, dofs].tocsc()
-                pivots = _ldl_pivots(block)
-                min_piv[b] = pivots.min()
-                if not pivots.min() > 8 * np.finfo(float).eps * size * abs(block).max():
-                    _raise_not_pd(int(b), dofs, f"LDLᵀ pivot {pivots.min():.3e}")
-    return BlockStructure(labels=labels, sizes=sizes, min_eigenvalues=min_eig, min_pivots=min_piv)
+    facts = verify_definite(M_sym, M_raw)
+    if facts.failures:
+        proven = [f for f in facts.failures if f.proven]
+        fail = proven[0] if proven else facts.failures[0]
+        _raise_not_pd(fail.block, fail.dofs, fail.reason, fail.proven)
+    return facts
 
 
 def check_positive_diagonal(M: sp.spmatrix):
@@ -199,41 +160,16 @@ def check_positive_diagonal(M: sp.spmatrix):
             index=(j, j), fix="every dof needs a positive mass or inertia")
 
 
-def _gather_blocks(csr: sp.csr_matrix, dofs: np.ndarray) -> np.ndarray:
-    """Dense (count, s, s) stack of the diagonal blocks M[dofs[b]][:, dofs[b]]."""
-    count, s = dofs.shape
-    rows = dofs.ravel()
-    sub = csr[rows].tocoo()  # rows of all blocks, all columns
-    # Position of each column inside its block: only entries whose column is in the same
-    # block as the row survive (blocks are connected components, so all do).
-    pos_in_block = np.empty(csr.shape[1], dtype=np.int64)
-    pos_in_block[dofs.ravel()] = np.tile(np.arange(s), count)
-    stack = np.zeros((count, s, s))
-    blk = sub.row // s
-    stack[blk, sub.row % s, pos_in_block[sub.col]] = sub.data
-    return stack
-
-
-def _ldl_pivots(block: sp.csc_matrix) -> np.ndarray:
-    from scipy.sparse.linalg import splu
-
-    try:
-        lu = splu(block, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                  options={"SymmetricMode": True})
-    except RuntimeError:  # exactly singular
-        return np.array([0.0])
-    if np.any(lu.perm_r != lu.perm_c):
-        # SuperLU pivoted off the diagonal after all: fall back to the dense test.
-        return np.linalg.eigvalsh(block.toarray())
-    return lu.U.diagonal()
-
-
-def _raise_not_pd(block: int, dofs: np.ndarray, detail: str):
+def _raise_not_pd(block: int, dofs: np.ndarray, detail: str, proven: bool):
     lo, hi = int(dofs.min()), int(dofs.max())
     span = f"dofs {lo}..{hi}" if hi - lo + 1 == dofs.size else f"{dofs.size} dofs from {lo} to {hi}"
-    raise InvalidProblemError(
-        "M", f"diagonal block {block} ({span}) of the symmetrised M is not positive definite: "
-             f"{detail}",
-        index=f"block {block}: {span}",
-        fix="check the masses/inertias of that body (a rigid body needs a positive mass and "
-            "a positive definite inertia tensor)")
+    where = f"diagonal block {block} ({span}) of the symmetrised M"
+    if proven:
+        problem, fix = (f"{where} is {detail}", "check the masses/inertias of that body (a rigid body needs a positive "
+                                                 "mass and a positive definite inertia tensor)")
+    else:
+        problem, fix = (f"{where}: {detail}",
+                        "the block is singular or too ill-conditioned to be proven definite in double precision even "
+                        "after diagonal scaling: check the masses/inertias of that body (nearly dependent rows of an "
+                        "inertia tensor or of an assembled mass matrix)")
+    raise InvalidProblemError("M", problem, index=f"block {block}: {span}", fix=fix)

@@ -289,7 +289,7 @@ class Problem:
 
         M_sym = symmetrise(M)
         M_sym.sort_indices()
-        blocks = block_structure_and_definiteness(M_sym)
+        blocks = block_structure_and_definiteness(M_sym, M)
 
         if solution is not None:
             solution = _frozen_solution("solution", solution, m, n)

@@ -17,8 +17,8 @@ def problem_summary(problem, *, solution_tol: float = 1e-6, max_asymmetry: float
     sizes, counts = np.unique(blocks.sizes, return_counts=True)
     free = problem.contact_free_dofs
     free_blocks = int(np.unique(blocks.labels[free]).size) if free.size else 0
-    eig = blocks.min_eigenvalues
-    finite = np.isfinite(eig)
+    lam = blocks.lam_lower
+    finite = np.isfinite(lam)
     summary = {
         "title": problem.title,
         "description": problem.description.strip(),
@@ -46,7 +46,8 @@ def problem_summary(problem, *, solution_tol: float = 1e-6, max_asymmetry: float
             "sizes": {str(int(s)): int(c) for s, c in zip(sizes, counts)},
             "contact_free_blocks": free_blocks,
             "contact_free_dofs": int(free.size),
-            "min_eigenvalue": float(eig[finite].min()) if finite.any() else None,
+            "min_eigenvalue_lower": float(lam[finite].min()) if finite.any() else None,
+            "decided_exactly": int(blocks.exact_blocks),
         },
     }
     sym = symmetrised(problem)
@@ -119,8 +120,10 @@ def format_summary(s: dict) -> str:
     add(f"M blocks   {b['count']} diagonal block(s): "
         + ", ".join(f"{c} of size {k}" for k, c in b["sizes"].items())
         + f"; {b['contact_free_blocks']} contact-free ({b['contact_free_dofs']} dofs)")
-    if b["min_eigenvalue"] is not None:
-        add(f"           positive definite: smallest block eigenvalue {b['min_eigenvalue']:.3e}")
+    if b["min_eigenvalue_lower"] is not None:
+        exact = f"; {b['decided_exactly']} block(s) decided in exact arithmetic" if b["decided_exactly"] else ""
+        add(f"           positive definite (verified): smallest block eigenvalue ≥ {b['min_eigenvalue_lower']:.3e}"
+            f"{exact}")
     a, sym = s["M_asymmetry"], s["symmetrised"]
     limit = f"limit {sym['limit']:g}, --max-asymmetry"
     rows = [("M", a)] if sym["matrix"] == "M" else [("M", a), ("W", sym)]

@@ -1,8 +1,9 @@
-"""CHOLMOD's numeric factorisation without the GIL (rfverify.solver.cholmod_nogil): the same
-factor as cvxopt's own call bit for bit, other threads run during it, an indefinite matrix is
-refused as before, and anything unexpected falls back to cvxopt's call."""
+"""CHOLMOD through ctypes with rfverify's own cholmod_common (rfverify.solver.cholmod_nogil): the
+same factor and solves as cvxopt's own calls under its default options, bit for bit; other
+threads run during it; an indefinite matrix is refused as before; anything unexpected means the
+QDLDL fallback; and cvxopt's global ``cholmod.options`` is neither read nor written (issue 48
+item 3): a user's settings there change no answer, and a user's thread never sees rfverify's."""
 
-import ctypes
 import sys
 import threading
 import time
@@ -11,11 +12,20 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+import rfverify
 from rfverify.solver import cholmod_nogil
 from rfverify.solver.engines import CholmodEngine
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
-                                reason="the GIL-free call reads /proc/self/maps (Linux)")
+                                reason="the ctypes call finds libcholmod in /proc/self/maps (Linux)")
+
+
+def grid(k):
+    """Lower triangle of a k² × k² grid Laplacian (+ 0.5 I): quick to factor, its analysis (AMD and
+    nested dissection) takes tens of milliseconds."""
+    T = sp.diags([-1.0, 4.5, -1.0], [-1, 0, 1], shape=(k, k))
+    A = sp.kron(sp.identity(k), T) + sp.kron(sp.diags([-1.0, -1.0], [-1, 1], shape=(k, k)), sp.identity(k))
+    return sp.tril(A.tocsc(), format="csc")
 
 
 def spd(n, seed, density=4e-3):
@@ -24,18 +34,60 @@ def spd(n, seed, density=4e-3):
     return sp.tril((A @ A.T + sp.identity(n) * 2.0).tocsc(), format="csc")
 
 
-def cvxopt_engine():
-    engine = CholmodEngine()
-    engine._nogil = None  # cvxopt's own cholmod.numeric
-    return engine
+class CvxoptReference:
+    """cvxopt's own cholmod.symbolic/numeric/solve on a lower triangle, under cvxopt's default
+    options (an empty ``cholmod.options``): what rfverify's engine must equal bit for bit."""
+
+    releases_gil = False
+
+    def __init__(self):
+        self._A = self._F = None
+
+    def factor(self, K):
+        import cvxopt
+        from cvxopt import cholmod
+
+        assert dict(cholmod.options) == {}, "the reference needs cvxopt's default options"
+        K = sp.csc_matrix(K)
+        K.sort_indices()
+        n = K.shape[0]
+        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
+        self._A = cvxopt.spmatrix(cvxopt.matrix(K.data.astype(np.float64)), cvxopt.matrix(K.indices.astype(np.int64)),
+                                  cvxopt.matrix(cols), (n, n))
+        if self._F is None:
+            from rfverify.solver.engines import ND_MIN_ROWS, nested_dissection
+
+            perm = nested_dissection(K) if n >= ND_MIN_ROWS else None
+            self._F = (cholmod.symbolic(self._A, uplo="L") if perm is None
+                       else cholmod.symbolic(self._A, p=cvxopt.matrix(perm.astype(np.int64)), uplo="L"))
+        try:
+            cholmod.numeric(self._A, self._F)
+        except ArithmeticError as exc:
+            raise ArithmeticError(f"CHOLMOD: not positive definite (column {exc})") from None
+
+    def solve(self, b):
+        import cvxopt
+        from cvxopt import cholmod
+
+        x = cvxopt.matrix(np.array(b, dtype=np.float64))
+        cholmod.solve(self._F, x)
+        return np.array(x).ravel()
+
+    def permutation(self):
+        import cvxopt
+        from cvxopt import cholmod
+
+        n = self._A.size[0]
+        p = cvxopt.matrix(np.arange(n, dtype=np.float64))
+        cholmod.solve(self._F, p, sys=7)  # x = P b
+        return np.array(p).ravel().astype(np.int64)
 
 
-def test_available_here_and_bit_for_bit_cvxopts_factor():
-    assert cholmod_nogil.factorizer() is not None, "cvxopt's libcholmod was not found among the mapped files"
+def test_available_here_and_bit_for_bit_cvxopts_own_calls():
+    assert cholmod_nogil.session() is not None, "cvxopt's libcholmod was not found among the mapped files"
     for seed in range(3):
-        K = spd(1500 + 500 * seed, seed)
-        ours, theirs = CholmodEngine(), cvxopt_engine()
-        assert ours.releases_gil and not theirs.releases_gil
+        K = spd(1500 + 500 * seed, seed)  # AMD, then nested dissection or AMD from 2000 rows
+        ours, theirs = CholmodEngine(), CvxoptReference()
         b = np.random.default_rng(seed).standard_normal(K.shape[0])
         for scale in (1.0, 3.0):  # the first factorisation and a refactorisation on the same pattern
             K2 = K.copy()
@@ -48,8 +100,8 @@ def test_available_here_and_bit_for_bit_cvxopts_factor():
             assert np.abs(full @ x - b).max() < 1e-10 * np.abs(b).max() * np.abs(x).max() * 10
 
 
-def _progress_during(engine, K):
-    """Steps a Python thread makes while ``engine`` factors ``K`` (the GIL-free call lets it run)."""
+def _progress_during(work):
+    """Steps a Python thread makes while ``work()`` runs (a GIL-free call lets it run)."""
     count, stop = [0], [False]
 
     def spin():
@@ -61,23 +113,26 @@ def _progress_during(engine, K):
     time.sleep(0.02)
     try:
         before = count[0]
-        engine.factor(K)
+        work()
         return count[0] - before
     finally:
         stop[0] = True
         thread.join()
 
 
-def test_other_threads_run_while_it_factors():
+def test_other_threads_run_while_it_analyses_and_factors():
     K = spd(6000, 7, density=1.5e-3)
-    ours, theirs = CholmodEngine(), cvxopt_engine()
-    ours.factor(K)  # analysed: the timed calls only factor
+    ours, theirs = CholmodEngine(), CvxoptReference()
     theirs.factor(K)
     t0 = time.perf_counter()
     theirs.factor(K)
     assert time.perf_counter() - t0 > 0.02, "the matrix must take a while to factor for this test to say anything"
-    free, held = _progress_during(ours, K), _progress_during(theirs, K)
+    ours.factor(K)
+    G = grid(100)
+    analysed = _progress_during(lambda: CholmodEngine().analyse(G))
+    free, held = _progress_during(lambda: ours.factor(K)), _progress_during(lambda: theirs.factor(K))
     assert free > 20 * max(held, 1000), (free, held)
+    assert analysed > 1000
 
 
 def test_an_indefinite_matrix_is_refused_at_the_same_column_as_by_cvxopt(capfd):
@@ -86,61 +141,54 @@ def test_an_indefinite_matrix_is_refused_at_the_same_column_as_by_cvxopt(capfd):
     bad.data = bad.data.copy()
     bad.data[bad.indptr[400]] = -5.0  # a negative diagonal entry (column 400's first stored entry)
     messages = []
-    for engine in (CholmodEngine(), cvxopt_engine()):
+    for engine in (CholmodEngine(), CvxoptReference()):
         engine.factor(K)
         with pytest.raises(ArithmeticError) as info:
             engine.factor(bad)
         messages.append(str(info.value))
-        assert engine.factorisations == 1
         engine.factor(K)  # the factor is usable again afterwards
     assert messages[0] == messages[1] and "not positive definite" in messages[0]
     assert capfd.readouterr() == ("", "")  # CHOLMOD prints nothing (print = 0, as cvxopt sets it)
 
 
-def test_an_error_reported_by_cholmod_goes_to_cvxopts_call(monkeypatch):
+def test_an_error_reported_by_cholmod_is_raised_not_ignored(monkeypatch):
     K = spd(600, 4)
     engine = CholmodEngine()
-    calls = []
-    monkeypatch.setattr(cholmod_nogil.Factorizer, "factorize", lambda self, *a: calls.append(1))  # returns None
-    engine.factor(K)
-    b = np.ones(K.shape[0])
-    reference = cvxopt_engine()
-    reference.factor(K)
-    assert calls and np.array_equal(engine.solve(b), reference.solve(b))
+    monkeypatch.setattr(cholmod_nogil.Cholmod, "factorize", lambda self, values: None)  # CHOLMOD said: error
+    with pytest.raises(MemoryError, match="CHOLMOD"):
+        engine.factor(K)
+    assert engine.factorisations == 0
 
 
-def test_an_unexpected_cholmod_common_layout_means_cvxopts_call(monkeypatch):
+def test_an_unexpected_cholmod_common_layout_means_qdldl(monkeypatch):
+    from rfverify.solver.engines import QDLDLEngine, cholmod_available, schur_engine
+
     monkeypatch.setattr(cholmod_nogil, "_checked", False)
     monkeypatch.setattr(cholmod_nogil, "_lib", None)
     wrong = tuple((off, fmt, want + 1) if off == cholmod_nogil._PRINT_OFFSET else (off, fmt, want)
                   for off, fmt, want in cholmod_nogil._EXPECTED_DEFAULTS)
     monkeypatch.setattr(cholmod_nogil, "_EXPECTED_DEFAULTS", wrong)
-    assert cholmod_nogil.factorizer() is None
-    engine = CholmodEngine()
-    assert not engine.releases_gil
-    K = spd(500, 5)
-    engine.factor(K)
-    assert np.all(np.isfinite(engine.solve(np.ones(500))))
+    assert cholmod_nogil.session() is None and not cholmod_available()
+    with pytest.raises(ImportError, match="not usable here"):
+        CholmodEngine()
+    assert isinstance(schur_engine(), QDLDLEngine)
 
 
-def test_only_cvxopts_factor_of_a_lower_triangle_is_accepted():
-    fz = cholmod_nogil.factorizer()
-    other = ctypes.pythonapi.PyCapsule_New
-    other.restype = ctypes.py_object
-    other.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_void_p]
-    keep = ctypes.c_char_p(b"not a factor")
-    capsule = other(ctypes.addressof(ctypes.c_int(0)), keep, None)
-    z = np.zeros(2, dtype=np.int64)
-    with pytest.raises(TypeError, match="not cvxopt's factor"):
-        fz.factorize(capsule, z, z[:0], np.zeros(0))
+def test_calls_out_of_order_are_refused():
+    chol = cholmod_nogil.session()
+    with pytest.raises(ValueError, match="analyse first"):
+        chol.factorize(np.ones(3))
     K = spd(50, 1)
-    engine = CholmodEngine()
-    engine.analyse(K)
-    with pytest.raises(ValueError, match="int64"):
-        fz.factorize(engine._factor, K.indptr.astype(np.int32), K.indices.astype(np.int64), K.data)
-    with pytest.raises(ValueError, match="order"):
-        small = spd(40, 2)
-        fz.factorize(engine._factor, small.indptr.astype(np.int64), small.indices.astype(np.int64), small.data)
+    assert chol.analyse(K.indptr, K.indices)
+    with pytest.raises(ValueError, match="successful numeric"):
+        chol.solve(np.ones(50))
+    with pytest.raises(ValueError, match="values"):
+        chol.factorize(K.data[:-1])
+    assert chol.factorize(K.data) == 50
+    with pytest.raises(ValueError, match="right-hand side"):
+        chol.solve(np.ones(49))
+    chol.release()
+    assert chol.counts() is None
 
 
 def test_analyse_then_factor_is_the_same_as_factor_alone():
@@ -161,42 +209,121 @@ def test_the_factors_own_order_and_column_counts_are_those_of_the_pattern():
 
     for n, seed in ((900, 1), (3000, 2)):  # AMD, and nested dissection or AMD (ND_MIN_ROWS)
         K = spd(n, seed)
-        ours, theirs = CholmodEngine(), cvxopt_engine()
+        ours, theirs = CholmodEngine(), CvxoptReference()
         assert ours.permutation() is None and ours.column_counts() is None
         ours.factor(K)
         theirs.factor(K)
         perm = ours.permutation()
-        assert np.array_equal(perm, theirs.permutation()) and theirs.column_counts() is None
+        assert np.array_equal(perm, theirs.permutation())
         full = (K + sp.tril(K, -1).T).tocsc()
         Ap, Ai, _ = upper_csc(full[perm][:, perm])
         assert np.array_equal(ours.column_counts(), np.diff(_symbolic(n, Ap, Ai)[1]))
 
 
-def test_cvxopts_global_options_are_set_by_one_block_at_a_time():
-    """The set-up thread analyses while the double solve may call cvxopt: two option blocks must
-    not interleave, or one restores the other's settings and leaks them into the user's cvxopt."""
+# ---------------------------------------------------------------------- cvxopt's global options
+USER_OPTIONS = [{"postorder": False}, {"nmethods": 1}, {"supernodal": 0}, {"print": 5}, {"not_an_option": 1}]
+"""Settings a user of cvxopt may leave in ``cvxopt.cholmod.options`` (the last one makes every
+cvxopt.cholmod call raise ValueError)."""
+
+
+def _cholmod_problem():
+    """A problem on which both paths factor with CHOLMOD: the schur form, and the double-double
+    phase's contact-space factor forced to CHOLMOD."""
+    from rfverify.random_problems import random_problem
+
+    return random_problem(40, 90, seed=3)
+
+
+def _answers(problem):
+    out = rfverify.solve(problem, method="schur")
+    digits = rfverify.solve_to_digits(problem, digits=10, method="schur", factor_engine="cholmod")
+    return [out.v, out.u, out.r, np.array([out.nit])], [digits.v, digits.u, digits.r, np.array([digits.nit])]
+
+
+@pytest.fixture
+def user_options():
     from cvxopt import cholmod
 
-    from rfverify.solver.engines import _cholmod_options
+    saved = dict(cholmod.options)
+    yield cholmod.options
+    cholmod.options.clear()
+    cholmod.options.update(saved)
 
-    original = dict(cholmod.options)
-    inside, order = threading.Event(), []
 
-    def first():
-        with _cholmod_options(supernodal=1):
-            order.append("first in")
-            inside.set()
-            time.sleep(0.3)
-            order.append("first out")
+@pytest.mark.parametrize("setting", USER_OPTIONS, ids=lambda d: next(iter(d)))
+def test_answers_are_bit_for_bit_the_same_whatever_the_users_cvxopt_options(setting, user_options, capfd):
+    problem = _cholmod_problem()
+    user_options.clear()
+    plain = _answers(problem)
+    user_options.update(setting)
+    theirs = _answers(problem)
+    assert dict(user_options) == setting  # rfverify left the user's setting as it was
+    for a, b in zip(plain, theirs):
+        for x, y in zip(a, b):
+            assert np.array_equal(x, y)
+    assert capfd.readouterr().err == ""  # nothing printed by CHOLMOD (the user's "print" is not ours)
 
-    def second():
-        inside.wait()
-        with _cholmod_options(supernodal=0):
-            order.append("second in")
 
-    threads = [threading.Thread(target=first), threading.Thread(target=second)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    assert order == ["first in", "first out", "second in"] and dict(cholmod.options) == original
+def test_a_users_thread_never_sees_rfverifys_settings(user_options):
+    """Another thread polls cvxopt.cholmod.options while rfverify analyses, factors and solves:
+    the two paths on a small problem, and the engine on a matrix whose analysis takes a while
+    (a setting made around it would be seen by the poller)."""
+    problem = _cholmod_problem()
+    K = grid(100)
+    user_options.clear()
+    user_options["postorder"] = True
+    before = dict(user_options)
+    seen, polls, stop = [], [0], threading.Event()
+
+    def poll():
+        while not stop.is_set():
+            now = dict(user_options)
+            if now != before:
+                seen.append(now)
+            polls[0] += 1
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(2e-4)  # switch threads often, so that a changed dictionary would be seen
+    thread = threading.Thread(target=poll)
+    thread.start()
+    try:
+        _answers(problem)
+        for _ in range(12):  # a dozen analyses: a setting made around each would be seen at least once
+            engine = CholmodEngine()
+            engine.factor(K)
+            engine.solve(np.ones(K.shape[0]))
+    finally:
+        stop.set()
+        thread.join()
+        sys.setswitchinterval(interval)
+    assert polls[0] > 1000 and not seen, seen[:3]
+
+
+class RecordingOptions(dict):
+    """A stand-in for cvxopt.cholmod.options that records every change made to it from Python."""
+
+    def __init__(self):
+        super().__init__()
+        self.changes = []
+
+    def _record(name):
+        def method(self, *args, **kwargs):
+            self.changes.append((name, args, kwargs))
+            return getattr(dict, name)(self, *args, **kwargs)
+        return method
+
+    for _name in ("__setitem__", "__delitem__", "update", "clear", "pop", "popitem", "setdefault"):
+        locals()[_name] = _record(_name)
+    del _name, _record
+
+
+def test_rfverify_never_writes_cvxopts_options(monkeypatch):
+    from cvxopt import cholmod
+
+    recording = RecordingOptions()
+    monkeypatch.setattr(cholmod, "options", recording)
+    _answers(_cholmod_problem())
+    engine = CholmodEngine()
+    engine.factor(spd(2500, 9))  # nested dissection or AMD
+    engine.solve(np.ones(2500))
+    assert recording.changes == [] and dict(recording) == {}

@@ -130,7 +130,7 @@ def test_a_digits_run_stops_at_its_time_limit_and_writes_the_best_proof(bed2800,
     # the written file holds the best answer and a certificate that certify confirms
     assert main(["certify", str(sol), "--digits", "1", "--quiet", "--json"]) in (0, 1)
     c = json.loads(capsys.readouterr().out)
-    assert c["stored_certificate"]["matches_solution"] is True
+    assert c["stored_certificate"]["matches_solution"] is True and c["stored_certificate"]["matches_problem"] is True
     for name, q in s["certificate"]["quantities"].items():
         if q["mode"] == "relative" and q["digits"] is not None:
             assert c["quantities"][name]["digits"] >= q["digits"] - 1e-9

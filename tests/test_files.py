@@ -42,7 +42,7 @@ def test_every_real_file_loads(real_data, name):
     if m is not None:
         assert problem.n_dofs == m
     assert problem.H.shape == (problem.n_dofs, 5 * n)
-    assert problem.blocks.min_eigenvalues[np.isfinite(problem.blocks.min_eigenvalues)].min() > 0
+    assert problem.blocks.proven and problem.blocks.lam_lower.min() > 0
 
 
 def test_bundled_files_are_the_original_files(real_data):

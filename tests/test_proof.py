@@ -368,12 +368,12 @@ def test_mutation_overestimating_lambda_min_is_caught(monkeypatch):
     problem, point, v, v_star, _ = _all_open_offset_point()
     real = B.gMinvg_upper
 
-    def inflated(g, mass):
-        mass.lam_lower = mass.lam_lower * 100
+    def inflated(g, mass):  # λmin of the equilibrated blocks, which the bound divides by
+        mass.lam_scaled = mass.lam_scaled * 100
         try:
             return real(g, mass)
         finally:
-            mass.lam_lower = mass.lam_lower / 100
+            mass.lam_scaled = mass.lam_scaled / 100
 
     monkeypatch.setattr(B, "gMinvg_upper", inflated)
     assert _violated(problem, point, v, v_star)

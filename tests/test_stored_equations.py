@@ -162,7 +162,7 @@ def test_a_new_solution_voids_the_certificate_of_the_file(tmp_path, capsys):
     capsys.readouterr()
     # certify of the file: accepted, and it says the stored certificate is about this /solution
     assert main(["certify", str(path), "--quiet"]) == 0
-    assert "about this /solution (digest matches)" in capsys.readouterr().out
+    assert "about this problem and this /solution (both digests match)" in capsys.readouterr().out
     # a plain solve in place with 3 iterations: /solution replaced, /certificate gone
     assert main(["solve", str(path), "--max-iter", "3", "--out", str(path)]) == 1
     with h5py.File(path, "r") as fh:
@@ -177,7 +177,7 @@ def test_a_new_solution_voids_the_certificate_of_the_file(tmp_path, capsys):
     for f in (path, other):
         capsys.readouterr()
         assert main(["certify", str(f), "--quiet"]) == 0
-        assert "digest matches" in capsys.readouterr().out
+        assert "both digests match" in capsys.readouterr().out
 
 
 def test_certify_says_when_a_stored_certificate_is_about_another_solution(tmp_path, capsys):

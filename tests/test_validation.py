@@ -71,7 +71,7 @@ def test_valid_problems_are_accepted(arrays):
     meta = arrays["meta"]
     assert p.n_dofs == 6 * meta["n_bodies"] and p.n_contacts == meta["n_contacts"]
     assert p.symmetry.scaled <= DEFAULT_MAX_ASYMMETRY
-    assert np.all(p.blocks.min_eigenvalues[np.isfinite(p.blocks.min_eigenvalues)] > 0)
+    assert p.blocks.proven and np.all(p.blocks.lam_lower > 0)
     free = {6 * b + k for b in meta["free_bodies"] for k in range(6)}
     assert free <= set(p.contact_free_dofs.tolist())
     assert np.array_equal(p.mu, arrays["mu"]) and np.array_equal(p.mu_r, arrays["mu_r"])

@@ -281,7 +281,7 @@ def test_a_malformed_tail_point_in_the_file_is_refused(lattice, tmp_path):
     sol = tmp_path / "sol.h5"
     rfverify.save(problem, sol)
     with h5py.File(sol, "a") as fh:
-        rfverify.io.certificate.write_certificate(fh, out.certificate)
+        rfverify.io.certificate.write_certificate(fh, out.certificate, problem)
         del fh["certificate/point/r_more"]
     with pytest.raises(rfverify.ProblemFileError, match="v_more and r_more"):
         rfverify.io.certificate.read_point(sol)

@@ -19,8 +19,8 @@ iterations, continued in 320-bit arithmetic where double-double stalls) is evalu
 arithmetic, and the bound ||v - v*||_Ms <= (sqrt(g'Ms^-1 g) + sqrt(g'Ms^-1 g + 4 r'u))/2 is
 carried to the solution. The verdict names the problem it proves (with (M + Mᵀ)/2 unless
 --as-stored). A /certificate already in the solution file is checked against the /solution it
-holds (its digest) and the output says whether it is about that solution. Exit code 0 only
-when --digits are proven."""
+holds and the problem it is read with (its digests of both) and the output says whether it is
+about them. Exit code 0 only when --digits are proven."""
 
 
 def add_parser(sub) -> None:
@@ -79,12 +79,12 @@ def cmd_certify(args) -> int:
         sol = other.solution
         where = args.solution
         point = read_point(_resolve(args.solution))
-        stored = read_stored_certificate(_resolve(args.solution))
+        stored = read_stored_certificate(_resolve(args.solution), problem)
     else:
         sol, where = problem.solution, args.problem
         if is_hdf5_input(args.problem):
             point = read_point(_resolve(args.problem))
-            stored = read_stored_certificate(_resolve(args.problem))
+            stored = read_stored_certificate(_resolve(args.problem), problem)
     # A 3-D file's /solution (3 per contact; local: u and r, v = H r) is read into the rolling
     # layout by load(), so it is certified like any other.
     if sol is None or sol.v is None or sol.r is None:
@@ -101,7 +101,7 @@ def cmd_certify(args) -> int:
     u = sol.u if sol.u is not None else _velocity(problem, sol)
     if args.out:
         _write_certificate(args, problem, sol, u, cert)
-    stored_note = _stored_certificate_note(stored, where)
+    stored_note = _stored_certificate_note(stored, where, problem)
     if args.json:
         print(dumps({**cert.as_dict(), "stored_certificate": None if stored is None else
                      {**stored, "note": stored_note}}, indent=2))
@@ -121,20 +121,36 @@ def cmd_certify(args) -> int:
     return EXIT_OK if cert.certified else EXIT_NOT_SOLVED
 
 
-def _stored_certificate_note(stored: dict | None, where) -> str:
-    """One line on the /certificate the file already held: whether it is about the /solution
-    the file holds (its digest), and what it claimed."""
+def _stored_certificate_note(stored: dict | None, where, problem) -> str:
+    """One line on the /certificate the file already held: whether it is about the problem being
+    certified and the /solution the file holds (its digests), and what it claimed."""
     if stored is None:
         return ""
     claim = stored.get("verdict") or "(no verdict)"
+    head = f"stored certificate in {where}:"
+    recomputed = "the verdict above is the one that does (its point was used only as a proof point)"
+    if stored.get("matches_problem") is False:
+        data = "W, q, mu, mu_r" if problem.local is not None else "M, H, f, w, mu, mu_r"
+        local = ""
+        if str(stored.get("theorem") or "").startswith("Local problem") and problem.local is None:
+            local = (" (it proves a local problem u = W r + q, such as the .dat file this one was written from, and "
+                     "this file holds its global lifting: certify that file with --solution to check the claim)")
+        return (f"{head} about ANOTHER problem (written for other data: the digest of the problem's {data} "
+                f"differs){local}: its claim does not hold for this problem; {recomputed}")
     if stored["matches_solution"] is False:
-        return (f"stored certificate in {where}: NOT about this /solution (it was written for another one; "
-                f"digest differs): its claim does not hold for the solution now stored; the verdict above "
-                f"is the one that does (its point was used only as a proof point)")
+        return (f"{head} NOT about this /solution (it was written for another one; digest differs): its claim "
+                f"does not hold for the solution now stored; {recomputed}")
     if stored["matches_solution"] is None:
-        return (f"stored certificate in {where}: written before certificates recorded their solution's digest, "
-                f"so it may be about another solution; the verdict above is recomputed for the stored one")
-    return f"stored certificate in {where}: about this /solution (digest matches); it claimed: {claim}"
+        return (f"{head} written before certificates recorded their solution's digest, so it may be about another "
+                f"problem or solution; the verdict above is recomputed for this one")
+    if stored.get("digest_kind") != "problem and solution":
+        kind = ("of the old kind: it covers only the /solution, not the problem's data" if
+                stored.get("digest_kind") == "solution only" else
+                f"of a kind this rfverify does not know ({stored.get('digest_kind')})")
+        return (f"{head} its digest is {kind}; the /solution matches it, but whether the certificate was written "
+                f"for this problem cannot be told; the verdict above is recomputed for this problem (it claimed: "
+                f"{claim})")
+    return f"{head} about this problem and this /solution (both digests match); it claimed: {claim}"
 
 
 def _velocity(problem, sol):
@@ -173,4 +189,4 @@ def _write_certificate(args, problem, sol, u, cert):
 
     target = getattr(args, "out_target", None) or check_output_file(args.out, inputs=[args.problem, args.solution])
     save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), target,
-         extra=lambda fh: write_certificate(fh, cert))
+         extra=lambda fh: write_certificate(fh, cert, problem))

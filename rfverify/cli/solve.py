@@ -248,7 +248,7 @@ def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
         from ..io.certificate import write_certificate
 
         def extra(fh):
-            write_certificate(fh, certificate)
+            write_certificate(fh, certificate, problem)
     if target.in_place:  # the file's own layout (3 per contact for 3-D files), see io/fclib3d.py
         write_solution_in_place(target, problem.with_solution(solution).solution, extra=extra,
                                 problem=problem)

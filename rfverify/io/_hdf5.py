@@ -40,6 +40,9 @@ _EXACT_INT = 2**53
 FIX_LAYOUT = ("write the file with rfverify.save or fclib's fclib_write_global_rolling "
                "(layout: DESIGN §7; 3-D files: fclib_write_global/fclib_write_local)")
 FIX_INT = "store sizes and indices as integers (int32, as fclib.c writes them)"
+FIX_DAMAGED = ("restore the file from a backup, or write it again (with the program that made it; "
+               "rfverify's own files: rfverify generate, solve --out or rfverify.save)")
+"""The fix of a file whose HDF5 structure is damaged (overwritten bytes, a truncated copy)."""
 FIX_REAL = "store the data as float64 (real numbers)"
 
 
@@ -89,21 +92,66 @@ def kind_name(obj) -> str:
     return type(obj).__name__
 
 
+def damaged(path, location, what: str, exc) -> ProblemFileError:
+    """The error of a file whose HDF5 structure cannot be read: "is truncated" (HDF5 says the
+    file ends before the size its header records) or "is damaged: ``what``", with HDF5's own
+    words, and the fix: restore or rewrite the file."""
+    import re
+
+    detail = first_line(exc)
+    cut = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", detail)
+    if cut:
+        problem = (f"is truncated: it has {cut.group(1)} bytes, its HDF5 header records {cut.group(2)} "
+                   f"(the end of the file is missing)")
+    else:
+        problem = f"is damaged: {what} (HDF5: {detail.strip(chr(39))})"
+    return ProblemFileError(path, problem, location=location, fix=FIX_DAMAGED)
+
+
+def _garbled_names(group) -> str:
+    """"" when the member names of ``group`` read as text; else why the group looks damaged (a
+    name that is not text, or a list of names HDF5 cannot read)."""
+    try:
+        names = list(group.keys())
+    except (KeyError, OSError, RuntimeError, ValueError) as exc:
+        return f"the names of its members cannot be read (HDF5: {first_line(exc)})"
+    bad = [n for n in names if not isinstance(n, str) or not n.isprintable()]
+    return f"it holds a member whose name is not text ({bad[0]!r})" if bad else ""
+
+
 def member(group, name, path, kind):
     """``group[name]`` checked to exist, to be reachable (links) and to be a ``kind``
-    (h5py.Group or h5py.Dataset)."""
+    (h5py.Group or h5py.Dataset).  A hard link that cannot be followed, or a group whose member
+    names are not text, means a damaged file (:func:`damaged`); a soft or external link that
+    leads nowhere is named as such."""
     h5py = h5py_module()
     loc = member_path(group, name)
     what = "group" if kind is h5py.Group else "dataset"
     link = group.get(name, getlink=True)
     if link is None:
+        garbled = _garbled_names(group)
+        if garbled:
+            raise ProblemFileError(path, f"is missing, and {group.name} looks damaged: {garbled}", location=loc,
+                                   fix=FIX_DAMAGED)
         raise ProblemFileError(path, f"missing {what} {loc}", location=loc, fix=FIX_LAYOUT)
     try:
         obj = group[name]
     except (KeyError, OSError, RuntimeError, ValueError) as exc:
-        raise ProblemFileError(path, f"is a link ({type(link).__name__}) that cannot be followed "
-                                     f"({first_line(exc)})", location=loc,
-                               fix="replace the link by the data it should point to") from None
+        if isinstance(link, h5py.SoftLink):  # made by a user: a link to nothing, or a loop
+            try:
+                target = group.get(link.path, getlink=True)
+            except (KeyError, OSError, RuntimeError, ValueError):
+                target = None
+            why = ", which does not exist in the file" if target is None else f" that cannot be followed ({first_line(exc)})"
+            raise ProblemFileError(path, f"is a soft link (SoftLink) to {link.path}{why}", location=loc,
+                                   fix="replace the link by the data it should point to") from None
+        if isinstance(link, h5py.ExternalLink):
+            raise ProblemFileError(path, f"is an external link (ExternalLink) to {link.path} in {link.filename}, which cannot be "
+                                         f"followed ({first_line(exc)})", location=loc,
+                                   fix="replace the link by the data it should point to (rfverify reads one "
+                                       "self-contained file)") from None
+        # A hard link always points into this file: an object there that cannot be opened is damage.
+        raise damaged(path, loc, f"the {what} this name points to cannot be opened", exc) from None
     if not isinstance(obj, kind):
         extra = ""
         if kind is h5py.Group and isinstance(obj, h5py.Dataset) and name in ("M", "H"):
@@ -141,8 +189,7 @@ def read_dataset(ds, path) -> np.ndarray:
         raise ProblemFileError(path, f"is too large to read into memory ({ds.size} values)",
                                location=ds.name, fix="check the file: its sizes are implausible") from None
     except (OSError, TypeError, ValueError, RuntimeError, KeyError) as exc:
-        raise ProblemFileError(path, f"cannot be read ({first_line(exc)})", location=ds.name,
-                               fix="the file is probably truncated or corrupt: re-create it") from None
+        raise damaged(path, ds.name, "its data cannot be read", exc) from None
 
 
 def refuse_kind(dt, ds, path, expected: str, fix: str):

@@ -6,8 +6,10 @@ beside the problem and its ``/solution``::
     /certificate                 attrs: format, version, rfverify_version, requested_digits,
                                         certified, verdict, arithmetic, theorem, point_source,
                                         problem (the statement the proof is about), equations
-                                        ("symmetrised" or "stored"), solution_sha256 (digest of
-                                        the /solution datasets this certificate is about)
+                                        ("symmetrised" or "stored"), problem_sha256 (digest of
+                                        the problem's data, :func:`problem_digest`) and
+                                        solution_sha256 (digest of the /solution datasets,
+                                        :func:`solution_digest`): what this certificate is about
     /certificate/point           attrs: layout = "rolling5" (r 5 per contact, (N, T1, T2, R1, R2),
                                         also for a 3-D file: its problem embedded with R = 0, and
                                         the v of a lifted local problem)
@@ -33,8 +35,11 @@ beside the problem and its ``/solution``::
 
 Every write of ``/solution`` removes or rewrites ``/certificate``
 (:func:`rfverify.io.fclib.write_solution_in_place`), so a file never keeps a claim about a
-solution it no longer holds; ``certify`` compares ``solution_sha256`` with the stored
-``/solution`` and says whether the stored certificate is about it.
+solution it no longer holds; ``certify`` compares both digests with the problem it reads and the
+``/solution`` the file holds, and says whether the stored certificate is about them (a
+certificate copied beside another problem is "about another problem").  Certificates written
+before the problem digest have ``solution_sha256`` only: their digest is of the old kind, and
+``certify`` says that it covers the solution alone.
 
 To recheck: ``rfverify certify PROBLEM --solution SOL.h5`` evaluates the bound again from the
 stored point, in exact arithmetic, against the stored ``/solution``.
@@ -58,6 +63,61 @@ THEOREM = ("For M_s = (M+M^T)/2 positive definite and the posed M (M_s, or M as 
 SOLUTION_NAMES = ("v", "u", "r")
 
 
+PROBLEM_DIGEST = "rfverify-problem-sha256-v1"
+"""The kind of :func:`problem_digest` (stored beside it as ``problem_digest``)."""
+
+
+def problem_digest(problem) -> str:
+    """SHA-256 of the data a certificate is about, as rfverify reads them (exactly, in its own
+    layout: a 3-D file's problem embedded with zero rolling rows), in a defined byte order:
+
+    ``PROBLEM_DIGEST``, then for a global problem the matrices M and H (as stored, not
+    symmetrised) and the vectors f, w, μ, μr; for a local problem (``problem.local``) W and q
+    and μ, μr (its lifting is a solver device, not data).  A matrix is its name, its shape and
+    its canonical CSC form — repeated entries summed exactly (as read), explicit zeros dropped,
+    row indices increasing within each column — as int64 column pointers, int64 row indices and
+    float64 values; a vector is its name, its length and its float64 values.  Integers and
+    floats are little-endian, −0.0 is written as +0.0 (the same number).  The storage a file
+    used (triplet, CSC, CSR; one file or another) does not change the digest."""
+    import hashlib
+
+    import scipy.sparse as sp
+
+    h = hashlib.sha256(PROBLEM_DIGEST.encode())
+
+    def block(name: str, *arrays):
+        h.update(b"\0" + name.encode() + b"\0")
+        for a in arrays:
+            h.update(np.ascontiguousarray(a).tobytes())
+
+    def floats(x):
+        return (np.asarray(x, dtype=np.float64) + 0.0).astype("<f8")  # −0.0 + 0.0 = +0.0
+
+    def matrix(name: str, A):
+        C = sp.csc_matrix(A, dtype=np.float64, copy=True)
+        C.sum_duplicates()
+        C.eliminate_zeros()
+        C.sort_indices()
+        block(name, np.array(C.shape, dtype="<i8"), C.indptr.astype("<i8"), C.indices.astype("<i8"),
+              floats(C.data))
+
+    def vector(name: str, x):
+        x = floats(x).ravel()
+        block(name, np.array([x.size], dtype="<i8"), x)
+
+    if problem.local is not None:
+        matrix("W", problem.local.W)
+        vector("q", problem.local.q)
+    else:
+        matrix("M", problem.M)
+        matrix("H", problem.H)
+        vector("f", problem.f)
+        vector("w", problem.w)
+    vector("mu", problem.mu)
+    vector("mu_r", problem.mu_r)
+    return h.hexdigest()
+
+
 def solution_digest(fh) -> str:
     """SHA-256 of the ``/solution`` datasets of an open FCLIB file, as stored (float64 bytes,
     little-endian, with their names; "" when there is no /solution group): what a
@@ -78,9 +138,11 @@ def solution_digest(fh) -> str:
     return h.hexdigest()
 
 
-def write_certificate(fh, certificate) -> None:
-    """Write ``certificate`` (a :class:`rfverify.Certificate`) into the open h5py file ``fh``,
-    replacing any previous ``/certificate``."""
+def write_certificate(fh, certificate, problem) -> None:
+    """Write ``certificate`` (a :class:`rfverify.Certificate`) about ``problem`` (the
+    :class:`rfverify.Problem` it proves) into the open h5py file ``fh``, replacing any previous
+    ``/certificate``; its digests bind it to the problem's data and to the ``/solution`` the file
+    holds."""
     import h5py
 
     from .._version import __version__
@@ -97,6 +159,8 @@ def write_certificate(fh, certificate) -> None:
     grp.attrs["verdict"] = certificate.verdict
     grp.attrs["theorem"] = THEOREM if proof is None else proof.theorem  # global (§6.1) or local (§6.1b)
     grp.attrs["point_source"] = str(certificate.extra.get("point_source", ""))
+    grp.attrs["problem_digest"] = PROBLEM_DIGEST
+    grp.attrs["problem_sha256"] = problem_digest(problem)
     grp.attrs["solution_sha256"] = solution_digest(fh)
     if proof is not None:
         grp.attrs["arithmetic"] = proof.arithmetic
@@ -137,28 +201,44 @@ def write_certificate(fh, certificate) -> None:
                                                                dtype=h5py.string_dtype()))
 
 
-def read_stored_certificate(path) -> dict | None:
-    """What ``/certificate`` of ``path`` claims, and whether it is about the ``/solution`` the
-    file holds now: ``{"certified", "verdict", "problem", "equations", "solution_sha256",
-    "current_sha256", "matches_solution"}`` (``matches_solution`` None for a certificate
-    written before digests were stored); None when there is no certificate."""
+def read_stored_certificate(path, problem=None) -> dict | None:
+    """What ``/certificate`` of ``path`` claims, and whether it is about ``problem`` (the
+    :class:`rfverify.Problem` being certified; None: not judged) and the ``/solution`` the file
+    holds now: ``{"certified", "verdict", "problem", "equations", "solution_sha256",
+    "current_sha256", "matches_solution", "problem_sha256", "current_problem_sha256",
+    "matches_problem", "digest_kind"}``.  ``digest_kind`` is "problem and solution", "solution
+    only" (a certificate written before the problem digest: ``matches_problem`` None, whatever
+    the solution) or None (no digest at all: both None).  None when there is no certificate."""
     import h5py
+
+    from ._hdf5 import damaged
 
     try:
         with h5py.File(path, "r") as fh:
             grp = fh.get("certificate")
             if not isinstance(grp, h5py.Group):
                 return None
-            attrs = {k: grp.attrs.get(k) for k in ("certified", "verdict", "problem", "equations",
-                                                    "solution_sha256", "requested_digits")}
+            attrs = {k: grp.attrs.get(k) for k in ("certified", "verdict", "problem", "equations", "theorem",
+                                                    "solution_sha256", "problem_sha256", "problem_digest",
+                                                    "requested_digits")}
             current = solution_digest(fh)
-    except OSError as exc:
-        raise ProblemFileError(path, f"cannot be read ({exc})", fix="check the file") from None
+    except (OSError, KeyError, RuntimeError) as exc:
+        raise damaged(path, "/certificate", "its /certificate cannot be read", exc) from None
     out = {k: (v.decode("utf-8", "replace") if isinstance(v, bytes) else v) for k, v in attrs.items()}
     out["certified"] = None if out["certified"] is None else bool(out["certified"])
     out["current_sha256"] = current
     stored = out["solution_sha256"]
     out["matches_solution"] = None if not stored else stored == current
+    kind_known = bool(out["problem_sha256"]) and out["problem_digest"] == PROBLEM_DIGEST
+    if kind_known:
+        out["digest_kind"] = "problem and solution"
+    elif out["problem_sha256"]:
+        out["digest_kind"] = f"unknown ({out['problem_digest']})"
+    else:
+        out["digest_kind"] = "solution only" if stored else None
+    out["current_problem_sha256"] = problem_digest(problem) if problem is not None and kind_known else None
+    out["matches_problem"] = (None if out["current_problem_sha256"] is None
+                              else out["problem_sha256"] == out["current_problem_sha256"])
     return out
 
 
@@ -211,8 +291,10 @@ def read_point(path):
             decimals = {k: _read_decimals(pg, k, path) for k in ("v_decimal", "r_decimal") if k in pg}
     except ProblemFileError:
         raise
-    except OSError as exc:
-        raise ProblemFileError(path, f"cannot be read ({exc})", fix="check the file") from None
+    except (OSError, KeyError, RuntimeError) as exc:
+        from ._hdf5 import damaged
+
+        raise damaged(path, "/certificate/point", "its /certificate/point cannot be read", exc) from None
     if arrays["v_hi"].shape != arrays["v_lo"].shape or arrays["r_hi"].shape != arrays["r_lo"].shape:
         raise ProblemFileError(path, "hi and lo parts of the point differ in size", location="/certificate/point",
                                fix="write the certificate again")

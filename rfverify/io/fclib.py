@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
 from ..problem import DEFAULT_MAX_ASYMMETRY, Problem, StoredSolution
-from ._hdf5 import (STORAGE_FORMATS, check_declared_sizes, first_line, h5py_module, matrix_meta, member,
+from ._hdf5 import (STORAGE_FORMATS, check_declared_sizes, damaged, first_line, h5py_module, matrix_meta, member,
                     read_guesses, read_info, read_matrix, read_scalar_int, read_solution, read_vector,
                     write_matrix, write_solution)
 from ._paths import read_head
@@ -64,9 +64,10 @@ def read_fclib(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem
     path = Path(path)
     read_head(path, "an FCLIB .hdf5 file")
     if not h5py.is_hdf5(path):
-        raise ProblemFileError(path, "is not an HDF5 file (wrong format, or truncated: the "
+        raise ProblemFileError(path, "is not an HDF5 file (wrong format, or damaged: the "
                                      "HDF5 signature is missing)",
-                               fix="pass an FCLIB .hdf5 file (or a Siconos .dat file)")
+                               fix="pass an FCLIB .hdf5 file (or a Siconos .dat file); if this was one, it is damaged: "
+                                   "restore it from a backup, or write it again")
     try:
         with h5py.File(path, "r") as fh:
             return _read_open_file(fh, path, max_asymmetry)
@@ -74,10 +75,8 @@ def read_fclib(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem
         raise exc.with_path(path) from None
     except ProblemFileError:
         raise
-    except (OSError, KeyError, RuntimeError) as exc:  # truncated or corrupt inside
-        raise ProblemFileError(path, f"cannot be read as HDF5 ({first_line(exc)})",
-                               fix="the file is probably truncated or corrupt: re-create or "
-                                   "re-download it") from None
+    except (OSError, KeyError, RuntimeError) as exc:  # truncated or damaged inside
+        raise damaged(path, None, "its HDF5 structure cannot be read", exc) from None
 
 
 def _read_open_file(fh, path, max_asymmetry):

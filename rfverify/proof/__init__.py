@@ -80,7 +80,7 @@ class ProofContext:
             self.w_diag = self.local.facts.w_diag
         else:
             self.exact = ExactData(problem)
-            self.mass: MassBounds = verify_mass_matrix(problem.M, problem.M_sym)
+            self.mass: MassBounds = verify_mass_matrix(problem.M, problem.M_sym, problem.blocks)
             self.w_diag = self.mass.quad_upper_columns(problem.H) if self.mass.proven else None
             self.scales = data_scales(problem, self.exact, self.mass, self.w_diag)
         self._stored_scales = None

@@ -52,7 +52,7 @@ import scipy.sparse as sp
 
 from ..problem import SPACEDIM, Problem
 from .dyadic import Dyadic, DyadicCSR, Quotient, divide_upper, fraction_upper_float, sqrt_upper
-from .massbounds import MassBounds, gamma, inflate, upper_sum, verify_lambda_min_sparse, verify_mass_matrix
+from .massbounds import ETA, MassBounds, gamma, inflate, upper_sum, verify_lambda_min_sparse, verify_mass_matrix
 
 FLOAT64_DIGITS = 53 * math.log10(2)  # ≈ 15.95: what a float64 can carry relative to its norm
 MAX_CERTIFIABLE_DIGITS = 15
@@ -347,7 +347,7 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
         return _invalid(requested, "the solution contains NaN or Inf", t0, **named)
     exact = exact or ExactData(problem)
-    mass = mass or verify_mass_matrix(problem.M, problem.M_sym)
+    mass = mass or verify_mass_matrix(problem.M, problem.M_sym, problem.blocks)
     if not mass.proven:
         fb = mass.failures[0]
         return _invalid(requested, f"M_s = (M + Mᵀ)/2 is not proven positive definite: block {fb.block} "
@@ -423,7 +423,7 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
                                       "solution's r (Hr is unique)"), {}
     else:
         e_r, r_note, r_terms = _r_bound(problem, exact, mass, Quotient(u_num, den), sqrtW * eps, point_r, Hr_p,
-                                        g_num.square().total() / (den * den), eps, r, stored)
+                                        g_num, eps, r, stored, den=den)
     terms.update(r_terms)
     if e_r is None:
         q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
@@ -479,16 +479,17 @@ def cones_failure(data, u_p: Dyadic, point_r: Dyadic, u_name: str) -> str:
 
 
 def gMinvg_upper(g: Dyadic, mass: MassBounds) -> float:
-    """Upper bound of gᵀM⁻¹g ≤ Σ_b ‖g_b‖² / λ_b (exact squares, rounded up)."""
+    """Upper bound of gᵀM⁻¹g = (Sg)ᵀ(SMS)⁻¹(Sg) ≤ Σ_b ‖(Sg)_b‖² / λmin(S M_b S) (S the exact
+    power-of-two equilibration of :mod:`.massbounds`; exact squares, rounded up)."""
     if not any(g.ints):  # g = 0 exactly (an exact point): the bound is 0, not a rounding of it
         return 0.0
-    g_sq = g.square()
+    g_sq = (g * Dyadic.from_float(np.ldexp(1.0, mass.exponents))).square()
     order = np.argsort(mass.labels, kind="stable")
-    nb = mass.lam_lower.size
+    nb = mass.lam_scaled.size
     counts = np.bincount(mass.labels, minlength=nb)
     starts = np.concatenate(([0], np.cumsum(counts)))[:-1]
     per_block = g_sq[order].segment_sums(starts, starts + counts).abs_upper()
-    return float(_up(math.fsum(_up(per_block / mass.lam_lower).tolist())))
+    return float(_up(math.fsum(_up(per_block / mass.lam_scaled).tolist())))
 
 
 def eps_M_upper(q_g: float, gap_up: float) -> float:
@@ -574,8 +575,15 @@ def proven_open(u_p: Dyadic, u_radius, mu, mur, n: int) -> np.ndarray:
     return lhs > rhs
 
 
-def _r_bound(problem, exact, mass, u_p, u_radius, point_r, Hr_p, g_sq, eps, r, stored: bool = False):
-    """Per-component bound on r − r* when r* is unique on the loaded contacts, else None."""
+def _r_bound(problem, exact, mass, u_p, u_radius, point_r, Hr_p, g, eps, r, stored: bool = False, den: int = 1):
+    """Per-component bound on r − r* when r* is unique on the loaded contacts, else None
+    (g = g_num / ``den``: the residual of a point moved onto a face is rational).
+
+    ‖r_S − r*_S‖₂ ≤ ‖H_S r_S − Hr*‖₂ / σmin(H_S), tried first in the problem's units; where
+    σmin(H_S) > 0 cannot be proven there (rows of H in badly scaled units), in equilibrated
+    ones: with S the exact power-of-two equilibration of M (:mod:`.massbounds`) and C that of
+    the columns of S H_S, |r_j − r*_j| ≤ c_j ‖S(H_S r_S − Hr*)‖₂ / σmin(S H_S C) (the same
+    identity, S H_S C (C⁻¹d) = S(H_S r_S − Hr*)), and ‖S M(v − v*)‖₂ ≤ √λmax(S M_s S)·ε."""
     n = problem.n_contacts
     mu, mur = problem.mu, problem.mu_r
     open_ = proven_open(u_p, u_radius, mu, mur, n)
@@ -588,40 +596,89 @@ def _r_bound(problem, exact, mass, u_p, u_radius, point_r, Hr_p, g_sq, eps, r, s
     if cols.size > m:
         return None, (f"H has {cols.size} columns on the {S.size} possibly loaded contacts and only {m} rows: "
                       "r is not unique (hyperstatic), Hr is"), terms
-    lam = math.inf
-    if cols.size:
-        HS = problem.H[:, cols].tocsc()
-        A = (HS.T @ HS).tocsc()
-        absHS = abs(HS)
-        kmax = int(np.max(np.diff(HS.indptr), initial=1))
-        A_err = (absHS.T @ absHS) * gamma(kmax + 2)
-        lam, why = verify_lambda_min_sparse(A, A_err)
-        terms["sigma_min_HS_sq_lower"] = lam
-        if why:
-            return None, (f"full column rank of H on the {S.size} possibly loaded contacts not proven ({why}): "
-                          "r may not be unique, Hr is"), terms
-    # ‖H_S r_S − Hr*‖₂ ≤ ‖H_S r_S − H r_p‖₂ + ‖g‖₂ + √λmax(M) ε
+    e = np.abs(r).astype(np.float64)  # off S (and dropped components): r* = 0 there
     r_S = np.zeros_like(r)
     r_S[cols] = r[cols]
     d = exact.H.matvec(Dyadic.from_float(r_S)) - Hr_p
-    dist = sqrt_upper(d.square().total())
-    gnorm = sqrt_upper(g_sq)
-    # ‖M d‖₂ ≤ √λmax(M_s)·ε, plus ‖A‖₂‖d‖₂ ≤ ‖A‖₂ ε/√λmin(M_s) for the skew part A of a stored M
-    gain = float(_up(math.sqrt(mass.lam_max_upper)))
-    if stored:
-        lam_min = float(np.nanmin(mass.lam_lower))
-        gain = float(_up(gain + float(_up(exact.skew_norm_upper() / float(_down(math.sqrt(lam_min)
-                                                                                  * (1 - 4 * 2.0 ** -53)))))))
-    if dist == 0 and gnorm == 0 and eps == 0:  # an exact point, the returned r on it: H_S r_S = Hr*
-        total = 0.0
+    if cols.size == 0:
+        e_S, total = None, 0.0
     else:
-        total = float(_up(_up(dist + gnorm) + _up(gain * eps)))
-        total = float(_up(total + float(_up(gain * 4 * 2.0 ** -53 * eps))))
-    e = np.abs(r).astype(np.float64)  # off S (and dropped components): r* = 0 there
-    if cols.size:
-        e_S = 0.0 if total == 0 else float(_up(total / float(_down(math.sqrt(lam) * (1 - 4 * 2.0 ** -53)))))
+        e_S, total, why = _r_bound_in(problem, exact, mass, cols, d, g, eps, stored, terms, scaled=False, den=den)
+        if why:
+            e_S, total, why_s = _r_bound_in(problem, exact, mass, cols, d, g, eps, stored, terms, scaled=True, den=den)
+            if why_s:
+                return None, (f"full column rank of H on the {S.size} possibly loaded contacts not proven ({why}; "
+                              f"with rows and columns equilibrated: {why_s}): r may not be unique, Hr is"), terms
+    if e_S is not None:
         e[cols] = e_S
     terms["r_residual_2norm"] = total
     note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), H of full column rank on the other "
             f"{S.size}")
     return e, note, terms
+
+
+def _r_bound_in(problem, exact, mass, cols, d: Dyadic, g: Dyadic, eps, stored: bool, terms: dict, scaled: bool,
+                den: int = 1):
+    """(bounds on |r_j − r*_j| for j in cols, the residual norm bound, "") or (None, nan, why),
+    in the problem's units or (``scaled``) in equilibrated ones (:func:`_r_bound`)."""
+    from ..definiteness import equilibration_exponents, ldexp_up, scale_rows, scale_symmetric
+
+    HS = sp.csc_matrix(problem.H[:, cols])
+    if scaled:
+        rows, bad = scale_rows(HS, mass.exponents)
+        if bad.any():
+            return None, math.nan, "the row scaling underflows"
+        HS = rows.tocsc()
+        col_e = equilibration_exponents(np.asarray(HS.multiply(HS).sum(axis=0)).ravel())
+        HS_c = sp.csc_matrix((np.ldexp(HS.data, np.repeat(col_e, np.diff(HS.indptr))), HS.indices, HS.indptr),
+                             shape=HS.shape)
+        if not np.array_equal(np.ldexp(HS_c.data, -np.repeat(col_e, np.diff(HS.indptr))), HS.data):
+            return None, math.nan, "the column scaling underflows"
+        HS = HS_c
+    A = (HS.T @ HS).tocsc()
+    absHS = abs(HS)
+    kmax = int(np.max(np.diff(HS.indptr), initial=1))
+    A_err = (absHS.T @ absHS) * gamma(kmax + 2)
+    lam, why = verify_lambda_min_sparse(A, A_err)
+    terms["sigma_min_HS_sq_lower" + ("_equilibrated" if scaled else "")] = lam
+    if why:
+        return None, math.nan, why
+    if scaled:
+        two_e = Dyadic.from_float(np.ldexp(1.0, mass.exponents))
+        d, g = d * two_e, g * two_e
+        # ‖S M d‖₂ ≤ √λmax(S M_s S)·ε (row sums of |S M_s S|), plus ‖S K S‖₂ ε/√λmin(S M_s S) for
+        # the skew part K of a stored M (the M_s-norm of v − v* is the 2-norm of S⁻¹(v − v*) in S M_s S)
+        SMS, under = scale_symmetric(problem.M_sym, mass.exponents)
+        absS = abs(SMS)
+        absS.data = absS.data + np.where(under, ETA, 0.0)
+        k = int(np.max(np.diff(SMS.indptr), initial=1)) + 2
+        lam_max = float(inflate(np.max(np.asarray(absS.sum(axis=1)).ravel(), initial=0.0) * (1 + 4 * 2.0 ** -53), k))
+        gain = float(_up(math.sqrt(lam_max)))
+        if stored:
+            Mr = sp.csr_matrix(problem.M)
+            K, under_k = scale_symmetric((Mr - Mr.T) * 0.5, mass.exponents)
+            K.data = _up(np.abs(K.data) * (1 + 2.0 ** -52)) + np.where(under_k, ETA, 0.0)
+            kk = int(np.max(np.diff(K.indptr), initial=1)) + 2
+            rsum = float(np.max(inflate(np.asarray(K.sum(axis=1)).ravel(), kk), initial=0.0))
+            csum = float(np.max(inflate(np.asarray(K.sum(axis=0)).ravel(), kk), initial=0.0))
+            skew = float(_up(math.sqrt(float(_up(rsum * csum)))))
+            lam_min = float(np.nanmin(mass.lam_scaled))
+            gain = float(_up(gain + float(_up(skew / float(_down(math.sqrt(lam_min) * (1 - 4 * 2.0 ** -53)))))))
+    else:
+        # ‖M d‖₂ ≤ √λmax(M_s)·ε, plus ‖A‖₂‖d‖₂ ≤ ‖A‖₂ ε/√λmin(M_s) for the skew part A of a stored M
+        gain = float(_up(math.sqrt(mass.lam_max_upper)))
+        if stored:
+            lam_min = float(np.nanmin(mass.lam_lower))
+            gain = float(_up(gain + float(_up(exact.skew_norm_upper() / float(_down(math.sqrt(lam_min)
+                                                                                      * (1 - 4 * 2.0 ** -53)))))))
+    # ‖H_S r_S − Hr*‖₂ ≤ ‖H_S r_S − H r_p‖₂ + ‖g‖₂ + gain·ε (each scaled by S in equilibrated units)
+    dist = sqrt_upper(d.square().total())
+    gnorm = sqrt_upper(g.square().total() / (den * den))  # g = g_num / den
+    if dist == 0 and gnorm == 0 and eps == 0:  # an exact point, the returned r on it: H_S r_S = Hr*
+        return np.zeros(cols.size), 0.0, ""
+    total = float(_up(_up(dist + gnorm) + _up(gain * eps)))
+    total = float(_up(total + float(_up(gain * 4 * 2.0 ** -53 * eps))))
+    e_S = float(_up(total / float(_down(math.sqrt(lam) * (1 - 4 * 2.0 ** -53)))))
+    if scaled:
+        return ldexp_up(np.full(cols.size, e_S), col_e), total, ""
+    return np.full(cols.size, e_S), total, ""

@@ -17,7 +17,8 @@ because r*ᵀu* = 0 and rᵀu*, r*ᵀu ≥ 0 (pairs of K and K*).  So ε := √(
 * where u* is proven to lie in the interior of K*_i (the box u ± √(W_kk) ε inside), r*_i = 0
   for every solution (set O); on the other contacts S, with d = r − r*,
   ‖W^½ E_S d_S‖ ≤ ε + ‖W^½ E_O r_O‖, so per block b of W_SS (its connected components)
-  ‖d_b‖₂ ≤ (ε + √(r_Oᵀ W_OO r_O)) / √λmin(W_b) where λmin(W_b) > 0 is verified.  Where it
+  |d_j| ≤ (ε + √(r_Oᵀ W_OO r_O))·√((W_b⁻¹)_jj) ≤ (ε + √(r_Oᵀ W_OO r_O)) / √λmin(W_b) where
+  λmin(W_b) > 0 is verified (bounds of :mod:`.massbounds`, scale-invariant).  Where it
   is not, r is reported as information (not unique), never certified.
 
 A point slightly outside K* (u = W r + q misses K*_i by rounding of the iterate) is still used
@@ -45,6 +46,7 @@ from fractions import Fraction
 import numpy as np
 import scipy.sparse as sp
 
+from ..definiteness import exact_ldlt
 from ..problem import SPACEDIM, LocalForm, Problem
 from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cone_violations,
                     cones_failure, eps_M_upper, _up_times,
@@ -158,28 +160,11 @@ def prove_psd(W: sp.spmatrix) -> LocalFacts:
 def exact_psd(A: sp.spmatrix) -> str:
     """"definite", "semidefinite" or "indefinite" for the exact (A + Aᵀ)/2 of a small float
     matrix: LDLᵀ in rationals with the largest remaining diagonal as pivot (a PSD matrix whose
-    largest remaining diagonal is 0 has a zero remainder)."""
+    largest remaining diagonal is 0 has a zero remainder; :func:`rfverify.definiteness.exact_ldlt`)."""
     D = np.asarray(sp.csr_matrix(A).toarray(), dtype=np.float64)
     n = D.shape[0]
     F = [[(Fraction(float(D[i, j])) + Fraction(float(D[j, i]))) / 2 for j in range(n)] for i in range(n)]
-    left = list(range(n))
-    while left:
-        p = max(left, key=lambda i: F[i][i])
-        piv = F[p][p]
-        if piv < 0:
-            return "indefinite"
-        if piv == 0:
-            return "semidefinite" if all(F[i][j] == 0 for i in left for j in left) else "indefinite"
-        left.remove(p)
-        row = F[p]
-        for i in left:
-            if F[i][p] != 0:
-                f = F[i][p] / piv
-                Fi = F[i]
-                for j in left:
-                    if row[j] != 0:
-                        Fi[j] -= f * row[j]
-    return "definite"
+    return exact_ldlt(F)[0]
 
 
 def local_data_scales(problem: Problem) -> dict:
@@ -351,8 +336,10 @@ def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyad
     radius = 0.0 if eps == 0 and t == 0 else float(_up(eps + t))
     lam = mass.lam_lower[mass.labels]  # per column of the loaded set
     d_r = (Dyadic.from_float(r[cols]) - point_r[cols]).abs_upper()
-    e[cols] = upper_sum(d_r, _up(radius / np.nextafter(np.sqrt(lam) * (1 - 4 * 2.0 ** -53), 0))
-                        if radius else np.zeros(cols.size))
+    # |d_j| ≤ √((W_b⁻¹)_jj)·‖W_b^½ d_b‖ (Cauchy–Schwarz), never more than ‖d_b‖₂ ≤ ‖W_b^½ d_b‖/√λmin(W_b)
+    per = np.minimum(_up(np.sqrt(mass.minv_diag_upper)),
+                     _up(1.0 / np.nextafter(np.sqrt(lam) * (1 - 4 * 2.0 ** -53), 0)))
+    e[cols] = upper_sum(d_r, _up(radius * per) if radius else np.zeros(cols.size))
     terms.update({"lam_min_W_S_lower": float(np.min(lam)), "W_norm_r_open": t})
     note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), W definite on the other {S.size} "
             f"(verified λmin ≥ {float(np.min(lam)):.2e})")

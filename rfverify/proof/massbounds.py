@@ -4,22 +4,20 @@ The certificate (DESIGN §6) needs, rigorously:
 
 * M ≻ 0, with a positive lower bound λ_b ≤ λmin(M_b) for every diagonal block M_b
   (connected component of the sparsity graph: a body, or an FE mesh);
-* upper bounds on (M⁻¹)_jj (to turn ‖v − v*‖_M into per-dof bounds) and on hᵀM⁻¹h for the
-  columns h of H (per contact-velocity component);
+* upper bounds on (M⁻¹)_jj (to turn ‖v − v*‖_M into per-dof bounds), on hᵀM⁻¹h for the
+  columns h of H (per contact-velocity component) and on gᵀM⁻¹g;
 * an upper bound on λmax(M).
 
-Method (floating point with a-priori rounding-error bounds, no change of rounding mode; the
-approach of Rump's verified linear algebra).  For a block A:
+Everything is proven on the **equilibrated** blocks S M_b S, S = diag(2^e_j) exact
+(:mod:`rfverify.definiteness`: verified floating point with a-priori rounding-error bounds,
+exact rationals where that cannot decide), and carried back through the exact S:
+(M⁻¹)_jj = s_j²((SMS)⁻¹)_jj, hᵀM⁻¹h = (Sh)ᵀ(SMS)⁻¹(Sh) ≤ ‖Sh‖²/λmin(SMS), λmin(M_b) ≥
+λmin(S M_b S)/max s_j².  So the bounds do not depend on the units of the dofs: a body whose
+translations are in grams and rotations in g·mm² is bounded as well as one in SI units.
 
-1. λmin: pick τ ≈ λ̃min/2 from a floating eigen-solver and any floating matrix G with
-   A − τI ≈ GGᵀ (from ``eigh`` for small blocks, from a sparse LDLᵀ for large ones).  Then
-   A = τI + GGᵀ + E exactly, with E = A − τI − GGᵀ; GGᵀ ⪰ 0 for *any* real G, so
-   λmin(A) ≥ τ − ‖E‖₂.  ‖E‖₂ ≤ max(row, column sums) of an entrywise bound B ≥ |E|,
-   B = |fl(A − τI − GGᵀ)| + γ·(|G||G|ᵀ + |A| + τI) + underflow terms, with γ covering every
-   rounding (including the rounding of the float (M + Mᵀ)/2 against the exact one).
-2. For blocks of at most ``DENSE_LIMIT`` dofs, an approximate inverse Z: with
-   ρ ≥ ‖I − AZ‖₂ (bounded the same way), ‖A⁻¹ − Z‖₂ ≤ ρ/λ, so for any vector h
-   hᵀA⁻¹h ≤ hᵀZh + ‖h‖²ρ/λ, and always hᵀA⁻¹h ≤ ‖h‖²/λ.  Larger blocks use the latter.
+For blocks of at most ``DENSE_LIMIT`` dofs an approximate inverse Z of A = S M_b S tightens
+them: with ρ ≥ ‖I − AZ‖₂ (bounded the same way), ‖A⁻¹ − Z‖₂ ≤ ρ/λ, so for any vector h
+hᵀA⁻¹h ≤ hᵀZh + ‖h‖²ρ/λ, and always hᵀA⁻¹h ≤ ‖h‖²/λ.  Larger blocks use the latter.
 
 The constants are deliberately generous (each is inflated by a factor 1 + 8(k+4)u for a
 computation with k roundings); they cost nothing, because they only guard λ against an
@@ -32,54 +30,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
-U = 2.0 ** -53  # unit roundoff of float64
-ETA = 2.0 ** -1074  # smallest subnormal: absolute error of an underflowing product
-DENSE_LIMIT = 400
+from ..definiteness import (DENSE_LIMIT, ETA, U, BlockFailure, Definiteness, deflate, gamma, gather_blocks,
+                            inflate, ldexp_up, scale_rows, scale_symmetric, sparse_lambda_lower, upper_sum,
+                            verify_definite)
 
-
-def gamma(k: int) -> float:
-    """γ_k = k·u/(1 − k·u), rounded up generously."""
-    return 2.0 * k * U / (1.0 - 2.0 * k * U)
-
-
-def inflate(x, k: int):
-    """x (≥ 0, computed with k roundings) times 1 + 8(k+4)u: a rigorous upper bound."""
-    return np.nextafter(np.asarray(x, dtype=np.float64) * (1.0 + 8.0 * (k + 4) * U), np.inf)
-
-
-def upper_sum(*terms):
-    """Rigorous upper bound of the exact sum of float terms (arrays broadcast), any signs:
-    |fl(Σt) − Σt| ≤ γ_n Σ|t|."""
-    total = np.zeros(np.broadcast(*terms).shape) if len(terms) > 1 else np.asarray(terms[0], dtype=np.float64)
-    mag = np.zeros_like(total)
-    for t in terms:
-        total = total + t
-        mag = mag + np.abs(t)
-    # Where every term is exactly 0 (mag = 0: a sum of magnitudes vanishes only then) the sum is 0.
-    return np.where(mag == 0, 0.0, np.nextafter(total + inflate(gamma(len(terms) + 1) * mag, len(terms) + 2), np.inf))
-
-
-def deflate(x, k: int):
-    """x (> 0, computed with k roundings) times 1 − 8(k+4)u: a rigorous lower bound."""
-    return np.nextafter(np.asarray(x, dtype=np.float64) * (1.0 - 8.0 * (k + 4) * U), -np.inf)
-
-
-@dataclass
-class BlockFailure:
-    block: int
-    dofs: np.ndarray
-    reason: str
+__all__ = ["MassBounds", "verify_mass_matrix", "verify_lambda_min_sparse", "BlockFailure", "gamma", "inflate",
+           "deflate", "upper_sum", "U", "ETA", "DENSE_LIMIT"]
 
 
 @dataclass
 class MassBounds:
     """Verified facts about M = (M + Mᵀ)/2, block by block.
 
-    ``labels[j]`` block of dof j; ``lam_lower[b]`` > 0 with λmin(M_b) ≥ it (NaN where the
-    proof failed, see ``failures``); ``minv_diag_upper[j]`` ≥ (M⁻¹)_jj; ``m_diag[j]`` = M_jj
-    (exact float64 of the data's diagonal); ``lam_max_upper`` ≥ λmax(M).
+    ``labels[j]`` block of dof j; ``exponents[j]`` its equilibration (s_j = 2^e_j);
+    ``lam_scaled[b]`` > 0 with λmin(S M_b S) ≥ it and ``lam_lower[b]`` with λmin(M_b) ≥ it (NaN
+    where the proof failed, see ``failures``); ``minv_diag_upper[j]`` ≥ (M⁻¹)_jj;
+    ``m_diag_upper[j]`` ≥ M_jj; ``lam_max_upper`` ≥ λmax(M).
     """
 
     labels: np.ndarray
@@ -88,41 +55,58 @@ class MassBounds:
     m_diag_upper: np.ndarray
     lam_max_upper: float
     failures: list = field(default_factory=list)
-    # size → (blocks with an approximate inverse, Z stacked (nb, s, s), ρ ≥ ‖I − M_b Z_b‖₂)
+    exponents: np.ndarray | None = None
+    lam_scaled: np.ndarray | None = None
+    # size → (blocks with an approximate inverse, Z stacked (nb, s, s), ρ ≥ ‖I − A_b Z_b‖₂), A = SMS
     _groups: dict = field(default_factory=dict, repr=False)
     _local: np.ndarray | None = field(default=None, repr=False)
     dense_blocks: int = 0
     sparse_blocks: int = 0
+
+    def __post_init__(self):
+        if self.exponents is None:  # unscaled facts (built by hand): S = I
+            self.exponents = np.zeros(self.labels.size, dtype=np.int64)
+        if self.lam_scaled is None:
+            self.lam_scaled = self.lam_lower
 
     @property
     def proven(self) -> bool:
         return not self.failures
 
     def quad_upper_columns(self, H: sp.spmatrix) -> np.ndarray:
-        """Upper bounds of h_kᵀ M⁻¹ h_k for every column h_k of H (m × K), rigorous."""
-        Hc = sp.coo_matrix(H)
+        """Upper bounds of h_kᵀ M⁻¹ h_k = (Sh_k)ᵀ(SMS)⁻¹(Sh_k) for every column h_k of H (m × K),
+        rigorous."""
+        Hc, inexact = scale_rows(H, self.exponents)
         K = Hc.shape[1]
         out = np.zeros(K, dtype=np.float64)
         if Hc.nnz == 0:
             return out
+        nb = int(self.labels.max()) + 1
         blk = self.labels[Hc.row]
         # Group the nonzeros by (column, block) pairs.
-        key = Hc.col.astype(np.int64) * (int(self.labels.max()) + 1) + blk
+        key = Hc.col.astype(np.int64) * nb + blk
         pairs, inv = np.unique(key, return_inverse=True)
-        pair_col = pairs // (int(self.labels.max()) + 1)
-        pair_blk = pairs % (int(self.labels.max()) + 1)
+        pair_col = pairs // nb
+        pair_blk = pairs % nb
+        # An entry of Sh that underflowed is within ETA of the exact one: its magnitude bound grows
+        # by ETA, and its pair takes the crude bound (the approximate inverse needs exact entries).
+        mag = np.abs(Hc.data) + np.where(inexact, ETA, 0.0)
         sq = np.zeros(pairs.size)
-        np.add.at(sq, inv, Hc.data.astype(np.float64) ** 2)
-        sq = inflate(sq, 2 + int(np.max(np.bincount(inv))))  # ≥ ‖h_kb‖²
-        crude = inflate(sq / self.lam_lower[pair_blk], 1)  # ‖h‖²/λ
+        np.add.at(sq, inv, mag ** 2)
+        per_pair = np.bincount(inv)
+        # A square that underflows is low by less than ETA: one ETA per term covers it.
+        sq = inflate(sq + per_pair * ETA, 2 + int(np.max(per_pair)))  # ≥ ‖(Sh)_kb‖²
+        rough = np.zeros(pairs.size, dtype=bool)
+        rough[inv[inexact]] = True
+        crude = inflate(sq / self.lam_scaled[pair_blk], 1)  # ‖Sh‖²/λ
         best = crude.copy()
         # Tighter: hᵀZh + ‖h‖²ρ/λ for blocks with an approximate inverse, batched by size.
         for s, (blocks_s, Zs, rhos) in self._groups.items():
             if blocks_s.size == 0:
                 continue
-            slot = np.full(self.lam_lower.size, -1, dtype=np.int64)
+            slot = np.full(self.lam_scaled.size, -1, dtype=np.int64)
             slot[blocks_s] = np.arange(blocks_s.size)
-            sel = np.flatnonzero(slot[pair_blk] >= 0)
+            sel = np.flatnonzero((slot[pair_blk] >= 0) & ~rough)
             if sel.size == 0:
                 continue
             dense = np.zeros((sel.size, s))
@@ -136,199 +120,94 @@ class MassBounds:
             hz = np.einsum("pi,pij,pj->p", dense, Z, dense)
             ahz = np.einsum("pi,pij,pj->p", absd, np.abs(Z), absd)
             up = upper_sum(hz, inflate(gamma(2 * s + 2) * ahz + s * 4 * ETA, 3),
-                           inflate(sq[sel] * rho / self.lam_lower[pair_blk[sel]], 2))
+                           inflate(sq[sel] * rho / self.lam_scaled[pair_blk[sel]], 2))
             best[sel] = np.minimum(best[sel], up)
         np.add.at(out, pair_col, best)
         counts = np.bincount(pair_col, minlength=K)
         return inflate(out, 2 + int(counts.max(initial=1)))
 
 
-def _blocks(M_sym: sp.csc_matrix):
-    n_blocks, labels = connected_components(M_sym, directed=False)
-    return n_blocks, labels
-
-
-def verify_mass_matrix(M_raw: sp.spmatrix, M_sym: sp.spmatrix | None = None) -> MassBounds:
-    """Verified bounds for the exact symmetrisation (M_raw + M_rawᵀ)/2 (see module doc)."""
+def verify_mass_matrix(M_raw: sp.spmatrix, M_sym: sp.spmatrix | None = None,
+                       facts: Definiteness | None = None) -> MassBounds:
+    """Verified bounds for the exact symmetrisation (M_raw + M_rawᵀ)/2 (see module doc).
+    ``M_sym`` is its float64 rounding when already computed; ``facts`` the definiteness facts
+    :func:`rfverify.definiteness.verify_definite` gave for it (``problem.blocks``), reused
+    rather than proven again."""
     M_raw = sp.csc_matrix(M_raw, dtype=np.float64)
     if M_sym is None:
-        M_sym = ((M_raw + M_raw.T) * 0.5).tocsc()
+        M_sym = ((M_raw * 0.5 + M_raw.T * 0.5)).tocsc()
     M_sym = sp.csc_matrix(M_sym)
     m = M_sym.shape[0]
-    n_blocks, labels = _blocks(M_sym)
-    order = np.argsort(labels, kind="stable")
-    sizes = np.bincount(labels, minlength=n_blocks)
-    starts = np.concatenate(([0], np.cumsum(sizes)))
+    if facts is None or facts.labels.size != m:
+        facts = verify_definite(M_sym, M_raw)
+    labels, sizes, exps = facts.labels, facts.sizes, facts.exponents
+    order, starts = facts.block_dofs()
     local = np.empty(m, dtype=np.int64)
     local[order] = np.arange(m) - starts[labels[order]]
-    lam_lower = np.full(n_blocks, np.nan)
-    minv_diag = np.full(m, np.inf)
+    lam_scaled = facts.lam_scaled.copy()
+    proven = np.isfinite(lam_scaled) & (lam_scaled > 0)
+    minv_scaled = np.full(m, np.inf)  # ≥ ((SMS)⁻¹)_jj
     dense_groups = {}  # size → (blocks with a usable approximate inverse, their Z, their ρ)
-    failures = []
-    csr = M_sym.tocsr()
-    diag = M_sym.diagonal()
-    # |A_float − A_exact| ≤ u|A_exact|: the float (M + Mᵀ)/2 is one rounding of the exact one.
-    absA = abs(csr)
-    row_abs = np.asarray(absA.sum(axis=1)).ravel()
+    S, _ = scale_symmetric(M_sym, exps)
     n_dense = n_sparse = 0
     for s in np.unique(sizes):
         blocks_s = np.flatnonzero(sizes == s)
         if s <= DENSE_LIMIT:
             n_dense += blocks_s.size
-            dofs = order[(starts[blocks_s][:, None] + np.arange(s)[None, :])]
-            A = np.stack([csr[d][:, d].toarray() for d in dofs]) if blocks_s.size < 64 or s > 8 \
-                else _gather_dense(csr, dofs)
-            lam, Z, rho, bad = _dense_blocks(A)
-            ok = np.array([not msg for msg in bad], dtype=bool)
-            for k in np.flatnonzero(~ok):
-                failures.append(BlockFailure(int(blocks_s[k]), dofs[k], bad[k]))
-            good = np.flatnonzero(ok)
-            lam_lower[blocks_s[good]] = lam[good]
-            usable = ok & (rho < 1) if Z is not None else np.zeros_like(ok)
-            zd = np.where(usable[:, None], np.diagonal(Z, axis1=1, axis2=2) if Z is not None else np.inf, np.inf)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                via_z = upper_sum(zd, inflate(rho / lam, 1)[:, None])
-                crude = inflate(1.0 / lam, 1)[:, None]
-            minv_diag[dofs[good]] = np.minimum(via_z, crude)[good]
-            dense_groups[int(s)] = (blocks_s[usable], Z[usable] if Z is not None else None, rho[usable])
+            good = blocks_s[proven[blocks_s]]
+            if good.size == 0:
+                continue
+            dofs = order[(starts[good][:, None] + np.arange(s)[None, :])]
+            lam = lam_scaled[good]
+            crude = inflate(1.0 / lam, 1)[:, None]
+            Z, rho = _approximate_inverses(gather_blocks(S.tocsr(), dofs))
+            usable = rho < 1 if Z is not None else np.zeros(good.size, dtype=bool)
+            bound = crude
+            if usable.any():
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    via_z = upper_sum(np.diagonal(Z, axis1=1, axis2=2), inflate(rho / lam, 1)[:, None])
+                bound = np.where(usable[:, None], np.minimum(via_z, crude), crude)
+            minv_scaled[dofs] = bound
+            dense_groups[int(s)] = (good[usable], Z[usable] if Z is not None else None, rho[usable])
         else:
-            for b in blocks_s:
-                n_sparse += 1
-                d = order[starts[b]:starts[b + 1]]
-                A = csr[d][:, d].tocsc()
-                lam_b, why = verify_lambda_min_sparse(A, abs(A) * (2 * U))
-                if why:
-                    failures.append(BlockFailure(int(b), d, why))
-                    continue
-                lam_lower[b] = lam_b
-                minv_diag[d] = inflate(1.0 / lam_b, 1)
+            n_sparse += blocks_s.size
+            for b in blocks_s[proven[blocks_s]]:
+                minv_scaled[order[starts[b]:starts[b + 1]]] = inflate(1.0 / lam_scaled[b], 1)
+    minv_diag = ldexp_up(minv_scaled, 2 * exps)  # (M⁻¹)_jj = s_j²((SMS)⁻¹)_jj
+    csr = M_sym.tocsr()
+    row_abs = np.asarray(abs(csr).sum(axis=1)).ravel()
     lam_max = float(inflate(np.max(row_abs, initial=0.0) * (1 + 4 * U), 2 + int(np.max(np.diff(csr.indptr), initial=1))))
-    return MassBounds(labels=labels, lam_lower=lam_lower, minv_diag_upper=minv_diag,
-                      m_diag_upper=inflate(np.abs(diag), 1), lam_max_upper=lam_max, failures=failures,
+    return MassBounds(labels=labels, lam_lower=facts.lam_lower, minv_diag_upper=minv_diag,
+                      m_diag_upper=inflate(np.abs(M_sym.diagonal()), 1), lam_max_upper=lam_max,
+                      failures=list(facts.failures), exponents=exps, lam_scaled=lam_scaled,
                       _groups=dense_groups, _local=local, dense_blocks=n_dense, sparse_blocks=n_sparse)
 
 
-def _gather_dense(csr: sp.csr_matrix, dofs: np.ndarray) -> np.ndarray:
-    """Dense blocks A[b] = M[dofs[b]][:, dofs[b]] for many small equal-size blocks, vectorised."""
-    nb, s = dofs.shape
-    pos = np.full(csr.shape[0], -1, dtype=np.int64)
-    pos[dofs.ravel()] = np.tile(np.arange(s), nb)
-    blk = np.full(csr.shape[0], -1, dtype=np.int64)
-    blk[dofs.ravel()] = np.repeat(np.arange(nb), s)
-    coo = csr[dofs.ravel()].tocoo()
-    rows = dofs.ravel()[coo.row]
-    A = np.zeros((nb, s, s))
-    ok = blk[coo.col] == blk[rows]
-    np.add.at(A, (blk[rows][ok], pos[rows][ok], pos[coo.col][ok]), coo.data[ok])
-    return A
-
-
-def _dense_blocks(A: np.ndarray):
-    """Batched verification for equal-size dense blocks A (nb, s, s).  Returns
-    (λ lower bounds, approximate inverses Z or None, ρ ≥ ‖I − AZ‖₂, failure reasons)."""
+def _approximate_inverses(A: np.ndarray):
+    """Approximate inverses Z of equal-size dense blocks A (nb, s, s) (proven definite) and
+    ρ ≥ ‖I − AZ‖₂ (rigorous); (None, ones) where inversion fails."""
     nb, s, _ = A.shape
-    bad = [""] * nb
-    if not np.all(np.isfinite(A)):
-        return np.full(nb, np.nan), None, np.ones(nb), ["non-finite entries"] * nb
-    lam, V = np.linalg.eigh(A)
-    lmin = lam[:, 0]
     eye = np.eye(s)
-
-    def lower_bound(tau):
-        # A = τI + GGᵀ + E exactly for any τ and G (GGᵀ ⪰ 0), so λmin(A) ≥ τ − ‖E‖₂ whatever τ is.
-        d = np.sqrt(np.maximum(lam - tau[:, None], 0.0))
-        G = V * d[:, None, :]
-        F = (A - tau[:, None, None] * eye) - G @ np.swapaxes(G, 1, 2)
-        absG = np.abs(G)
-        B = np.abs(F) + gamma(s + 4) * (absG @ np.swapaxes(absG, 1, 2) + np.abs(A) + np.abs(tau)[:, None, None] * eye) \
-            + 2 * U * np.abs(A) + (s + 4) * ETA
-        B = inflate(B, s + 6)
-        normE = inflate(np.maximum(B.sum(axis=1).max(axis=1), B.sum(axis=2).max(axis=1)), s + 2)
-        return deflate(tau - normE, 2), normE
-
-    # τ just below the computed λmin makes the bound nearly λmin itself (the r bounds divide by
-    # its root); τ = λmin/2 is the fallback where rounding makes the first useless.
-    lam_near, normE = lower_bound(lmin * (1 - 2.0 ** -20))
-    lam_half, normE_half = lower_bound(lmin * 0.5)
-    lam_lower = np.fmax(lam_near, lam_half)
-    normE = np.where(lam_near >= lam_half, normE, normE_half)
-    for k in range(nb):
-        if not lmin[k] > 0:
-            bad[k] = f"not positive definite (smallest eigenvalue ≈ {lmin[k]:.3e})"
-        elif not lam_lower[k] > 0:
-            bad[k] = (f"positive definiteness could not be proven in double precision (λmin ≈ "
-                      f"{lmin[k]:.3e}, rounding-error bound {normE[k]:.3e})")
-    Z = None
-    rho = np.ones(nb)
     try:
         with np.errstate(all="ignore"):
             Z = np.linalg.inv(A)
         if not np.all(np.isfinite(Z)):
             raise np.linalg.LinAlgError
-        absZ = np.abs(Z)
-        R = eye - A @ Z
-        BR = np.abs(R) + (gamma(s + 2) + 2 * U) * (eye + np.abs(A) @ absZ) + (s + 2) * ETA
-        BR = inflate(BR, s + 6)
-        rho = inflate(np.maximum(BR.sum(axis=1).max(axis=1), BR.sum(axis=2).max(axis=1)), s + 2)
     except np.linalg.LinAlgError:
-        Z = None
-        rho = np.ones(nb)
-    return lam_lower, Z, rho, bad
+        return None, np.ones(nb)
+    absZ = np.abs(Z)
+    R = eye - A @ Z
+    BR = np.abs(R) + (gamma(s + 2) + 2 * U) * (eye + np.abs(A) @ absZ) + (s + 2) * ETA
+    BR = inflate(BR, s + 6)
+    rho = inflate(np.maximum(BR.sum(axis=1).max(axis=1), BR.sum(axis=2).max(axis=1)), s + 2)
+    return Z, rho
 
 
 def verify_lambda_min_sparse(A: sp.csc_matrix, A_err: sp.spmatrix, tau: float | None = None,
                              attempts: int = 4):
     """Rigorous lower bound of λmin(A_exact) for a sparse symmetric float matrix A with
     |A − A_exact| ≤ A_err entrywise.  Returns (λ_lower, "") or (nan, reason)."""
-    from scipy.sparse.linalg import eigsh, splu
-
-    A = sp.csc_matrix(A, dtype=np.float64)
-    n = A.shape[0]
-    if not np.all(np.isfinite(A.data)):
-        return np.nan, "non-finite entries"
-    if tau is None:
-        try:
-            if n < 3:  # ARPACK needs k < n - 1: a tiny matrix is solved densely
-                est = float(np.linalg.eigvalsh(A.toarray())[0])
-            else:
-                est = float(eigsh(A, k=1, sigma=0, which="LM", return_eigenvectors=False, tol=1e-4)[0])
-        except Exception:  # singular or not converged: fall back to a diagonal-based guess
-            est = float(np.min(A.diagonal())) * 1e-3
-        if not est > 0:
-            return np.nan, f"not positive definite (smallest eigenvalue ≈ {est:.3e})"
-        tau = est * (1 - 1e-3)  # just below the estimate (ARPACK's tol 1e-4): the bound is then ≈ λmin
-    absA = abs(A)
-    last = ""
-    taus = [tau, tau * 0.5] + [tau * 0.5 / 16 ** k for k in range(1, attempts)]
-    for tau in taus:
-        B = (A - tau * sp.identity(n, format="csc")).tocsc()
-        try:
-            lu = splu(B, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                      options=dict(SymmetricMode=True))
-        except RuntimeError as exc:
-            last = f"factorisation of A − τI failed ({exc})"
-            continue
-        if not np.array_equal(lu.perm_r, lu.perm_c):
-            last = "the factorisation pivoted off the diagonal"
-            continue
-        dU = lu.U.diagonal()
-        if not np.all(dU > 0):
-            last = "a non-positive pivot"
-            continue
-        p = np.argsort(lu.perm_c)  # Pr·A·Pc = A[p][:, p] = L·U when perm_r = perm_c
-        G = (lu.L @ sp.diags(np.sqrt(dU))).tocsr()
-        Bp = B[p][:, p].tocsr()
-        GG = (G @ G.T).tocsr()
-        F = (Bp - GG).tocsr()
-        absG = abs(G)
-        k = int(np.max(np.diff(G.indptr), initial=1))
-        Ap = absA[p][:, p]
-        errp = sp.csr_matrix(A_err)[p][:, p]
-        bound = abs(F) + gamma(k + 4) * (absG @ absG.T + Ap + tau * sp.identity(n)) + 2 * U * Ap + errp
-        rows = inflate(np.asarray(bound.sum(axis=1)).ravel() + (k + 4) * ETA * n, k + 8)
-        normE = float(inflate(rows.max(initial=0.0), int(np.max(np.diff(bound.tocsr().indptr), initial=1)) + 2))
-        lam = float(deflate(tau - normE, 2))
-        if lam > 0:
-            return lam, ""
-        last = f"rounding-error bound {normE:.3e} ≥ τ = {tau:.3e}"
-    return np.nan, f"positive definiteness could not be proven in double precision ({last})"
+    lam, why, _ = sparse_lambda_lower(A, A_err, tau, attempts)
+    if why:
+        why = f"positive definiteness could not be proven in double precision ({why})"
+    return lam, why

@@ -1,20 +1,29 @@
-"""CHOLMOD's numeric factorisation without the GIL.
+"""CHOLMOD through :mod:`ctypes`, with a ``cholmod_common`` of rfverify's own: the symbolic
+analysis, the numeric factorisation and the solves, all without the GIL.
 
-cvxopt's ``cholmod.numeric`` holds Python's GIL for the whole factorisation (0.2–0.3 s per call at
-10⁴ contacts, minutes at 10⁵), so no other thread of the process runs meanwhile.  This module
-calls the very function cvxopt calls, ``cholmod_l_factorize`` of the libcholmod cvxopt loaded,
-through :mod:`ctypes`, which releases the GIL during a foreign call: the k-digit path prepares its
-double-double phase on the second core while the double solve factors (:mod:`rfverify.digits`).
+Two reasons not to call cvxopt's ``cholmod.symbolic``/``numeric``/``solve``:
 
-Same library, same symbolic factor (cvxopt's capsule), the same lower triangle and the same
-options (CHOLMOD's defaults with ``print`` = 0 and ``supernodal`` = 2, as cvxopt sets them): the
-same factor bit for bit (tests/test_cholmod_nogil.py).  Each :class:`Factorizer` owns its
-``cholmod_common`` (workspace and options; CHOLMOD is thread-safe across separate ones).
+* they hold Python's GIL for the whole call (0.2–0.3 s per factorisation at 10⁴ contacts,
+  minutes at 10⁵), so no other thread of the process runs meanwhile; a foreign call through
+  ctypes releases it: the k-digit path prepares its double-double phase on the second core while
+  the double solve factors (:mod:`rfverify.digits`);
+* they take their options from cvxopt's module-global ``cvxopt.cholmod.options`` (a user's
+  ``{"postorder": False}`` or ``{"nmethods": 1}`` changes the ordering, hence every answer bit
+  for bit), and setting them around a call makes rfverify's settings visible to the user's
+  other threads.  rfverify neither reads nor writes that dictionary.
 
-:func:`factorizer` returns None — and callers use cvxopt's call — wherever anything is not as
-expected: no ``/proc/self/maps`` (not Linux), no libcholmod among the process's mapped files (a
-cvxopt linked statically), or a ``cholmod_common`` whose leading fields, after
-``cholmod_l_start``, do not hold CHOLMOD's documented defaults at the offsets of CHOLMOD 3–5.
+Same library (the libcholmod cvxopt loaded), the same calls cvxopt makes
+(``cholmod_l_analyze_p``, ``cholmod_l_factorize``, ``cholmod_l_solve`` on a packed, sorted lower
+triangle) and the options cvxopt applies with an empty ``options`` dictionary (CHOLMOD's
+defaults with ``print`` = 0 and ``supernodal`` = 2): the same factor and the same solves bit for
+bit as cvxopt's own calls under its default options (tests/test_cholmod_nogil.py).  Each
+:class:`Cholmod` owns its ``cholmod_common`` (workspace and options; CHOLMOD is thread-safe across
+separate ones) and its factor.
+
+:func:`session` returns None — and the engines fall back to QDLDL — wherever anything is not as
+expected: no libcholmod among the process's mapped files nor in cvxopt's package, or a
+``cholmod_common`` whose leading fields, after ``cholmod_l_start``, do not hold CHOLMOD's
+documented defaults at the offsets of CHOLMOD 3–5.
 """
 
 from __future__ import annotations
@@ -39,6 +48,14 @@ _EXPECTED_DEFAULTS = ((0, "d", 0.0), (8, "d", 1.2), (16, "d", 1.2), (24, "Q", 5)
 _CHOLMOD_LONG, _CHOLMOD_REAL, _CHOLMOD_DOUBLE = 2, 1, 0
 
 
+class _Dense(ctypes.Structure):
+    """``cholmod_dense`` (unchanged since CHOLMOD 1)."""
+
+    _fields_ = [("nrow", ctypes.c_size_t), ("ncol", ctypes.c_size_t), ("nzmax", ctypes.c_size_t),
+                ("d", ctypes.c_size_t), ("x", ctypes.c_void_p), ("z", ctypes.c_void_p), ("xtype", ctypes.c_int),
+                ("dtype", ctypes.c_int)]
+
+
 class _Sparse(ctypes.Structure):
     """``cholmod_sparse`` (unchanged since CHOLMOD 1)."""
 
@@ -47,6 +64,20 @@ class _Sparse(ctypes.Structure):
                 ("z", ctypes.c_void_p), ("stype", ctypes.c_int), ("itype", ctypes.c_int), ("xtype", ctypes.c_int),
                 ("dtype", ctypes.c_int), ("sorted", ctypes.c_int), ("packed", ctypes.c_int)]
 
+
+_FUNCTIONS = {
+    "cholmod_l_start": ([ctypes.c_void_p], ctypes.c_int),
+    "cholmod_l_finish": ([ctypes.c_void_p], ctypes.c_int),
+    "cholmod_l_analyze_p": ([ctypes.POINTER(_Sparse), ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t,
+                             ctypes.c_void_p], ctypes.c_void_p),
+    "cholmod_l_factorize": ([ctypes.POINTER(_Sparse), ctypes.c_void_p, ctypes.c_void_p], ctypes.c_int),
+    "cholmod_l_solve": ([ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(_Dense), ctypes.c_void_p], ctypes.c_void_p),
+    "cholmod_l_free_dense": ([ctypes.POINTER(ctypes.c_void_p), ctypes.c_void_p], ctypes.c_int),
+    "cholmod_l_free_factor": ([ctypes.POINTER(ctypes.c_void_p), ctypes.c_void_p], ctypes.c_int),
+}
+"""The CHOLMOD functions called here, with their C signatures (CHOLMOD 3–5, SuiteSparse_long
+indices): the same ones cvxopt's cholmod module calls."""
+_CHOLMOD_A = 0  # cholmod_solve's sys for A x = b
 
 _lib = None
 _checked = False
@@ -93,6 +124,24 @@ def _loaded_libcholmod() -> str | None:
     return None
 
 
+def _packaged_libcholmod() -> str | None:
+    """The libcholmod shipped inside cvxopt's wheel (``cvxopt.libs`` beside the package on
+    Linux, ``cvxopt/.dylibs`` on macOS), where the mapped files cannot be listed; None if absent."""
+    import glob
+    import os
+
+    try:
+        import cvxopt
+    except ImportError:
+        return None
+    here = os.path.dirname(cvxopt.__file__)
+    for pattern in (os.path.join(here + ".libs", "libcholmod*"), os.path.join(here, ".dylibs", "libcholmod*")):
+        found = sorted(glob.glob(pattern))
+        if found:
+            return found[0]
+    return None
+
+
 def _library():
     global _lib, _checked
     with _lock:
@@ -103,19 +152,18 @@ def _library():
             import cvxopt.cholmod  # noqa: F401  (maps cvxopt's libcholmod into the process)
         except ImportError:
             return None
-        path = _loaded_libcholmod()
+        path = _loaded_libcholmod() or _packaged_libcholmod()
         if path is None:
             return None
         try:
             lib = ctypes.CDLL(path)  # the already-loaded library: dlopen returns the same handle
-            for name in ("cholmod_l_start", "cholmod_l_finish", "cholmod_l_factorize"):
+            for name in _FUNCTIONS:
                 getattr(lib, name)
         except (OSError, AttributeError):
             return None
-        lib.cholmod_l_start.argtypes = [ctypes.c_void_p]
-        lib.cholmod_l_finish.argtypes = [ctypes.c_void_p]
-        lib.cholmod_l_factorize.argtypes = [ctypes.POINTER(_Sparse), ctypes.c_void_p, ctypes.c_void_p]
-        lib.cholmod_l_factorize.restype = ctypes.c_int
+        for name, (argtypes, restype) in _FUNCTIONS.items():
+            getattr(lib, name).argtypes = argtypes
+            getattr(lib, name).restype = restype
         probe = ctypes.create_string_buffer(COMMON_BYTES)
         if not lib.cholmod_l_start(probe):
             return None
@@ -125,82 +173,139 @@ def _library():
         return _lib
 
 
-_capsule_name = ctypes.pythonapi.PyCapsule_GetName
-_capsule_name.restype = ctypes.c_char_p
-_capsule_name.argtypes = [ctypes.py_object]
-_capsule_pointer = ctypes.pythonapi.PyCapsule_GetPointer
-_capsule_pointer.restype = ctypes.c_void_p
-_capsule_pointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
-
-
-class Factorizer:
-    """``cholmod_l_factorize`` on cvxopt's symbolic factors, the GIL released, with a
-    ``cholmod_common`` of its own (freed with the object).  Use from one thread at a time."""
+class Cholmod:
+    """One sparse Cholesky factorisation through CHOLMOD, with a ``cholmod_common`` of its own
+    (freed with the object): :meth:`analyse` a lower-triangle pattern, :meth:`factorize` values
+    on it (again and again), :meth:`solve`.  Every call releases the GIL.  Use from one thread
+    at a time."""
 
     def __init__(self, lib):
         self._lib = lib
         self._common = ctypes.create_string_buffer(COMMON_BYTES)
         if not lib.cholmod_l_start(self._common):
             raise MemoryError("cholmod_l_start failed")
-        struct.pack_into("i", self._common, _PRINT_OFFSET, 0)  # as cvxopt: CHOLMOD prints nothing
+        # cvxopt's options with an empty options dictionary: CHOLMOD's defaults, print 0, supernodal 2
+        struct.pack_into("i", self._common, _PRINT_OFFSET, 0)
         struct.pack_into("i", self._common, _SUPERNODAL_OFFSET, 2)
-        weakref.finalize(self, lib.cholmod_l_finish, self._common)
+        self._factor = ctypes.c_void_p(None)
+        self._pattern = None  # (indptr, indices) of the analysed lower triangle, int64
+        self._numeric = False
+        weakref.finalize(self, _finish, lib, self._factor, self._common)
 
-    def factorize(self, factor, indptr: np.ndarray, indices: np.ndarray, values: np.ndarray) -> int | None:
-        """Refactor cvxopt's symbolic/numeric factor ``factor`` (a "CHOLMOD FACTOR D L"
-        capsule) with the lower triangle (CSC: int64 ``indptr``, sorted int64 ``indices``,
-        float64 ``values``; the pattern it was analysed with).  Returns the column CHOLMOD
-        stopped at (the order n when the matrix is positive definite), or None when CHOLMOD
-        reports an error (out of memory, invalid input): the caller then asks cvxopt, whose
-        call says which."""
-        name = _capsule_name(factor)
-        if name != b"CHOLMOD FACTOR D L":
-            raise TypeError(f"not cvxopt's factor of a lower-triangle 'd' matrix: {name!r}")
+    @property
+    def analysed(self) -> bool:
+        return bool(self._factor.value)
+
+    @property
+    def numeric(self) -> bool:
+        """True when the last :meth:`factorize` succeeded (solves are possible)."""
+        return self._numeric
+
+    def analyse(self, indptr: np.ndarray, indices: np.ndarray, perm: np.ndarray | None = None) -> bool:
+        """Symbolic analysis of the lower triangle with this pattern (CSC, int64, sorted): AMD,
+        or — given ``perm`` — the better of ``perm`` and AMD (CHOLMOD's choice with its default
+        ``nmethods``).  Returns False when CHOLMOD reports an error (out of memory)."""
+        self.release()
         n = indptr.size - 1
-        if not (indptr.dtype == indices.dtype == np.int64 and values.dtype == np.float64
-                and indptr.flags.c_contiguous and indices.flags.c_contiguous and values.flags.c_contiguous
-                and values.size == indices.size == indptr[-1]):
-            raise ValueError("factorize needs contiguous int64 indptr/indices and float64 values of one size")
-        L = _capsule_pointer(factor, name)
-        if ctypes.c_size_t.from_address(L).value != n:  # cholmod_factor starts with n, minor
-            raise ValueError("the factor is not of this order")
+        indptr, indices = _int64(indptr), _int64(indices)
+        values = np.zeros(indices.size)  # the analysis reads the pattern only
+        A = _Sparse(n, n, indices.size, indptr.ctypes.data, indices.ctypes.data, None, values.ctypes.data, None,
+                    -1, _CHOLMOD_LONG, _CHOLMOD_REAL, _CHOLMOD_DOUBLE, 1, 1)
+        p = None if perm is None else _int64(perm)
+        L = self._lib.cholmod_l_analyze_p(ctypes.byref(A), None if p is None else p.ctypes.data, None, 0,
+                                          self._common)
+        if not L:
+            return False
+        self._factor.value = L
+        self._pattern = (indptr, indices)
+        return True
+
+    def factorize(self, values: np.ndarray) -> int | None:
+        """Numeric factorisation of the analysed pattern with ``values`` (float64, one per stored
+        entry).  Returns the column CHOLMOD stopped at (the order n when the matrix is positive
+        definite), or None when CHOLMOD reports an error (out of memory, invalid input)."""
+        if not self.analysed:
+            raise ValueError("factorize needs an analysed pattern (analyse first)")
+        indptr, indices = self._pattern
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        if values.size != indices.size:
+            raise ValueError(f"factorize needs {indices.size} values, got {values.size}")
+        n = indptr.size - 1
         A = _Sparse(n, n, values.size, indptr.ctypes.data, indices.ctypes.data, None, values.ctypes.data, None,
                     -1, _CHOLMOD_LONG, _CHOLMOD_REAL, _CHOLMOD_DOUBLE, 1, 1)
+        self._numeric = False
         if _waiting:
             _wake_waiting()
-        if not self._lib.cholmod_l_factorize(ctypes.byref(A), L, self._common):
+        if not self._lib.cholmod_l_factorize(ctypes.byref(A), self._factor, self._common):
             return None
-        return int(ctypes.c_size_t.from_address(L + ctypes.sizeof(ctypes.c_size_t)).value)
+        column = int(ctypes.c_size_t.from_address(self._factor.value + ctypes.sizeof(ctypes.c_size_t)).value)
+        self._numeric = column >= n
+        return column
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """A⁻¹ rhs with the last successful factorisation (a new float64 array)."""
+        if not self._numeric:
+            raise ValueError("solve needs a successful numeric factorisation")
+        n = self._pattern[0].size - 1
+        b = np.array(rhs, dtype=np.float64).reshape(-1)
+        if b.size != n:
+            raise ValueError(f"the right-hand side has {b.size} entries, the matrix order is {n}")
+        if n == 0:
+            return b
+        B = _Dense(n, 1, n, n, b.ctypes.data, None, _CHOLMOD_REAL, _CHOLMOD_DOUBLE)
+        X = self._lib.cholmod_l_solve(_CHOLMOD_A, self._factor, ctypes.byref(B), self._common)
+        if not X:
+            raise MemoryError("CHOLMOD's solve failed (out of memory)")
+        try:
+            x = _Dense.from_address(X)
+            out = np.ctypeslib.as_array((ctypes.c_double * n).from_address(x.x)).copy()
+        finally:
+            self._lib.cholmod_l_free_dense(ctypes.byref(ctypes.c_void_p(X)), self._common)
+        return out
+
+    def counts(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(P, column counts of L) of the analysed factor (``L->Perm``, ``L->ColCount``: int64
+        arrays of the order n; the leading fields of ``cholmod_factor`` since CHOLMOD 1), or None
+        before the analysis.  The counts include the diagonal: nnz(L) is their sum."""
+        if not self.analysed:
+            return None
+        L = self._factor.value
+        word = ctypes.sizeof(ctypes.c_size_t)
+        n = ctypes.c_size_t.from_address(L).value
+        perm_at, count_at = (ctypes.c_void_p.from_address(L + k * word).value for k in (2, 3))
+        if not perm_at or not count_at:
+            return None
+        perm = np.ctypeslib.as_array((ctypes.c_int64 * n).from_address(perm_at)).copy()
+        counts = np.ctypeslib.as_array((ctypes.c_int64 * n).from_address(count_at)).copy()
+        return perm, counts
+
+    def release(self) -> None:
+        """Free the factor (and its analysis)."""
+        if self._factor.value:
+            self._lib.cholmod_l_free_factor(ctypes.byref(self._factor), self._common)
+            self._factor.value = None
+        self._pattern = None
+        self._numeric = False
+
+
+def _finish(lib, factor: ctypes.c_void_p, common) -> None:
+    """Free a :class:`Cholmod`'s factor, then its common (the factor needs the common to be freed)."""
+    if factor.value:
+        lib.cholmod_l_free_factor(ctypes.byref(factor), common)
+    lib.cholmod_l_finish(common)
+
+
+def _int64(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.int64)
 
 
 def available() -> bool:
-    """True when the GIL-free call can be used here (see the module's docstring)."""
+    """True when CHOLMOD can be called here (see the module's docstring)."""
     return _library() is not None
 
 
-def factorizer() -> Factorizer | None:
-    """A :class:`Factorizer`, or None where the GIL-free call is not available here (see the
-    module's docstring)."""
+def session() -> Cholmod | None:
+    """A :class:`Cholmod`, or None where CHOLMOD cannot be called here (see the module's
+    docstring)."""
     lib = _library()
-    return None if lib is None else Factorizer(lib)
-
-
-def factor_counts(factor) -> tuple[np.ndarray, np.ndarray] | None:
-    """(P, column counts of L) of cvxopt's analysed CHOLMOD factor ``factor``, copied from the
-    factor itself (``L->Perm``, ``L->ColCount``: int64 arrays of the order n; the leading fields
-    of ``cholmod_factor`` since CHOLMOD 1), or None where the GIL-free library is not in use
-    here.  The counts include the diagonal: nnz(L) is their sum."""
-    if _library() is None:
-        return None
-    name = _capsule_name(factor)
-    if name not in (b"CHOLMOD FACTOR D L", b"CHOLMOD FACTOR D U"):
-        raise TypeError(f"not cvxopt's factor of a 'd' matrix: {name!r}")
-    L = _capsule_pointer(factor, name)
-    word = ctypes.sizeof(ctypes.c_size_t)
-    n = ctypes.c_size_t.from_address(L).value
-    perm_at, count_at = (ctypes.c_void_p.from_address(L + k * word).value for k in (2, 3))
-    if not perm_at or not count_at:
-        return None
-    perm = np.ctypeslib.as_array((ctypes.c_int64 * n).from_address(perm_at)).copy()
-    counts = np.ctypeslib.as_array((ctypes.c_int64 * n).from_address(count_at)).copy()
-    return perm, counts
+    return None if lib is None else Cholmod(lib)

@@ -12,7 +12,8 @@ with the factor.  It knows nothing of contacts, cones or the KKT system.  Three 
 ``SuperLUEngine``  LU with partial pivoting of a general square matrix (SuperLU, a new
                    factorisation each time); the unsymmetric form (6)
 ``CholmodEngine``  supernodal Cholesky of a symmetric positive definite matrix given as its
-                   lower triangle (CHOLMOD from cvxopt's wheel, a dependency; AMD, or the
+                   lower triangle (CHOLMOD from cvxopt's wheel, a dependency, called through
+                   ctypes with options of its own: :mod:`.cholmod_nogil`; AMD, or the
                    better of AMD and nested dissection on large matrices; symbolic analysis
                    once); the ``schur`` form, and the double-double phase's float64 oracle on
                    large contact-space matrices (:class:`rfverify.extended.mixed.CholmodMixed`)
@@ -23,7 +24,6 @@ Every factorisation after the first must have the first one's sparsity pattern (
 
 from __future__ import annotations
 
-import threading
 from typing import Protocol
 
 import numpy as np
@@ -121,8 +121,14 @@ class SuperLUEngine:
 def cholmod_missing_message(what: str) -> str:
     """Why ``what`` cannot run without CHOLMOD, and how to install it (one message for the
     ``schur`` form and the ``cholmod`` engine of the double-double phase)."""
-    return (f"{what} needs CHOLMOD from cvxopt, a dependency of rfverify that is missing here: "
-            "pip install cvxopt (a wheel: no system library)")
+    try:
+        import cvxopt.cholmod  # noqa: F401
+    except ImportError:
+        return (f"{what} needs CHOLMOD from cvxopt, a dependency of rfverify that is missing here: "
+                "pip install cvxopt (a wheel: no system library)")
+    return (f"{what} needs CHOLMOD, called directly in cvxopt's libcholmod, which is not usable here (no "
+            "libcholmod of CHOLMOD 3-5 found among the loaded libraries or in cvxopt's wheel): reinstall cvxopt "
+            "from its wheel (pip install --force-reinstall cvxopt)")
 
 
 ND_MIN_ROWS = 2000
@@ -162,9 +168,10 @@ class CholmodEngine:
     per call, dense BLAS-3 kernels on the supernodes.  A matrix that is not positive definite
     raises :class:`ArithmeticError` naming the column CHOLMOD stopped at.
 
-    cvxopt's CHOLMOD options are module-global: each call sets the ones it relies on
-    (supernodal LLᵀ, so that an indefinite matrix is refused rather than given an LDLᵀ) and
-    restores the caller's."""
+    Every CHOLMOD call goes through :mod:`.cholmod_nogil` (ctypes, the GIL released) with a
+    ``cholmod_common`` of this engine's own: cvxopt's module-global ``cvxopt.cholmod.options``
+    is neither read nor written, so a user's settings there change nothing here and rfverify's
+    never show there."""
 
     triangle = "lower"
 
@@ -173,26 +180,24 @@ class CholmodEngine:
             import cvxopt.cholmod  # noqa: F401  (fails here, with the fix, when absent)
         except ImportError:
             raise ImportError(cholmod_missing_message(what)) from None
-        self._factor = None
-        self._A = None
+        self._chol = cholmod_nogil.session()
+        if self._chol is None:
+            raise ImportError(cholmod_missing_message(what))
         self._pattern = None
-        self._pattern64 = None  # (indptr, indices) as int64, for the GIL-free call
-        self._numeric = False  # a numeric factorisation has succeeded since the analysis
-        self._nogil = cholmod_nogil.factorizer()  # None: cvxopt's own call (it holds the GIL)
         self.factorisations = 0
         self.ordering = None  # "AMD" or "nested dissection or AMD, the less fill", after the analysis
 
     @property
     def releases_gil(self) -> bool:
-        """True when the numeric factorisations run without the GIL
-        (:mod:`.cholmod_nogil`): other threads of the process run meanwhile."""
-        return self._nogil is not None
+        """True: the analysis, the factorisations and the solves run without the GIL
+        (:mod:`.cholmod_nogil`); other threads of the process run meanwhile."""
+        return True
 
     def analyse(self, K: sp.csc_matrix) -> None:
         """The symbolic analysis (fill-reducing order, supernodes) of the pattern of ``K``'s
         lower triangle, values ignored; the first :meth:`factor` of a matrix with this pattern
         then only factors.  Does nothing once analysed."""
-        if self._factor is None:
+        if self._pattern is None:
             self._analyse(self._lower(K))
 
     @staticmethod
@@ -202,141 +207,67 @@ class CholmodEngine:
         return K
 
     def _analyse(self, K: sp.csc_matrix) -> None:
-        import cvxopt
-        from cvxopt import cholmod
-
         n = K.shape[0]
-        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
-        A = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(K.data, dtype=np.float64)),
-                            cvxopt.matrix(K.indices.astype(np.int64)), cvxopt.matrix(cols), (n, n))
         perm = nested_dissection(K) if n >= ND_MIN_ROWS else None
-        with _cholmod_options(supernodal=2):
-            if perm is None:
-                factor = cholmod.symbolic(A, uplo="L")
-                ordering = "AMD"
-            else:  # CHOLMOD tries the given order and AMD and keeps the one with less fill
-                factor = cholmod.symbolic(A, p=cvxopt.matrix(perm.astype(np.int64)), uplo="L")
-                ordering = "nested dissection or AMD, whichever fills less"
-        self._A, self._factor, self.ordering = A, factor, ordering
-        self._numeric = False
+        if not self._chol.analyse(K.indptr, K.indices, perm):
+            raise MemoryError(f"CHOLMOD: the symbolic analysis of a matrix of order {n} failed (out of memory)")
+        # CHOLMOD tries a given order and AMD and keeps the one with less fill
+        self.ordering = "AMD" if perm is None else "nested dissection or AMD, whichever fills less"
         self._pattern = (K.indptr.copy(), K.indices.copy())
-        self._pattern64 = (K.indptr.astype(np.int64), K.indices.astype(np.int64))
 
     def factor(self, K: sp.csc_matrix) -> None:
-        import cvxopt
-        from cvxopt import cholmod
-
         K = self._lower(K)
         n = K.shape[0]
-        if self._factor is None:
+        if self._pattern is None:
             self._analyse(K)
         elif not (np.array_equal(K.indptr, self._pattern[0]) and np.array_equal(K.indices, self._pattern[1])):
             raise ValueError("CholmodEngine: the matrix's pattern differs from the first one's")
-        values = np.ascontiguousarray(K.data, dtype=np.float64)
-        column = None
-        if self._nogil is not None:
-            column = self._nogil.factorize(self._factor, *self._pattern64, values)
-        if column is None:  # cvxopt's own call: no GIL-free path, or CHOLMOD reported an error (it says which)
-            self._A.V = cvxopt.matrix(values)
-            with _cholmod_options(supernodal=2):
-                try:
-                    cholmod.numeric(self._A, self._factor)
-                except ArithmeticError as exc:
-                    raise ArithmeticError(f"CHOLMOD: not positive definite (column {exc})") from None
-        elif column < n:
+        column = self._chol.factorize(K.data)
+        if column is None:
+            raise MemoryError(f"CHOLMOD: the factorisation of a matrix of order {n} failed (out of memory or "
+                              "invalid input)")
+        if column < n:
             raise ArithmeticError(f"CHOLMOD: not positive definite (column {column})")
-        self._numeric = True
         self.factorisations += 1
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        import cvxopt
-        from cvxopt import cholmod
-
-        b = cvxopt.matrix(np.array(rhs, dtype=np.float64).reshape(-1))
-        cholmod.solve(self._factor, b)
-        return np.array(b, dtype=np.float64).reshape(-1)
+        return self._chol.solve(rhs)
 
     def column_counts(self) -> np.ndarray | None:
         """Nonzeros per column of L below the diagonal, in CHOLMOD's order (statistics: nnz(L),
-        Σ c_j²), read from the analysed factor itself; None before the analysis, after
-        :meth:`release`, or where the factor's fields cannot be read here
-        (:func:`.cholmod_nogil.factor_counts`)."""
-        if self._factor is None or self._nogil is None:
-            return None
-        found = cholmod_nogil.factor_counts(self._factor)
+        Σ c_j²), read from the analysed factor itself; None before the analysis or after
+        :meth:`release`."""
+        found = self._chol.counts() if self._pattern is not None else None
         return None if found is None else found[1] - 1
 
     def permutation(self) -> np.ndarray | None:
         """CHOLMOD's fill-reducing order P (L Lᵀ = K[P][:, P]), or None before the first
         numeric factorisation (or after :meth:`release`)."""
-        if self._factor is None or not self._numeric:  # cvxopt solves only with a numeric factor
+        if self._pattern is None or not self._chol.numeric:
             return None
-        found = cholmod_nogil.factor_counts(self._factor) if self._nogil is not None else None
-        if found is not None:
-            return found[0]
-        import cvxopt
-        from cvxopt import cholmod
-
-        n = self._A.size[0]
-        p = cvxopt.matrix(np.arange(n, dtype=np.float64))
-        cholmod.solve(self._factor, p, sys=7)  # x = P b
-        return np.array(p, dtype=np.float64).reshape(-1).astype(np.int64)
+        found = self._chol.counts()
+        return None if found is None else found[0]
 
     def release(self) -> None:
         """Drop the factor (and its symbolic analysis): the next ``factor`` starts afresh."""
-        self._factor = None
-        self._A = None
+        self._chol.release()
         self._pattern = None
-        self._pattern64 = None
-        self._numeric = False
-
-
-_options_lock = threading.RLock()
-
-
-class _cholmod_options:
-    """Set cvxopt's global CHOLMOD options for a block, restoring the caller's afterwards; one
-    block at a time in the process (the k-digit path analyses on a second thread), so that two
-    blocks cannot restore each other's settings."""
-
-    def __init__(self, **options):
-        self.options = options
-
-    def __enter__(self):
-        from cvxopt import cholmod
-
-        _options_lock.acquire()
-        try:
-            self.saved = dict(cholmod.options)
-            cholmod.options.update(self.options)
-        except BaseException:
-            _options_lock.release()
-            raise
-
-    def __exit__(self, *exc):
-        from cvxopt import cholmod
-
-        try:
-            cholmod.options.clear()
-            cholmod.options.update(self.saved)
-        finally:
-            _options_lock.release()
-        return False
 
 
 def cholmod_available() -> bool:
-    """True when cvxopt's CHOLMOD imports here (a dependency of rfverify; False only on a
-    broken or hand-trimmed install, where the forms fall back to QDLDL)."""
+    """True when cvxopt's CHOLMOD can be called here (cvxopt is a dependency of rfverify; False
+    only on a broken or hand-trimmed install, or where its libcholmod cannot be called directly:
+    the forms then fall back to QDLDL)."""
     try:
         import cvxopt.cholmod  # noqa: F401
     except ImportError:
         return False
-    return True
+    return cholmod_nogil.available()
 
 
 def schur_engine() -> FactorEngine:
-    """The engine of the ``schur`` form: CHOLMOD (cvxopt, a dependency), else QDLDL where cvxopt
-    does not import (the same factorisation of the same SPD matrix, without supernodes: 24–44×
+    """The engine of the ``schur`` form: CHOLMOD (cvxopt, a dependency), else QDLDL where cvxopt's
+    CHOLMOD cannot be called (the same factorisation of the same SPD matrix, without supernodes: 24–44×
     slower on a 10⁴-contact factor)."""
     return CholmodEngine("the schur form") if cholmod_available() else QDLDLEngine()
 

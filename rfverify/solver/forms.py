@@ -243,7 +243,7 @@ class SchurSystem(ReducedFactoredSystem):
 
     symmetric positive definite (M is), factored by CHOLMOD's supernodal Cholesky (cvxopt's
     wheel, a dependency): dense BLAS-3 kernels on the supernodes, where QDLDL's up-looking
-    LDLᵀ — the fallback where cvxopt does not import — works entry by entry (24–44× slower per
+    LDLᵀ — the fallback where cvxopt's CHOLMOD cannot be called — works entry by entry (24–44× slower per
     factorisation at 10⁴ contacts).  S dv = a − Bᵀ L⁻¹ b′
     with b′ = b − J Q_{p⁻¹} c, then dr̃ = −L⁻ᵀ (L⁻¹ b′ + B dv) and dz = Q_{p⁻¹}c − Q_{p⁻²}Jᵀdr̃.
     S is M + BᵀB (sparse product) put on the fixed pattern of M + |B|ᵀ|B|, in the triangle the
