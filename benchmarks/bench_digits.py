@@ -15,6 +15,7 @@ Not a test: timings on a shared 2-core machine are noisy; compare ratios from on
     python benchmarks/bench_digits.py                       # the issue's problem set (generated once into --cache)
     python benchmarks/bench_digits.py --files A.hdf5 B.hdf5 # your own files
     python benchmarks/bench_digits.py --quick               # small problems only
+    python benchmarks/bench_digits.py --family Chute:16:2   # every problem of one generated family
 """
 
 from __future__ import annotations
@@ -45,6 +46,10 @@ SCENES = [
     ("MassRatio 1e6", "MassRatio", None, 1, 0),
 ]
 
+
+FAMILIES = [("Chute", 16, 1)]
+"""(scene, count, seed): whole generated families, every problem a row (issue 45: a quarter of
+the generated Chutes carry a self-stress, which the family shows end to end)."""
 
 SCENE_CACHE = Path(tempfile.gettempdir()) / "rfverify-bench-digits"
 """Where generated scene problems are kept between runs (this script, bench_clarabel.py and
@@ -87,6 +92,28 @@ def scene_file(cache: Path, scene: str, size, count: int, index: int) -> Path:
     return files[min(index, len(files) - 1)]
 
 
+def family_files(cache: Path, scene: str, count: int, seed: int) -> list[Path]:
+    """Every problem of ``rfverify generate SCENE --count COUNT --seed SEED``, generated once."""
+    from rfverify.scenes import generate, save_collection
+
+    folder = cache / f"{scene}-family-{count}-seed{seed}"
+    files = sorted(folder.glob("*.hdf5")) if folder.is_dir() else []
+    if len(files) < count:
+        folder.mkdir(parents=True, exist_ok=True)
+        save_collection(generate(scene, count=count, seed=seed), folder)
+        files = sorted(folder.glob("*.hdf5"))
+    return sorted(files, key=lambda f: rfverify.load(f).n_contacts)
+
+
+def parse_family(text: str) -> tuple[str, int, int]:
+    """``SCENE:COUNT:SEED`` (the --family option)."""
+    try:
+        scene, count, seed = text.split(":")
+        return scene, int(count), int(seed)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not SCENE:COUNT:SEED, e.g. Chute:16:1") from None
+
+
 def user_files(paths):
     """(label, Problem) for each file named on the command line."""
     for f in paths:
@@ -105,10 +132,14 @@ def problem_set(args):
         yield "random 200", random_problem(100, 200, seed=1)
         yield "local dense 60", random_local_problem(60)
         return
-    for label, scene, size, count, index in SCENES:
-        yield label, rfverify.load(scene_file(cache, scene, size, count, index))
-    yield "random 2269", random_problem(1100, 2269, seed=1)
-    yield "local dense W", random_local_problem(260)
+    if not args.family:
+        for label, scene, size, count, index in SCENES:
+            yield label, rfverify.load(scene_file(cache, scene, size, count, index))
+        yield "random 2269", random_problem(1100, 2269, seed=1)
+        yield "local dense W", random_local_problem(260)
+    for scene, count, seed in (args.family or FAMILIES):
+        for k, f in enumerate(family_files(cache, scene, count, seed)):
+            yield f"{scene} {k + 1}/{count} s{seed}", rfverify.load(f)
 
 
 def run_one(label, problem, digits: int, workdir: Path):
@@ -151,6 +182,9 @@ def main(argv=None):
     ap = problem_parser(__doc__)
     ap.add_argument("--digits", type=int, default=10, help="digits to prove (default 10)")
     ap.add_argument("--quick", action="store_true", help="the small problems only")
+    ap.add_argument("--family", action="append", type=parse_family, metavar="SCENE:COUNT:SEED",
+                    help="only every problem of a generated family (repeatable); by default the set above "
+                         f"and then {', '.join(f'{a}:{b}:{c}' for a, b, c in FAMILIES)}")
     args = ap.parse_args(argv)
     rows = []
     head = (f"{'problem':<22} {'n':>5} {'m':>5} {'double':>7} {'ext':>7} {'mp':>6} {'proof':>6} {'total':>7} "

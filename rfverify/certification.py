@@ -212,7 +212,7 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
             **out.summary(), "proof_attempts": driver.attempts}
     if face is not None:
         if face.pop("_point", None) is point:
-            info["point_source"] = "the problem reduced to the face of its self-stresses (DESIGN §6.5), lifted back"
+            info["point_source"] = "the problem reduced to the face of its self-stresses (DESIGN §6.8), lifted back"
         info["face"] = face
     if driver.timed_out and not proof.certified:
         info["time_limit"] = time_limit

@@ -348,7 +348,7 @@ class ProofDriver:
 
     def answer(self, point: Point):
         """The float64 (v, u, r) a point stands for: its rounding, with r moved along the
-        self-stresses into K where the point came from a face (DESIGN §6.5)."""
+        self-stresses into K where the point came from a face (DESIGN §6.8)."""
         v, u, r = self.ctx.rounded(point)
         if self.face is not None:
             from .proof.face import returned_reactions
@@ -620,7 +620,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     if face_note is not None:
         extra["face"] = face_note
         if driver.best[2] is face_note.get("_point"):
-            extra["point_source"] = "the problem reduced to the face of its self-stresses (DESIGN §6.5), lifted back"
+            extra["point_source"] = "the problem reduced to the face of its self-stresses (DESIGN §6.8), lifted back"
         face_note.pop("_point", None)
     timed_out = driver.timed_out and not proof.certified
     if timed_out:
@@ -642,7 +642,7 @@ MAX_FACE_DEPTH = 2
 
 def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digits: int, relative: bool, say,
                    deadline, settings: dict, depth: int) -> dict | None:
-    """Where verified self-stresses leave the feasible set no interior (DESIGN §6.5): the problem
+    """Where verified self-stresses leave the feasible set no interior (DESIGN §6.8): the problem
     reduced to their face (:mod:`.proof.reduction`) is solved by this same path, each of its
     iterates lifted back and proven on ``problem`` itself (a reduced iterate's own proof would be
     about rounded data: contacts sticking beside the face sit ~1e-29 inside their cones there,

@@ -1,5 +1,5 @@
 """Issue 45: data whose feasible set has no interior (a self-stress), found, verified exactly,
-and proven through their face — and never a false proof on the way (DESIGN §6.5)."""
+and proven through their face — and never a false proof on the way (DESIGN §6.8)."""
 
 from __future__ import annotations
 

@@ -200,7 +200,7 @@ def _solve_digits(args, problem, options) -> int:
     else:
         tail = "" if out.wide is None else f"; multiple-precision ({out.wide.bits} bits) iterations: {out.wide.nit}"
         face = cert.extra.get("face")
-        if face:  # a self-stress: the problem was solved again on its face (DESIGN §6.5)
+        if face:  # a self-stress: the problem was solved again on its face (DESIGN §6.8)
             tail += f"; on the face of {len(face['self_stresses'])} self-stress(es): {face.get('reduction', '')}"
         print(f"double solve: {out.double.status} in {out.double.nit} iterations; extended "
               f"(double-double) iterations: {out.extended.nit}{tail}")
@@ -208,7 +208,7 @@ def _solve_digits(args, problem, options) -> int:
         print_quantities(cert)
         repaired = getattr(cert.proof, "face", None) if cert.proof is not None else None
         if repaired is not None:  # the proof's point was moved onto a self-stress's face
-            print(f"  self-stress: {'; '.join(s.describe() for s in repaired.stresses)} (DESIGN §6.5)")
+            print(f"  self-stress: {'; '.join(s.describe() for s in repaired.stresses)} (DESIGN §6.8)")
         t = out.timings
         wide_time = f", multiple precision {t['wide']:.2f}" if out.wide is not None else ""
         wide_time += f", on the face {t['face']:.2f}" if t.get("face") else ""

@@ -148,7 +148,7 @@ class ProofContext:
         return proof
 
     def self_stresses(self) -> list:
-        """The verified, feasible self-stresses its proofs have found so far (DESIGN §6.5)."""
+        """The verified, feasible self-stresses its proofs have found so far (DESIGN §6.8)."""
         if self.is_local:
             return []
         return [s for s in self.exact.face_search.found if not s.infeasible]

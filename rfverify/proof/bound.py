@@ -175,7 +175,7 @@ class Proof:
     """"symmetrised" ((M + Mᵀ)/2) or "stored" (M as stored): the matrix of the posed equations."""
     face: object = None
     """A :class:`.face.FaceRepair` when the point was moved exactly onto the face that a verified
-    self-stress forces (DESIGN §6.5), else None."""
+    self-stress forces (DESIGN §6.8), else None."""
     stored_equations: "Proof | None" = None
     """For a proof of the symmetrised equations of a problem whose stored M is unsymmetric: the
     same point and solution proven against the stored equations (how many digits of *their*

@@ -1,5 +1,5 @@
 """Facial reduction for the proof: self-stresses found, verified exactly, and points moved onto
-the face they force (DESIGN §6.5).
+the face they force (DESIGN §6.8).
 
 A **self-stress** is a y ∈ K, y ≠ 0, with H y = 0 and wᵀy = 0: contact forces that balance
 on their own (a sphere wedged in a μ = 1 corner, two spheres jammed between a wall and the
@@ -118,7 +118,7 @@ class FaceRepair:
         text += f" (v changed by at most {self.moved:.1e})" if self.moved > 0 else " (it was on it)"
         if self.shifts:
             text += " and its r taken plus a multiple of the self-stress, which lies in K"
-        return text + ", and the theorem applied there (DESIGN §6.5)"
+        return text + ", and the theorem applied there (DESIGN §6.8)"
 
     def as_dict(self) -> dict:
         return {"self_stresses": [s.as_dict() for s in self.stresses], "moved": self.moved,

@@ -1,5 +1,5 @@
 """The problem restricted to the face that verified self-stresses force (facial reduction),
-and the map of its points back to the problem's own variables (DESIGN §6.5).
+and the map of its points back to the problem's own variables (DESIGN §6.8).
 
 Where a self-stress y exists, every feasible velocity keeps u_F (the contacts y touches) in
 the face Φ = {G s + G₀ t : s ≥ 0} of K*_F (:mod:`.face`: G the face's edges, G₀ its free
