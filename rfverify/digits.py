@@ -194,8 +194,9 @@ class Preparation:
     ``prepare()`` is left to the first update, which repeats the step and reports it where it
     always did.  :meth:`cancel` (the path ends early) stops the thread at its next step."""
 
-    def __init__(self, problem: Problem, backend: str, engine: str, background: bool):
+    def __init__(self, problem: Problem, backend: str, engine: str, background: bool, refine=None):
         self.problem, self.backend, self.engine = problem, backend, engine
+        self.refine = refine  # refine(data): more exact data for the extended phase (a problem on a face)
         self._ctx = self._ctx_error = None
         self._system = self._system_error = None
         self._ctx_ready = threading.Event()
@@ -274,6 +275,8 @@ class Preparation:
 
     def _new_system(self):
         data = ExtendedData(self.problem)
+        if self.refine is not None:
+            self.refine(data)
         return data, choose_backend(data, self.backend, engine=self.engine)
 
     def cancel(self) -> None:
@@ -524,7 +527,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     cold = {"compiled_kernels": False} if float64_kernels_deferred() else {}
     t0, c0 = time.perf_counter(), compile_seconds()
     prepared = Preparation(problem, backend, factor_engine,
-                           background=not compiling and not extended_cache_is_cold() and preparing_beside())
+                           background=not compiling and not extended_cache_is_cold() and preparing_beside(),
+                           refine=None if _on_face is None else _on_face[1].refine)
     deadline = None if time_limit is None else t0 + time_limit
     limit = {} if time_limit is None else {"time_limit": time_limit}
     try:

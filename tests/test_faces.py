@@ -70,10 +70,14 @@ def _corner_point(problem):
 def test_a_point_left_slightly_off_the_face_is_never_proven(monkeypatch):
     """The face move replaced by one that leaves v' 2⁻⁶⁰ off the face on one dof: the proof must
     refuse (exact cone test), not certify."""
+    from rfverify.certificate import candidate_point
+
     problem = corner_problem(0)
-    ctx, point, _ = _corner_point(problem)
-    good = ctx.prove(point, *ctx.rounded(point), requested=10)
-    assert good.valid and good.face is not None
+    double = rfverify.solve(problem, tol=1e-10)
+    point = candidate_point(double.v, double.r)  # off the face by the double solve's error
+    ctx = ProofContext(problem)
+    good = ctx.prove(point, *ctx.rounded(point), requested=6)
+    assert good.valid and good.face is not None and good.face.moved > 0
     real_restore = face.restore
 
     def off_face(problem_, exact, point_v, stresses):
@@ -86,7 +90,7 @@ def test_a_point_left_slightly_off_the_face_is_never_proven(monkeypatch):
 
     monkeypatch.setattr(face, "restore", off_face)
     ctx2 = ProofContext(problem)
-    bad = ctx2.prove(point, *ctx2.rounded(point), requested=10)
+    bad = ctx2.prove(point, *ctx2.rounded(point), requested=6)
     assert not bad.valid and not bad.certified
     assert "after it was moved onto a face" in bad.failure
 

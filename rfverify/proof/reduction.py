@@ -31,8 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from fractions import Fraction
+
 from ..problem import SPACEDIM, Problem
 from . import Point
+from . import rational as Q
 from .dyadic import Dyadic
 from .face import SelfStress
 
@@ -57,6 +60,10 @@ class _Block:
     C: np.ndarray       # (e, 5|F|) edge-coefficient rows
     HtD: np.ndarray     # H_{F,D}ᵀ (5|F|, |D|)
     edges: list         # per row of C: (contact index in F, the edge as 5 exact Fractions)
+    Zx: list            # Z exactly: |D| rows of k_D Fractions (the face's motions of these bodies)
+    Sx: list            # the edge coefficients exactly: e rows of k_D Fractions (s = Sx ξ + s0)
+    v0x: list           # v₀ on D exactly (|D| Fractions)
+    s0x: list           # the edge coefficients at v₀ (e Fractions)
     mu: np.ndarray
     mu_r: np.ndarray
 
@@ -88,15 +95,34 @@ def _block(problem: Problem, stress: SelfStress) -> _Block | None:
     else:
         P = np.eye(nF)
         C = np.zeros((0, nF))
-    E = P @ HtD
-    e = -P @ problem.w[cols]
-    _, sv, Vt = np.linalg.svd(E, full_matrices=True)
-    rank = int(np.sum(sv > NULL_TOL * (sv[0] if sv.size else 1.0)))
-    Z = Vt[rank:].T
-    if Z.shape[1] == 0:
+    # The motions the face allows, exactly: the null space over Q of [H_{F,D}ᵀ | −G_edges | −G_free]
+    # (δ on D, edge and free coefficients); its δ parts are Z, its edge parts the edge functionals.
+    gens = [g for i in range(contacts.size) for g in ([(i, x) for x in stress.edges[i]]
+                                                       + [(i, x) for x in stress.free[i]])]
+    A = Q.as_fractions(HtD)
+    for r_i, row in enumerate(A):
+        i, comp = divmod(r_i, SPACEDIM)
+        row += [-g[comp] if gi == i else Fraction(0) for gi, g in gens]
+    nD, ne = dofs.size, len(edges)
+    basis = Q.null_space(A, nD + len(gens))
+    basis = [b for b in basis if any(b[:nD])]
+    if not basis:
         return None  # the face allows these bodies no motion at all: nothing to reduce to
-    v0 = np.linalg.lstsq(E, e, rcond=None)[0] if np.any(e) else np.zeros(dofs.size)
-    return _Block(cols, dofs, Z, v0, P, C, HtD, exact_edges, problem.mu[contacts], problem.mu_r[contacts])
+    basis = [[x / max(abs(t) for t in b[:nD]) for x in b] for b in basis]  # columns of Z at most 1
+    Zx = [[b[d] for b in basis] for d in range(nD)]
+    Sx = [[b[nD + j] for b in basis] for j in range(ne)]
+    wF = [Fraction(float(x)) for x in problem.w[cols]]
+    if any(wF):
+        x0 = Q.particular_solution(A, [-x for x in wF])
+        if x0 is None:
+            return None
+    else:
+        x0 = [Fraction(0)] * (nD + len(gens))
+    v0x, s0x = x0[:nD], x0[nD:nD + ne]
+    Z = np.array([[float(x) for x in row] for row in Zx])
+    v0 = Q.to_float(v0x)
+    return _Block(cols, dofs, Z, v0, P, C, HtD, exact_edges, Zx, Sx, v0x, s0x,
+                  problem.mu[contacts], problem.mu_r[contacts])
 
 
 @dataclass
@@ -112,15 +138,74 @@ class FaceReduction:
     kept_contacts: np.ndarray  # the original contacts that stay, in order (the first of the reduced ones)
     edge_owner: list           # per reduced edge contact: (block index, edge index)
 
+    def refine(self, data) -> None:
+        """Give the extended phase of :attr:`problem` (``data``, its
+        :class:`~rfverify.extended.data.ExtendedData`) the entries of H̃ on the face's dofs as the
+        exact products Zᵀ H of the original data (Z exact, rational) rounded to double-double,
+        and the edge contacts' exact coefficients, instead of the float64 roundings the reduced
+        problem holds: a contact beside the face that is active at the solution sits ~1e-29
+        inside its cone at a converged iterate, far less than those roundings (~1e-16), and its
+        lifted velocity (:meth:`lift`, with the same exact Z) must be in the cone exactly."""
+        from fractions import Fraction
+
+        Ht = data.Ht
+        rows, cols, _, _ = Ht.coo()
+        n_kept_dofs = self.Z.shape[0] - sum(b.dofs.size for b in self.blocks)
+        flat = data.lp.keep[rows]
+        rc, comp = np.divmod(flat, SPACEDIM)
+        which = np.flatnonzero(cols >= n_kept_dofs)
+        if not which.size:
+            return
+        H = sp.csc_matrix(self.original.H)
+        col_of = {}  # reduced dof -> (block, column of its Z)
+        start = n_kept_dofs
+        for b in self.blocks:
+            for t in range(b.Z.shape[1]):
+                col_of[start + t] = (b, t)
+            start += b.Z.shape[1]
+        hi, lo = Ht.hi.copy(), Ht.lo.copy()
+        nk = self.kept_contacts.size
+        for e in which:
+            b, t = col_of[int(cols[e])]
+            if rc[e] >= nk:  # a frictionless edge contact: its coefficient s_j exactly
+                bi, j = self.edge_owner[int(rc[e]) - nk]
+                exact = self.blocks[bi].Sx[j][t] if comp[e] == 0 else Fraction(0)
+            else:
+                column = H[:, SPACEDIM * int(self.kept_contacts[rc[e]]) + int(comp[e])]
+                exact = Fraction(0)
+                for d, z in zip(b.dofs, b.Zx):
+                    h = column[int(d), 0]
+                    if h and z[t]:
+                        exact += z[t] * Fraction(float(h))
+            exact *= Fraction(float(data.lp.scale[rows[e]]))
+            hi[e] = float(exact)
+            lo[e] = float(exact - Fraction(hi[e]))
+        from ..extended.data import DDMatrix
+
+        data.Ht = DDMatrix(Ht.shape, Ht.indptr, Ht.indices, hi, lo)
+        data.HtT = data.Ht.transpose()
+
     def lift(self, point: Point) -> Point:
         """A point of the reduced problem as a point of the original one (double-double)."""
         orig = self.original
         m, n = orig.n_dofs, orig.n_contacts
         xi_h, xi_l = point.v_hi, point.v_lo
         Z = self.Z
-        # v = v₀ + Z ξ in double-double: Z's columns off D are unit vectors (copied exactly)
+        # v = v₀ + Z ξ: a copy off D, and on D the exact rational Z ξ rounded to double-double
         vh = self.v0 + Z @ xi_h
-        vl = Z @ xi_l + _two_sum_error(self.v0, Z, xi_h, vh)
+        vl = np.zeros(m)
+        first = int(np.sum(~np.isin(np.arange(m), np.concatenate([b.dofs for b in self.blocks]))))
+        off_D = np.ones(m, dtype=bool)
+        for b in self.blocks:
+            off_D[b.dofs] = False
+        vl[off_D] = Z[off_D] @ xi_l
+        for b in self.blocks:
+            xi = [Fraction(float(xi_h[first + t])) + Fraction(float(xi_l[first + t])) for t in range(b.Z.shape[1])]
+            for d, row, v0d in zip(b.dofs, b.Zx, b.v0x):
+                x = v0d + sum((z * c for z, c in zip(row, xi) if z), Fraction(0))
+                vh[d] = float(x)
+                vl[d] = float(x - Fraction(vh[d]))
+            first += b.Z.shape[1]
         rh = np.zeros(SPACEDIM * n)
         rl = np.zeros(SPACEDIM * n)
         kept_cols = (SPACEDIM * self.kept_contacts[:, None] + np.arange(SPACEDIM)).ravel()
@@ -265,13 +350,15 @@ def reduce_to_face(problem: Problem, stresses: list) -> FaceReduction | None:
     H_kept = (Z.T @ H[:, kept_cols]).tocsc()
     w_kept = problem.w[kept_cols] + H[:, kept_cols].T @ v0
     edge_cols, edge_w, owner = [], [], []
+    first = kept_dofs.size
     for bi, b in enumerate(blocks):
-        for j in range(b.C.shape[0]):
-            a = np.zeros(m)
-            a[b.dofs] = b.HtD.T @ b.C[j]
-            edge_cols.append(Z.T @ a)
-            edge_w.append(float(b.C[j] @ (problem.w[b.cols] + b.HtD @ b.v0)))
+        for j in range(b.C.shape[0]):  # s_j = Sx_j ξ + s0_j: a frictionless contact on the block's ξ
+            col = np.zeros(Z.shape[1])
+            col[first:first + b.Z.shape[1]] = [float(x) for x in b.Sx[j]]
+            edge_cols.append(col)
+            edge_w.append(float(b.s0x[j]))
             owner.append((bi, j))
+        first += b.Z.shape[1]
     ne = len(edge_cols)
     blocks_H = [H_kept]
     if ne:
