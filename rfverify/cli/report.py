@@ -19,8 +19,9 @@ how fast, where double precision breaks and what the K-digit path costs. Below: 
 refuted solver claims (grouped, each once), speed on common solved sets, Dolan–Moré profiles,
 how far double precision gets, cond(Q_p) and λ2 per iteration for one hard problem per family,
 the proven digits of every method, lockstep diagnostics (double against reference) of the worst
-cases, and every other failure with its diagnosed cause. PNG figures are written beside
-report.html."""
+cases, and every other failure with its diagnosed cause. report.html stands alone (its figures
+are embedded in it, nothing beside it is needed to view it); the figures are also written as PNG
+files into RUN_DIR, where summary.md links them."""
 
 
 def add_parser(sub) -> None:
