@@ -129,9 +129,12 @@ def cmd_solve(args) -> int:
     options["verbose"] = bool(args.verbose and not args.json)
     if args.time_limit is not None:
         options["time_limit"] = args.time_limit
+    # Progress: the iterations once the run is long (Algorithm 1), a line if a peer is (it reports
+    # none); --verbose prints every iteration already.
     peer = args.method in PEER_METHODS
-    callback = None if say is None or options["verbose"] or peer else IterationProgress(say, after, t_start)
-    with recorded_warnings() as caught, announcing(say), _peer_notice(say if peer else None, args.method,
+    show = None if options["verbose"] else say
+    callback = None if show is None or peer else IterationProgress(show, after, t_start)
+    with recorded_warnings() as caught, announcing(say), _peer_notice(show if peer else None, args.method,
                                                                       after - (t0 - t_start)):
         result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, callback=callback,
                        **options)
@@ -212,13 +215,17 @@ class _peer_notice:
     def __enter__(self):
         import threading
 
-        if self.say is not None:
-            self.timer = threading.Timer(self.after, self.say, [
-                f"{self.method} is running (a peer solver: it reports no iterations here; --verbose shows "
-                "its own log)"])
+        if self.say is not None and self.after <= 0:
+            self.say(self._message())
+        elif self.say is not None:
+            self.timer = threading.Timer(self.after, lambda: self.say(self._message()))
             self.timer.daemon = True
             self.timer.start()
         return self
+
+    def _message(self) -> str:
+        return (f"{self.method} is running (a peer solver: it reports no iterations to rfverify; --verbose shows "
+                "its own log)")
 
     def __exit__(self, *exc):
         if self.timer is not None:
@@ -256,8 +263,9 @@ def _solve_digits(args, problem, options, say, after, t_start) -> int:
         print(dumps(summary, indent=2))
     else:
         tail = "" if out.wide is None else f"; multiple-precision ({out.wide.bits} bits) iterations: {out.wide.nit}"
-        print(f"double solve: {out.double.status} in {out.double.nit} iterations; extended "
-              f"(double-double) iterations: {out.extended.nit}{tail}")
+        chosen = "as requested" if args.method != "auto" else "by auto"
+        print(f"double solve ({out.double.method} {chosen}): {out.double.status} in {out.double.nit} iterations; "
+              f"extended (double-double) iterations: {out.extended.nit}{tail}")
         print(cert.verdict)
         print_quantities(cert)
         t = out.timings
