@@ -1,6 +1,6 @@
 """Issue 49, the first hour with rfverify: `solve` says which method ran and why, a long run
-shows its iterations on stderr (--quiet silences them), and a numba compilation is named by the
-kernel it compiles, on any run."""
+shows its iterations on stderr (--quiet silences them); a numba compilation is named by the kernel
+it compiles, on any run (tests/test_everyday.py)."""
 
 from __future__ import annotations
 
@@ -129,25 +129,3 @@ def test_iteration_lines_are_spaced_but_a_new_form_or_component_is_always_shown(
     late = []
     IterationProgress(late.append, after=3600.0)(_info(0))
     assert late == []
-
-
-# ----------------------------------------------------------------------------- compilation
-def test_a_compilation_is_named_by_its_kernel(monkeypatch):
-    """Any run that compiles says so, naming the kernel — not "the first run": a run after a
-    cold k-digit path compiles the float64 kernels that path left to its background child."""
-    import numba
-
-    from rfverify import compilation
-
-    monkeypatch.setitem(compilation._announce, "said", False)
-    lines = []
-
-    @numba.njit
-    def never_compiled_before(x):
-        return x * 3 - 1
-
-    with compilation.announcing(lines.append):
-        never_compiled_before(3)
-        never_compiled_before(4.5)  # a second compilation is not named again
-    assert lines == [compilation.COMPILING.format(kernel=f"{__name__}.{never_compiled_before.py_func.__qualname__}")]
-    assert "first run" not in lines[0]

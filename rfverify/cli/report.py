@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 
 from .argtypes import nonneg_int, positive_int
-from .common import exit_codes, EXIT_OK, dumps
+from .common import exit_codes, EXIT_OK, dumps, progress_printer
 
 HELP = "write RUN_DIR/report.html and RUN_DIR/summary.md from a bench run"
 
@@ -41,11 +41,13 @@ def add_parser(sub) -> None:
 
 
 def cmd_report(args) -> int:
+    from ..compilation import announcing
     from ..report import make_report
 
-    out = make_report(args.run_dir, diagnose_count=args.diagnose,
-                      diagnose_max_contacts=args.diagnose_max_contacts, diagnose_dps=args.dps,
-                      quiet=args.quiet)
+    with announcing(progress_printer(args)):  # its proofs and lockstep runs may compile kernels
+        out = make_report(args.run_dir, diagnose_count=args.diagnose,
+                          diagnose_max_contacts=args.diagnose_max_contacts, diagnose_dps=args.dps,
+                          quiet=args.quiet)
     if out["issues"]:
         first = out["issues"][0].split("; fix:")[0]
         print(f"rfverify report: warning: {args.run_dir}: {len(out['issues'])} record(s) or array "
