@@ -61,9 +61,10 @@ def add_parser(sub) -> None:
                      help="print status, iterations, time and final residuals as JSON")
     sol.add_argument("--quiet", action="store_true",
                      help="no progress lines on stderr (otherwise: a numba compilation as it starts; once a run "
-                          f"has taken {PROGRESS_AFTER:g} s ({PROGRESS_AFTER_ENV}=S sets another threshold), one "
-                          "line per iteration with the form, mu and the criterion; with --digits, one per stage "
-                          "and extended iteration too); --json also has none")
+                          f"has taken {PROGRESS_AFTER:g} s ({PROGRESS_AFTER_ENV}=S sets another threshold), its "
+                          "iterations, at most two lines a second, with the form, mu and the criterion (--verbose "
+                          "prints every one on stdout instead); with --digits, one line per stage and extended "
+                          "iteration too); --json also has none")
     sol.add_argument("--verbose", action="store_true",
                      help="print a settings header and each iteration as it happens (every independent "
                           "component, labelled); with --method clarabel, Clarabel's own log")
