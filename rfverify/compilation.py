@@ -34,7 +34,21 @@ from numba.core import event as _event
 _lock = threading.Lock()
 _state = {"total": 0.0, "depth": 0, "start": 0.0}
 _announce = {"say": None, "said": False}
-COMPILING = "compiling numba kernels (the first run on this machine: seconds, then cached for every later run)"
+COMPILING = ("compiling numba kernels missing from numba's cache (first: {kernel}); seconds, once: numba caches "
+             "what it compiles for later runs")
+"""The line :class:`announcing` says, ``{kernel}`` the kernel whose compilation started it.  Not
+"the first run": a kernel is compiled wherever the cache lacks it — a fresh machine, changed
+sources, a signature not compiled before, or the float64 kernels that a cold k-digit path left to
+its background child (:func:`float64_kernels_deferred`) when the path ended first."""
+
+
+def _kernel_name(event) -> str:
+    """``module.function`` of the kernel a ``numba:compile`` event is about."""
+    try:
+        func = event.data["dispatcher"].py_func
+        return f"{func.__module__}.{func.__qualname__}"
+    except Exception:  # numba's event data is not a public interface: say less rather than fail
+        return "a kernel"
 
 
 class _CompileClock(_event.Listener):
@@ -47,7 +61,7 @@ class _CompileClock(_event.Listener):
                     say, _announce["said"] = _announce["say"], True
             _state["depth"] += 1
         if say is not None:
-            say(COMPILING)
+            say(COMPILING.format(kernel=_kernel_name(event)))
 
     def on_end(self, event):
         with _lock:
@@ -60,9 +74,10 @@ _event.register("numba:compile", _CompileClock())
 
 
 class announcing:
-    """``with announcing(say):`` — the first numba compilation inside the block (a cold cache)
-    is named by one progress line, ``say(COMPILING)``, as it starts, instead of a silent pause
-    named only in the timings at the end.  Once per process."""
+    """``with announcing(say):`` — the first numba compilation inside the block (a kernel missing
+    from the cache) is named by one progress line, :data:`COMPILING` with that kernel, as it
+    starts, instead of a silent pause named only in the timings at the end.  Once per process;
+    ``say=None`` says nothing."""
 
     def __init__(self, say):
         self.say = say

@@ -446,11 +446,12 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
                     relative: bool = False, progress=None, factor_engine: str = "auto",
-                    as_stored: bool | None = None, time_limit: float | None = None, _face_depth: int = 0,
-                    _on_face=None, **options) -> DigitsSolution:
+                    as_stored: bool | None = None, time_limit: float | None = None, callback=None,
+                    _face_depth: int = 0, _on_face=None, **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; DESIGN §6.3 says what "digits" means when a quantity is zero).
-    ``progress(message)`` receives one line per stage.
+    ``progress(message)`` receives one line per stage; ``callback`` is the double solve's
+    (:func:`rfverify.solve`: once per iteration, True stops it).
 
     Example
     -------
@@ -507,7 +508,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         out = solve_to_digits(scaled, digits, method, tol, max_iter,
                               extended_max_iter=extended_max_iter, backend=backend, wide_tail=wide_tail,
                               wide_bits=wide_bits, wide_max_iter=wide_max_iter, relative=relative, progress=progress,
-                              factor_engine=factor_engine, time_limit=time_limit, **options)
+                              factor_engine=factor_engine, time_limit=time_limit, callback=callback, **options)
         return _unscaled_solution(out, scaled, scaling)
     threads()  # a bad RFVERIFY_THREADS is refused now, not after the double solve
     if factor_engine not in ENGINES:
@@ -532,7 +533,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     deadline = None if time_limit is None else t0 + time_limit
     limit = {} if time_limit is None else {"time_limit": time_limit}
     try:
-        double = solve(problem, method=method, tol=tol, max_iter=max_iter,
+        double = solve(problem, method=method, tol=tol, max_iter=max_iter, callback=callback,
                        **{**DOUBLE_SETTINGS, **cold, **limit, **options})
     except BaseException:
         prepared.cancel()

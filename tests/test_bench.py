@@ -3,9 +3,11 @@ summary counts that agree with an independent recheck of the saved solutions."""
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 import re
+from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +22,7 @@ from rfverify.random_problems import random_problem
 from rfverify.report import load_run, make_report
 from rfverify.report.aggregates import performance_profile, sgm
 from rfverify.report.data import RunData
+from rfverify.report.document import FEW_PROBLEMS
 
 
 @pytest.fixture(scope="module")
@@ -87,20 +90,52 @@ def test_summary_counts_agree_with_recheck_of_saved_solutions(run_dir):
         assert (int(solved), int(total)) == (recheck, len(recs)), (method, tol)
 
 
+class _Links(HTMLParser):
+    """Every attribute of report.html that makes a browser load or link something, and the
+    embedded images in order."""
+
+    def __init__(self):
+        super().__init__()
+        self.links, self.images = [], []
+
+    def handle_starttag(self, tag, attrs):
+        for name, value in attrs:
+            if name in ("src", "href", "srcset", "data", "poster", "action", "background") or (
+                    name == "style" and "url(" in (value or "")):
+                self.links.append((tag, name, value))
+            if tag == "img" and name == "src":
+                self.images.append(value)
+
+
+def _embedded_png(src: str) -> bytes:
+    head, data = src.split(",", 1)
+    assert head == "data:image/png;base64"
+    return base64.b64decode(data, validate=True)
+
+
 def test_report_files_and_figures(run_dir):
     path, _ = run_dir
     make_report(path, diagnose_count=1, diagnose_max_contacts=4)
     page = (path / "report.html").read_text()
-    images = re.findall(r'<img src="([^"]+)"', page)
+    parser = _Links()
+    parser.feed(page)
+    # Issue 49: report.html stands alone: nothing it loads or links is a local file.
+    local = [link for link in parser.links if not re.match(r"(data:|https?://)", link[2] or "")]
+    assert not local, local
+    assert "url(" not in page.split("<style>", 1)[1].split("</style>", 1)[0]
+    # Its figures are the PNG files written beside it (summary.md links those), embedded.
+    summary = (path / "summary.md").read_text()
+    linked = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", summary)
     assert {"profile_time.png", "profile_iterations.png", "work_precision.png", "proven_digits.png",
-            "hard_per_family.png"} <= set(images)
-    # The first screen has one figure: proven digits against time.
-    glance = page.split("id='glance'", 1)[1].split("<h2", 1)[0]
-    assert re.findall(r'<img src="([^"]+)"', glance) == ["proven_digits.png"]
-    for name in images:
+            "hard_per_family.png"} <= set(linked)
+    assert [_embedded_png(src) for src in parser.images] == [(path / name).read_bytes() for name in linked]
+    for name in linked:
         png = path / name
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
-    summary = (path / "summary.md").read_text()
+    # The first screen has one figure: proven digits against time.
+    glance = _Links()
+    glance.feed(page.split("id='glance'", 1)[1].split("<h2", 1)[0])
+    assert [_embedded_png(src) for src in glance.images] == [(path / "proven_digits.png").read_bytes()]
     for heading in ("At a glance", "Robustness: solved per collection", "Speed on common solved sets",
                     "Performance profiles", "How far double precision gets", "What 10 proven digits cost",
                     "Per-iteration diagnostics", "Failures and their diagnosed causes", "Refuted claims",
@@ -303,10 +338,14 @@ def test_glance_numbers_agree_with_the_tables_below(run_dir):
     header, rows = _table_with(speed.split("SGM iterations")[0], "method", "A1 common")
     cell = {(r[0], h): c for r in rows for h, c in zip(header[1:], r[1:])}
     a1_forms = [r[0] for r in rows if r[0] != "clarabel"]
-    lines = re.findall(r"tol (\S+): Algorithm 1 form (\w+), (\S+) s on the (\d+) problems every form solved"
-                       r"(?: \(([^)]*)\))?; overall (\w+), (\S+) s on the (\d+) problems every method solved", glance)
+    few = r"(, too few to rank by)?"
+    lines = re.findall(r"tol (\S+): Algorithm 1 form (\w+), (\S+) s on the (\d+) problems? every form solved" + few
+                       + r"(?: \(([^)]*)\))?; overall (\w+), (\S+) s on the (\d+) problems? every method solved" + few,
+                       glance)
     assert len(lines) == 2, glance
-    for tol, form, t_form, n_a1, others, best, t_best, n_all in lines:
+    for tol, form, t_form, n_a1, few_a1, others, best, t_best, n_all, few_all in lines:
+        # Issue 49: a ranking on fewer than FEW_PROBLEMS problems says they are too few.
+        assert bool(few_a1) == (int(n_a1) < FEW_PROBLEMS) and bool(few_all) == (int(n_all) < FEW_PROBLEMS)
         col_a1 = next(h for h in header if h.startswith(f"{tol} A1 common (n={n_a1})"))
         col_all = next(h for h in header if h.startswith(f"{tol} all common (n={n_all})"))
         times_a1 = {m: float(cell[(m, col_a1)]) for m in a1_forms}
@@ -317,10 +356,12 @@ def test_glance_numbers_agree_with_the_tables_below(run_dir):
         assert cell[(best, col_all)] == t_best and times_all[best] == min(times_all.values())
 
     # Most robust: the "all" rows of the robustness table.
-    robust = re.findall(r"tol (\S+): ([\w, ]+) \((\d+)/(\d+) verified\)(?:; (.*))?", glance)
+    robust = re.findall(r"tol (\S+): ([\w, ]+) \((\d+)/(\d+) verified\)(?:; (?!on the)((?:(?!; on the).)*))?"
+                        r"(; on the \d+ problems?, too few to rank by)?$", glance, re.M)
     assert len(robust) == 2
     rows = [r for r in _table_with(text, "collection", "solved", "refuted claims")[1] if r[0] == "all"]
-    for tol, best, top, total, rest in robust:
+    for tol, best, top, total, rest, few in robust:
+        assert bool(few) == (int(total) < FEW_PROBLEMS)
         solved = {r[1]: int(r[3].split("/")[0]) for r in rows if r[2] == tol}
         assert max(solved.values()) == int(top) and {r[3].split("/")[1] for r in rows if r[2] == tol} == {total}
         assert set(best.split(", ")) == {m for m, k in solved.items() if k == int(top)}

@@ -217,7 +217,9 @@ def test_a_compilation_is_named_as_it_starts(monkeypatch):
     with compilation.announcing(lines.append):
         fresh(3)
         fresh(4.5)  # a second compilation is not named again
-    assert lines == [compilation.COMPILING]
+    # Named by its kernel, not as "the first run" (issue 49: a later run can compile too).
+    assert lines == [compilation.COMPILING.format(kernel=f"{__name__}.{fresh.py_func.__qualname__}")]
+    assert "first run" not in lines[0]
 
 
 def test_fewer_digits_asked_for_are_explained(capsys):

@@ -149,3 +149,81 @@ def test_the_first_screen_answers_in_plain_words(tmp_path):
     assert "The 1 it did not: bundled/cube, its W is indefinite as stored" in first
     assert "certify the global problem it was made from instead" in first
     assert "Terms: v are the bodies' velocities" in first
+
+
+def _clustered_run() -> RunData:
+    """Five methods whose median (time, digits) per tolerance lie close together, as on the
+    committed example report, where the tolerance labels once overlapped."""
+    rng = np.random.default_rng(1)
+    keys = [f"p{i}" for i in range(12)]
+    problems = {k: {"key": k, "collection": "c", "n_contacts": 3, "n_dofs": 6, "sha256": ""} for k in keys}
+    data = RunData(Path("."), {"digits": 10}, problems)
+    for m, base in (("jqinv", 0.14), ("qp2", 0.15), ("reduced", 0.145), ("noscaling", 0.16), ("clarabel", 0.025)):
+        for tol, digits in ((1e-8, 6.0), (1e-9, 6.6), (1e-10, 7.0)):
+            for k in keys:
+                data.solves.append({"kind": "solve", "problem": k, "method": m, "tol": tol, "nit": 10,
+                                    "time": base * (1 + 0.02 * rng.standard_normal()), "solved": True,
+                                    "status": "Solved", "proven": {"answer": digits + 0.3 * rng.standard_normal()}})
+    data.build_index()
+    return data
+
+
+def _boxes(texts):
+    from matplotlib.text import Text
+
+    return [Text.get_window_extent(t) for t in texts]
+
+
+def _overlapping(boxes):
+    return [(i, j) for i in range(len(boxes)) for j in range(i) if boxes[i].overlaps(boxes[j])]
+
+
+def test_tolerance_labels_of_the_first_figure_do_not_overlap(tmp_path, monkeypatch):
+    """Issue 49: in proven_digits.png no two tolerance labels overlap, none leaves the axes, and
+    each still names a median of its own method (its colour) — on medians crowded together."""
+    from matplotlib.text import Annotation
+
+    from rfverify.report import figures
+
+    drawn = {}
+    save = figures._save
+
+    def keep(fig, path):  # the figure as it is saved (the boxes measured before savefig closes it)
+        fig.canvas.draw()
+        drawn["labels"] = [(t.get_text(), t.get_color()) for t in fig.axes[0].texts if isinstance(t, Annotation)]
+        drawn["boxes"] = _boxes(t for t in fig.axes[0].texts if isinstance(t, Annotation))
+        drawn["frame"] = fig.axes[0].get_window_extent().frozen()
+        save(fig, path)
+
+    monkeypatch.setattr(figures, "_save", keep)
+    assert figures.proven_digits_time(_clustered_run(), tmp_path) == tmp_path / "proven_digits.png"
+    colours = {m: figures._style(m)[0] for m in ("jqinv", "qp2", "reduced", "noscaling", "clarabel")}
+    assert sorted(drawn["labels"]) == sorted((t, c) for c in colours.values() for t in ("1e-08", "1e-09", "1e-10"))
+    boxes = drawn["boxes"]
+    assert not _overlapping(boxes)
+    assert all(drawn["frame"].contains(b.x0, b.y0) and drawn["frame"].contains(b.x1, b.y1) for b in boxes)
+
+
+def test_labels_apart_moves_what_a_fixed_offset_would_stack():
+    """The same labels at one fixed offset (the old drawing) overlap; placed apart they do not,
+    and none covers another labelled point."""
+    from rfverify.report.figures import _plt, labels_apart
+
+    plt = _plt()
+    items = [(0.15 + 0.001 * i, 6.0 + 0.05 * i, f"1e-{8 + i % 3:02d}", "C0") for i in range(9)]
+    fig, ax = plt.subplots(figsize=(4, 3))
+    ax.set_xlim(0.1, 0.2)
+    ax.set_ylim(0, 10)
+    fixed = [ax.annotate(t, (x, y), textcoords="offset points", xytext=(4, 3), fontsize=6) for x, y, t, _ in items]
+    fig.canvas.draw()
+    assert _overlapping(_boxes(fixed))
+    for t in fixed:
+        t.remove()
+    placed = labels_apart(ax, items)
+    fig.canvas.draw()
+    boxes = _boxes(placed)
+    assert not _overlapping(boxes)
+    points = [ax.transData.transform((x, y)) for x, y, _, _ in items]
+    for i, b in enumerate(boxes):
+        assert not any(b.contains(px, py) for j, (px, py) in enumerate(points) if j != i)
+    plt.close(fig)

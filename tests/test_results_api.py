@@ -3,6 +3,8 @@ and reprs fit in a few lines (no array dumps)."""
 
 from __future__ import annotations
 
+import pytest
+
 import rfverify
 from rfverify.solver.result import Status
 
@@ -103,3 +105,43 @@ def test_docs_results_table_matches_the_code():
     if runs:
         assert res.nit == max(r["nit"] for r in runs)
     assert objs["DigitsSolution"].digits == objs["DigitsSolution"].certificate.digits
+
+
+@pytest.fixture(scope="module")
+def four_results():
+    """One result of each kind, from the small bundled problems."""
+    p = rfverify.load("bundled:chute")
+    res = rfverify.solve(p)
+    return {"SolveResult": res, "DigitsSolution": rfverify.solve_to_digits(p, digits=6),
+            "Certificate": rfverify.certify(p, res, digits=6),
+            "Diagnosis": rfverify.diagnose(rfverify.load("bundled:sphere"), max_iter=3)}
+
+
+@pytest.mark.parametrize("kind", ["SolveResult", "DigitsSolution", "Certificate", "Diagnosis"])
+def test_every_result_is_a_mapping_like_optimize_result(four_results, kind):
+    """Issue 49: ``"status" in res``, ``dict(res)``, ``res.keys()``, ``items()``, ``values()``,
+    ``len`` and iteration work on every result, as on SciPy's OptimizeResult; the keys are its
+    fields and properties (the common ones first, the aliases last), never its methods; attribute
+    access is unchanged."""
+    import dataclasses
+    from collections.abc import Mapping
+
+    res = four_results[kind]
+    assert type(res).__name__ == kind and isinstance(res, Mapping)
+    keys = list(res.keys())
+    assert keys[:6] == ["status", "success", "message", "nit", "time", "timings"]
+    assert keys[-2:] == ["iterations", "solve_time"]
+    assert "status" in res and "nit" in res and "as_dict" not in res and "__class__" not in res
+    assert {f.name for f in dataclasses.fields(res)} <= set(keys)
+    assert len(keys) == len(set(keys)) == len(res) and list(res) == keys
+    d = dict(res)
+    assert list(d) == keys and d["status"] is res.status and d["nit"] == res.nit == res["iterations"]
+    assert [k for k, _ in res.items()] == keys and len(list(res.values())) == len(keys)
+    for k in ("status", "message", "timings"):
+        assert res[k] is getattr(res, k) or res[k] == getattr(res, k)
+    assert res.get("x") is None and res.get("status") is res.status
+    with pytest.raises(KeyError):
+        res["x"]  # noqa: B018  (SciPy's x: the unknowns are v, u, r here, docs/RESULTS.md)
+    with pytest.raises(KeyError):
+        res["as_dict"]  # noqa: B018  (a method, not a key)
+    assert res.status == d["status"] and res.as_dict()["status"] == str(res.status)

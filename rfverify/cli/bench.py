@@ -10,7 +10,7 @@ import sys
 from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
 from ..solver.result import METHODS
 from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
-from .common import DOCS_NOTE, exit_codes, EXIT_OK, add_equations_option, dumps
+from .common import DOCS_NOTE, exit_codes, EXIT_OK, add_equations_option, dumps, progress_printer
 
 NO_LIMIT = 10**9
 """--reference-max-contacts when not given: every problem gets the --digits path."""
@@ -98,15 +98,17 @@ def check_outputs(args) -> None:
 
 def cmd_bench(args) -> int:
     from ..bench import run_bench
+    from ..compilation import announcing
 
     command = "rfverify " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["bench"] else None
-    out = run_bench(args.inputs, args.out, methods=tuple(args.methods), tols=tuple(args.tol), jobs=args.jobs,
-                    time_limit=args.time_limit, trajectory_tol=args.trajectory_tol,
-                    trajectories=not args.no_trajectories, digits=args.digits,
-                    reference_max_contacts=NO_LIMIT if args.reference_max_contacts is None
-                    else args.reference_max_contacts, max_iter=args.max_iter,
-                    quiet=args.quiet, command=command, retry_failed=args.retry_failed,
-                    scheduler=args.scheduler, as_stored=args.as_stored)
+    with announcing(progress_printer(args)):  # a compilation here or in a forked local task is named
+        out = run_bench(args.inputs, args.out, methods=tuple(args.methods), tols=tuple(args.tol), jobs=args.jobs,
+                        time_limit=args.time_limit, trajectory_tol=args.trajectory_tol,
+                        trajectories=not args.no_trajectories, digits=args.digits,
+                        reference_max_contacts=NO_LIMIT if args.reference_max_contacts is None
+                        else args.reference_max_contacts, max_iter=args.max_iter,
+                        quiet=args.quiet, command=command, retry_failed=args.retry_failed,
+                        scheduler=args.scheduler, as_stored=args.as_stored)
     if args.json:
         out = dict(out, counts=[{"method": m, "tol": t, "solved": s, "total": n}
                                 for (m, t), (s, n) in out["counts"].items()])

@@ -4,8 +4,9 @@ strict JSON output, progress lines and recorded warnings."""
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 import contextlib
+import math
+from pathlib import Path
 import sys
 import warnings
 
@@ -113,6 +114,65 @@ def progress_printer(args):
         print(f"rfverify {args.command}: {message}", file=sys.stderr, flush=True)
 
     return say
+
+
+PROGRESS_AFTER_ENV = "RFVERIFY_PROGRESS_AFTER"
+"""Seconds of a run after which ``solve`` prints its iterations on stderr (default
+:data:`PROGRESS_AFTER`; 0: from the first iteration)."""
+
+PROGRESS_AFTER = 2.0
+PROGRESS_EVERY = 0.5
+"""At most one iteration line per this many seconds (a new form or component is always shown)."""
+
+
+def progress_after() -> float:
+    """The threshold of :data:`PROGRESS_AFTER_ENV` in seconds, refused with the fix when it is not
+    a number ≥ 0."""
+    import os
+
+    from ..errors import InvalidArgumentError
+
+    raw = os.environ.get(PROGRESS_AFTER_ENV, "").strip()
+    if not raw:
+        return PROGRESS_AFTER
+    try:
+        seconds = float(raw)
+    except ValueError:
+        seconds = math.nan
+    if not (seconds >= 0 and math.isfinite(seconds)):
+        raise InvalidArgumentError(PROGRESS_AFTER_ENV, f"must be a number of seconds ≥ 0, got {raw!r}",
+                                   fix=f"set {PROGRESS_AFTER_ENV}={PROGRESS_AFTER:g} (the default) or unset it")
+    return seconds
+
+
+class IterationProgress:
+    """A ``callback`` of :func:`rfverify.solve` that shows a long run as it goes: once ``after``
+    seconds have passed since ``start``, one line per iteration through ``say`` — the form, the
+    iteration, μ and the criterion (DESIGN §4.5) — at most one per :data:`PROGRESS_EVERY`
+    seconds except when the form (``auto`` moving on) or the component changes.  Never stops the
+    run."""
+
+    def __init__(self, say, after: float, start: float | None = None, every: float = PROGRESS_EVERY):
+        import time
+
+        self.say, self.after, self.every = say, after, every
+        self.start = time.perf_counter() if start is None else start
+        self.last, self.key = -math.inf, None
+
+    def __call__(self, info) -> bool:
+        import time
+
+        now = time.perf_counter()
+        if now - self.start < self.after:
+            return False
+        key = (info.method, info.component)
+        if key == self.key and now - self.last < self.every:
+            return False
+        self.key, self.last = key, now
+        where = f" (component {info.component + 1})" if info.component else ""
+        self.say(f"  {info.method or 'Algorithm 1'} iteration {info.iteration}{where}: μ = {info.mu:.2e}, "
+                 f"criterion = {info.criterion:.2e}, {now - self.start:.1f} s")
+        return False
 
 
 def print_quantities(cert) -> None:

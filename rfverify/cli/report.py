@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 
 from .argtypes import nonneg_int, positive_int
-from .common import exit_codes, EXIT_OK, dumps
+from .common import exit_codes, EXIT_OK, dumps, progress_printer
 
 HELP = "write RUN_DIR/report.html and RUN_DIR/summary.md from a bench run"
 
@@ -19,8 +19,9 @@ how fast, where double precision breaks and what the K-digit path costs. Below: 
 refuted solver claims (grouped, each once), speed on common solved sets, Dolan–Moré profiles,
 how far double precision gets, cond(Q_p) and λ2 per iteration for one hard problem per family,
 the proven digits of every method, lockstep diagnostics (double against reference) of the worst
-cases, and every other failure with its diagnosed cause. PNG figures are written beside
-report.html."""
+cases, and every other failure with its diagnosed cause. report.html stands alone (its figures
+are embedded in it, nothing beside it is needed to view it); the figures are also written as PNG
+files into RUN_DIR, where summary.md links them."""
 
 
 def add_parser(sub) -> None:
@@ -40,11 +41,13 @@ def add_parser(sub) -> None:
 
 
 def cmd_report(args) -> int:
+    from ..compilation import announcing
     from ..report import make_report
 
-    out = make_report(args.run_dir, diagnose_count=args.diagnose,
-                      diagnose_max_contacts=args.diagnose_max_contacts, diagnose_dps=args.dps,
-                      quiet=args.quiet)
+    with announcing(progress_printer(args)):  # its proofs and lockstep runs may compile kernels
+        out = make_report(args.run_dir, diagnose_count=args.diagnose,
+                          diagnose_max_contacts=args.diagnose_max_contacts, diagnose_dps=args.dps,
+                          quiet=args.quiet)
     if out["issues"]:
         first = out["issues"][0].split("; fix:")[0]
         print(f"rfverify report: warning: {args.run_dir}: {len(out['issues'])} record(s) or array "

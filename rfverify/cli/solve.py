@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS
+from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS, PEER_METHODS
 from .argtypes import digit_count, out_path, positive_float, positive_int, tolerance
-from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_equations_option,
-                     add_load_options, dumps, is_hdf5_input,
-                     load_problem, print_quantities, print_warnings, progress_printer,
-                     recorded_warnings, warning_summary)
+from .common import (DOCS_NOTE, PROGRESS_AFTER, PROGRESS_AFTER_ENV, exit_codes, EXIT_NOT_SOLVED, EXIT_OK,
+                     PROBLEM_HELP, IterationProgress, add_equations_option, add_load_options, dumps,
+                     is_hdf5_input, load_problem, print_quantities, print_warnings, progress_after,
+                     progress_printer, recorded_warnings, warning_summary)
 
 HELP = "solve a problem with Algorithm 1 (or the Clarabel peer)"
 
@@ -41,8 +41,8 @@ def add_parser(sub) -> None:
                           "is Solved, or, on a problem of at least "
                           f"{AUTO_SCHUR_MIN_CONTACTS} contacts whose factor costs at least "
                           f"{AUTO_SCHUR_MIN_FILL:g} per contact (rfverify.solver.body_fill), schur then "
-                          "jqinv then noscaling (the output names the form returned and "
-                          "what was tried); or clarabel, the same problem handed to Clarabel; or siconos, "
+                          "jqinv then noscaling (the 'method' line of the output names the form that ran, why "
+                          "auto took it first and what it tried before); or clarabel, the same problem handed to Clarabel; or siconos, "
                           "Siconos's GRFC3D_IPM, the paper's own solver, in a child process (needs a build: "
                           "bash benchmarks/peers/siconos/build.sh, then RFVERIFY_SICONOS=<its prefix>) "
                           "(default: %(default)s)")
@@ -60,7 +60,11 @@ def add_parser(sub) -> None:
     sol.add_argument("--json", action="store_true",
                      help="print status, iterations, time and final residuals as JSON")
     sol.add_argument("--quiet", action="store_true",
-                     help="no progress lines on stderr (--digits prints one per stage otherwise)")
+                     help="no progress lines on stderr (otherwise: a numba compilation as it starts; once a run "
+                          f"has taken {PROGRESS_AFTER:g} s ({PROGRESS_AFTER_ENV}=S sets another threshold), its "
+                          "iterations, at most two lines a second, with the form, mu and the criterion (--verbose "
+                          "prints every one on stdout instead); with --digits, one line per stage and extended "
+                          "iteration too); --json also has none")
     sol.add_argument("--verbose", action="store_true",
                      help="print a settings header and each iteration as it happens (every independent "
                           "component, labelled); with --method clarabel, Clarabel's own log")
@@ -104,8 +108,11 @@ def check_outputs(args) -> None:
 def cmd_solve(args) -> int:
     import time
 
+    from ..compilation import announcing
     from ..solver import solve
 
+    t_start = time.perf_counter()
+    after = progress_after()  # a bad RFVERIFY_PROGRESS_AFTER is refused before any work
     problem = load_problem(args)
     options = {}
     if args.no_presolve:
@@ -115,15 +122,23 @@ def cmd_solve(args) -> int:
 
             raise InvalidProblemError("mu", "has zero coefficients, which the unreduced lifting "
                                             "would divide by", fix="drop --no-presolve")
+    say = progress_printer(args)
     if args.digits is not None:
-        return _solve_digits(args, problem, options)
+        return _solve_digits(args, problem, options, say, after, t_start)
     t0 = time.perf_counter()
     # --verbose: the solver prints its header and each iteration as it happens (Clarabel its own log).
     options["verbose"] = bool(args.verbose and not args.json)
     if args.time_limit is not None:
         options["time_limit"] = args.time_limit
-    with recorded_warnings() as caught:
-        result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, **options)
+    # Progress: the iterations once the run is long (Algorithm 1), a line if a peer is (it reports
+    # none); --verbose prints every iteration already.
+    peer = args.method in PEER_METHODS
+    show = None if options["verbose"] else say
+    callback = None if show is None or peer else IterationProgress(show, after, t_start)
+    with recorded_warnings() as caught, announcing(say), _peer_notice(show if peer else None, args.method,
+                                                                      after - (t0 - t_start)):
+        result = solve(problem, method=args.method, tol=args.tol, max_iter=args.max_iter, callback=callback,
+                       **options)
     wall = time.perf_counter() - t0
     if args.out:
         _write_solution_file(args, problem, result.v, result.u, result.r)
@@ -152,14 +167,17 @@ def cmd_solve(args) -> int:
             print(f"  solver: {result.message[:-len(hint) - 2]}")
         else:
             print(f"status {result.status}: {result.message}")
+        print(method_line(result, args.method))
         if problem.statement != "the convex relaxation":
             print(f"problem: {problem.statement}{_stored_hint(problem)}")
         m = result.measures
         if m is not None:
             print(f"criterion {m.max:.2e} (dynamics {m.dynamics:.1e}, velocity {m.velocity:.1e}, cone "
                   f"{m.cone:.1e}, complementarity {m.complementarity:.1e}; rfverify.measures)")
-        print(f"iterations {result.nit}, time {wall:.3f} s; the paper's measures: pinfeas {result.pinfeas:.2e}, "
-              f"dinfeas {result.dinfeas:.2e}, mu {result.mu:.2e}")
+        compiled = result.timings.get("compile", 0.0)
+        compiled = f" (compiling kernels {compiled:.2f} s)" if compiled >= 0.005 else ""
+        print(f"iterations {result.nit}, time {wall:.3f} s{compiled}; the paper's measures: pinfeas "
+              f"{result.pinfeas:.2e}, dinfeas {result.dinfeas:.2e}, mu {result.mu:.2e}")
         if args.out:
             print(f"solution written to {args.out}")
         print_warnings(summary["numerical_warnings"], "during the solve (the status above is "
@@ -167,6 +185,53 @@ def cmd_solve(args) -> int:
     if result.extras.get("interrupted"):
         return _interrupted("the best iterate so far is reported above" + (f" and written to {args.out}" if args.out else ""))
     return EXIT_OK if result.success else EXIT_NOT_SOLVED
+
+
+def method_line(result, requested: str) -> str:
+    """The text output's account of what ran: the form (or peer) that returned the answer and,
+    under ``auto``, why that form came first and what ran before it."""
+    if requested != "auto":
+        return f"method {result.method} (as requested)"
+    auto = result.extras.get("auto")
+    if auto is None:  # nothing iterated (f = 0 and w = 0)
+        return f"method {result.method} (auto: no iteration needed)"
+    forms, attempts = auto["forms"], result.extras.get("attempts") or []
+    head = f"method {result.method} (auto: {forms[0]} first, as {auto['why']}"
+    if len(attempts) <= 1:
+        rest = forms[1:]
+        return head + (f"; next {', then '.join(rest)}, had it stalled)" if rest else ")")
+    tried = ", then ".join(f"{a['method']} {a['status']} at criterion {a['criterion']:.1e} after {a['nit']} "
+                           f"iterations ({a['seconds']:.2f} s)" for a in attempts)
+    chosen = "" if result.success else f"; {result.method}'s answer has the smallest criterion"
+    return f"{head}; {tried}{chosen})"
+
+
+class _peer_notice:
+    """While a peer solver runs (it reports no iterations to rfverify): one line through ``say``
+    if it is still running ``after`` seconds from now."""
+
+    def __init__(self, say, method: str, after: float):
+        self.say, self.method, self.after, self.timer = say, method, max(after, 0.0), None
+
+    def __enter__(self):
+        import threading
+
+        if self.say is not None and self.after <= 0:
+            self.say(self._message())
+        elif self.say is not None:
+            self.timer = threading.Timer(self.after, lambda: self.say(self._message()))
+            self.timer.daemon = True
+            self.timer.start()
+        return self
+
+    def _message(self) -> str:
+        return (f"{self.method} is running (a peer solver: it reports no iterations to rfverify; --verbose shows "
+                "its own log)")
+
+    def __exit__(self, *exc):
+        if self.timer is not None:
+            self.timer.cancel()
+        return False
 
 
 def _stored_hint(problem) -> str:
@@ -177,18 +242,18 @@ def _stored_hint(problem) -> str:
     return " (M as stored is unsymmetric and its equations have another solution: --as-stored solves them)"
 
 
-def _solve_digits(args, problem, options) -> int:
+def _solve_digits(args, problem, options, say, after, t_start) -> int:
     import time
 
     from ..compilation import announcing
     from ..digits import solve_to_digits
 
-    say = progress_printer(args)
     t0 = time.perf_counter()
+    callback = None if say is None or args.method in PEER_METHODS else IterationProgress(say, after, t_start)
     with announcing(say):  # a cold cache's compilation is named as it starts
         out = solve_to_digits(problem, digits=args.digits, method=args.method, tol=args.tol,
                               max_iter=args.max_iter, relative=args.relative, progress=say,
-                              time_limit=args.time_limit, **options)
+                              time_limit=args.time_limit, callback=callback, **options)
     wall = time.perf_counter() - t0
     cert = out.certificate
     if args.out:
@@ -202,8 +267,9 @@ def _solve_digits(args, problem, options) -> int:
         face = cert.extra.get("face")
         if face:  # a self-stress: the problem was solved again on its face (DESIGN §6.8)
             tail += f"; on the face of {len(face['self_stresses'])} self-stress(es): {face.get('reduction', '')}"
-        print(f"double solve: {out.double.status} in {out.double.nit} iterations; extended "
-              f"(double-double) iterations: {out.extended.nit}{tail}")
+        chosen = "as requested" if args.method != "auto" else "by auto"
+        print(f"double solve ({out.double.method} {chosen}): {out.double.status} in {out.double.nit} iterations; "
+              f"extended (double-double) iterations: {out.extended.nit}{tail}")
         print(cert.verdict)
         print_quantities(cert)
         repaired = getattr(cert.proof, "face", None) if cert.proof is not None else None

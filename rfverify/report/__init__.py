@@ -1,5 +1,6 @@
-"""``rfverify report RUN_DIR``: ``report.html`` (self-contained page, PNG figures beside it) and
-``summary.md`` from a bench run directory (:mod:`rfverify.bench`).
+"""``rfverify report RUN_DIR``: ``report.html`` (a self-contained page: its figures are embedded
+in it) and ``summary.md`` (whose figures are the PNG files written beside it) from a bench run
+directory (:mod:`rfverify.bench`).
 
 The first screen ("At a glance") has one figure — the proven digits of every answer of every
 method against its time (:mod:`rfverify.report.proven`: the bound of DESIGN §6 at each problem's

@@ -334,7 +334,8 @@ def refuted_groups(data: RunData) -> list[dict]:
 
 # ----------------------------------------------------------------------- proven digits of every run
 def proven_by_method(data: RunData) -> list[dict]:
-    """Per method (the k-digit path as "k-digit path" last): answers with proven digits, how many
+    """Per method (the k-digit path as "k-digit path" last): its answers (``runs``) and the
+    ``problems`` they are of, the answers with proven digits, how many
     reach the bench's k digits, the median proven digits and the median time of those that do
     (:mod:`rfverify.report.proven`; an answer's digits = the smallest relative digits of v, u, Hr)."""
     k = int(data.manifest.get("digits") or 10)
@@ -343,14 +344,16 @@ def proven_by_method(data: RunData) -> list[dict]:
         recs = [r for r in data.solves if r["method"] == m and not r.get("_placeholder")]
         proven = [r for r in recs if (r.get("proven") or {}).get("answer") is not None]
         reach = [r for r in proven if r["proven"]["answer"] >= k - 1e-9]
-        rows.append({"method": m, "runs": len(recs), "n_proven": len(proven), "reach": len(reach),
+        rows.append({"method": m, "runs": len(recs), "problems": len({r["problem"] for r in recs}),
+                     "n_proven": len(proven), "reach": len(reach),
                      "median_digits": median([r["proven"]["answer"] for r in proven]),
                      "best_digits": max((r["proven"]["answer"] for r in proven), default=None),
                      "median_time_reach": median([r["time"] for r in reach])})
     paths = [d for d in data.digits.values() if d.get("status") not in ("Timeout", "Crashed", "Error")]
     cert = [d for d in paths if d.get("certified")]
     if data.digits:
-        rows.append({"method": f"{k}-digit path", "runs": len(data.digits), "n_proven": len(paths),
+        rows.append({"method": f"{k}-digit path", "runs": len(data.digits), "problems": len(data.digits),
+                     "n_proven": len(paths),
                      "reach": len(cert), "median_digits": median([path_answer_digits(d) for d in paths]),
                      "best_digits": max((x for x in (path_answer_digits(d) for d in paths) if x is not None),
                                         default=None),

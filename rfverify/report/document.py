@@ -4,6 +4,7 @@ Markdown (``summary.md``) and as HTML (``report.html``, with :data:`CSS`)."""
 
 from __future__ import annotations
 
+import base64
 import html
 import math
 import warnings
@@ -33,6 +34,33 @@ def dig(x):
 def sec(x):
     """Seconds, the same text in the glance and in the tables (three significant digits)."""
     return fmt(x, ".3g")
+
+
+FEW_PROBLEMS = 5
+"""A ranking ("fastest", "most robust", "the best method") that rests on fewer problems than this
+says it is too few to rank by."""
+
+
+def counted(n: int, noun: str) -> str:
+    """``n`` and ``noun`` in the number it takes: "1 problem", "21 problems"."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def problems(n: int) -> str:
+    """``n`` problem(s), in words: "1 problem", "21 problems"."""
+    return counted(n, "problem")
+
+
+def resting_on(n: int, which: str = "") -> str:
+    """What a ranking rests on: "on the 21 problems every form solved" (``which`` = "every form
+    solved"), with ", too few to rank by" when ``n`` < :data:`FEW_PROBLEMS`."""
+    text = f"on the {problems(n)}{f' {which}' if which else ''}"
+    return text + (", too few to rank by" if too_few(n) else "")
+
+
+def too_few(n: int) -> bool:
+    """Whether a ranking on ``n`` problems must say it is too few to rank by."""
+    return n < FEW_PROBLEMS
 
 
 def _cell(c) -> str:
@@ -97,16 +125,20 @@ class Doc:
         return "\n".join(self.md) + "\n"
 
     def page(self, stamp: str) -> str:
-        """``report.html``: the self-contained page, ``stamp`` (when it was generated) at its foot."""
+        """``report.html``: the self-contained page (its figures embedded, it needs no other file),
+        ``stamp`` (when it was generated) at its foot."""
         return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>rfverify report</title>"
                 f"<style>{CSS}</style></head><body>{''.join(self.html)}"
                 f"<p style='color:#888;font-size:0.8em'>generated {stamp}</p></body></html>")
 
     def image(self, path: Path | None, alt: str):
+        """A figure: Markdown links the PNG file beside it; the HTML page carries the PNG itself
+        (a base64 ``data:`` URI), so that report.html stands alone when mailed or moved."""
         if path is None:
             return
         self.md.append(f"![{alt}]({path.name})\n")
-        self.html.append(f'<figure><img src="{html.escape(path.name)}" alt="{html.escape(alt)}">'
+        data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+        self.html.append(f'<figure><img src="data:image/png;base64,{data}" alt="{html.escape(alt)}">'
                          f"<figcaption>{html.escape(alt)}</figcaption></figure>")
 
 

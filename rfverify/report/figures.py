@@ -66,6 +66,63 @@ def _save(fig, path: Path) -> None:
     write_bytes_atomic(path, buf.getvalue())
 
 
+# Where a label may go around its point, in points (dx, dy, horizontal alignment): beside it
+# first, then ever further out, joined to the point by a thin line.
+_LABEL_SPOTS = [(5, 3, "left"), (5, -9, "left"), (-5, 3, "right"), (-5, -9, "right"), (0, 7, "center"),
+                (0, -14, "center")] + [(dx * r, dy * r, h) for r in (1, 2, 3, 4, 5, 6)
+                                       for dx, dy, h in ((14, 10, "left"), (14, -16, "left"), (-14, 10, "right"),
+                                                         (-14, -16, "right"), (0, 14, "center"), (0, -20, "center"),
+                                                         (22, -3, "left"), (-22, -3, "right"))]
+
+
+def labels_apart(ax, items, fontsize: float = 6) -> list:
+    """Annotate ``items`` — (x, y, text, colour) in data coordinates — so that no two labels
+    overlap and none covers another labelled point: each goes to the first of
+    :data:`_LABEL_SPOTS` that is free (inside the axes), the far ones with a thin line to their
+    point; where none is free, the least covered.  Call it after the layout is final.  Returns the
+    annotations."""
+    from matplotlib.text import Text
+
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    pad = 1.5 * fig.dpi / 72  # points to pixels
+    points = []  # the labelled points, each a small box a label of another point must not cover
+    for x, y, _, _ in items:
+        px, py = ax.transData.transform((x, y))
+        points.append((px - 4 * pad, py - 4 * pad, px + 4 * pad, py + 4 * pad))
+    boxes, placed = [], []
+    for k, (x, y, text, color) in enumerate(items):
+        obstacles = points[:k] + points[k + 1:] + boxes
+        best = None
+        for dx, dy, align in _LABEL_SPOTS:
+            far = abs(dx) > 6 or dy > 7 or dy < -14
+            ann = ax.annotate(text, (x, y), textcoords="offset points", xytext=(dx, dy), fontsize=fontsize,
+                              color=color, ha=align, annotation_clip=False,
+                              arrowprops=dict(arrowstyle="-", color=color, lw=0.5, alpha=0.7) if far else None)
+            ann.get_window_extent(renderer)  # places the text (and its line)
+            ext = Text.get_window_extent(ann)  # the text alone
+            box = (ext.x0 - pad, ext.y0 - pad, ext.x1 + pad, ext.y1 + pad)
+            outside = ext.x0 < frame.x0 or ext.x1 > frame.x1 or ext.y0 < frame.y0 or ext.y1 > frame.y1
+            score = (outside, sum(_overlap(box, o) for o in obstacles))
+            if best is None or score < best[0]:
+                if best is not None:
+                    best[1].remove()
+                best = (score, ann, box)
+            else:
+                ann.remove()
+            if score == (False, 0.0):
+                break
+        boxes.append(best[2])
+        placed.append(best[1])
+    return placed
+
+
+def _overlap(a, b) -> float:
+    """Area shared by two boxes (x0, y0, x1, y1)."""
+    return max(0.0, min(a[2], b[2]) - max(a[0], b[0])) * max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+
+
 def _style(method):
     return _STYLE.get(method, ("gray", "."))
 
@@ -326,6 +383,7 @@ def proven_digits_time(data: RunData, out: Path) -> Path | None:
         return None
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8.4, 4.9))
+    labels = []
     for m in [m for m in _STYLE if m in pts]:
         color, marker = _style(m)
         xs, ys, tols = zip(*pts[m])
@@ -336,9 +394,8 @@ def proven_digits_time(data: RunData, out: Path) -> Path | None:
             med.append((float(np.median([x for x, _ in at])), float(np.median([y for _, y in at]))))
         ax.plot([max(x, 1e-4) for x, _ in med], [y for _, y in med], color=color, marker=marker, ms=7, lw=1.6,
                 label=f"{m} ({len(xs)} answers; line: medians per tolerance)")
-        for (x, y), tol in zip(med, sorted(set(tols), reverse=True)):  # which median is which tolerance
-            ax.annotate(f"{tol:g}", (max(x, 1e-4), y), textcoords="offset points", xytext=(4, 3), fontsize=6,
-                        color=color)
+        labels += [(max(x, 1e-4), y, f"{tol:g}", color)  # which median is which tolerance
+                   for (x, y), tol in zip(med, sorted(set(tols), reverse=True))]
     if path_pts:
         xs, ys = zip(*path_pts)
         ax.scatter(xs, ys, color="black", marker="*", s=70, label=f"{k}-digit path ({len(xs)} problems)", zorder=5)
@@ -353,6 +410,7 @@ def proven_digits_time(data: RunData, out: Path) -> Path | None:
                  "each problem's proven point)", fontsize=9)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=8, frameon=False)
     fig.tight_layout()
+    labels_apart(ax, labels)  # after the layout: the placement is in the final display coordinates
     path = out / "proven_digits.png"
     _save(fig, path)
     return path

@@ -15,7 +15,7 @@ from . import figures
 from .aggregates import (algorithm1_methods, digits_cost, double_breaks, double_limit_summary, proven_by_method,
                          refuted_groups, refuted_runs)
 from .data import RunData
-from .document import Doc, add_figure, dig, fmt, sec
+from .document import Doc, add_figure, counted, dig, fmt, problems, resting_on, sec, too_few
 
 
 def glance_section(doc: Doc, data: RunData, out: Path, proven: dict, table, diags) -> None:
@@ -51,7 +51,9 @@ def in_words(data: RunData, proven: dict) -> list:
     if doubles:
         best = max(doubles, key=lambda r: r["reach"])
         out.append(f"Double precision alone rarely gets there provably: the best method, {best['method']}, gives {k} "
-                   f"proven digits on {best['reach']} of {best['runs']} answers (a run pushed to 1e-14 may pass through "
+                   f"proven digits on {best['reach']} of {best['runs']} answers ({problems(best['problems'])}"
+                   + (", too few to rank by" if too_few(best["problems"]) else "") + "; a run pushed to 1e-14 may "
+                   "pass through "
                    "an iterate with more correct digits, table 'How far double precision gets', but nothing tells "
                    "which iterate without a proof).")
     br = double_breaks(data)
@@ -63,7 +65,7 @@ def in_words(data: RunData, proven: dict) -> list:
                    "relative error that many times larger in the answer; the extended precision of the path "
                    "removes exactly that.")
         out.append(f"Where it stops: the best double answer of a problem is proven to a median of "
-                   f"{dig(br['median_best'])} digits.{why}")
+                   f"{dig(br['median_best'])} digits (over {problems(br['n'])}).{why}")
     out.append("Terms: v are the bodies' velocities, u the contact velocities, r the contact reactions and Hr "
                "the forces they put on the bodies (a proven digit is a correct significant digit, proven by a "
                "rigorous error bound); jqinv, qp2, reduced and noscaling are Algorithm 1 with different linear "
@@ -112,8 +114,10 @@ def _answers(data: RunData, proven: dict) -> list:
                                        "table 'Proven digits of every answer')"))
     fast = [r for r in rows if r["median_time_reach"] is not None]
     if fast:
-        items.append(("How fast:", "; ".join(f"{r['method']} {sec(r['median_time_reach'])} s" for r in fast)
-                      + f" (median wall time of the runs that reached {k} proven digits)"))
+        items.append(("How fast:", "; ".join(
+            f"{r['method']} {sec(r['median_time_reach'])} s "
+            f"({counted(r['reach'], 'problem' if r['method'].endswith('path') else 'run')})" for r in fast)
+                      + f" (median wall time of the runs that reached {k} proven digits, and how many did)"))
     br = double_breaks(data)
     if br["n"]:
         text = (f"the best double answer of each problem (any method, any tolerance) is proven to a median of "
@@ -147,16 +151,17 @@ def _glance(data: RunData, table, diags) -> list:
         if timed_a1:
             best = min(timed_a1, key=lambda r: r["sgm_time_a1"])
             others = ", ".join(f"{r['method']} {sec(r['sgm_time_a1'])} s" for r in timed_a1 if r is not best)
-            parts.append(f"Algorithm 1 form {best['method']}, {sec(best['sgm_time_a1'])} s on the "
-                         f"{best['n_common_a1']} problems every form solved" + (f" ({others})" if others else ""))
+            parts.append(f"Algorithm 1 form {best['method']}, {sec(best['sgm_time_a1'])} s "
+                         f"{resting_on(best['n_common_a1'], 'every form solved')}"
+                         + (f" ({others})" if others else ""))
         elif a1:
             parts.append("no problem was solved by every Algorithm 1 form")
         if set(data.methods) != set(a1):
             timed = [r for r in at.values() if not math.isnan(r["sgm_time_all"])]
             if timed:
                 best = min(timed, key=lambda r: r["sgm_time_all"])
-                text = (f"overall {best['method']}, {sec(best['sgm_time_all'])} s on the "
-                        f"{best['n_common_all']} problems every method solved")
+                text = (f"overall {best['method']}, {sec(best['sgm_time_all'])} s "
+                        f"{resting_on(best['n_common_all'], 'every method solved')}")
                 a1_there = [r for r in timed if r["method"] in a1]
                 if best["method"] not in a1 and a1_there:
                     b1 = min(a1_there, key=lambda r: r["sgm_time_all"])
@@ -176,7 +181,8 @@ def _glance(data: RunData, table, diags) -> list:
         best = [r["method"] for r in at if r["solved"] == top]
         rest = ", ".join(f"{r['method']} {r['solved']}" for r in at if r["solved"] != top)
         robust.append(f"tol {tol:g}: {_names(best)} ({top}/{at[0]['total']} verified)"
-                      + (f"; {rest}" if rest else ""))
+                      + (f"; {rest}" if rest else "") + (f"; {resting_on(at[0]['total'])}"
+                                                         if too_few(at[0]["total"]) else ""))
     items.append(("Most robust", "(verified solved runs per tolerance; table 'Robustness'):", robust))
 
     lim = double_limit_summary(data)

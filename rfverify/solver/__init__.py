@@ -381,7 +381,8 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
     a message naming what was tried."""
     t0 = time.perf_counter()
     attempts, results = [], []
-    for form in auto_sequence(problem.n_contacts, fill=lambda: body_fill(problem)):
+    forms, why = _auto_choice(problem)
+    for form in forms:
         opts = dict(options)
         if settings.time_limit is not None:
             left = settings.time_limit - (time.perf_counter() - t0)
@@ -400,8 +401,24 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
         tried = "; ".join(f"{a['method']}: {a['status']} (criterion {a['criterion']:.2e})" for a in attempts)
         best.message = f"auto returned {best.method} [{tried}]: {best.message}"
     best.extras["attempts"] = attempts
+    best.extras["auto"] = {"forms": list(forms), "why": why}
     best.timings["total"] = time.perf_counter() - t0
     return best
+
+
+def _auto_choice(problem: Problem) -> tuple[tuple, str]:
+    """(the forms ``auto`` tries on ``problem``, in order — :func:`auto_sequence`'s choice — and
+    why, in words: the contact count and, on a large problem, the factor's fill per contact
+    against the thresholds of :mod:`rfverify.solver.result`)."""
+    n = problem.n_contacts
+    contacts = f"{n} contact{'' if n == 1 else 's'}"
+    if n < AUTO_SCHUR_MIN_CONTACTS:
+        return auto_sequence(n), f"{contacts} < {AUTO_SCHUR_MIN_CONTACTS}"
+    fill = body_fill(problem)
+    forms = auto_sequence(n, fill)
+    relation = "≥" if forms == AUTO_SEQUENCE_LARGE else "<"
+    return forms, (f"{contacts} ≥ {AUTO_SCHUR_MIN_CONTACTS} with a factor fill of {fill:.0f} per contact "
+                   f"{relation} {AUTO_SCHUR_MIN_FILL:g}")
 
 
 def _combined_status(runs, n_groups):

@@ -104,12 +104,12 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
         v, r_t, z = _least_squares_start(system, cones, space.f, space.w, space.JT, v, r_t, z, jd, work)
 
     policy = _DoublePolicy(settings, Termination(settings, callback, t0), judge, cones, extended,
-                           keep_iterates, component, printer, describe_cone)
+                           keep_iterates, component, printer, describe_cone, form)
     out = iterate(precision, policy, (v, r_t, z), n_contacts=n_contacts, n_cones=cones.n_cones, clock_origin=t0)
     # An iterate whose judging raised never became a trace row (the loop stopped there).
     records = [rec for rec in out.records if "criterion" in rec]
     if records and "sigma" not in records[-1] and printer is not None:
-        printer(_info(_with_defaults(records[-1]), component))  # the last iterate, stepped or not
+        printer(_info(_with_defaults(records[-1]), component, form))  # the last iterate, stepped or not
     trace = {key: np.asarray([_with_defaults(rec)[key] for rec in records]) for key in TRACE_FIELDS}
     status, message, bundle = policy.term.final(out.verdict, policy.current)
     if bundle is None:
@@ -248,8 +248,9 @@ class _DoublePolicy:
     paper's γ = 0.9 + 0.09α, the λ₂ check of every iterate, and the trace columns."""
 
     def __init__(self, settings: Settings, term: Termination, judge, cones: ProductCone, extended: bool,
-                 keep_iterates: bool, component: int, printer, describe_cone):
+                 keep_iterates: bool, component: int, printer, describe_cone, form: str = ""):
         self.settings, self.term, self.judge, self.cones = settings, term, judge, cones
+        self.form = form
         self.describe_cone = describe_cone
         self.extended = extended
         self.extended_from = 0 if extended else None
@@ -299,7 +300,7 @@ class _DoublePolicy:
         self.double_short = not self.extended and not (_adequate(predictor.info, self.settings.tol, self.term_scales)
                                                        and _adequate(corrector.info, self.settings.tol,
                                                                      self.term_scales))
-        info = _info(_with_defaults(record), self.component)
+        info = _info(_with_defaults(record), self.component, self.form)
         if self.printer is not None:
             self.printer(info)
         verdict = self.term.ask_callback(info)
@@ -427,8 +428,9 @@ def _adequate(info, tol, term_scales) -> bool:
                for e, rn, sc in zip(info.block_residuals, info.rhs_norms, term_scales))
 
 
-def _info(record, component) -> IterationInfo:
-    return IterationInfo(component=component, iteration=int(record["iter"]), criterion=float(record["criterion"]),
+def _info(record, component, form: str = "") -> IterationInfo:
+    return IterationInfo(component=component, method=form, iteration=int(record["iter"]),
+                         criterion=float(record["criterion"]),
                          pinfeas=float(record["pinfeas"]), dinfeas=float(record["dinfeas"]), mu=float(record["mu"]),
                          sigma=float(record["sigma"]), alpha_aff=float(record["alpha_aff"]),
                          alpha=float(record["alpha"]), min_lam2_z=float(record["min_lam2_z"]),

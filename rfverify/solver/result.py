@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import enum
 import sys
-from dataclasses import asdict, dataclass, field, fields
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
 
 import numpy as np
 
@@ -269,8 +270,9 @@ class IterationInfo:
     ``component`` (index of the independent component, 0 when solved as one), ``iteration``,
     rfverify's ``criterion`` and the paper's ``pinfeas``, ``dinfeas``, ``mu``, the centring
     ``sigma``, step lengths ``alpha_aff``, ``alpha``, ``min_lam2_z``/``min_lam2_s`` (smallest
-    λ2 of z and Jᵀr̃), ``max_cond_Qp``, the linear ``solve_residual`` (backward error) and
-    ``elapsed`` seconds since the solve started."""
+    λ2 of z and Jᵀr̃), ``max_cond_Qp``, the linear ``solve_residual`` (backward error),
+    ``elapsed`` seconds since the solve started, and the ``method`` (linear-system form) of the
+    run it belongs to — under ``method="auto"``, the form running now."""
 
     component: int
     iteration: int
@@ -286,27 +288,58 @@ class IterationInfo:
     max_cond_Qp: float
     solve_residual: float
     elapsed: float
+    method: str = ""
 
 
 
-class ResultAliases:
+class ResultAliases(Mapping):
     """What every result (:class:`SolveResult`, :class:`rfverify.DigitsSolution`,
     :class:`rfverify.Certificate`, :class:`rfverify.diagnosis.Diagnosis`) offers the same way
     (docs/RESULTS.md): ``time`` is ``timings["total"]`` in seconds, ``iterations`` (Clarabel's
-    name) is ``nit``, ``solve_time`` (Clarabel's) is ``time``; ``result["name"]`` is
-    ``result.name`` (SciPy's ``OptimizeResult`` is a dict); ``as_dict()`` is the JSON-able dict
-    the CLI prints with ``--json``."""
+    name) is ``nit``, ``solve_time`` (Clarabel's) is ``time``; ``as_dict()`` is the JSON-able dict
+    the CLI prints with ``--json``.
+
+    Every result is also a read-only mapping, as SciPy's ``OptimizeResult`` (a dict) is: its keys
+    are the names of its data — its dataclass fields and its public properties, the common ones
+    first (``status``, ``success``, ``message``, ``nit``, ``time``, ``timings``) and the aliases
+    (``iterations``, ``solve_time``) last — so ``"status" in res``, ``res["status"]``,
+    ``res.keys()``, ``res.items()``, ``dict(res)``, ``len(res)`` and ``for name in res`` work, and
+    ``res[name]`` is ``getattr(res, name)``, evaluated when asked.  Methods (``as_dict``, ...) are
+    not keys; attribute access stays."""
+
+    def __getitem__(self, key):  # OptimizeResult-style access, the same on every result
+        if key not in self._result_keys():
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def __iter__(self):
+        return iter(self._result_keys())
+
+    def __len__(self) -> int:
+        return len(self._result_keys())
+
+    def __contains__(self, key) -> bool:  # without evaluating the property, unlike Mapping's
+        return key in self._result_keys()
+
+    @classmethod
+    def _result_keys(cls) -> tuple:
+        """The keys of this result class, computed once per class (see the class docstring)."""
+        keys = cls.__dict__.get("_keys_of_class")
+        if keys is None:
+            names = [f.name for f in fields(cls)] if is_dataclass(cls) else []
+            for klass in cls.__mro__:
+                names += [n for n, v in vars(klass).items() if isinstance(v, property)]
+            names = [n for n in dict.fromkeys(names) if not n.startswith("_")]
+            first = [n for n in _COMMON_KEYS if n in names]
+            last = [n for n in _ALIAS_KEYS if n in names]
+            keys = tuple(first + [n for n in names if n not in first and n not in last] + last)
+            cls._keys_of_class = keys
+        return keys
 
     @property
     def time(self) -> float:
         """Wall time of the call in seconds, ``timings["total"]`` (NaN when not recorded)."""
         return float(self.timings.get("total", float("nan")))
-
-    def __getitem__(self, key):  # OptimizeResult-style access, the same on every result
-        try:
-            return getattr(self, key)
-        except AttributeError:
-            raise KeyError(key) from None
 
     @property
     def iterations(self) -> int:
@@ -317,6 +350,10 @@ class ResultAliases:
     def solve_time(self) -> float:
         """Clarabel's name for ``time`` (``timings["total"]``, seconds)."""
         return self.time
+
+
+_COMMON_KEYS = ("status", "success", "message", "nit", "time", "timings")
+_ALIAS_KEYS = ("iterations", "solve_time")
 
 
 @dataclass
