@@ -16,7 +16,11 @@ H' = ZᵀH and w' = w + Hᵀv₀, and one frictionless contact (μ = μr = 0) pe
 column Zᵀ H_{F,D} cⱼ and w_N = cⱼᵀ(w_F + H_Fᵀ v₀).  It has an interior, so Algorithm 1
 converges on it as on any problem.
 
-Its data are float64 roundings (Z, P and C are computed in floating point), so it is a
+Z is exact (the null space over Q of the face system [H_{F,D}ᵀ | −G | −G₀], whose edge parts
+are the edge functionals exactly); the reduced problem holds float64 roundings of its data, and
+its double-double phase gets ZᵀH and the edge functionals exactly to double-double
+(:meth:`FaceReduction.refine`), because a contact beside the face that is active at the
+solution sits ~μ inside its cone, far less than a float64 rounding.  The reduced problem is a
 device for finding points, never the subject of a proof: :func:`FaceReduction.lift` maps its
 points back (v = v₀ + Zξ; r on F from the edge multipliers ρ and the equalities' multipliers λ,
 r_F = Σ cⱼ ρⱼ + Pᵀλ, λ by least squares with exact residuals), and the proof
