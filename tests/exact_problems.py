@@ -23,9 +23,10 @@ KINDS = ("open", "stick", "slide_t", "slide_r", "slide_both")
 
 
 def exact_problem(seed: int, n_contacts: int = 4, *, asymmetry: int = 0, kinds=None, bodies: int | None = None,
-                  mu=0.5, mu_r=0.25):
+                  mu=0.5, mu_r=0.25, max_asymmetry: float = rfverify.problem.DEFAULT_MAX_ASYMMETRY):
     """(problem, v*, u*, r*) with exact data.  ``asymmetry``: largest |A_ij| of the skew part
-    (integers; the diagonal of M is about 2^12, so 15 gives an entrywise asymmetry of ~7e-3).
+    (integers; the diagonal of M is about 2^12, so 15 gives an entrywise asymmetry of ~7e-3;
+    above about 20 pass a larger ``max_asymmetry``).
     ``kinds``: the contact kinds in order (default: random, every kind at least once when
     n_contacts ≥ 5).  mu, mu_r: dyadic floats (exact squares)."""
     rng = np.random.default_rng(seed)
@@ -105,7 +106,7 @@ def exact_problem(seed: int, n_contacts: int = 4, *, asymmetry: int = 0, kinds=N
     # Everything above is small dyadic arithmetic: check exactness rather than trust it.
     _check_exact(M, H, v, r, f, w, u)
     problem = rfverify.Problem.from_arrays(sp.csc_matrix(M), sp.csc_matrix(H), f, w, mu_v, mur_v,
-                                           title=f"exact seed {seed}")
+                                           title=f"exact seed {seed}", max_asymmetry=max_asymmetry)
     return problem, v, u, r
 
 
