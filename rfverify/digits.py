@@ -413,11 +413,12 @@ class ProofDriver:
     @staticmethod
     def _distance_dominates(proof: Proof) -> bool:
         """True when v's or u's bound is uncertified and its point part (√(M⁻¹)_jj·ε or
-        √W_kk·ε, the part more iterations shrink) is below 1e-3 of it: the rest is the fixed
-        distance from the point to the candidate."""
-        own = {"u": proof.terms["max_sqrt_W_kk"] * proof.eps_M}
+        √W_kk·ε, and the free blocks' verified solve: the part more iterations shrink) is below
+        1e-3 of it: the rest is the fixed distance from the point to the candidate."""
+        t = proof.terms
+        own = {"u": t.get("u_point_part", t["max_sqrt_W_kk"] * proof.eps_M)}
         if not proof.local:
-            own["v"] = proof.terms["max_sqrt_Minv_jj"] * proof.eps_M
+            own["v"] = t.get("v_point_part", t["max_sqrt_Minv_jj"] * proof.eps_M)
         return any(not q.certified and own[name] < 1e-3 * q.abs_bound
                    for name, q in proof.quantities.items() if name in own and q.mode != "information")
 
@@ -493,9 +494,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     >>> import rfverify
     >>> ten = rfverify.solve_to_digits(rfverify.load("bundled:chute"), digits=10)
     >>> ten.status, ten.digits                      # doctest: +SKIP
-    (<Status.CERTIFIED: 'Certified'>, {'v': 11.4, 'u': 10.4, 'Hr': 11.8, 'r': 11.6})
+    (<Status.CERTIFIED: 'Certified'>, {'v': 12.2, 'u': 10.4, 'Hr': 11.9, 'r': 11.6})
     >>> ten.message                                 # doctest: +SKIP
-    'proven to 10 digits (v 11.4 digits, ...) for the convex relaxation with (M + Mᵀ)/2. ...'
+    'proven to 10 digits (v 12.2 digits, ...) for the convex relaxation with (M + Mᵀ)/2. ...'
 
     ``ten.v``, ``ten.u``, ``ten.r`` are the proven answer (float64); ``ten.certificate`` holds the
     proof (recheck it with :func:`rfverify.certify`, or write it with ``rfverify solve --digits
