@@ -132,7 +132,8 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
     quantity proven zero at the data scale is stated as "zero within e" (DESIGN §6.3), never as
     digits; the problem (:attr:`Proof.statement`) ends the first sentence, and where the stored
     M is unsymmetric a second one says how many digits of the stored equations' solution the
-    answer has."""
+    answer has.  Where ``extra["proven_at"]`` (:meth:`rfverify.digits.ProofDriver.proven_at`)
+    says the proof's point is not the last one proven, the first sentence names it."""
     req = proof.requested
     about = f" for {proof.statement}" if proof.statement else ""
     if not proof.valid:
@@ -148,6 +149,10 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
         have = "no relative digits" if q.digits is None else f"{q.digits:.1f} proven digits"
         why = f"; {q.note}" if q.digits is None and q.note else ""
         verdict = f"not proven to {req} digits{about}: {worst} has {have} ({proof.summary()}){why}"
+    at = (extra or {}).get("proven_at")
+    if at and at.get("proofs", 0) > 1 and at.get("last") != at.get("where"):
+        # the last progress lines are about another point: say which one this verdict is about
+        verdict += f" (proof point: {at['where']}, the best of {at['proofs']} proven; the last was {at['last']})"
     verdict += stored_sentence(proof)
     limit = (extra or {}).get("time_limit")
     if limit is not None and not proof.certified:

@@ -209,7 +209,7 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
                              dict(method="auto", tol=1e-10, extended_max_iter=max_iter), depth=0)
     _, proof, point, _ = driver.best
     info = {"point_source": "double solve + " + out.point_source, "double_iterations": int(double.nit),
-            **out.summary(), "proof_attempts": driver.attempts}
+            **out.summary(), "proof_attempts": driver.attempts, "proven_at": driver.proven_at()}
     if face is not None:
         if face.pop("_point", None) is point:
             info["point_source"] = "the problem reduced to the face of its self-stresses (DESIGN §6.8), lifted back"

@@ -318,6 +318,23 @@ def _proven_answer(ctx: ProofContext, point: Point, digits: int, relative: bool)
     return ctx.prove(point, v, u, r, requested=digits, relative=relative), (v, u, r)
 
 
+def proof_site(phase: str, iteration: int | None = None, *, on_face: bool = False) -> dict:
+    """Where a proof's point came from: ``phase`` "double" (the double solve's answer),
+    "extended" (a double-double iterate) or "multiple-precision" (an iterate of the tail),
+    its ``iteration``, and ``on_face`` when it is an iterate of the problem reduced to a face,
+    lifted back (DESIGN §6.5)."""
+    return {"phase": phase, "iteration": iteration, "on_face": bool(on_face)}
+
+
+def site_words(at: dict | None) -> str:
+    """A :func:`proof_site` in words: "extended iteration 4", "the double solve's answer",
+    "extended iteration 3 on the face"."""
+    if at is None:
+        return "no point"
+    words = "the double solve's answer" if at["phase"] == "double" else f"{at['phase']} iteration {at['iteration']}"
+    return words + (" on the face" if at.get("on_face") else "")
+
+
 class ProofDriver:
     """The ``until`` callback of the extended phase: tries the proof where it may succeed,
     keeps the best one, and stops the run once ``requested`` digits are proven, or when μ
@@ -330,6 +347,9 @@ class ProofDriver:
         self.target = target  # (v, u, r) to certify; None: the rounding of each point
         self.face = None  # (FaceReduction, stresses): iterates of the reduced problem, proven lifted back
         self.best: tuple | None = None  # (score, proof, point, (v, u, r))
+        self.best_at: dict | None = None  # where the best proof was made (proof_site), and
+        self.last_at: dict | None = None  # where the last one was
+        self.proofs = 0  # points proven in all (the double answer's and a face's included)
         self.proof_seconds = 0.0
         self.attempts = 0
         self.stall = stall
@@ -337,7 +357,7 @@ class ProofDriver:
         self._since = 0
         self.progress = progress
         self.recent = []  # the last few iterates: handover to the wide tail, and proven at the end
-        self.proven_at = set()
+        self.proven_keys = set()  # ("dd" or "wide", iteration) of the iterates proven
         self.hopeless = False  # certifying a target: the point is already far closer than the target
         self.invalid_limit = None  # stop after this many invalid proofs in a row (None: never)
         self._invalid_run = 0
@@ -348,6 +368,27 @@ class ProofDriver:
     @property
     def certified(self) -> bool:
         return self.best is not None and self.best[1].certified
+
+    def offer(self, proof: Proof, point: Point, sol, at: dict, *, ties: bool = False, proofs: int = 1) -> bool:
+        """Record a proof made at ``at`` (:func:`proof_site`) — ``proofs`` points proven to
+        reach it (a face's sub-run proves several) — and keep it as the best when it says more
+        (with ``ties``, also when it says as much).  True when it became the best."""
+        self.last_at = at
+        self.proofs += proofs
+        sc = self.score(proof)
+        if self.best is None or sc > self.best[0] or (ties and sc >= self.best[0]):
+            self.best, self.best_at = (sc, proof, point, sol), at
+            return True
+        return False
+
+    def proven_at(self) -> dict | None:
+        """Where the best proof was made, for the certificate (``extra["proven_at"]``): the
+        :func:`proof_site` with ``where`` (its words), ``proofs`` (points proven in all) and
+        ``last`` (where the last one was); None before any proof."""
+        if self.best_at is None:
+            return None
+        return {**self.best_at, "where": site_words(self.best_at), "proofs": self.proofs,
+                "last": site_words(self.last_at)}
 
     def answer(self, point: Point):
         """The float64 (v, u, r) a point stands for: its rounding, with r moved along the
@@ -375,11 +416,12 @@ class ProofDriver:
     @staticmethod
     def _distance_dominates(proof: Proof) -> bool:
         """True when v's or u's bound is uncertified and its point part (√(M⁻¹)_jj·ε or
-        √W_kk·ε, the part more iterations shrink) is below 1e-3 of it: the rest is the fixed
-        distance from the point to the candidate."""
-        own = {"u": proof.terms["max_sqrt_W_kk"] * proof.eps_M}
+        √W_kk·ε, and the free blocks' verified solve: the part more iterations shrink) is below
+        1e-3 of it: the rest is the fixed distance from the point to the candidate."""
+        t = proof.terms
+        own = {"u": t.get("u_point_part", t["max_sqrt_W_kk"] * proof.eps_M)}
         if not proof.local:
-            own["v"] = proof.terms["max_sqrt_Minv_jj"] * proof.eps_M
+            own["v"] = t.get("v_point_part", t["max_sqrt_Minv_jj"] * proof.eps_M)
         return any(not q.certified and own[name] < 1e-3 * q.abs_bound
                    for name, q in proof.quantities.items() if name in own and q.mode != "information")
 
@@ -412,9 +454,9 @@ class ProofDriver:
         eps_lower = self.ctx.eps_lower(gap)
         if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested):
             return False
-        if key in self.proven_at:
+        if key in self.proven_keys:
             return False
-        self.proven_at.add(key)
+        self.proven_keys.add(key)
         t0 = time.perf_counter()
         if self.face is not None:  # an iterate of the problem on a face: proven on the problem itself
             point = self.face[0].lift(point)
@@ -422,11 +464,9 @@ class ProofDriver:
         proof = self.ctx.prove(point, *sol, requested=self.requested, relative=self.relative)
         self.proof_seconds += time.perf_counter() - t0
         self.attempts += 1
-        sc = self.score(proof)
-        if self.best is None or sc > self.best[0]:
-            self.best = (sc, proof, point, sol)
+        phase = "multiple-precision" if key[0] == "wide" else "extended"
+        self.offer(proof, point, sol, proof_site(phase, it.k, on_face=self.face is not None))
         if self.progress and not quiet:
-            phase = "multiple-precision" if key[0] == "wide" else "extended"
             self.progress(f"proof at {phase} iteration {it.k} (μ = {it.mu:.1e}): {proof.summary()}")
         if proof.certified:
             return True
@@ -458,9 +498,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     >>> import rfverify
     >>> ten = rfverify.solve_to_digits(rfverify.load("bundled:chute"), digits=10)
     >>> ten.status, ten.digits                      # doctest: +SKIP
-    (<Status.CERTIFIED: 'Certified'>, {'v': 11.4, 'u': 10.4, 'Hr': 11.8, 'r': 11.6})
+    (<Status.CERTIFIED: 'Certified'>, {'v': 12.2, 'u': 10.4, 'Hr': 11.9, 'r': 11.6})
     >>> ten.message                                 # doctest: +SKIP
-    'proven to 10 digits (v 11.4 digits, ...) for the convex relaxation with (M + Mᵀ)/2. ...'
+    'proven to 10 digits (v 12.2 digits, ...) for the convex relaxation with (M + Mᵀ)/2. ...'
 
     ``ten.v``, ``ten.u``, ``ten.r`` are the proven answer (float64); ``ten.certificate`` holds the
     proof (recheck it with :func:`rfverify.certify`, or write it with ``rfverify solve --digits
@@ -598,7 +638,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         driver.face, driver.target = _on_face[1:3], _on_face[3]
     c_ext = compile_seconds()  # (what _start_from compiled counts in "compile" only)
     if first is not None:  # the double answer's proof, to beat
-        driver.best = (ProofDriver.score(first[0]), first[0], point, first[1])
+        driver.offer(first[0], point, first[1], proof_site("double"))
     try:
         ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
                          wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
@@ -610,8 +650,11 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         t_first = time.perf_counter()
         first = _proven_answer(ctx, point, digits, relative)
         driver.proof_seconds += time.perf_counter() - t_first
-        if driver.best is None or ProofDriver.score(first[0]) >= driver.best[0]:  # ties: the double answer, as
-            driver.best = (ProofDriver.score(first[0]), first[0], point, first[1])  # when it was proven first
+        # ties: the double answer, as when it was proven first
+        became_best = driver.offer(first[0], point, first[1], proof_site("double"), ties=True)
+        if driver.proofs > 1:  # after the iterates' proofs: a line, as they have
+            say(f"the double solve's answer proven too: {first[0].summary()}"
+                + ("; it is the best proof" if became_best else ""))
     face_note = None
     if (not driver.certified and not interrupted and not driver.timed_out and _face_depth < MAX_FACE_DEPTH
             and _on_face is None):
@@ -621,7 +664,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                                         wide_max_iter=wide_max_iter, factor_engine=factor_engine, **options),
                                    _face_depth)
     _, proof, point, (v, u, r) = driver.best
-    extra = {"point_source": ext_out.point_source, **ext_out.summary(), "proof_attempts": driver.attempts}
+    extra = {"point_source": ext_out.point_source, **ext_out.summary(), "proof_attempts": driver.attempts,
+             "proven_at": driver.proven_at()}
     if face_note is not None:
         extra["face"] = face_note
         if driver.best[2] is face_note.get("_point"):
@@ -686,9 +730,10 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
     if proof is None or point is None:
         return note
     say(f"the face's points, lifted back: {proof.summary()}")
-    if driver.best is None or ProofDriver.score(proof) > driver.best[0]:
-        sol = driver.target if driver.target is not None else (sub.v, sub.u, sub.r)
-        driver.best = (ProofDriver.score(proof), proof, point, sol)
+    sub_at = sub.certificate.extra.get("proven_at") or {}
+    at = proof_site(sub_at.get("phase", "double"), sub_at.get("iteration"), on_face=True)
+    sol = driver.target if driver.target is not None else (sub.v, sub.u, sub.r)
+    if driver.offer(proof, point, sol, at, proofs=int(sub_at.get("proofs", 1))):
         note["_point"] = point
     return note
 
@@ -806,14 +851,14 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
     if not driver.certified:
         # No proof succeeded: prove the last iterates (the final one may have left a cone
         # after a failed step) so that the verdict reports the best proven digits.
-        again = [it for it in driver.recent[-3:] if ("dd", it.k) not in driver.proven_at
-                 and ("wide", it.k) not in driver.proven_at]
+        again = [it for it in driver.recent[-3:] if ("dd", it.k) not in driver.proven_keys
+                 and ("wide", it.k) not in driver.proven_keys]
         for it in again:
             driver(it, force=True, quiet=True)
         if again and driver.best is not None:
             # one line, not one per iterate: the progress goes forward
             say(f"the last iterates ({', '.join(str(it.k) for it in again)}) proven too, in case the final one "
-                f"left a cone: best {driver.best[1].summary()}")
+                f"left a cone: the best proof is {site_words(driver.best_at)}'s: {driver.best[1].summary()}")
     return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide)
 
 

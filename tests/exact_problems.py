@@ -23,13 +23,19 @@ KINDS = ("open", "stick", "slide_t", "slide_r", "slide_both")
 
 
 def exact_problem(seed: int, n_contacts: int = 4, *, asymmetry: int = 0, kinds=None, bodies: int | None = None,
-                  mu=0.5, mu_r=0.25):
+                  mu=0.5, mu_r=0.25, max_asymmetry: float = rfverify.problem.DEFAULT_MAX_ASYMMETRY,
+                  free_bodies: int = 0, contact_skew: bool = True):
     """(problem, v*, u*, r*) with exact data.  ``asymmetry``: largest |A_ij| of the skew part
-    (integers; the diagonal of M is about 2^12, so 15 gives an entrywise asymmetry of ~7e-3).
+    (integers; the diagonal of M is about 2^12, so 15 gives an entrywise asymmetry of ~7e-3;
+    above about 20 pass a larger ``max_asymmetry``).  ``free_bodies``: that many more bodies
+    that no contact touches (their skew part too), after the others; ``contact_skew=False``
+    puts the skew part on those free bodies only (as in the Siconos Chute, whose contact
+    bodies' velocities hardly differ between the stored and symmetrised equations).
     ``kinds``: the contact kinds in order (default: random, every kind at least once when
     n_contacts ≥ 5).  mu, mu_r: dyadic floats (exact squares)."""
     rng = np.random.default_rng(seed)
-    nb = bodies or max(2, n_contacts)
+    nb_contact = bodies or max(2, n_contacts)
+    nb = nb_contact + free_bodies
     m = 6 * nb
     # M_s: block diagonal per body, integer, strongly diagonally dominant (SPD).
     Ms = np.zeros((m, m))
@@ -41,7 +47,7 @@ def exact_problem(seed: int, n_contacts: int = 4, *, asymmetry: int = 0, kinds=N
         Ms[s, s] = B
     A = np.zeros((m, m))
     if asymmetry:
-        for b in range(nb):
+        for b in range(0 if contact_skew else nb_contact, nb):
             s = slice(6 * b, 6 * b + 6)
             X = rng.integers(-asymmetry, asymmetry + 1, size=(6, 6)).astype(float)
             A[s, s] = np.triu(X, 1) - np.triu(X, 1).T
@@ -54,10 +60,10 @@ def exact_problem(seed: int, n_contacts: int = 4, *, asymmetry: int = 0, kinds=N
     # H: each contact touches one or two bodies with small integer entries.
     H = np.zeros((m, 5 * n))
     for c in range(n):
-        a = c % nb
+        a = c % nb_contact
         H[6 * a:6 * a + 6, 5 * c:5 * c + 5] = rng.integers(-8, 9, size=(6, 5))
-        if nb > 1 and rng.random() < 0.5:
-            b = (a + 1 + rng.integers(0, nb - 1)) % nb
+        if nb_contact > 1 and rng.random() < 0.5:
+            b = (a + 1 + rng.integers(0, nb_contact - 1)) % nb_contact
             H[6 * b:6 * b + 6, 5 * c:5 * c + 5] = rng.integers(-8, 9, size=(6, 5))
         H[6 * a + (c % 6), 5 * c] += 16.0  # keep H's columns independent
     mu_v = np.full(n, float(mu))
@@ -105,7 +111,7 @@ def exact_problem(seed: int, n_contacts: int = 4, *, asymmetry: int = 0, kinds=N
     # Everything above is small dyadic arithmetic: check exactness rather than trust it.
     _check_exact(M, H, v, r, f, w, u)
     problem = rfverify.Problem.from_arrays(sp.csc_matrix(M), sp.csc_matrix(H), f, w, mu_v, mur_v,
-                                           title=f"exact seed {seed}")
+                                           title=f"exact seed {seed}", max_asymmetry=max_asymmetry)
     return problem, v, u, r
 
 

@@ -23,6 +23,24 @@ Consequences, per component (Cauchy–Schwarz in the M_s inner product):
   has full column rank: if u* is proven to lie in the interior of K*_i, then r*_i = 0 for
   every solution; on the others (set S), ‖r_S − r*_S‖₂ ≤ ‖H_S r_S − Hr*‖₂ / σmin(H_S).
 
+Free blocks (:mod:`.freeblocks`).  Let F be the diagonal blocks of the posed M that no contact
+touches (H's rows zero there) and that no nonzero of the stored M links to another block —
+both verified exactly on the data — and whose inverse is verified (ρ_b ≥ ‖I − X_b M_b‖∞ < 1
+for a float approximate inverse X_b); C the other dofs.  Every solution has M_b v*_b = f_b on
+F, so d_b = M_b⁻¹ g_b exactly: |d_b| ≤ |X_b g_b| + (row sums of |I − X_b M_b|)·‖X_b g_b‖∞/(1 − ρ_b),
+every rounding bounded outward.  On C, M_C d_C − H_C(r − r*) = g_C and Hᵀd = H_Cᵀd_C, so the
+lines above hold with g_C alone: ‖d_C‖_{M_s} ≤ ε_C (ε with g_C), and
+
+* |v_j − v*_j| ≤ √((M_s⁻¹)_jj)·ε_C on C, and on F the smaller of the verified solve and
+  √((M_s⁻¹)_jj)·ε;
+* |u_k − u*_k| ≤ √(h_kᵀM_s⁻¹h_k)·ε_C (h_k vanishes on F);
+* |(Hr − Hr*)_i| ≤ |g_i| + √(m_iᵀM_s⁻¹m_i)·ε_C, and 0 on the rows of H that are zero;
+* the r bound with ‖g_C‖₂ and ε_C (H r_p − Hr* = −g + M d vanishes on F).
+
+(F empty gives the lines above: ε_C = ε.)  Where the stored M is unsymmetric only in blocks
+no contact touches — the Siconos Chute — this bounds the distance to the stored equations'
+solution through the stored blocks' own inverses instead of one ε shared by every dof.
+
 A *point* (v_p, r_p) — an extended-precision interior-point iterate — is evaluated **exactly**
 (dyadic rationals, :mod:`.dyadic`): cone membership by comparing squares, g, rᵀu; the
 norms of M_s⁻¹ come from :mod:`.massbounds` (verified floating point).  The triangle inequality
@@ -63,7 +81,9 @@ THEOREM_GLOBAL = ("Global problem, M_s = (M+M^T)/2 positive definite, M the pose
                   "any v with u(v) = H^T v + w in K* and any r in K, with g = Mv - Hr - f: ||v - v*||_Ms^2 <= "
                   "g^T(v - v*) + r^T u(v), so ||v - v*||_Ms <= (sqrt(g^T Ms^-1 g) + sqrt(g^T Ms^-1 g + 4 r^T u(v)))/2 "
                   "(monotonicity of the convex relaxation); per-component bounds by Cauchy-Schwarz in the M_s inner "
-                  "product, carried to the stored solution by the triangle inequality (DESIGN 6.1).")
+                  "product, with g restricted to the blocks of M that touch a contact; on the blocks no contact "
+                  "touches (decoupled, verified), v - v* = M_b^-1 g_b bounded by a verified inverse; carried to the "
+                  "stored solution by the triangle inequality (DESIGN 6.1).")
 
 
 def _up(x):
@@ -220,12 +240,15 @@ class ExactData:
         self.HT = self.H.transpose()
         self.M = DyadicCSR.from_scipy(problem.M)
         self.MT = self.M.transpose()
+        Hc = sp.csr_matrix(problem.H)
+        self.H_row_zero = _rows_without_nonzeros(Hc)  # (Hr)_i = 0 for every r there
         self.f = Dyadic.from_float(problem.f)
         self.w = Dyadic.from_float(problem.w)
         self.mu = Dyadic.from_float(problem.mu)
         self.mu_r = Dyadic.from_float(problem.mu_r)
         self._row_quad = None
         self._skew_norm = None
+        self._free = {}
         from .face import FaceSearch
 
         self.face_search = FaceSearch()  # self-stresses found near failing contacts, per problem
@@ -237,6 +260,15 @@ class ExactData:
     def M_apply(self, v: Dyadic, stored: bool) -> Dyadic:
         """M v of the posed equations exactly: M as stored (``stored``) or (M + Mᵀ)/2."""
         return self.M.matvec(v) if stored else self.M_sym_apply(v)
+
+    def free_blocks(self, mass: MassBounds, stored: bool):
+        """The blocks no contact touches, with their verified inverses, of the posed M (as
+        stored, or (M + Mᵀ)/2): :func:`.freeblocks.free_blocks`, built once per posing."""
+        if stored not in self._free:
+            from .freeblocks import free_blocks
+
+            self._free[stored] = free_blocks(self.problem, mass, stored)
+        return self._free[stored]
 
     def row_quad_upper(self, mass: MassBounds) -> np.ndarray:
         """Upper bounds of m_iᵀ M_s⁻¹ m_i for the rows m_i of the stored M (the Hr bound of the
@@ -258,6 +290,14 @@ class ExactData:
             self._skew_norm = float(_up(math.sqrt(float(_up(float(np.max(rows, initial=0.0))
                                                             * float(np.max(cols, initial=0.0)))))))
         return self._skew_norm
+
+
+def _rows_without_nonzeros(A: sp.csr_matrix) -> np.ndarray:
+    """Mask of the rows of A with no nonzero entry (explicitly stored zeros do not count)."""
+    nonzero = np.zeros(A.shape[0], dtype=bool)
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    nonzero[rows[A.data != 0]] = True
+    return ~nonzero
 
 
 def cone_violations(data: ExactData, u: Dyadic, r: Dyadic):
@@ -387,21 +427,39 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     q_g = float(divide_upper(divide_upper(gMinvg_upper(g_num, mass), den), den))
     gap_up = fraction_upper_float(gap)
     eps = eps_M_upper(q_g, gap_up)
+    # The free blocks (no contact, decoupled): d_F = M_F⁻¹ g_F, bounded through their verified
+    # inverses; the rest (C) has its own ε_C from g_C alone (.freeblocks).
+    free = exact.free_blocks(mass, stored)
+    if free.dofs.size:
+        g_C = Dyadic(np.where(free.coupled, g_num.ints, 0), g_num.exp)
+        q_gC = float(divide_upper(divide_upper(gMinvg_upper(g_C, mass), den), den))
+        eps_C = min(eps, eps_M_upper(q_gC, gap_up))
+        d_free = divide_upper(free.bound(g_num), den)
+    else:
+        g_C, q_gC, eps_C, d_free = g_num, q_g, eps, None
 
     # ---- carry to the returned solution
     vd = Dyadic.from_float(v)
-    e_v = upper_sum(divide_upper((vd.times_int(den) - V).abs_upper(), den),
-                    _up_times(_up(np.sqrt(mass.minv_diag_upper)), eps))
+    sqrt_minv = _up(np.sqrt(mass.minv_diag_upper))
+    own_v = _up_times(sqrt_minv, eps_C)
+    if d_free is not None:  # free dofs: the verified solve, or Cauchy–Schwarz with the whole ε
+        own_v = np.where(free.coupled, own_v, np.minimum(d_free, _up_times(sqrt_minv, eps)))
+    e_v = upper_sum(divide_upper((vd.times_int(den) - V).abs_upper(), den), own_v)
     sqrtW = _up(np.sqrt(w_diag))
     e_u = upper_sum(divide_upper((Dyadic.from_float(u).times_int(den) - u_num).abs_upper(), den),
-                    _up_times(sqrtW, eps))
+                    _up_times(sqrtW, eps_C))
     Hr_ret = exact.H.matvec(Dyadic.from_float(r))
     g_abs = divide_upper(g_num.abs_upper(), den)
-    # |e_iᵀM d| ≤ √(m_iᵀM_s⁻¹m_i)·ε; for a symmetric M that is √(M_ii)·ε
+    # |e_iᵀM d| ≤ √(m_iᵀM_s⁻¹m_i)·ε_C; for a symmetric M that is √(M_ii)·ε_C.  A row of H that is
+    # zero has (Hr)_i = (Hr*)_i = 0 exactly: no bound there.
     row_norm = _up(np.sqrt(exact.row_quad_upper(mass))) if stored else _up(np.sqrt(mass.m_diag_upper))
-    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up_times(row_norm, eps))
+    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up_times(row_norm, eps_C))
+    e_Hr = np.where(exact.H_row_zero, 0.0, e_Hr)
 
-    terms = {"eps_M": eps, "gap_rTu": gap_up, "gMinvg_upper": q_g, "g_inf": float(np.max(g_abs, initial=0.0)),
+    terms = {"eps_M": eps, "eps_M_coupled": eps_C, "gMinvg_coupled_upper": q_gC,
+             "free_blocks_solved": free.count, "free_dofs_solved": int(free.dofs.size),
+             "v_point_part": float(np.max(own_v, initial=0.0)), "u_point_part": float(np.max(_up_times(sqrtW, eps_C), initial=0.0)),
+             "gap_rTu": gap_up, "gMinvg_upper": q_g, "g_inf": float(np.max(g_abs, initial=0.0)),
              "lam_min_M_lower": float(np.nanmin(mass.lam_lower)), "lam_max_M_upper": mass.lam_max_upper,
              "max_sqrt_Minv_jj": float(np.max(np.sqrt(mass.minv_diag_upper), initial=0.0)),
              "max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)),
@@ -422,8 +480,8 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
                                       f"{', '.join(s.contact_list() for s in face.stresses)} can be added to any "
                                       "solution's r (Hr is unique)"), {}
     else:
-        e_r, r_note, r_terms = _r_bound(problem, exact, mass, Quotient(u_num, den), sqrtW * eps, point_r, Hr_p,
-                                        g_num, eps, r, stored, den=den)
+        e_r, r_note, r_terms = _r_bound(problem, exact, mass, Quotient(u_num, den), sqrtW * eps_C, point_r, Hr_p,
+                                        g_C, eps_C, r, stored, den=den)
     terms.update(r_terms)
     if e_r is None:
         q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import re
 import time
 
 import numpy as np
@@ -137,8 +136,6 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     c0 = compile_seconds()
     result = _solve(problem, method, tol, max_iter, keep_iterates, callback, **options)
     result.timings["compile"] = compile_seconds() - c0  # numba's, on a cold start (included in total)
-    result = judged_on_the_file(problem, result) if problem.local is not None else result
-    result.message = one_criterion(result.message, result.measures)
     if not result.success and tol < DOUBLE_REACH:
         hint = (f"tol = {tol:g} is below what double precision can reach (the criterion's own rounding is "
                 f"about 1e-16; this run reached {result.criterion:.2e}): for more accuracy use --digits K "
@@ -153,16 +150,31 @@ DOUBLE_REACH = 1e-15
 own rounding is about 1e-16): a run that misses one says so and points to the k-digit path."""
 
 
-_STOP_CRITERION = re.compile(r"criterion [0-9.e+-]+ ≤ tol \(worst: \w+\)")
+def returned_verdict(status: Status, message: str, final, settings: Settings) -> tuple[Status, str]:
+    """The status and message of a returned answer, decided by ``final`` — the measures of the
+    returned (v, u, r) on the whole problem, the one criterion value a result states — from the
+    run's own ending (``status``, ``message``: why it stopped, naming the returned iteration).
 
-
-def one_criterion(message: str, final) -> str:
-    """``message`` with the stopping test's criterion (of the judged iterate, in its own
-    arithmetic) restated as that of the returned answer (``final``, the one the status and
-    ``criterion`` report), so that a run states one criterion value."""
-    if final is None or not np.isfinite(final.max):
-        return message
-    return _STOP_CRITERION.sub(f"criterion {final.max:.2e} ≤ tol (worst: {final.worst()})", message)
+    A run judges its iterates on its own component (its arithmetic, its data scales), so its
+    stopping test and the returned answer's criterion can differ; the answer decides: Solved
+    when ``final.max ≤ tol``, AlmostSolved when ``≤ almost_factor·tol``, and the number stated
+    is ``final.max``.  A user's stop (Stopped) stays Stopped."""
+    tol, almost = settings.tol, settings.almost_factor * settings.tol
+    x = final.max if final is not None and np.isfinite(final.max) else np.inf
+    if status is Status.STOPPED or not np.isfinite(x):
+        return status, message
+    if x <= tol:
+        if status is Status.SOLVED:
+            return status, f"criterion {x:.2e} ≤ tol (worst: {final.worst()}); {message}"
+        return Status.SOLVED, f"criterion of the returned (v, u, r) {x:.2e} ≤ tol (the iterations ended {status}: {message})"
+    if status is Status.SOLVED:  # the run's own test passed, the returned answer's did not
+        return (Status.ALMOST_SOLVED if x <= almost else Status.INSUFFICIENT_PROGRESS,
+                f"the run met tol on its own iterates ({message}), but the returned (v, u, r) has criterion "
+                f"{x:.2e} > tol ({final.worst()})")
+    if x <= almost:
+        return Status.ALMOST_SOLVED, (f"{status}: {message}; the returned (v, u, r) has criterion {x:.2e} ≤ "
+                                      f"{settings.almost_factor:g}·tol")
+    return status, message
 
 
 def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:
@@ -240,17 +252,20 @@ def judged_on_the_file(problem: Problem, result: SolveResult) -> SolveResult:
     u = problem.local.velocity(result.r)
     final = measures(problem, result.v, u, result.r, "longdouble")
     tol = result.settings.tol
-    status, message = result.status, result.message
     lift = problem.provenance.get("lift") or problem.provenance.get("lifted") or {}
-    if status is Status.SOLVED and not final.max <= tol:
+    if result.status is Status.SOLVED and not final.max <= tol:
         status = Status.ALMOST_SOLVED if final.max <= result.settings.almost_factor * tol \
             else Status.INSUFFICIENT_PROGRESS
         dropped = lift.get("dropped")
         lam = float(lift.get("min_eigenvalue", 0.0))
         why = (f"; the lifting dropped {dropped} eigenvalue(s) of W (smallest {lam:.2e}"
                + ("): W is not positive semidefinite as stored" if lam < 0 else ")")) if dropped else ""
-        message = (f"solved on the lifting (criterion {result.criterion:.2e}), but the file's own problem "
+        # two measures of one point, named: the lifting's (which the run met) and the file's
+        message = (f"solved on the lifting (criterion there {result.criterion:.2e}), but the file's own problem "
                    f"u = W r + q has criterion {final.max:.2e} > tol ({final.worst()}){why}")
+    else:  # the file's criterion is the one stated, and decides as it does for any answer
+        status, message = returned_verdict(*result.extras.get("run_verdict", (result.status, result.message)),
+                                           final, result.settings)
     return dataclasses.replace(result, u=u, measures=final, status=status, message=message)
 
 
@@ -271,9 +286,20 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
     if keep_iterates:
         options["split_components"] = False
     settings = Settings(tol=tol, max_iter=max_iter, **options)
-    t0 = time.perf_counter()
     if method == "auto":
         return _solve_in_turn(problem, settings, keep_iterates, callback, options)
+    return _solve_form(problem, method, settings, keep_iterates, callback)
+
+
+def _on_the_file(problem: Problem, result: SolveResult) -> SolveResult:
+    """A local file's answer judged on the file (per form: auto then chooses by that verdict)."""
+    return judged_on_the_file(problem, result) if problem.local is not None else result
+
+
+def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates: bool, callback) -> SolveResult:
+    """One form of Algorithm 1, or a peer, on ``problem`` (checked by :func:`_solve`), its
+    answer judged on the problem as read."""
+    t0 = time.perf_counter()
     if method == "clarabel":
         if callback is not None:
             from ..errors import InvalidArgumentError
@@ -282,7 +308,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
                                        fix="use an Algorithm 1 method (jqinv, qp2, ...)")
         from .clarabel_peer import solve_clarabel
 
-        return solve_clarabel(problem, settings)
+        return _on_the_file(problem, solve_clarabel(problem, settings))
     if method == "siconos":
         if callback is not None:
             from ..errors import InvalidArgumentError
@@ -291,7 +317,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
                                        fix="use an Algorithm 1 method (jqinv, qp2, ...)")
         from .siconos_peer import solve_siconos
 
-        return solve_siconos(problem, settings)
+        return _on_the_file(problem, solve_siconos(problem, settings))
 
     pre = presolve(problem, settings)
     lp, groups, v, presolve_info = pre.lifted, pre.groups, pre.v, pre.info
@@ -327,21 +353,13 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
         if out.status in (Status.STOPPED, Status.MAX_TIME):
             break  # the user's stop and the time limit hold for the whole solve
 
-    status, message = _combined_status(runs, len(groups))
+    run_status, run_message = _combined_status(runs, len(groups))
     v = np.asarray(v, dtype=np.float64)
     r = lp.r_from_lifted(np.asarray(r_t, dtype=np.float64))
     u = lp.u_from_v(v)
     # The verdict is about what is returned: the whole problem, rounded to float64.
     final = measures(problem, v, u, r, "longdouble")
-    if status is Status.SOLVED and not final.max <= settings.tol:
-        status = Status.ALMOST_SOLVED if final.max <= settings.almost_factor * settings.tol \
-            else Status.INSUFFICIENT_PROGRESS
-        message += f"; but the returned (v, u, r) has criterion {final.max:.2e} > tol ({final.worst()})"
-    elif status not in (Status.SOLVED, Status.STOPPED) and final.max <= settings.tol:
-        # A component that ended short of tol in its own scales can still leave the whole
-        # problem within tol (its denominators are larger): the returned answer decides.
-        message = f"criterion of the returned (v, u, r) {final.max:.2e} ≤ tol (a component ended {status}: {message})"
-        status = Status.SOLVED
+    status, message = returned_verdict(run_status, run_message, final, settings)
     if len(runs) == 1:
         pinf, dinf, mu = runs[0].pinfeas, runs[0].dinfeas, runs[0].mu
     else:
@@ -359,7 +377,8 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
         extras={"factorisations": sum(o.factorisations for o in runs),
                 "unregularised_factorisations": sum(o.unregularised_factorisations for o in runs),
                 "extended_from": [o.extended_from for o in runs],
-                "r_t": r_t, "z": z,
+                "r_t": r_t, "z": z, "run_verdict": (run_status, run_message),
+                "returned_iteration": [o.returned_iteration for o in runs],
                 "interrupted": any(o.interrupted for o in runs),
                 "n_cones": {"L3": lp.n3, "L1": lp.n1},
                 "component_runs": [{"status": o.status, "message": o.message, "nit": o.nit, "trace": o.trace}
@@ -367,6 +386,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
                 "iterates": runs[0].iterates if keep_iterates else [],
                 "active_dofs": groups[0][0] if keep_iterates else None},
     )
+    result = _on_the_file(problem, result)
     if printer is not None:
         printer.summary(result)
     return result

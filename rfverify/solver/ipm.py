@@ -56,6 +56,8 @@ class RunResult(Outcome):
     extended_from: int | None = None
     # True when Ctrl-C ended the run (status Stopped, the last judged iterate returned).
     interrupted: bool = False
+    # The iteration whose iterate is returned (the best one when the run did not end Solved).
+    returned_iteration: int | None = None
 
 
 def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, settings: Settings,
@@ -111,7 +113,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     if records and "sigma" not in records[-1] and printer is not None:
         printer(_info(_with_defaults(records[-1]), component, form))  # the last iterate, stepped or not
     trace = {key: np.asarray([_with_defaults(rec)[key] for rec in records]) for key in TRACE_FIELDS}
-    status, message, bundle = policy.term.final(out.verdict, policy.current)
+    status, message, bundle, returned_k = policy.term.final(out.verdict, policy.current)
     if bundle is None:
         # The first iterate was never judged (its residuals or measures overflowed): return it
         # as it stands, with NaN measures, never nothing.
@@ -119,7 +121,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
 
         nan = float("nan")
         bundle = (out.iterate, Measures(nan, nan, nan, nan, nan, nan, nan), (nan, nan, nan))
-        if status in (Status.SOLVED, Status.ALMOST_SOLVED):
+        if status is Status.SOLVED:
             status = Status.NUMERICAL_ERROR
     ((out_v, out_r, out_z), judged_o, (pinf_o, dinf_o, mu_o)) = bundle
     timings = dict(out.timings, total=time.perf_counter() - t_run)
@@ -129,7 +131,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                      trace=trace, timings=timings,
                      factorisations=system.factor_count, unregularised_factorisations=system.unregularised_count,
                      tol=settings.tol, iterates=policy.iterates, extended_from=policy.extended_from,
-                     interrupted=getattr(policy, "was_interrupted", False))
+                     interrupted=getattr(policy, "was_interrupted", False), returned_iteration=returned_k)
 
 
 class _NumpySpace:

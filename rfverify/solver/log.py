@@ -94,5 +94,10 @@ class IterationPrinter:
     def summary(self, result):
         print("-" * _shown(column_header(self.labelled)), file=self.stream)
         print(f"status {result.status}: {result.message}", file=self.stream)
-        print(f"criterion of the returned (v, u, r): {result.criterion:.2e}; "
+        free = int(result.presolve.get("free_dofs", 0) or 0)
+        # The rows judge each iterate on its own run's data; say so where that is not the whole problem.
+        apart = ([f"without the {free} contact-free dofs"] if free else []) + (
+            ["each component on its own"] if self.labelled else [])
+        rows = f" (the rows judge each iterate {', '.join(apart)})" if apart else ""
+        print(f"criterion of the returned (v, u, r) on the whole problem: {result.criterion:.2e}{rows}; "
               f"time {result.timings.get('total', float('nan')):.3f} s", file=self.stream, flush=True)

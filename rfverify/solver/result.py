@@ -251,7 +251,9 @@ TRACE_FIELDS = ("iter", "criterion", "pinfeas", "dinfeas", "mu", "sigma", "alpha
                 "min_lam2_z", "min_lam2_z_cone", "min_lam2_s", "min_lam2_s_cone", "max_cond_Qp",
                 "solve_residual", "refine_steps", "time")
 """Per-iteration trace columns.  ``criterion`` is rfverify's stopping measure
-(:func:`rfverify.measures.measures`, the ``max`` of the returned (v, u, r) of that iterate);
+(:func:`rfverify.measures.measures`, the ``max``) of that iterate's (v, u, r) on its run's own data:
+its component, without the contact-free bodies (solved apart), in the iterate's arithmetic — the
+returned answer's criterion on the whole problem is ``SolveResult.criterion``;
 ``pinfeas``, ``dinfeas``, ``mu`` are the paper's (DESIGN §4), reported beside it.
 ``min_lam2_*_cone`` is the index of the cone (see
 ``LiftedProblem.cone_contact``/``cone_part`` for its contact); ``solve_residual`` is the
@@ -268,7 +270,7 @@ TRACE_HEADERS = {"iter": "iter", "criterion": "criterion", "pinfeas": "pinfeas",
 class IterationInfo:
     """What a ``callback`` receives once per iteration (after the step is computed):
     ``component`` (index of the independent component, 0 when solved as one), ``iteration``,
-    rfverify's ``criterion`` and the paper's ``pinfeas``, ``dinfeas``, ``mu``, the centring
+    rfverify's ``criterion`` (of the iterate on its run's data, as in the trace) and the paper's ``pinfeas``, ``dinfeas``, ``mu``, the centring
     ``sigma``, step lengths ``alpha_aff``, ``alpha``, ``min_lam2_z``/``min_lam2_s`` (smallest
     λ2 of z and Jᵀr̃), ``max_cond_Qp``, the linear ``solve_residual`` (backward error),
     ``elapsed`` seconds since the solve started, and the ``method`` (linear-system form) of the

@@ -6,8 +6,13 @@ The criterion is :mod:`rfverify.measures`' (judged on what would be returned).  
 dual (dynamics) and gap (complementarity, primal cone) measures that is still above tol fell
 below 0.9 × its own best, counted from the first step with α ≥ 0.5 — before it, a badly
 scaled start can take several tiny but growing steps while μ grows 1e6-fold (see
-docs/DECISIONS.md, "Solver robustness").  A run that stops otherwise returns its best iterate
-and is AlmostSolved when that reached ``almost_factor·tol``.
+docs/DECISIONS.md, "Solver robustness").  A run that stops otherwise returns its best iterate.
+
+The messages state no criterion value: the run judges its iterates on its own component (the
+bodies in contact, without the contact-free ones, in the iterate's arithmetic), while what
+:func:`rfverify.solve` returns is judged once more on the whole problem.  That one number — the
+criterion of the returned (v, u, r) — decides Solved and AlmostSolved and is the one stated
+(:func:`rfverify.solver.returned_verdict`), so that a point is never given two criterion values.
 """
 
 from __future__ import annotations
@@ -52,8 +57,7 @@ class Termination:
         if self.best is None or merit < self.best[0]:
             self.best = (merit, k, (state, judged, paper))
         if merit <= tol:
-            return Verdict(Status.SOLVED, f"criterion {merit:.2e} ≤ tol (worst: {judged.worst()}); "
-                                          f"paper's max(pinfeas, dinfeas, mu) = {max(paper):.2e}")
+            return Verdict(Status.SOLVED, f"paper's max(pinfeas, dinfeas, mu) = {max(paper):.2e}")
         improved = False
         for i, val in enumerate((max(judged.velocity, judged.dual_cone), judged.dynamics,
                                  max(judged.complementarity, judged.primal_cone))):
@@ -66,8 +70,7 @@ class Termination:
         if self._since >= self.settings.stall_iterations:
             return Verdict(Status.INSUFFICIENT_PROGRESS,
                            f"iteration {k}: none of the primal, dual and gap measures above tol improved by 10% "
-                           f"in {self._since} iterations (best criterion {self.best[0]:.2e} at iteration "
-                           f"{self.best[1]})")
+                           f"in {self._since} iterations")
         limit = self.settings.time_limit
         if limit is not None and time.perf_counter() - self.t0 > limit:
             return Verdict(Status.MAX_TIME, f"iteration {k}: time limit of {limit:g} s reached")
@@ -85,18 +88,17 @@ class Termination:
         return None
 
     def final(self, verdict: Verdict, current):
-        """(status, message, bundle) to return, bundle = (state, measures, paper) as given to
-        :meth:`observe`: the current iterate when Solved or stopped by the callback, else the
-        best one (AlmostSolved when it reached ``almost_factor·tol``)."""
+        """(status, message, bundle, k) to return, bundle = (state, measures, paper) as given to
+        :meth:`observe` for iteration k: the current iterate when Solved or stopped by the
+        callback, else the best one, named in the message when it is not the last.  The status
+        is the verdict's: whether the returned point is AlmostSolved is decided on it by
+        :func:`rfverify.solver.returned_verdict`."""
         status, message = verdict.status, verdict.message
         if status in (Status.SOLVED, Status.STOPPED) and current is not None:
-            return status, message, current
+            return status, message, current, self._last_k
         if self.best is None:  # the first iterate already failed (e.g. its residuals overflowed)
-            return status, message, current
-        merit, kb, bundle = self.best
-        if merit <= self.settings.almost_factor * self.settings.tol:
-            return (Status.ALMOST_SOLVED, f"{status}: {message}; best iterate (iteration {kb}) reached "
-                                          f"{merit:.2e} ≤ {self.settings.almost_factor:g}·tol", bundle)
+            return status, message, current, self._last_k
+        _, kb, bundle = self.best
         if kb != self._last_k:
-            message += f"; returning the best iterate (iteration {kb}, criterion {merit:.2e})"
-        return status, message, bundle
+            message += f"; returning the best iterate (iteration {kb})"
+        return status, message, bundle, kb
