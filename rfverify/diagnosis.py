@@ -52,7 +52,7 @@ from .measures import data_scales, measures
 from .problem import SPACEDIM, Problem
 from .solver import DOUBLE_REACH, posed, solve
 from .algorithm.rules import rule_at
-from .solver.result import ResultAliases, Status
+from .solver.result import ALGORITHM1_METHODS, ResultAliases, Status, method_unavailable
 
 UNIT_ROUNDOFF = 2.0 ** -53
 
@@ -976,7 +976,7 @@ def _remedies(ctx: _Context, cause, run: ExactRun, user_options: dict):
     if problem.as_stored:
         base += ["--as-stored"]
     options = {k: v for k, v in user_options.items() if k not in ("refine_tol", "extended_below", "as_stored")}
-    forms = [m for m in ("jqinv", "reduced", "reduced_factored", "noscaling", "qp2") if m != method]
+    forms = [m for m in ALGORITHM1_METHODS if m != method and method_unavailable(m) is None]
     more = max(2 * max_iter, int(1.25 * run.reached_at) + 5) if run.reached_at is not None else 2 * max_iter
     # Below double's reach no float64 answer meets the criterion: a proof of K digits is the answer.
     ks = (15, 12, 10) if tol < DOUBLE_REACH else (max(1, min(15, math.ceil(-math.log10(tol)))),)
