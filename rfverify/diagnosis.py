@@ -1,6 +1,10 @@
 """Why a double run stalled, shown by the same algorithm in exact arithmetic (DESIGN §5).
 
-:func:`diagnose` runs ``method`` in double, keeping every iterate, and then:
+:func:`diagnose` runs ``method`` in double as ``rfverify solve`` runs it (the run diagnosed), and
+again as one system keeping every iterate, every linear solve refined to the floor of the
+extended arithmetic (the lockstep's run: its digits measure rounding alone); where that run meets
+the tolerance and the first does not, the precision of the default linear solves is the cause.
+Otherwise:
 
 1. **Lockstep.**  From every double iterate k, the exact step (:mod:`rfverify.exact`: Algorithm
    1 in double-double, every Newton solve refined to that arithmetic's floor) with the double
@@ -83,10 +87,12 @@ class Diagnosis(ResultAliases):
     Attributes
     ----------
     method : str              linear-system form of the double run
-    status : Status           the double run's status (a str enum: ``status == "Solved"``)
+    status : Status           the double run's status, as ``rfverify solve`` runs it (a str
+                              enum: ``status == "Solved"``)
     success : bool            status is Solved
     message : str             the double run's message
-    nit : int                 iterations of the double run (alias ``iterations``)
+    nit : int                 iterations of the double run (alias ``iterations``); the lockstep's
+                              run (one system, solves refined) is ``evidence["lockstep_run"]``
     steps : list of dict      one record per iteration k (the lockstep): ``iter``, ``mu``,
                               ``criterion``, ``digits_v``, ``digits_u``, ``digits_Hr``,
                               ``digits_r_t`` and ``digits_z`` (digits of agreement of the
@@ -180,7 +186,9 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
 
     Returns a :class:`Diagnosis`: the double run's ``status``/``message``/``nit``, the
     lockstep ``steps``, the ``cause`` ("precision", "iterations", "data", "none"), its
-    ``evidence`` and a ``remedy`` the diagnosis ran; ``to_dict()`` is its JSON.
+    ``evidence`` and a ``remedy`` the diagnosis ran; ``to_dict()`` is its JSON.  ``status``,
+    ``message``, ``nit`` are those of the run as ``rfverify solve`` makes it (default settings,
+    independent components split); the lockstep's run is the same form as one system.
     ``progress(message)`` receives one line per stage and per exact step.
 
     ``dps``: digits of the mpmath witness; ``witness_time``: its budget in seconds (0: no
@@ -214,6 +222,10 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
         problem = scaled_problem(problem, scaling)
         note_units = f"diagnosed in exactly scaled units ({scaling.describe()})"
 
+    # The run as `rfverify solve` makes it (default settings, independent components split): the
+    # run whose outcome the diagnosis is about.  Then the lockstep's run: the same form as one
+    # system, keeping every iterate, its solves refined to the floor (see above).
+    plain = solve(problem, method=method, tol=tol, max_iter=max_iter, **user_options)
     res = solve(problem, method=method, tol=tol, max_iter=max_iter, keep_iterates=True, **options)
     if res.extras.get("zero_data"):  # f = w = 0: answered exactly, without iterating
         return Diagnosis(method=method, status=Status(res.status), message=res.message, nit=0, tol=float(tol),
@@ -223,11 +235,11 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     lp = lift(problem, reduce_cones=settings.reduce_cones)
     iterates = res.extras["iterates"]
     nsteps = len(iterates) - 1
-    say(f"double run ({method}): {res.status} after {res.nit} iterations; lockstep of its {nsteps} steps "
-        "in double-double")
+    say(f"double run ({method}): {plain.status} after {plain.nit} iterations; the lockstep's run (one system, "
+        f"solves refined to the floor): {res.status} after {res.nit}; lockstep of its {nsteps} steps in double-double")
     t1 = time.perf_counter()
-    diag = Diagnosis(method=method, status=Status(res.status), message=res.message, nit=int(res.nit),
-                     failure=None if res.success else res.message, tol=float(tol))
+    diag = Diagnosis(method=method, status=Status(plain.status), message=plain.message, nit=int(plain.nit),
+                     failure=None if plain.success else plain.message, tol=float(tol))
     ctx = _Context(problem, res, lp, method, tol, max_iter, say, deadline)
     if lp.nk != ctx.exact.data.nk or lp.nz != ctx.exact.data.nz:
         from .errors import InvalidArgumentError
@@ -241,6 +253,10 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     evidence = {"r_unique": ctx.r_unique, "r_unique_note": ctx.r_unique_note,
                 "mu_zero_contacts": int(np.sum(problem.mu == 0)), "form_block": FORM_BLOCK.get(method),
                 "form_power": FORM_POWER.get(method), "form_order": ctx.order, "text": []}
+    evidence["run"] = _run_record(plain, "as `rfverify solve` runs it")
+    evidence["lockstep_run"] = _run_record(res, "one system, every linear solve refined to the floor, extended "
+                                                "arithmetic from the first iteration (refine_tol=None, "
+                                                "extended_below=None unless given)")
     if note_units:
         evidence["units"] = note_units
     timings = {"double": t1 - t0, "setup": t2 - t1, "steps": t3 - t2, "exact": 0.0, "witness": 0.0,
@@ -252,13 +268,21 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     marks = [m["iter"] for m in (dep, sf) if m is not None]
     focus = min(marks) if marks else None  # the first step that is not good enough
     if cut is not None:
-        diag.status, diag.message = Status.MAX_TIME, f"{res.message}; {cut}"
+        diag.status, diag.message = Status.MAX_TIME, f"{plain.message}; {cut}"
         evidence["text"].append(cut)
-    elif res.success:
-        diag.cause = "none"
-        evidence["text"].append(_healthy_text(ctx, steps))
+    elif plain.success or res.success:
+        if plain.success:
+            diag.cause = "none"
+            evidence["text"].append(_healthy_text(ctx, steps))
+        else:  # the same form with every solve refined meets the tolerance: the default solves' precision
+            diag.cause = "precision"
+            evidence["text"].append(_refined_text(ctx, plain, res))
         _witness(ctx, steps, focus, None, evidence, dps, witness_time, timings)
         evidence["text"] += (evidence.get("witness") or {}).get("text", [])
+        if not plain.success and remedies and ctx.in_time():
+            t5 = time.perf_counter()
+            diag.remedy, evidence["remedies_tried"] = _remedies(ctx, "precision", None, user_options)
+            timings["remedies"] = time.perf_counter() - t5
     else:
         t4 = time.perf_counter()
         main, early = _counterfactual(ctx, focus, keep=witness_time > 0)
@@ -278,7 +302,9 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
             evidence["remedies_tried"] = []
             evidence["text"].append("the time limit was reached before any remedy was tried")
         if not ctx.in_time() and diag.cause is None:
-            diag.status = Status.MAX_TIME
+            cut = f"time limit of {time_limit:g} s reached before the diagnosis decided the cause"
+            diag.status, diag.message = Status.MAX_TIME, f"{plain.message}; {cut}"
+            evidence["text"].append(cut)
     timings["total"] = time.perf_counter() - t0
     diag.timings = timings
     diag.evidence = evidence
@@ -323,26 +349,19 @@ class _Context:
         return v
 
     def _exact_judge(self, component):
+        """``judge(v, r̃, z)`` of double-double iterates, as the double run judges its own: the
+        component's criterion of the float64 rounding (a local file: on its own u = W r + q);
+        below double's reach the criterion of the point itself, in mpmath."""
         problem, lp = self.problem, self.lp
-        if self.tol < DOUBLE_REACH:  # no float64 answer meets such a tolerance: judge the point itself
-            import mpmath
-
-            data = self._mp_measures()
-            pair = np.frompyfunc(lambda h, l: mpmath.mpf(float(h)) + mpmath.mpf(float(l)), 2, 1)
-
+        if self.tol < DOUBLE_REACH and not self.local:  # no float64 answer meets such a tolerance
             def judge(v, r_t, z):
+                import mpmath
+
                 with mpmath.workdps(40):
-                    r = np.zeros(SPACEDIM * problem.n_contacts, dtype=object)
-                    r[:] = mpmath.mpf(0)
-                    r[lp.keep] = pair(r_t.h, r_t.l) * np.array([mpmath.mpf(float(s)) for s in lp.scale], dtype=object)
-                    if self.local:
-                        rf = np.array([float(x) for x in r])
-                        return measures(problem, problem.H @ rf, problem.local.velocity(rf), rf, "longdouble")
-                    vm = pair(v.h, v.l).astype(object)
-                    u = data.arith.matvec(data.HT, vm) + data.w
-                    return data.measures(vm, u, r)
+                    return self._criterion_mp([mpmath.mpf(h) + mpmath.mpf(lo) for h, lo in zip(v.h, v.l)],
+                                              [mpmath.mpf(h) + mpmath.mpf(lo) for h, lo in zip(r_t.h, r_t.l)])
             return judge
-        if self.local:  # judged on the file: u = W r + q (the double run's final judgement too)
+        if self.local:
             def judge(v, r_t, z):
                 r = lp.r_from_lifted(np.asarray(r_t.h, dtype=np.float64))
                 return measures(problem, problem.H @ r, problem.local.velocity(r), r, "longdouble")
@@ -358,22 +377,27 @@ class _Context:
         rounding (as the double run judges), or of the point itself below double's reach."""
         problem, lp = self.problem, self.lp
         if self.tol < DOUBLE_REACH and not self.local:
-            import mpmath
-
-            data = self._mp_measures()
-            with mpmath.workdps(40):
-                vm = np.empty(len(it.v), dtype=object)
-                vm[:] = [mpmath.mpf(x) for x in it.v]
-                r = np.empty(SPACEDIM * problem.n_contacts, dtype=object)
-                r[:] = mpmath.mpf(0)
-                r[lp.keep] = [mpmath.mpf(x) * mpmath.mpf(float(sc)) for x, sc in zip(it.r_t, lp.scale)]
-                return data.measures(vm, data.arith.matvec(data.HT, vm) + data.w, r)
+            return self._criterion_mp(it.v, it.r_t)
         v = np.array([float(x) for x in it.v])
         r_t = np.array([float(x) for x in it.r_t])
         if self.local:
             rf = lp.r_from_lifted(r_t)
             return measures(problem, problem.H @ rf, problem.local.velocity(rf), rf, "longdouble")
         return self.judge_component(np.asarray(v, dtype=np.longdouble)[self.active], np.asarray(r_t, dtype=np.longdouble))
+
+    def _criterion_mp(self, v_values, r_t_values):
+        """The measures of (v, r = P r̃, u = Hᵀv + w) computed in mpmath (40 digits) from mpf
+        values, with M of the posed equations exactly."""
+        import mpmath
+
+        data, lp = self._mp_measures(), self.lp
+        with mpmath.workdps(40):
+            vm = np.empty(len(v_values), dtype=object)
+            vm[:] = [mpmath.mpf(x) for x in v_values]
+            r = np.empty(SPACEDIM * self.problem.n_contacts, dtype=object)
+            r[:] = mpmath.mpf(0)
+            r[lp.keep] = [mpmath.mpf(x) * mpmath.mpf(float(sc)) for x, sc in zip(r_t_values, lp.scale)]
+            return data.measures(vm, data.arith.matvec(data.HT, vm) + data.w, r)
 
     def _mp_measures(self):
         """The measures in mpmath (40 digits) with M of the posed equations exactly."""
@@ -403,7 +427,7 @@ def _exact_posed_M(problem: Problem, arith):
     with arith.context():
         mpf = arith.mp.mpf
         entries = {}
-        for M, w in ((A.tocoo(), 1), (A.T.tocoo(), 1)):
+        for M in (A.tocoo(), A.T.tocoo()):
             for i, j, x in zip(M.row, M.col, M.data):
                 entries[(int(i), int(j))] = entries.get((int(i), int(j)), mpf(0)) + mpf(float(x)) / 2
         keys = sorted(entries)
@@ -422,11 +446,8 @@ def r_unique(problem: Problem, lp) -> tuple[bool, str]:
     from scipy.sparse import csc_matrix, identity
     from scipy.sparse.linalg import splu
 
-    m, nk = problem.n_dofs, lp.nk
-    if problem.local is not None:
-        HK = csc_matrix(problem.H)[:, lp.keep]
-    else:
-        HK = csc_matrix(problem.H)[:, lp.keep]
+    nk = lp.nk
+    HK = csc_matrix(problem.H)[:, lp.keep]  # (a local file: its lifting, W = HᵀH)
     if nk == 0:
         return True, "no reaction components"
     if nk > HK.shape[0]:
@@ -642,6 +663,21 @@ def _lam2_loss(s: dict) -> str | None:
     return None
 
 
+def _run_record(res, how: str) -> dict:
+    return {"how": how, "status": str(res.status), "message": res.message, "nit": int(res.nit),
+            "criterion": float(res.criterion), "components": len(res.extras.get("component_runs") or []) or 1}
+
+
+def _refined_text(ctx, plain, res) -> str:
+    split = plain.extras.get("component_runs") or []
+    how = f", split into {len(split)} independent components" if split else ""
+    return (f"as `rfverify solve` runs it (default inexact linear solves, float64 until the criterion is 1e-9{how}) "
+            f"the {ctx.method} run ends {plain.status} at criterion {plain.criterion:.1e}; the same form as one system "
+            f"with every linear solve refined to the floor of the extended arithmetic meets the tolerance "
+            f"({res.status} after {res.nit} iterations, criterion {res.criterion:.1e}), and its steps are the exact "
+            f"ones (below): more precision in the linear algebra is what the run lacks")
+
+
 def _healthy_text(ctx, steps) -> str:
     finite = [s for s in steps if math.isfinite(s["digits"])]
     if not finite:
@@ -763,7 +799,8 @@ def _cause_text(ctx, cause, dep, sf, main, early, decided, steps, evidence) -> l
     out.append(said(main, f"iteration {main.start} of the double run"))
     if early is not None:
         out.append(said(early, "the double run's start"))
-    double_end = f"the double run ended {res.status} after {res.nit} iterations (criterion {res.criterion:.1e})"
+    double_end = (f"the lockstep's double run ended {res.status} after {res.nit} iterations (criterion "
+                  f"{res.criterion:.1e})")
     if cause == "precision":
         out.append(f"{double_end}: double precision is the cause")
     elif cause == "iterations":
@@ -900,7 +937,8 @@ def _witness(ctx, steps, focus, run, evidence, dps, budget, timings):
                            f"lockstep said {lock:.1f})")
     if ctx.local:  # the exact run of a local problem has no dofs; the reference works on the lifting
         run = None
-    if run is not None and run.kept and time.perf_counter() < stop:
+    step_seconds = time.perf_counter() - t0  # the reference's build and one step: what the next step may cost
+    if run is not None and run.kept and time.perf_counter() + step_seconds < stop:
         last = run.reached_at if run.reached_at is not None else run.rows[-1]["iter"]
         kl = last - 1
         if kl >= run.start and kl in run.kept and last in run.kept:
@@ -939,7 +977,8 @@ def _witness(ctx, steps, focus, run, evidence, dps, budget, timings):
         def tick(kk, crit):
             ctx.say(f"  mpmath iteration {kk}: criterion {crit:.2e}")
 
-        w = witness(ref, start, k0, g0, ctx.settings, ctx.judge_reference, compare, n, stop, dps, tick)
+        w = witness(ref, start, k0, g0, ctx.settings, ctx.judge_reference, compare, n, stop, dps, tick,
+                    step_seconds=step_seconds)
         out["run"] = w.as_dict()
         agree = f"{w.agreement:.1f}" if math.isfinite(w.agreement) else "all"
         if w.reached_at is not None:
@@ -977,7 +1016,8 @@ def _remedies(ctx: _Context, cause, run: ExactRun, user_options: dict):
         base += ["--as-stored"]
     options = {k: v for k, v in user_options.items() if k not in ("refine_tol", "extended_below", "as_stored")}
     forms = [m for m in ALGORITHM1_METHODS if m != method and method_unavailable(m) is None]
-    more = max(2 * max_iter, int(1.25 * run.reached_at) + 5) if run.reached_at is not None else 2 * max_iter
+    reached = None if run is None else run.reached_at
+    more = max(2 * max_iter, int(1.25 * reached) + 5) if reached is not None else 2 * max_iter
     # Below double's reach no float64 answer meets the criterion: a proof of K digits is the answer.
     ks = (15, 12, 10) if tol < DOUBLE_REACH else (max(1, min(15, math.ceil(-math.log10(tol)))),)
     iters = [("solve", {"method": method, "max_iter": more}, ["--method", method, "--max-iter", str(more)])]
@@ -1034,7 +1074,12 @@ def _conclusion(d: Diagnosis) -> str:
     run = ev.get("exact") or {}
     early = ev.get("exact_from_start") or {}
     dep = ev.get("departure")
-    if d.cause == "precision":
+    if d.cause == "precision" and not run:
+        lock = ev.get("lockstep_run") or {}
+        what = (f"Cause: double precision — the {d.method} run ended {d.status} as `rfverify solve` runs it, while the "
+                f"same form with every linear solve refined to the floor of the extended arithmetic meets tol = "
+                f"{d.tol:g} ({lock.get('status')} after {lock.get('nit')} iterations, its steps the exact ones).")
+    elif d.cause == "precision":
         reached = run.get("reached_at") if run.get("reached_at") is not None else early.get("reached_at")
         start = run.get("start") if run.get("reached_at") is not None else 0
         sf = ev.get("shortfall")

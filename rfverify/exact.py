@@ -295,15 +295,15 @@ class Witness:
 
 
 def witness(reference_solver, start_iterate: tuple, k0: int, gamma0: float, settings, judge, compare,
-            max_steps: int, deadline: float, dps: int, progress=None) -> Witness:
+            max_steps: int, deadline: float, dps: int, progress=None, step_seconds: float = 0.0) -> Witness:
     """Algorithm 1 in the mpmath reference (``reference_solver``, a :class:`reference.Solver`)
     from ``start_iterate`` (a :class:`reference.Iterate`, or (v, r̃, z cones) in the reference's
-    layout), iteration ``k0`` of the
-    double run, with the double run's σ rule (by the criterion ``judge(iterate)`` of each
-    iterate) and γ rule, for at most ``max_steps`` steps,
-    while the wall clock is before ``deadline`` and until the criterion meets
-    ``settings.tol``.  ``compare(k, iterate)`` returns the digits of agreement of the
-    reference's iterate k (a :class:`reference.Iterate`) with the double-double run's."""
+    layout), iteration ``k0`` of the double run, with the double run's σ rule (by the criterion
+    ``judge(iterate)`` of each iterate) and γ rule, for at most ``max_steps`` steps, while the
+    wall clock allows and until the criterion meets ``settings.tol``.  ``compare(k, iterate)``
+    returns the digits of agreement of the reference's iterate k (a :class:`reference.Iterate`)
+    with the double-double run's.  A step that would end past ``deadline`` is not begun
+    (``step_seconds``: what one is expected to take, before the first is timed)."""
     from reference import jordan as RJ
 
     t0 = time.perf_counter()
@@ -312,6 +312,7 @@ def witness(reference_solver, start_iterate: tuple, k0: int, gamma0: float, sett
     criteria, agreement, reached, stopped = [], math.inf, None, ""
     steps = 0
     k = k0
+    last = step_seconds  # seconds of the last step: a step that would end past the deadline is not begun
     while True:
         crit = judge(it).max
         criteria.append(crit)
@@ -323,16 +324,18 @@ def witness(reference_solver, start_iterate: tuple, k0: int, gamma0: float, sett
         if steps >= max_steps:
             stopped = f"{steps} steps, as many as the double-double run took"
             break
-        if time.perf_counter() > deadline:
+        if time.perf_counter() + last > deadline:
             stopped = f"its time budget was spent after {steps} steps"
             break
         if progress:
             progress(k, crit)
+        t_step = time.perf_counter()
         try:
             step = reference_solver.step(it, gamma, rules.rule_at(settings.sigma_rule, crit))
         except RJ.ReferenceDomainError as exc:
             stopped = f"no step from iteration {k}: {exc}"
             break
+        last = time.perf_counter() - t_step
         it = step.iterate
         gamma = rules.step_fraction(float(step.alpha), 0.09)
         steps += 1

@@ -111,6 +111,25 @@ def test_a_run_cut_short_by_max_iter_with_healthy_steps_is_not_precision():
     assert d.remedy["status"] == "Solved" and d.remedy["criterion"] <= 1e-10
 
 
+def test_a_run_that_stalls_only_with_the_default_solves_is_precision(monkeypatch):
+    """The run diagnosed is the run as `rfverify solve` makes it.  Where it stalls and the same
+    form with every solve refined (the lockstep's run) meets the tolerance, the cause is the
+    precision of the linear algebra, not "none".  (Here the plain run is made to refine nothing,
+    refine_max=0: qp2 on the 4-contact wedge Chute then ends AlmostSolved at 1.4e-10.)"""
+    from rfverify import diagnosis as D
+
+    real = D.solve
+
+    def solve(problem, **kw):
+        return real(problem, **kw) if kw.get("keep_iterates") else real(problem, refine_max=0, **kw)
+
+    monkeypatch.setattr(D, "solve", solve)
+    d = diagnose(rfverify.load(HARD / "Chute-ndof-24-nc-4-0.hdf5"), method="qp2", tol=1e-10, witness_time=0)
+    assert d.status == "AlmostSolved" and d.evidence["lockstep_run"]["status"] == "Solved"
+    assert d.cause == "precision" and d.conclusion.startswith("Cause: double precision")
+    assert d.remedy is not None and d.remedy["criterion"] <= 1e-10
+
+
 def test_a_problem_without_a_solution_is_the_data():
     d = diagnose(_infeasible(), tol=1e-10, witness_time=0)
     assert not d.success and d.cause == "data" and d.remedy is None
@@ -232,7 +251,7 @@ def test_cli_diagnose_exit_code_is_the_double_runs_outcome(capsys):
     assert main(["diagnose", "bundled:chute", "--tol", "1e-25", "--max-iter", "40", "--witness-time", "0",
                  "--no-remedy"]) == 1
     out = capsys.readouterr().out
-    assert "failure: iteration" in out and "first flagged iteration" in out
+    assert "failure: " in out and "first flagged iteration" in out
     assert main(["diagnose", "bundled:sphere", "--json", "--max-iter", "3", "--witness-time", "0"]) == 1
     s = json.loads(capsys.readouterr().out)
     assert s["status"] == "MaxIterations" and len(s["iterations"]) == 3

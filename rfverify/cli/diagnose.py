@@ -34,9 +34,12 @@ steps within --witness-time seconds.
 remedy: another --method, more --max-iter, --digits K, run as 'rfverify solve' runs them; the
 first whose answer meets --tol is printed with its figures.
 
-The first line states the cause and the remedy. The double run refines every linear solve to
-4*eps (solver setting refine_tol=None) and uses the extended arithmetic from the first
-iteration (extended_below=None), so that the digits measure the rounding of one arithmetic."""
+The first line states the cause and the remedy. The run diagnosed is --method as 'rfverify
+solve' runs it; the lockstep's run is the same form as one system (no split into independent
+components), every linear solve refined to 4*eps (solver setting refine_tol=None) and the
+extended arithmetic from the first iteration (extended_below=None), so that the digits measure
+the rounding of one arithmetic. Where that run meets --tol and the plain one does not, the cause
+is the precision of the default linear solves."""
 
 EPILOG = """\
 Exit codes: 0 the double run was Solved; 1 it was not (MaxIterations, NumericalError, ...) —
@@ -121,7 +124,12 @@ def cmd_diagnose(args) -> int:
         print(dumps(d, indent=2))
         return code
     print(d["conclusion"].replace("PROBLEM", str(args.problem)))
-    print(f"double run ({d['method']}): {d['status']} after {d['nit']} iterations: {d['message']}")
+    print(f"double run ({d['method']}, as rfverify solve runs it): {d['status']} after {d['nit']} iterations: "
+          f"{d['message']}")
+    lock = d["evidence"].get("lockstep_run")
+    if lock:
+        print(f"lockstep's run ({lock['how']}): {lock['status']} after {lock['nit']} iterations, criterion "
+              f"{lock['criterion']:.2e}")
     for sentence in d["evidence"].get("text", []):
         print(f"  - {sentence}")
     print(COLUMNS)
