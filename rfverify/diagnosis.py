@@ -674,8 +674,8 @@ def _refined_text(ctx, plain, res) -> str:
     return (f"as `rfverify solve` runs it (default inexact linear solves, float64 until the criterion is 1e-9{how}) "
             f"the {ctx.method} run ends {plain.status} at criterion {plain.criterion:.1e}; the same form as one system "
             f"with every linear solve refined to the floor of the extended arithmetic meets the tolerance "
-            f"({res.status} after {res.nit} iterations, criterion {res.criterion:.1e}), and its steps are the exact "
-            f"ones (below): more precision in the linear algebra is what the run lacks")
+            f"({res.status} after {res.nit} iterations, criterion {res.criterion:.1e}; its steps against the exact "
+            f"ones below): more precision in the linear algebra is what the run lacks")
 
 
 def _healthy_text(ctx, steps) -> str:
@@ -825,10 +825,18 @@ def _data_facts(ctx, run: ExactRun) -> str:
         facts.append(f"{n0} contacts have μ = 0")
     last = run.rows[-1] if run.rows else None
     if last:
+        why = ""
+        if last["worst"] in ("velocity", "cone") and last["mu"] < 1e-3 * ctx.tol:
+            why = " — the constraints leave (almost) no strictly feasible point"
+        elif last["worst"] == "dynamics" and not ctx.r_unique and ctx.scales.r > 0:
+            grown = last["r_t_inf"] / ctx.scales.r
+            first = run.rows[0]["r_t_inf"] / ctx.scales.r
+            if grown > 10 * max(first, 1.0):
+                why = (f" — the reactions grow along the self-stress of the redundant contacts (‖r̃‖∞ from {first:.1e} "
+                       f"to {grown:.1e} times the reaction scale ‖f‖/max‖h_k‖), and the float64 rounding of so large "
+                       "an r alone leaves that dynamics residual")
         facts.append(f"the exact run stalls on its {last['worst']} measure ({last['criterion']:.1e}) while μ = "
-                     f"{last['mu']:.1e}" + (" — the constraints leave (almost) no strictly feasible point"
-                                            if last["worst"] in ("velocity", "cone") and last["mu"] < 1e-3 * ctx.tol
-                                            else ""))
+                     f"{last['mu']:.1e}{why}")
     return "Evidence: " + "; ".join(facts) + "." if facts else ""
 
 
@@ -1044,7 +1052,8 @@ def _remedies(ctx: _Context, cause, run: ExactRun, user_options: dict):
             out = solve_to_digits(problem, **{"tol": tol, **kw}, **limit)
             crit = measures(problem, out.v, out.u, out.r, "longdouble").max
             status = str(out.status)
-            ok = crit <= tol or (tol < DOUBLE_REACH and out.success)
+            # `solve --digits` exits 0 only when certified: a remedy is one the command says has worked
+            ok = out.success and (crit <= tol or tol < DOUBLE_REACH)
         entry = {"args": args, "status": status, "criterion": crit, "time": time.perf_counter() - t0,
                  "reached": bool(ok)}
         tried.append(entry)
@@ -1078,7 +1087,7 @@ def _conclusion(d: Diagnosis) -> str:
         lock = ev.get("lockstep_run") or {}
         what = (f"Cause: double precision — the {d.method} run ended {d.status} as `rfverify solve` runs it, while the "
                 f"same form with every linear solve refined to the floor of the extended arithmetic meets tol = "
-                f"{d.tol:g} ({lock.get('status')} after {lock.get('nit')} iterations, its steps the exact ones).")
+                f"{d.tol:g} ({lock.get('status')} after {lock.get('nit')} iterations).")
     elif d.cause == "precision":
         reached = run.get("reached_at") if run.get("reached_at") is not None else early.get("reached_at")
         start = run.get("start") if run.get("reached_at") is not None else 0

@@ -80,7 +80,8 @@ class ExactRun:
     (``start``, an iteration of the double run), how it ended (``status``, ``message``), the
     iteration at which it met the tolerance (``reached_at``, None if it did not), and one row
     per iterate (``iter``, ``mu``, ``criterion``, ``worst``: the measure deciding it,
-    ``pinfeas``, ``dinfeas``, ``gamma``: the step fraction of the step from it)."""
+    ``pinfeas``, ``dinfeas``, ``gamma``: the step fraction of the step from it, ``r_t_inf``:
+    ‖r̃‖∞)."""
 
     start: int
     status: Status
@@ -170,7 +171,8 @@ class _Continuation:
         if self.keep:
             self.kept[kk] = it
         self.rows.append({"iter": kk, "mu": res.mu, "criterion": judged.max, "worst": judged.worst(),
-                          "pinfeas": res.pinfeas, "dinfeas": res.dinfeas, "gamma": self.gamma})
+                          "pinfeas": res.pinfeas, "dinfeas": res.dinfeas, "gamma": self.gamma,
+                          "r_t_inf": float(np.max(np.abs(it[1].h), initial=0.0))})
         if self.progress:
             self.progress(kk, res.mu, judged.max)
         verdict = self.term.observe(kk, judged, (res.pinfeas, res.dinfeas, res.mu), None)

@@ -271,7 +271,9 @@ def lockstep_figure(diag: dict, path, title: str = "") -> Path:
     double step with the exact one (v, u, Hr; r and z where r is unique) with the threshold and
     the digits the form's conditioning leaves; max cond(Q_p) in double and exactly; min λ2 of z
     and of Jᵀr̃ in double and exactly; and the criterion of the double run's iterates beside the
-    exact continuation's (and the mpmath witness's).  The departure is marked in every panel."""
+    exact continuation's (and the mpmath witness's).  The departure is marked in every panel
+    (crimson), and the first step with fewer digits than the tolerance needs where it differs
+    (orange, dashed)."""
     plt = _plt()
     from matplotlib.ticker import MaxNLocator
 
@@ -296,7 +298,7 @@ def lockstep_figure(diag: dict, path, title: str = "") -> Path:
     a1.set_ylabel("digits of agreement, double vs exact step")
     a1.set_title("Rounding error of each step", fontsize=9)
     a1.set_ylim(bottom=0)
-    a1.legend(fontsize=7, loc="best")
+    a1.legend(fontsize=7, loc="lower left")
     for fam, lab, color in (("max_cond_Qp", "double", "tab:red"), ("max_cond_Qp_exact", "exact", "tab:purple")):
         y = np.array([_finite_or_nan(r.get(fam)) for r in its], dtype=float)
         if not np.all(np.isnan(y)):
@@ -324,7 +326,7 @@ def lockstep_figure(diag: dict, path, title: str = "") -> Path:
     crit = np.array([_finite_or_nan(r.get("criterion")) for r in its], dtype=float)
     a4.semilogy(k, np.where(crit > 0, crit, np.nan), marker="o", ms=3, color="tab:blue", label="double run")
     ev = diag.get("evidence") or {}
-    for key, lab, style in (("exact", "exact, from the departure", "--"), ("exact_from_start", "exact, from the start", ":")):
+    for key, lab, style in (("exact", "exact, continued", "--"), ("exact_from_start", "exact, from the start", ":")):
         run = ev.get(key)
         if run and run.get("iterations"):
             kk = np.array([r["iter"] for r in run["iterations"]], dtype=float)
@@ -341,17 +343,24 @@ def lockstep_figure(diag: dict, path, title: str = "") -> Path:
         a4.axhline(float(tol), color="gray", ls=":", lw=1, label=f"tol {float(tol):g}")
     a4.set_xlabel("iteration")
     a4.set_ylabel("criterion (DESIGN §4.5)")
-    a4.set_title("The run, and the same algorithm in exact arithmetic", fontsize=9)
+    a4.set_title("The run and the exact algorithm", fontsize=9)
     a4.legend(fontsize=7, loc="best")
-    dep = ev.get("departure")
+    dep, short = ev.get("departure"), ev.get("shortfall")
+    if short and dep and short["iter"] == dep["iter"]:
+        short = None  # one mark where they coincide
     for ax in axes:
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.grid(alpha=0.3, which="both")
         if dep:
             ax.axvline(dep["iter"], color="crimson", lw=1.5, alpha=0.7)
+        if short:
+            ax.axvline(short["iter"], color="darkorange", lw=1.5, ls="--", alpha=0.8)
     if dep:
-        a1.annotate(f"departure: step {dep['iter']}", xy=(dep["iter"], 0), xytext=(4, 6), textcoords="offset points",
-                    color="crimson", fontsize=8)
+        a1.annotate(f"departure: step {dep['iter']}", xy=(dep["iter"], 1), xycoords=("data", "axes fraction"),
+                    xytext=(3, -10), textcoords="offset points", color="crimson", fontsize=8)
+    if short:
+        a1.annotate(f"< tol's digits: step {short['iter']}", xy=(short["iter"], 1), xycoords=("data", "axes fraction"),
+                    xytext=(3, -22), textcoords="offset points", color="darkorange", fontsize=8)
     cause = diag.get("cause")
     head = f"{diag['status']} after {diag['nit']} iterations" + (f"; cause: {cause}" if cause else "")
     fig.suptitle(f"{title + ': ' if title else ''}{diag['method']}, {head}", fontsize=10)
