@@ -316,7 +316,7 @@ class _Context:
     the exact algorithm, the data scales and the form's conditioning."""
 
     def __init__(self, problem, res, lp, method, tol, max_iter, say, deadline):
-        from .solver import _judge
+        from .solver import component_judge
 
         self.problem, self.res, self.lp, self.method = problem, res, lp, method
         self.tol, self.max_iter, self.say, self.deadline = tol, max_iter, say, deadline
@@ -327,7 +327,7 @@ class _Context:
         self.trace = res.trace
         self.scales = data_scales(problem)
         self.f_inf = float(np.max(np.abs(problem.f), initial=0.0))
-        component = _judge(problem, lp, self.active, np.arange(lp.nk), self.settings)
+        component = component_judge(problem, lp, self.active, np.arange(lp.nk), self.settings)
         self.judge_component = component
         self.exact = ExactAlgorithm(problem, self.settings, self._exact_judge(component))
         m_a = self.active.size

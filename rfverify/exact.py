@@ -101,7 +101,7 @@ class ExactRun:
                 "iterations": [dict(r) for r in self.rows]}
 
 
-class _ExactScaling(ext._DDScaling):
+class _ExactScaling(ext.DDScaling):
     """The double-double NT scaling, reporting max cond(Q_p) = (λ1(p)/λ2(p))² from its
     spectral data (λ1(p) and λ2(p) are computed there without cancellation)."""
 
@@ -112,7 +112,7 @@ class _ExactScaling(ext._DDScaling):
         return {"max_cond_Qp": float(np.max(cond, initial=1.0))}
 
 
-class _ExactCones(ext._DDCones):
+class _ExactCones(ext.DDCones):
     def scaling(self, z, s):
         return _ExactScaling(self.n3, self.nz, self.n_cones, self.e, z, s)
 
@@ -219,8 +219,8 @@ class ExactAlgorithm:
         return tuple(ext.V(*dd.from_longdouble(np.asarray(x, dtype=np.longdouble))) for x in (v, r_t, z))
 
     def _precision(self):
-        space = ext._DDSpace(self.data)
-        newton = ReducedNewton(space, ext._DDBackend(self.backend), refine_max=REFINE_MAX, floor=FLOOR,
+        space = ext.DDSpace(self.data)
+        newton = ReducedNewton(space, ext.DDBackend(self.backend), refine_max=REFINE_MAX, floor=FLOOR,
                                inf=ext.V.inf, enough=None, predictor_enough=None)
         return Precision(space, _ExactCones(self.data), newton)
 
