@@ -39,7 +39,7 @@ def test_every_precision_runs_the_one_loop(monkeypatch):
     assert out.success
     # The double solve and the double-double phase are the loop's runs, ...
     assert [space for space, _ in calls[double_ipm]] and {s for s, _ in calls[double_ipm]} == {"_NumpySpace"}
-    assert [space for space, _ in calls[dd_ipm]] == ["_DDSpace"]
+    assert [space for space, _ in calls[dd_ipm]] == ["DDSpace"]
     dd_run = calls[dd_ipm][0][1]
     assert np.array_equal(out.extended.v.h, dd_run.iterate[0].h) and out.extended.nit == dd_run.k
     # ... and so is the multiple-precision tail, started from the double-double iterate.

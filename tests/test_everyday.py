@@ -181,15 +181,19 @@ def test_a_bench_task_past_its_solver_share_records_max_time_with_its_answer(tmp
 
 
 # ---------------------------------------------------------------------- words and progress
-def test_diagnose_explains_its_columns_and_ends_with_a_sentence(capsys):
+def test_diagnose_explains_its_columns_and_starts_with_a_sentence(capsys):
+    """The first line is the cause and the remedy in words (issue 46; it was the last line, and
+    said "double precision is not the cause" of stalls that exact arithmetic does not have)."""
     code, out, err = run(capsys, "diagnose", "bundled:sphere", "--quiet", "--dps", "20")
     lines = out.splitlines()
-    assert lines[1].startswith("columns:") and "r~ (the lifted reactions" in lines[1]
-    assert lines[-1].startswith("Healthy:") and "nothing to fix" in lines[-1]
-    code, out, err = run(capsys, "diagnose", "bundled:chute", "--tol", "1e-25", "--quiet", "--dps", "20")
-    last = out.splitlines()[-1]
-    assert code == 1 and last.startswith("Double precision broke at iteration") and "What to do:" in last
-    assert "--digits K" in last
+    assert lines[0].startswith("Cause: none") and "nothing to fix" in lines[0]
+    columns = next(line for line in lines if line.startswith("columns"))
+    assert "digits of agreement" in columns and "where r is unique" in columns
+    code, out, err = run(capsys, "diagnose", "bundled:chute", "--tol", "1e-25", "--quiet", "--dps", "20",
+                         "--witness-time", "0")
+    first = out.splitlines()[0]
+    assert code == 1 and first.startswith("Cause: double precision") and "Remedy: `rfverify solve" in first
+    assert "--digits 15" in first
 
 
 def test_generate_reports_progress_as_a_percentage(capsys):

@@ -44,12 +44,12 @@ def test_the_projection_zeroes_the_primal_row_and_keeps_the_complementarity_row_
     falls by orders of magnitude while the complementarity row's residual stays below η‖c‖."""
     data, start = started
     backend = choose_backend(data)
-    space = X._DDSpace(data)
-    newton = N.ReducedNewton(space, X._DDBackend(backend), refine_max=12, floor=1e-31, inf=X.V.inf,
+    space = X.DDSpace(data)
+    newton = N.ReducedNewton(space, X.DDBackend(backend), refine_max=12, floor=1e-31, inf=X.V.inf,
                              enough=N.NEWTON_ENOUGH)
     v, r, z = (X.V(*dd.from_longdouble(start[k])) for k in ("v", "r_t", "z"))
     res = residuals(space, v, r, z, data.n)
-    sc = X._DDCones(data).scaling(z, res.s)
+    sc = X.DDCones(data).scaling(z, res.s)
     newton.update(sc, 0, res.mu)
     a, b, c = -res.r_d, -res.r_p, sc.affine_rhs()
     sp, q = space, sc.quad

@@ -53,10 +53,13 @@ def test_diagnosis_is_typed_and_its_dict_is_the_cli_json():
     diag = rfverify.diagnose(rfverify.load("bundled:sphere"), max_iter=3)
     assert diag.status == "MaxIterations" and not diag.success and diag.nit == 3 == len(diag.steps)
     assert diag.failure == diag.message
-    assert set(diag.timings) == {"double", "reference", "steps", "total"}
+    assert set(diag.timings) == {"double", "setup", "steps", "exact", "witness", "remedies", "total"}
+    assert diag.cause == "iterations" and diag.remedy["status"] == "Solved" and diag["cause"] == diag.cause
     d = json.loads(json.dumps(diag.to_dict()))
-    assert d["status"] == "MaxIterations" and d["nit"] == 3 and d["iterations"] == diag.steps
-    assert repr(diag).startswith("Diagnosis(method='jqinv', status=MaxIterations, nit=3")
+    # (a local file has no v: its digits_v is NaN, which == cannot compare)
+    assert d["status"] == "MaxIterations" and d["nit"] == 3 and json.dumps(d["iterations"]) == json.dumps(diag.steps)
+    assert repr(diag).startswith("Diagnosis(method='jqinv', status=MaxIterations, nit=3, cause='iterations'")
+    assert d["cause"] == "iterations" and d["remedy"] == diag.remedy and d["evidence"]["text"]
 
 
 def _results_table():

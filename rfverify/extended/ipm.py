@@ -180,7 +180,7 @@ class _DDOperator:
         return V(*self.A.matvec(x.h, x.l))
 
 
-class _DDSpace:
+class DDSpace:
     """The lifted problem in double-double (:class:`~rfverify.algorithm.interfaces.Space`)."""
 
     tiny = 1e-300
@@ -210,7 +210,7 @@ class _DDSpace:
     move = axpy
 
 
-class _DDScaling:
+class DDScaling:
     """The NT scaling of one double-double iterate (:mod:`.cones`)."""
 
     def __init__(self, n3: int, nz: int, n_cones: int, e: V, z: V, s: V):
@@ -256,16 +256,16 @@ class _DDScaling:
                    C.max_step_threaded(self.n3, self.s.h, self.s.l, ds.h, ds.l))
 
 
-class _DDCones:
+class DDCones:
     def __init__(self, data: ExtendedData):
         self.n3, self.nz, self.n_cones = data.n3, data.nz, data.n3 + data.n1
         self.e = V(C.identity(data.n3, data.nz))
 
     def scaling(self, z, s):
-        return _DDScaling(self.n3, self.nz, self.n_cones, self.e, z, s)
+        return DDScaling(self.n3, self.nz, self.n_cones, self.e, z, s)
 
 
-class _DDBackend:
+class DDBackend:
     """A back end of :mod:`.system` seen through double-double vectors."""
 
     def __init__(self, backend):
@@ -277,7 +277,7 @@ class _DDBackend:
         if hasattr(backend, "apply_G_inverse"):
             self.apply_G_inverse = lambda e: V(*backend.apply_G_inverse(e.h, e.l))
 
-    def update(self, sc: _DDScaling) -> bool:
+    def update(self, sc: DDScaling) -> bool:
         return self.backend.update(sc.ph, sc.pl, sc.pih, sc.pil, sc.spec)
 
     def solve(self, a: V, t: V):
@@ -300,14 +300,14 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
     solved as stored (the reduction uses (M + Mᵀ)/2, refinement the stored M)."""
     t0 = time.perf_counter()
     backend = backend or choose_backend(data)
-    space = _DDSpace(data)
-    newton = ReducedNewton(space, _DDBackend(backend), refine_max=refine_max, floor=1e-31, inf=V.inf,
+    space = DDSpace(data)
+    newton = ReducedNewton(space, DDBackend(backend), refine_max=refine_max, floor=1e-31, inf=V.inf,
                            enough=enough, predictor_enough=predictor_enough)
     policy = UntilPolicy(until, progress, max_iter,
                          lambda k, it, res: Iterate(k, *it, res.mu, res.pinfeas, res.dinfeas),
                          gamma_max, "accepted")
     begin = tuple(V(*dd.from_longdouble(start[key])) for key in ("v", "r_t", "z"))
-    out = iterate(Precision(space, _DDCones(data), newton), policy, begin, n_contacts=data.n,
+    out = iterate(Precision(space, DDCones(data), newton), policy, begin, n_contacts=data.n,
                   n_cones=data.n3 + data.n1, clock_origin=t0)
     status, message = out.verdict
     return ExtendedResult(*out.iterate, status, message, out.k, extended_trace(out.records), backend.name,

@@ -313,54 +313,116 @@ def work_precision_problems(data: RunData, out: Path, keys: list) -> Path | None
 
 
 def diagnostics(diag: dict, key: str, out: Path, index: int, what: str = "") -> Path:
-    """Lockstep diagnosis: digits of agreement, max cond(Q_p), min λ2 double vs reference."""
+    """The report's lockstep figure of one diagnosed run (:func:`lockstep_figure`)."""
+    what = what or f"{diag['method']}, tol {diag.get('tol', float('nan')):g}"
+    return lockstep_figure(diag, out / f"diagnostics_{index}.png", f"{key} ({what})")
+
+
+def _finite_or_nan(x):
+    return float(x) if x is not None and math.isfinite(float(x)) else np.nan
+
+
+def lockstep_figure(diag: dict, path, title: str = "") -> Path:
+    """The figure of a diagnosis (``Diagnosis.to_dict()``; ``rfverify diagnose --plot`` and the
+    report's lockstep section), per step k (from iterate k to k+1): digits of agreement of the
+    double step with the exact one (v, u, Hr; r and z where r is unique) with the threshold and
+    the digits the form's conditioning leaves; max cond(Q_p) in double and exactly; min λ2 of z
+    and of Jᵀr̃ in double and exactly; and the criterion of the double run's iterates beside the
+    exact continuation's (and the mpmath witness's).  The departure is marked in every panel
+    (crimson), and the first step with fewer digits than the tolerance needs where it differs
+    (orange, dashed)."""
     plt = _plt()
-    its = diag["iterations"]
-    k = np.array([r["iter"] for r in its])
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(13, 3.6))
-    for name, lab in (("digits_v", "$v$"), ("digits_r_t", r"$\tilde r$"), ("digits_z", "$z$")):
-        # Below 0 there is no digit of agreement at all (the error exceeds the value): drawn at 0.
-        y = np.array([min(max(r[name], 0.0), DIGITS_CAP) if r[name] is not None else np.nan for r in its],
-                     dtype=float)
-        a1.plot(k + 1, y, marker="o", ms=3, label=lab)
     from matplotlib.ticker import MaxNLocator
 
-    for ax in (a1, a2, a3):
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    a1.set_xlabel("iteration")
+    its = diag["iterations"]
+    k = np.array([r["iter"] for r in its], dtype=float)
+    fig, axes = plt.subplots(1, 4, figsize=(17, 3.9))
+    a1, a2, a3, a4 = axes
+    for name, lab in (("digits_v", "$v$"), ("digits_u", "$u$"), ("digits_Hr", "$Hr$"), ("digits_r_t", "$r$"),
+                      ("digits_z", "$z$")):
+        y = np.array([_finite_or_nan(r.get(name)) for r in its], dtype=float)
+        if np.all(np.isnan(y)):
+            continue  # not measured (r not unique, or a local problem's v)
+        # Below 0 there is no digit of agreement at all (the error exceeds the value): drawn at 0.
+        a1.plot(k, np.clip(y, 0.0, DIGITS_CAP), marker="o", ms=3, label=lab)
+    thr = np.array([_finite_or_nan(r.get("threshold")) for r in its], dtype=float)
+    exp = np.array([_finite_or_nan(r.get("expected")) for r in its], dtype=float)
+    if not np.all(np.isnan(thr)):
+        a1.plot(k, np.clip(thr, 0.0, None), color="black", ls="--", lw=1.2, label="threshold")
+    if not np.all(np.isnan(exp)):
+        a1.plot(k, np.clip(exp, 0.0, None), color="gray", ls=":", lw=1.2, label="left by cond (form)")
+    a1.set_xlabel("step k (iterate k → k+1)")
     a1.set_ylabel("digits of agreement, double vs exact step")
-    a1.set_title("Rounding error of each iteration", fontsize=9)
+    a1.set_title("Rounding error of each step", fontsize=9)
     a1.set_ylim(bottom=0)
-    a1.legend(fontsize=8, loc="best")
-    a1.grid(alpha=0.3)
-    cond = np.array([r["max_cond_Qp"] for r in its], dtype=float)
-    # cond(Q_p) of iterate k scales the step that produces iterate k + 1.
-    a2.semilogy(k + 1, np.where(cond > 0, cond, np.nan), marker="o", ms=3, color="tab:red")
-    a2.axhline(1 / np.finfo(float).eps, color="gray", ls="--", lw=1, label="1/ε (double)")
-    a2.set_xlabel("iteration (step taken with this scaling)")
+    a1.legend(fontsize=7, loc="lower left")
+    for fam, lab, color in (("max_cond_Qp", "double", "tab:red"), ("max_cond_Qp_exact", "exact", "tab:purple")):
+        y = np.array([_finite_or_nan(r.get(fam)) for r in its], dtype=float)
+        if not np.all(np.isnan(y)):
+            a2.semilogy(k, np.where(y > 0, y, np.nan), marker="o" if lab == "double" else None, ms=3, color=color,
+                        ls="-" if lab == "double" else "--", label=f"cond($Q_p$) {lab}")
+    a2.axhline(1 / np.finfo(float).eps, color="gray", ls=":", lw=1, label="1/ε (double)")
+    a2.set_xlabel("step k (scaling at iterate k)")
     a2.set_ylabel("max cond($Q_p$) over cones")
     a2.set_title("Conditioning of the NT scaling", fontsize=9)
-    a2.legend(fontsize=8)
-    a2.grid(alpha=0.3, which="both")
+    a2.legend(fontsize=7)
     for fam, color in (("min_lam2_z", "tab:blue"), ("min_lam2_s", "tab:green")):
-        dbl = np.array([r[fam]["double"] for r in its], dtype=float)
-        ref = np.array([r[fam]["reference"] for r in its], dtype=float)
+        dbl = np.array([_finite_or_nan(r[fam]["double"]) for r in its], dtype=float)
+        ref = np.array([_finite_or_nan(r[fam]["reference"]) for r in its], dtype=float)
         label = "z" if fam.endswith("z") else r"J^T\tilde r"
-        a3.semilogy(k + 1, np.where(dbl > 0, dbl, np.nan), color=color, marker="o", ms=3,
+        a3.semilogy(k, np.where(dbl > 0, dbl, np.nan), color=color, marker="o", ms=3,
                     label=rf"$\lambda_2({label})$ double")
-        a3.semilogy(k + 1, np.where(ref > 0, ref, np.nan), color=color, ls="--", label=rf"$\lambda_2({label})$ exact")
-    events = [r["iter"] + 1 for r in its if r["flags"]]
+        a3.semilogy(k, np.where(ref > 0, ref, np.nan), color=color, ls="--", label=rf"$\lambda_2({label})$ exact")
+    events = [r["iter"] for r in its if r["flags"]]
     for e in events:
         a3.axvline(e, color="red", alpha=0.4, lw=1)
-    a3.set_xlabel("iteration" + (" (red: λ2 underflow / sign events)" if events else ""))
+    a3.set_xlabel("step k (λ2 of iterate k+1)" + (" — red: λ2 lost in double" if events else ""))
     a3.set_ylabel(r"min $\lambda_2$ over cones")
     a3.set_title("Distance to the cone boundary", fontsize=9)
     a3.legend(fontsize=7, loc="best")
-    a3.grid(alpha=0.3, which="both")
-    what = what or f"{diag['method']}, tol {diag.get('tol', float('nan')):g}"
-    fig.suptitle(f"{key} ({what}): {diag['status']} after {diag['nit']} iterations", fontsize=10)
+    crit = np.array([_finite_or_nan(r.get("criterion")) for r in its], dtype=float)
+    a4.semilogy(k, np.where(crit > 0, crit, np.nan), marker="o", ms=3, color="tab:blue", label="double run")
+    ev = diag.get("evidence") or {}
+    for key, lab, style in (("exact", "exact, continued", "--"), ("exact_from_start", "exact, from the start", ":")):
+        run = ev.get(key)
+        if run and run.get("iterations"):
+            kk = np.array([r["iter"] for r in run["iterations"]], dtype=float)
+            cc = np.array([_finite_or_nan(r["criterion"]) for r in run["iterations"]], dtype=float)
+            a4.semilogy(kk, np.where(cc > 0, cc, np.nan), ls=style, color="tab:orange" if key == "exact" else "tab:brown",
+                        label=f"{lab} (double-double)")
+    wit = (ev.get("witness") or {}).get("run")
+    if wit and wit.get("criteria"):
+        kk = wit["start"] + np.arange(len(wit["criteria"]), dtype=float)
+        cc = np.array([_finite_or_nan(c) for c in wit["criteria"]], dtype=float)
+        a4.semilogy(kk, np.where(cc > 0, cc, np.nan), ls="none", marker="x", color="black", label="mpmath witness")
+    tol = diag.get("tol")
+    if tol is not None and math.isfinite(float(tol)):
+        a4.axhline(float(tol), color="gray", ls=":", lw=1, label=f"tol {float(tol):g}")
+    a4.set_xlabel("iteration")
+    a4.set_ylabel("criterion (DESIGN §4.5)")
+    a4.set_title("The run and the exact algorithm", fontsize=9)
+    a4.legend(fontsize=7, loc="best")
+    dep, short = ev.get("departure"), ev.get("shortfall")
+    if short and dep and short["iter"] == dep["iter"]:
+        short = None  # one mark where they coincide
+    for ax in axes:
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.grid(alpha=0.3, which="both")
+        if dep:
+            ax.axvline(dep["iter"], color="crimson", lw=1.5, alpha=0.7)
+        if short:
+            ax.axvline(short["iter"], color="darkorange", lw=1.5, ls="--", alpha=0.8)
+    if dep:
+        a1.annotate(f"departure: step {dep['iter']}", xy=(dep["iter"], 1), xycoords=("data", "axes fraction"),
+                    xytext=(3, -10), textcoords="offset points", color="crimson", fontsize=8)
+    if short:
+        a1.annotate(f"< tol's digits: step {short['iter']}", xy=(short["iter"], 1), xycoords=("data", "axes fraction"),
+                    xytext=(3, -22), textcoords="offset points", color="darkorange", fontsize=8)
+    cause = diag.get("cause")
+    head = f"{diag['status']} after {diag['nit']} iterations" + (f"; cause: {cause}" if cause else "")
+    fig.suptitle(f"{title + ': ' if title else ''}{diag['method']}, {head}", fontsize=10)
     fig.tight_layout()
-    path = out / f"diagnostics_{index}.png"
+    path = Path(path)
     _save(fig, path)
     return path
 

@@ -58,8 +58,9 @@ def component_problem(problem: Problem, lp, group) -> tuple[Problem, np.ndarray]
 
 # The bench runs the solver with its default settings; the diagnosis repeats that run
 # (diagnose alone would refine every solve to 4·eps and start in the extended arithmetic, see
-# rfverify.diagnosis.diagnose).
-AS_BENCHED = {"refine_tol": Settings.refine_tol, "extended_below": Settings.extended_below}
+# rfverify.diagnosis.diagnose).  The mpmath witness gets a shorter budget than the command's:
+# a report diagnoses several runs.
+AS_BENCHED = {"refine_tol": Settings.refine_tol, "extended_below": Settings.extended_below, "witness_time": 20.0}
 
 
 def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int = 100, dps: int = 40,
@@ -130,10 +131,15 @@ def _renumber_contacts(diag: dict, contacts: np.ndarray) -> None:
                       lambda m: f"contact {contacts[int(m.group(1))]}" if int(m.group(1)) < contacts.size
                       else m.group(0), text)
 
-    for key in ("message", "failure"):
+    for key in ("message", "failure", "conclusion"):
         diag[key] = fix(diag.get(key))
     for it in diag.get("iterations", []):
         it["flags"] = [fix(f) for f in it.get("flags", [])]
+    evidence = diag.get("evidence") or {}
+    evidence["text"] = [fix(t) for t in evidence.get("text", [])]
+    for key in ("departure",):
+        if evidence.get(key):
+            evidence[key]["through"] = fix(evidence[key].get("through"))
 
 
 def _compare_status(diag: dict, bench_status, rerun=None) -> dict:
@@ -151,8 +157,9 @@ def _compare_status(diag: dict, bench_status, rerun=None) -> dict:
 
 
 # ---------------------------------------------------------------------- the report's worst cases, cached
-DIAGNOSIS_CACHE_VERSION = 2
-"""Layout of a cached lockstep diagnosis (2: diagnosed as the bench ran it, with its scope)."""
+DIAGNOSIS_CACHE_VERSION = 3
+"""Layout of a cached lockstep diagnosis (2: diagnosed as the bench ran it, with its scope; 3: exact
+steps in double-double, with the cause, its evidence and a remedy)."""
 
 
 def diagnose_worst(data: RunData, count, max_contacts, dps, quiet) -> list:

@@ -229,17 +229,22 @@ def digits_section(doc: Doc, data: RunData, proven: dict | None = None) -> None:
 def lockstep_section(doc: Doc, diags: list, out: Path) -> None:
     """Each diagnosed case (:func:`.lockstep.diagnose_worst`): why it was chosen, how, and its figure."""
     doc.h(2, "Per-iteration diagnostics, double against reference", anchor="lockstep")
-    doc.p("Lockstep (DESIGN §5): from each double iterate the reference takes the exact step; digits of "
-          "agreement measure the error of that iteration: rounding, and the solver's default inexact "
-          "linear solves (refinement stops at residuals of 1e-4 of the right-hand side, so healthy "
-          "iterations agree to 10–12 digits rather than 15–16). Failures first — refuted claims, then "
-          "runs not solved — each diagnosed as the bench ran it (same method, settings, tolerance, "
-          "iteration limit and components).")
+    doc.p("Lockstep (DESIGN §5): from each double iterate the exact step (Algorithm 1 in double-double, "
+          "the mpmath reference as witness on the deciding steps); digits of agreement measure the error of "
+          "that iteration: rounding, and the solver's default inexact linear solves (refinement stops at "
+          "residuals of 1e-4 of the right-hand side, so healthy iterations agree to 10–12 digits rather than "
+          "15–16). For a run that missed its tolerance the same algorithm is continued in exact arithmetic "
+          "from where the double steps departed: the cause is precision if it meets the tolerance within the "
+          "run's iteration limit, iterations if later, the data if never; a remedy is tried. Failures first — "
+          "refuted claims, then runs not solved — each diagnosed as the bench ran it (same method, settings, "
+          "tolerance, iteration limit and components).")
     if not diags:
         doc.p("No run was selected (no Algorithm 1 run on a problem small enough for the lockstep reference).")
     for i, (case, diag) in enumerate(diags):
         doc.h(3, f"{case['problem']} — {case['method']} at {case['tol']:g}: {case['why']}")
         doc.p(f"How it was diagnosed: {diag['scope']['text']}.")
+        if diag.get("conclusion"):
+            doc.p(diag["conclusion"].replace("PROBLEM", case["problem"]))
         doc.p(diag_summary(diag))
         add_figure(doc, f"Lockstep diagnosis of {case['problem']} ({diag_title(case, diag)})",
                    figures.diagnostics, diag, case["problem"], out, i, diag_title(case, diag))
@@ -297,4 +302,6 @@ def diag_summary(diag: dict) -> str:
         text += "; no λ2 underflow"
     if diag.get("failure"):
         text += f"; stop: {diag['failure']}"
+    if diag.get("cause"):
+        text += f"; cause: {diag['cause']}"
     return text

@@ -343,7 +343,7 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
 
         out = ipm.run(M[dofs][:, dofs].tocsc(), problem.f[dofs], lp.H_t[rows][:, dofs].tocsr(),
                       lp.w_t[rows], lp.J[rows][:, zidx].tocsr(), cones, n_c, method, settings,
-                      judge=_judge(problem, lp, dofs, rows, settings), describe_cone=describe,
+                      judge=component_judge(problem, lp, dofs, rows, settings), describe_cone=describe,
                       keep_iterates=keep_iterates, callback=callback, component=index, t0=t0,
                       printer=printer, M_eq=problem.M[dofs][:, dofs].tocsc() if problem.as_stored else None)
         v[dofs] = out.v
@@ -457,7 +457,7 @@ _SEVERITY = [Status.SOLVED, Status.ALMOST_SOLVED, Status.MAX_ITERATIONS, Status.
              Status.INSUFFICIENT_PROGRESS, Status.NUMERICAL_ERROR]
 
 
-def _judge(problem, lp, dofs, rows, settings):
+def component_judge(problem, lp, dofs, rows, settings):
     """``judge(v, r̃)`` for one independent component: the measures of
     :mod:`rfverify.measures` on the component's data in the original variables (u = Hᵀv + w,
     r = P r̃, as returned: in float64), evaluated in the solver's residual precision.  With ∞-norm measures, every component
