@@ -51,6 +51,11 @@ BOUNDARY_TOL = 1e-4
 """A float y_i with ‖y_T‖ ≥ (1 − this)·μ y_N is taken to be on the friction cone's boundary."""
 SNAP_DENOMINATORS = (1, 2 ** 4, 2 ** 10, 2 ** 20, 2 ** 30)
 """Largest denominators tried for tan(θ/2) of a boundary direction (θ its angle)."""
+MAX_GROUP_CONTACTS = 16
+"""A self-stress on more contacts than this (one connected group) is not made exact: exact
+elimination over Q costs O(k³) operations on growing fractions (a hyperstatic lattice's group of
+~200 contacts took minutes), and the stresses met in piles — a sphere or a chain of two wedged in
+a corner — have 2–4 contacts."""
 KINDS = {"stuck": "u = 0 (no relative motion)", "friction": "u on one edge of the friction cone",
          "rolling": "u on one edge of the rolling cone", "friction+rolling": "u on a face of both cones"}
 
@@ -311,6 +316,8 @@ def find_self_stress(problem, seeds, cache: FaceSearch | None = None) -> list:
         support = hood[yN > SUPPORT_TOL * float(np.max(yN))]
         pos = {int(c): i for i, c in enumerate(hood)}
         for group in _components(H, support):
+            if group.size > MAX_GROUP_CONTACTS:
+                continue  # not made exact (see MAX_GROUP_CONTACTS): no claim is made about it
             yg = np.concatenate([y[SPACEDIM * pos[int(c)]:SPACEDIM * pos[int(c)] + SPACEDIM] for c in group])
             for max_den in SNAP_DENOMINATORS:
                 stress = _exact_stress(problem, H, group, yg, max_den)
