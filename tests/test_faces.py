@@ -178,3 +178,42 @@ def test_quotient_bounds_enclose_the_exact_values(values):
     for v, a, b in zip(values, lo, hi):
         assert Fraction(float(a)) <= v <= Fraction(float(b))
         assert b - a <= 4 * np.spacing(max(abs(a), abs(b), 1e-300))
+
+
+def test_a_rational_point_is_proven_as_its_equal_with_another_denominator(monkeypatch):
+    """The moved point v' = V / den: the same point written with den·3 (numerator ×3) must give
+    the same proof up to rounding — every bound divides by den exactly once (g and rᵀu) or
+    twice (gᵀM⁻¹g), and a missing or extra division changes ε by 3× or 9×."""
+    from rfverify.certificate import candidate_point
+
+    problem = corner_problem(2, True)
+    double = rfverify.solve(problem, tol=1e-10)
+    point = candidate_point(double.v, double.r)
+    ctx = ProofContext(problem)
+    one = ctx.prove(point, *ctx.rounded(point), requested=6)
+    assert one.valid and one.face is not None and one.face.moved > 0
+    real_restore = face.restore
+
+    def thirds(problem_, exact, point_v, stresses):
+        repair = real_restore(problem_, exact, point_v, stresses)
+        q = repair.point_v
+        repair.point_v = Quotient(q.num.times_int(3), q.den * 3)
+        return repair
+
+    monkeypatch.setattr(face, "restore", thirds)
+    ctx3 = ProofContext(problem)
+    three = ctx3.prove(point, *ctx3.rounded(point), requested=6)
+    assert three.valid
+    assert three.eps_M == pytest.approx(one.eps_M, rel=1e-12)
+    for name in ("v", "u", "Hr"):
+        assert three.quantities[name].abs_bound == pytest.approx(one.quantities[name].abs_bound, rel=1e-12)
+    # an answer 1e-3 away from the point: its distance to v' (divided by den) dominates the bounds
+    v, u, r = ctx.rounded(point)
+    far = (v + 1e-3, u + 1e-3, r)
+    monkeypatch.setattr(face, "restore", real_restore)
+    one_far = ProofContext(problem).prove(point, *far, requested=6)
+    monkeypatch.setattr(face, "restore", thirds)
+    three_far = ProofContext(problem).prove(point, *far, requested=6)
+    for name in ("v", "u"):
+        assert one_far.quantities[name].abs_bound >= 1e-3
+        assert three_far.quantities[name].abs_bound == pytest.approx(one_far.quantities[name].abs_bound, rel=1e-12)

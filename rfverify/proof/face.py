@@ -57,7 +57,8 @@ elimination over Q costs O(k³) operations on growing fractions (a hyperstatic l
 ~200 contacts took minutes), and the stresses met in piles — a sphere or a chain of two wedged in
 a corner — have 2–4 contacts."""
 KINDS = {"stuck": "u = 0 (no relative motion)", "friction": "u on one edge of the friction cone",
-         "rolling": "u on one edge of the rolling cone", "friction+rolling": "u on a face of both cones"}
+         "rolling": "u on one edge of the rolling cone", "friction+rolling": "u on a face of both cones",
+         "face": "u on a face of its cone (its part off the face held at 0 by the proof's move)"}
 
 
 @dataclass(frozen=True)
@@ -290,6 +291,13 @@ def _exact_stress(problem, H: sp.csc_matrix, contacts: np.ndarray, y_float: np.n
                 e.append(tuple(g))
         edges.append(tuple(e))
         free.append(tuple(fr))
+        # "u = 0" is claimed only where it follows: y_i strictly inside every cone part it has
+        # (exactly), and no component of u left free by a zero coefficient.
+        strict_T = mu_f[i] > 0 and yT2 < mu_f[i] ** 2 * yN ** 2
+        strict_R = mur_f[i] > 0 and yR2 < mur_f[i] ** 2 * yN ** 2
+        exact_kind = {"stuck": strict_T and strict_R, "friction": strict_R, "rolling": strict_T}
+        if fr or not exact_kind.get(kinds[i], True):
+            kinds[i] = "face"
     w_dot_y = sum((Fraction(float(wk)) * yk for wk, yk in zip(problem.w[cols], y) if yk), Fraction(0))
     if w_dot_y > 0:
         return None
