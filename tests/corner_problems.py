@@ -26,7 +26,14 @@ def _columns(n, t1, t2, arm):
     return B
 
 
-def corner_problem(seed: int = 0, second_corner: bool = False, mu_r: float = 0.1) -> rfverify.Problem:
+def _turned(n, t1, t2, angle):
+    """The tangent frame (t1, t2) turned by ``angle`` about the normal n (floats: generic)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return n, c * t1 + s * t2, -s * t1 + c * t2
+
+
+def corner_problem(seed: int = 0, second_corner: bool = False, mu_r: float = 0.1,
+                   turn: float = 0.0) -> rfverify.Problem:
     """Spheres on a floor z = 0 between walls y = ±W/2 (μ = 1 everywhere): sphere 0 in the
     corner of the floor and the wall y = −W/2 with zero gap (self-stress on contacts 0 and 1),
     sphere 1 on the floor alone, and with ``second_corner`` sphere 2 in the corner at y = +W/2
@@ -42,8 +49,10 @@ def corner_problem(seed: int = 0, second_corner: bool = False, mu_r: float = 0.1
     blocks = []  # (body, 6×5 block)
     z, y, x = np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]
     # sphere 0: floor (N = z, T = x, y) and wall y = −W/2 (N = +y, T = x, z)
-    blocks.append((0, _columns(z, x, y, -R[0] * z)))
-    blocks.append((0, _columns(y, x, z, -R[0] * y)))
+    # (``turn`` ≠ 0: their tangent frames turned about the normals, generic floats; the cones
+    # then touch only up to rounding, and no exact self-stress need exist)
+    blocks.append((0, _columns(*_turned(z, x, y, turn), -R[0] * z)))
+    blocks.append((0, _columns(*_turned(y, x, z, turn), -R[0] * y)))
     # sphere 1: floor only, tangent frame turned by a random angle about z
     th = rng.uniform(0, 2 * np.pi)
     t1 = np.array([np.cos(th), np.sin(th), 0.0])
