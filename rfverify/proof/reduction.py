@@ -43,15 +43,6 @@ from . import rational as Q
 from .dyadic import Dyadic
 from .face import SelfStress
 
-NULL_TOL = 1e-9
-"""Singular values of E below this fraction of its largest count as zero (the self-stress makes
-E rank deficient by one at least; everything else it has is of order one in these units)."""
-
-
-def _frac_matrix(rows) -> np.ndarray:
-    return np.array([[float(x) for x in row] for row in rows], dtype=np.float64).reshape(len(rows), -1)
-
-
 @dataclass
 class _Block:
     """The reduction of one self-stress: its contacts' columns, the dofs D, Z_D, v₀_D, P, C."""
@@ -272,18 +263,6 @@ def _edge_positive(hi: np.ndarray, lo: np.ndarray, g, rho: float):
         alpha = float(Fraction(3, 2) * target - have) / float(gf @ gf)
         hi, lo = _dd_add(hi, lo, alpha * gf)
     return hi, lo
-
-
-def _two_sum_error(v0, Z, xi, vh) -> np.ndarray:
-    """The rounding error of vh = v₀ + Z ξ (float64), in float64 (good to double-double)."""
-    exact = Dyadic.from_float(v0) + _exact_sparse_matvec(Z, xi)
-    return (exact - Dyadic.from_float(vh)).nearest()
-
-
-def _exact_sparse_matvec(Z: sp.csc_matrix, x: np.ndarray) -> Dyadic:
-    from .dyadic import DyadicCSR
-
-    return DyadicCSR.from_scipy(Z).matvec(Dyadic.from_float(x))
 
 
 def _force_residual(problem: Problem, v: Dyadic, r: Dyadic) -> Dyadic:
