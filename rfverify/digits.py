@@ -110,7 +110,7 @@ class DigitsSolution(ResultAliases):
                 "time": self.time, "digits_requested": self.certificate.requested, "digits": self.digits,
                 "certificate": self.certificate.as_dict(), "double_status": str(self.double.status),
                 "double_iterations": self.double.nit, "extended_iterations": ext.nit,
-                "extended_status": ext.status, "backend": ext.backend,
+                "extended_status": ext.status, "backend": ext.backend, "factorisation": getattr(ext, "factorisation", ""),
                 "wide_iterations": None if wide is None else wide.nit,
                 "wide_status": None if wide is None else wide.status,
                 "wide_bits": None if wide is None else wide.bits,
@@ -809,9 +809,18 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
         return (lambda k, mu, pinf, dinf: say(f"  {phase} iteration {k}: μ = {mu:.2e}, pinfeas = {pinf:.1e}, "
                                               f"dinfeas = {dinf:.1e}")) if verbose else None
 
+    named = [system.name]
+
+    def extended_tick(k, mu, pinf, dinf):  # a fallback of the factorisation is said when it happens
+        if system.name != named[-1]:
+            named.append(system.name)
+            say(f"  extended iteration {k}: the last step's factorisation changed: {system.name}")
+        if verbose:
+            tick("extended")(k, mu, pinf, dinf)
+
     t0 = time.perf_counter()
     p0 = driver.proof_seconds
-    run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system, progress=tick("extended"))
+    run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system, progress=extended_tick)
     seconds_dd = time.perf_counter() - t0 - (driver.proof_seconds - p0)
     tail, note, hand_k, seconds_wide = None, "not needed", None, 0.0
     if not driver.certified:

@@ -280,7 +280,9 @@ def _solve_digits(args, problem, options, say, after, t_start) -> int:
         wide_time += f", on the face {t['face']:.2f}" if t.get("face") else ""
         # numba compiling the kernels (a cold start: first run on a machine) has its own entry
         compile_time = f"compiling kernels {t['compile']:.2f}, " if t.get("compile", 0.0) >= 0.005 else ""
-        print(f"time {wall:.2f} s ({compile_time}double {t['double']:.2f}, extended {t['setup'] + t['extended']:.2f}"
+        factored = getattr(out.extended, "factorisation", "")
+        factored = f" [{factored}]" if factored else ""
+        print(f"time {wall:.2f} s ({compile_time}double {t['double']:.2f}, extended {t['setup'] + t['extended']:.2f}{factored}"
               f"{wide_time}, proof {t['proof']:.2f})"
               + (f"; solution and certificate written to {args.out}" if args.out else ""))
         if out.success and args.digits < 10:

@@ -222,6 +222,8 @@ class ContactSpace(FactoredBackend):
             engine = "CHOLMOD" if isinstance(self.chol, CholmodMixed) else "QDLDL"
             how = f"float64 {engine} factor refined in double-double"
         reason = getattr(self.chol, "fallback_reason", "")
+        if reason and getattr(self.chol, "fallback_at", None) is not None:
+            reason = f"from factorisation {self.chol.fallback_at}: {reason}"
         if self.tightened_at is not None and not reason:
             reason = f"solves refined to double-double accuracy from factorisation {self.tightened_at}"
         form = "I + F⁻¹W̃F⁻ᵀ, W̃ = P W P of the local file" if self.data.local else "I + F⁻¹H̃M⁻¹H̃ᵀF⁻ᵀ"
@@ -285,6 +287,12 @@ class ContactSpace(FactoredBackend):
         self.dense_W_used = None
         self.Fh = np.zeros((n, 5, 5))
         self.Fl = np.zeros((n, 5, 5))
+
+    def describe_cost(self) -> str:
+        """The factorisations that ran and their cost (:meth:`.mixed._RefinedFloat64Factor.describe_cost`)."""
+        if hasattr(self.chol, "describe_cost"):
+            return self.chol.describe_cost()
+        return super().describe_cost()
 
     def _pair_index(self, c, d):
         return np.searchsorted(self._pair_keys, c * self.data.n + d)

@@ -13,6 +13,12 @@ class FactoredBackend:
     name = ""
     factorisations = 0
 
+    def describe_cost(self) -> str:
+        """The factorisations that ran, for the time line (a back end with a float64 engine
+        says which precision ran and why: :meth:`.contactspace.ContactSpace.describe_cost`)."""
+        n = int(self.factorisations)
+        return f"{n} double-double factorisation{'s' if n != 1 else ''}"
+
     def flops(self) -> float:
         cc = np.diff(self.chol.Lp).astype(float)
         return float(np.sum(cc * cc) + self.chol.nnz_upper)

@@ -120,6 +120,8 @@ class ExtendedResult:
     seconds: float = 0.0
     factor_seconds: float = 0.0
     stats: dict = field(default_factory=dict)
+    factorisation: str = ""
+    """Which factorisations ran and what they cost (a fallback named, with its reason)."""
 
 
 def interior_start(data: ExtendedData, v, r, u=None, margin_rel: float = 1e-8) -> dict:
@@ -310,8 +312,9 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
     out = iterate(Precision(space, DDCones(data), newton), policy, begin, n_contacts=data.n,
                   n_cones=data.n3 + data.n1, clock_origin=t0)
     status, message = out.verdict
+    cost = backend.describe_cost() if hasattr(backend, "describe_cost") else ""
     return ExtendedResult(*out.iterate, status, message, out.k, extended_trace(out.records), backend.name,
-                          time.perf_counter() - t0, out.timings["factor"], _stats(backend))
+                          time.perf_counter() - t0, out.timings["factor"], _stats(backend), cost)
 
 
 def _stats(backend) -> dict:

@@ -12,6 +12,7 @@ factorisation fails or refinement stalls.
 from __future__ import annotations
 
 import math
+import time
 
 import numba
 import numpy as np
@@ -99,6 +100,10 @@ class _RefinedFloat64Factor:
         self.last_steps = 0
         self.solves = 0  # statistics: solves and refinement steps so far
         self.refinement_steps = 0
+        self.factorisations = 0  # numeric factorisations asked for, and the one that fell back
+        self.fallback_at = None
+        self.factor_seconds = {"float64": 0.0, "double-double": 0.0}
+        self.factor_counts = {"float64": 0, "double-double": 0}
         self._A = None
 
     def set_backward_target(self, backward_target: float) -> None:
@@ -111,16 +116,38 @@ class _RefinedFloat64Factor:
     def _fall_back(self, reason: str) -> int:
         self.precision = "double-double"
         self.fallback_reason = reason
-        return self._dd_factor()
+        self.fallback_at = self.factorisations
+        return self._timed("double-double", self._dd_factor)
+
+    def _timed(self, precision: str, factor):
+        t0 = time.perf_counter()
+        try:
+            return factor()
+        finally:
+            self.factor_seconds[precision] += time.perf_counter() - t0
+            self.factor_counts[precision] += 1
+
+    def describe_cost(self) -> str:
+        """Which factorisations ran and what they cost, for the time line: e.g. "5 float64
+        factorisations 2.1 s, 8 in double-double 120.4 s (double-double from factorisation 5:
+        the float64 factorisation failed (…))" (a float64 factor whose solves stall is refactored
+        in double-double, so one matrix can count in both)."""
+        counts, secs = self.factor_counts, self.factor_seconds
+        out = f"{counts['float64']} float64 factorisation{'s' if counts['float64'] != 1 else ''} {secs['float64']:.1f} s"
+        if self.fallback_at is None:
+            return out
+        return (f"{out}, {counts['double-double']} in double-double {secs['double-double']:.1f} s (double-double "
+                f"from factorisation {self.fallback_at}: {self.fallback_reason})")
 
     def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
         """Numeric factorisation; -1 on success, else a non-positive pivot (in double-double,
         after a fallback)."""
         self._A = (np.ascontiguousarray(Axh, dtype=np.float64).copy(),
                    np.ascontiguousarray(Axl, dtype=np.float64).copy())
+        self.factorisations += 1
         if self.precision == "double-double":
-            return self._dd_factor()
-        failure = self._float64_factor()
+            return self._timed("double-double", self._dd_factor)
+        failure = self._timed("float64", self._float64_factor)
         if failure:
             return self._fall_back(failure)
         self.factored = True

@@ -70,6 +70,12 @@ class Hybrid(FactoredBackend):
             self.current = self.contact
             self.switched_at = k
 
+    def describe_cost(self) -> str:
+        dof = self.dof.describe_cost()
+        if self.switched_at is None:
+            return f"dof-space: {dof}"
+        return f"dof-space: {dof}; contact-space from iteration {self.switched_at}: {self.contact.describe_cost()}"
+
     def retry_solve(self, residual: float) -> bool:
         """The contact-space form's safety net (:meth:`.ContactSpace.retry_solve`) while it is in use."""
         return self.current is self.contact and self.contact.retry_solve(residual)

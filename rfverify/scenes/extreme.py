@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from .deposition import fcc_positions, open_cluster
-from .geometry import Bodies, Statics
+from .geometry import Bodies, Statics, quat_to_matrix, random_quaternions
 from .scene import G, Scene, World, coefficient_table, min_rule_table, stage_count
 from .stepper import SceneError
 from .published import SpheresPile
@@ -170,10 +170,14 @@ class GranularBed(Scene):
                      "neighbours have gaps in [0, gap_jitter d] (all within the margin) and no "
                      "other pair is within it; velocities N(0, agitation^2) per component, spins "
                      "N(0, (agitation/r)^2); stage = the first lattice sites (one full bottom layer "
-                     "at the first stage); the dumped problem is the first step's, so 'steps' is "
-                     "not used")
+                     "at the first stage); orientation 1: the whole bed (lattice, ground plane and "
+                     "gravity) turned by a uniformly random 3-D rotation, so that contact normals "
+                     "and tangent frames are generic (H has 3-6 nonzeros per column instead of "
+                     "1-2; the physics is that of orientation 0); the dumped problem is the first "
+                     "step's, so 'steps' is not used")
     defaults = dict(diameter=0.02, density=1300.0, h=1e-3, mu=0.3, mu_r=1e-3, margin=1e-3,
-                    packing=0.0, width=0.0, gap_jitter=1e-3, agitation=0.01, tilt=0.0)
+                    packing=0.0, width=0.0, gap_jitter=1e-3, agitation=0.01, tilt=0.0,
+                    orientation=0.0)
     default_size = 3375
     min_size = 1
     size_unit = "spheres"
@@ -199,6 +203,10 @@ class GranularBed(Scene):
                 raise SceneError(f"{self.name}: parameter {k} = {p[k]!r} must be > 0")
         if not p["agitation"] >= 0:
             raise SceneError(f"{self.name}: parameter agitation = {p['agitation']!r} must be >= 0")
+        if p["orientation"] not in (0.0, 1.0):
+            raise SceneError(f"{self.name}: parameter orientation = {p['orientation']!r} must be 0 "
+                             "(lattice axes: vertical and horizontal contact normals) or 1 (the bed "
+                             "turned by a random 3-D rotation: generic contact frames)")
 
     def layer_width(self, p, size) -> int:
         """Spheres along x and y of the bottom layer: ``width``, or a roughly cubic bed."""
@@ -222,8 +230,12 @@ class GranularBed(Scene):
         c, s = math.cos(angle), math.sin(angle)
         pos = self.sites(p, size) @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
         radii = 0.5 * p["diameter"] * (1.0 - p["gap_jitter"] * rng.uniform(0.0, 1.0, size))
-        return {"pos": pos, "radii": radii, "angle": angle, "nx": self.layer_width(p, size),
-                "vel": rng.normal(size=(size, 3)), "omega": rng.normal(size=(size, 3))}
+        base = {"pos": pos, "radii": radii, "angle": angle, "nx": self.layer_width(p, size),
+                "vel": rng.normal(size=(size, 3)), "omega": rng.normal(size=(size, 3)),
+                "turn": np.eye(3)}
+        if p["orientation"] == 1:  # drawn last: orientation 0 keeps its arrays bit for bit
+            base["turn"] = quat_to_matrix(random_quaternions(rng, 1))[0]
+        return base
 
     def stage(self, base, p, size, phi, rng):
         nx = base["nx"]
@@ -234,11 +246,16 @@ class GranularBed(Scene):
         bodies.omega = p["agitation"] / r[:, None] * base["omega"][:nb]
         tilt = math.radians(p["tilt"])
         gravity = G * np.array([math.sin(tilt), 0.0, -math.cos(tilt)])
-        return World(bodies=bodies, statics=Statics.make(planes=[((0, 0, 1), 0.0, 0)]), gravity=gravity,
+        Q = base["turn"]  # rows of positions turn as x -> Q x
+        if p["orientation"] == 1:
+            bodies.pos, bodies.vel, bodies.omega = bodies.pos @ Q.T, bodies.vel @ Q.T, bodies.omega @ Q.T
+            gravity = Q @ gravity
+        return World(bodies=bodies, statics=Statics.make(planes=[(tuple(Q[:, 2]), 0.0, 0)]), gravity=gravity,
                      h=p["h"], margin=p["margin"], mu_table=coefficient_table(p["mu"]),
                      mu_r_table=coefficient_table(p["mu_r"]),
                      notes={"bodies": nb, "layer_width": nx, "packing": "fcc" if p["packing"] == 1 else "cubic",
-                            "rotation_deg": math.degrees(base["angle"])})
+                            "rotation_deg": math.degrees(base["angle"]),
+                            **({"turned_vertical": [float(x) for x in Q[:, 2]]} if p["orientation"] == 1 else {})})
 
 
 # ---------------------------------------------------------------------- all open
