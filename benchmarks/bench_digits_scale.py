@@ -22,11 +22,13 @@ Not a test: timings on a shared machine are noisy; compare rows of one run.
     python benchmarks/bench_digits_scale.py --problems random:3000:10000 --engines cholmod
     python benchmarks/bench_digits_scale.py --problems PILE.hdf5 --engines cholmod ldl
     python benchmarks/bench_digits_scale.py --problems scene:GranularBed:3375 --engines default  # no extra
+    python benchmarks/bench_digits_scale.py --problems scene:GranularBed:3375:orientation=1 \
+        scene:GranularBed:3375:orientation=1,gap_jitter=0,agitation=0 --engines default  # generic frames
 
 A problem is ``random:NB:NC`` (``random_problem(NB, NC, seed=5)``: random rigid bodies, more
-fill than granular media have), ``scene:NAME:SIZE`` (``rfverify generate NAME --size SIZE``,
+fill than granular media have), ``scene:NAME:SIZE[:KEY=VALUE,...]`` (``rfverify generate NAME --size SIZE --param KEY=VALUE``,
 seed 0, its first problem: ``scene:GranularBed:3375`` is the 9675-contact bed, built in
-seconds) or an FCLIB file.
+seconds; ``:orientation=1`` turns it: generic contact frames) or an FCLIB file.
 Set ``OPENBLAS_NUM_THREADS=1`` on a shared machine.
 """
 
@@ -54,8 +56,9 @@ def load(spec: str):
     if spec.startswith("scene:"):
         from rfverify.scenes import generate
 
-        _, name, size = spec.split(":")
-        return generate(name, count=1, seed=0, size=int(size))[0]
+        _, name, size, *params = spec.split(":")  # scene:NAME:SIZE[:KEY=VALUE,...]
+        kw = {k: float(v) for k, v in (kv.split("=") for kv in ",".join(params).split(",") if kv)}
+        return generate(name, count=1, seed=0, size=int(size), **kw)[0]
     return rfverify.load(spec)
 
 
@@ -92,7 +95,7 @@ def one(spec: str, engine: str) -> dict:
             "digits": digits, "double_method": out.double.method, "schur_engine": schur_engine_name(),
             "peak_MB": round(rss_kb / 1024, 1),
             "peak_kB_per_contact": round(rss_kb / max(problem.n_contacts, 1), 1),
-            "backend": out.certificate.extra.get("backend", "")}
+            "backend": out.certificate.extra.get("backend", ""), "factorisation": getattr(ext, "factorisation", "")}
 
 
 def yardstick(spec: str, which: str) -> dict:
@@ -165,6 +168,8 @@ def _main(argv=None):
                   f"{'yes' if r['certified'] else 'NO'} {dig}", flush=True)
             if r.get("double_method") == "schur":
                 print(f"    double solve: schur factored by {r['schur_engine']}", flush=True)
+            if r.get("factorisation"):
+                print(f"    extended phase: {r['factorisation']}", flush=True)
             if not r["certified"]:
                 print(f"    tail: {r['wide_note']}", flush=True)
             ok = ok and r["certified"]

@@ -45,7 +45,14 @@ ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_SIZES = (1000, 3000, 10000)
 LARGE_SIZES = (30000, 100000)
 DEFAULT_METHODS = "jqinv,schur,clarabel"
-KINDS = ("bed", "random")
+KINDS = ("bed", "generic", "touching", "random")
+BED_PARAMS = {"bed": {}, "generic": {"orientation": 1.0},
+              "touching": {"orientation": 1.0, "gap_jitter": 0.0}}
+"""GranularBed parameters of each bed kind: ``bed`` the lattice axes (normals vertical and
+horizontal, about 20 nonzeros of H per contact); ``generic`` the same bed turned by a random 3-D
+rotation (generic contact frames, about 40 per contact); ``touching`` turned, with zero gaps:
+every lattice contact touches (hyperstatic: H has more columns on its loaded contacts than
+rows, r is not unique)."""
 
 
 def bed_side(n_contacts: int) -> int:
@@ -56,13 +63,13 @@ def bed_side(n_contacts: int) -> int:
 
 
 def make_problem(kind: str, size: int, seed: int):
-    """The problem of one row: ``bed`` (GranularBed, simple cubic, about ``size`` contacts) or
-    ``random`` (random_problem with 0.3 size bodies and ``size`` contacts)."""
-    if kind == "bed":
+    """The problem of one row: a bed (GranularBed, simple cubic, about ``size`` contacts,
+    :data:`BED_PARAMS`) or ``random`` (random_problem with 0.3 size bodies and ``size`` contacts)."""
+    if kind in BED_PARAMS:
         from rfverify.scenes import generate
 
         k = bed_side(size)
-        return generate("GranularBed", seed=seed, size=k ** 3)[0]
+        return generate("GranularBed", seed=seed, size=k ** 3, **BED_PARAMS[kind])[0]
     if kind == "random":
         from rfverify.random_problems import random_problem
 
@@ -163,7 +170,7 @@ def plot(rows, path: Path) -> bool:
     except ImportError:
         return False
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    styles = {"bed": "-", "random": "--"}
+    styles = {"bed": "-", "generic": "-.", "touching": ":", "random": "--"}
     colors = {"jqinv": "tab:blue", "schur": "tab:green", "clarabel": "tab:red", "auto": "tab:purple"}
     for kind in KINDS:
         for method in dict.fromkeys(r["method"] for r in rows):
@@ -174,7 +181,7 @@ def plot(rows, path: Path) -> bool:
                 x, y, ok = zip(*pts)
                 color = colors.get(method, "black")
                 ax.loglog(x, y, styles[kind], marker="o", color=color,
-                          label=f"{method}, {'granular bed' if kind == 'bed' else 'random'}")
+                          label=f"{method}, {kind if kind != 'bed' else 'granular bed'}")
                 bad = [(a, b) for a, b, v in zip(x, y, ok) if not v]
                 if bad:  # hollow: not verified at tol (a time limit, or a peer short of tol)
                     ax.loglog(*zip(*bad), "o", color="white", markersize=4, linestyle="none")
@@ -194,7 +201,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", default=",".join(map(str, DEFAULT_SIZES)),
                     help="target contact counts (a bed gets the nearest k x k x k lattice)")
     ap.add_argument("--large", action="store_true", help=f"add {', '.join(map(str, LARGE_SIZES))} contacts")
-    ap.add_argument("--kinds", default="bed,random", help="problem kinds: bed (GranularBed), random")
+    ap.add_argument("--kinds", default="bed,random", help="problem kinds: bed (GranularBed, lattice axes), generic (the bed turned: generic contact "
+                         "frames), touching (turned, zero gaps: hyperstatic), random")
     ap.add_argument("--methods", default=DEFAULT_METHODS)
     ap.add_argument("--tol", type=float, default=1e-8)
     ap.add_argument("--seed", type=int, default=5)
@@ -247,7 +255,9 @@ def _run(args, kinds, path) -> int:
                       f"it {row['iterations']:3d}  {row['time']:9.2f} s  crit {row['criterion']:.1e}"
                       + (f"  solve peak {mem / 1e6:7.0f} MB ({mem / row['contacts']:.0f} B/contact)" if mem else "")
                       + (f"  ({row['message']})" if row.get("message") else ""), flush=True)
-    print("\nbed: GranularBed (simple cubic k x k x k spheres on the ground, 3k^3 - 2k^2 contacts); random: "
+    print("\nbed: GranularBed (simple cubic k x k x k spheres on the ground, 3k^3 - 2k^2 contacts); generic: the "
+          "same bed turned by a random 3-D rotation (generic contact frames); touching: turned, zero gaps "
+          "(hyperstatic); random: "
           "random_problem(0.3 n bodies, n contacts). criterion: rfverify's, recomputed in longdouble from the "
           "returned answer. solve peak: the peak RSS of the solve's process above its RSS before the solve "
           "(problem data excluded).\n")

@@ -474,3 +474,48 @@ def test_the_stored_equations_case_is_proven_with_inexact_newton_solves():
     from test_stored_equations import check_stored_solution
 
     check_stored_solution(7, 9)
+
+
+def test_a_fallback_of_the_float64_factor_is_said_where_it_happens_and_in_the_time_line(monkeypatch, tmp_path, capsys):
+    """Issue 47: the CHOLMOD factor of the contact-space matrix failing at its third
+    factorisation (forced here) is reported as it happens (a progress line naming the
+    double-double factor and why), in the JSON ("factorisation": counts, seconds, the
+    factorisation it began at and why) and in the time line — not the plan announced at the
+    start of the phase."""
+    from rfverify.cli import main
+
+    original = CholmodMixed._float64_factor
+
+    def fails_from_the_third(self):
+        if self.factorisations >= 3:
+            return "the float64 factorisation failed (forced by the test)"
+        return original(self)
+
+    monkeypatch.setattr(CholmodMixed, "_float64_factor", fails_from_the_third)
+    said = []
+    out = rfverify.solve_to_digits(random_problem(20, 40, seed=3), digits=10, factor_engine="cholmod",
+                                   progress=said.append)
+    assert out.success, out.message
+    changed = [m for m in said if "factorisation changed" in m]
+    assert len(changed) == 1 and "double-double factor (from factorisation 3: the float64 factorisation " \
+                                  "failed (forced by the test))" in changed[0], said
+    start = next(m for m in said if m.startswith("extended phase:"))
+    assert "float64 CHOLMOD factor" in start and said.index(start) < said.index(changed[0])
+    how = out.as_dict()["factorisation"]
+    assert how.startswith("2 float64 factorisations and 1 that failed ") and " in double-double " in how
+    assert "double-double from factorisation 3: the float64 factorisation failed (forced by the test)" in how
+    dd_count = int(how.split(", ")[1].split(" in double-double")[0])
+    assert dd_count == out.extended.stats["factorisations"] - 2 >= 1  # every update from the third
+    problem = tmp_path / "p.hdf5"
+    rfverify.save(random_problem(20, 40, seed=3), problem)
+    assert main(["solve", str(problem), "--digits", "10"]) == 0
+    text = capsys.readouterr().out
+    line = next(x for x in text.splitlines() if x.startswith("time "))
+    assert "2 float64 factorisations and 1 that failed" in line and "double-double from factorisation 3" in line, text
+
+
+def test_without_a_fallback_the_time_line_counts_float64_factorisations_only():
+    out = rfverify.solve_to_digits(random_problem(20, 40, seed=3), digits=10, factor_engine="cholmod")
+    how = out.as_dict()["factorisation"]
+    assert out.success and how.endswith(" s") and "double-double" not in how
+    assert int(how.split()[0]) == out.extended.stats["factorisations"] >= 1

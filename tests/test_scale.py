@@ -188,3 +188,56 @@ def test_granular_bed_refuses_bad_parameters(capsys, tmp_path):
     out = json.loads(capsys.readouterr().out)
     q = rfverify.load(out["files"][0]["path"])
     assert q.title == "GranularBed" and q.n_contacts == 63 and "no step was solved" in q.description
+
+
+# ---------------------------------------------------------------- the turned bed (issue 47)
+def test_a_turned_bed_is_the_same_bed_turned_with_generic_contact_frames():
+    """orientation=1 turns the whole bed (lattice, ground, gravity, velocities) by one rotation Q:
+    the same physics, so the solution is the axis-aligned bed's turned — translational and
+    angular velocities alike — while the contact frames become generic (more nonzeros of H)."""
+    flat = generate("GranularBed", seed=5, size=27, agitation=0.02)[0]
+    turned = generate("GranularBed", seed=5, size=27, agitation=0.02, orientation=1)[0]
+    assert flat.n_contacts == turned.n_contacts and flat.n_dofs == turned.n_dofs
+    assert turned.H.nnz > 1.7 * flat.H.nnz  # generic normals and tangents
+    normals = np.abs(_translational_normals(turned))
+    assert np.all(np.sort(normals, axis=1)[:, 0] > 1e-6)  # no normal lies in a coordinate plane
+    up = np.array(turned.provenance["notes"]["turned_vertical"])
+    a = rfverify.solve(flat, method="jqinv", tol=1e-11)
+    b = rfverify.solve(turned, method="jqinv", tol=1e-11)
+    assert a.success and b.success
+    # Q from the ground contacts' normals: the flat bed's are e_z, the turned bed's Q e_z = up.
+    assert np.allclose(_translational_normals(turned)[-9:], up, atol=1e-14)
+    Q = _rotation_between(flat, turned)
+    va, vb = a.v.reshape(-1, 2, 3), b.v.reshape(-1, 2, 3)
+    scale = np.abs(a.v).max()
+    assert np.abs(va @ Q.T - vb).max() < 1e-7 * scale
+    # cones are isotropic: normal velocities and the norms of the tangential parts agree
+    ua, ub = a.u.reshape(-1, 5), b.u.reshape(-1, 5)
+    assert np.abs(ua[:, 0] - ub[:, 0]).max() < 1e-7 * scale
+    assert np.abs(np.linalg.norm(ua[:, 1:3], axis=1) - np.linalg.norm(ub[:, 1:3], axis=1)).max() < 1e-7 * scale
+    with pytest.raises(SceneError, match="orientation"):
+        generate("GranularBed", size=8, orientation=2)
+
+
+def _translational_normals(p):
+    """Each contact's normal: body A's translational rows of its first column of H."""
+    Hc = p.H.tocsc()
+    out = np.zeros((p.n_contacts, 3))
+    for c in range(p.n_contacts):
+        rows = Hc.indices[Hc.indptr[5 * c]:Hc.indptr[5 * c + 1]]
+        vals = Hc.data[Hc.indptr[5 * c]:Hc.indptr[5 * c + 1]]
+        a = rows.min() // 6
+        for r, x in zip(rows, vals):
+            if 6 * a <= r < 6 * a + 3:
+                out[c, r - 6 * a] = x
+    return out
+
+
+def _rotation_between(flat, turned):
+    """The rotation taking the flat bed's contact normals to the turned bed's (least squares,
+    Kabsch), checked to map every normal."""
+    A, B = _translational_normals(flat), _translational_normals(turned)
+    U, _, Vt = np.linalg.svd(B.T @ A)
+    Q = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    assert np.allclose(A @ Q.T, B, atol=1e-12)
+    return Q

@@ -104,6 +104,7 @@ class _RefinedFloat64Factor:
         self.fallback_at = None
         self.factor_seconds = {"float64": 0.0, "double-double": 0.0}
         self.factor_counts = {"float64": 0, "double-double": 0}
+        self.failed_float64 = 0
         self._A = None
 
     def set_backward_target(self, backward_target: float) -> None:
@@ -128,12 +129,14 @@ class _RefinedFloat64Factor:
             self.factor_counts[precision] += 1
 
     def describe_cost(self) -> str:
-        """Which factorisations ran and what they cost, for the time line: e.g. "5 float64
-        factorisations 2.1 s, 8 in double-double 120.4 s (double-double from factorisation 5:
+        """Which factorisations ran and what they cost, for the time line: e.g. "4 float64
+        factorisations and 1 that failed 2.1 s, 8 in double-double 120.4 s (double-double from factorisation 5:
         the float64 factorisation failed (…))" (a float64 factor whose solves stall is refactored
         in double-double, so one matrix can count in both)."""
         counts, secs = self.factor_counts, self.factor_seconds
-        out = f"{counts['float64']} float64 factorisation{'s' if counts['float64'] != 1 else ''} {secs['float64']:.1f} s"
+        failed = f" and {self.failed_float64} that failed" if self.failed_float64 else ""
+        out = (f"{counts['float64']} float64 factorisation{'s' if counts['float64'] != 1 else ''}{failed} "
+               f"{secs['float64']:.1f} s")
         if self.fallback_at is None:
             return out
         return (f"{out}, {counts['double-double']} in double-double {secs['double-double']:.1f} s (double-double "
@@ -149,6 +152,8 @@ class _RefinedFloat64Factor:
             return self._timed("double-double", self._dd_factor)
         failure = self._timed("float64", self._float64_factor)
         if failure:
+            self.factor_counts["float64"] -= 1  # an attempt, not a factor: counted apart
+            self.failed_float64 += 1
             return self._fall_back(failure)
         self.factored = True
         return -1
