@@ -221,6 +221,9 @@ class ContactSpace(FactoredBackend):
         if getattr(self.chol, "precision", "double-double") == "mixed":
             engine = "CHOLMOD" if isinstance(self.chol, CholmodMixed) else "QDLDL"
             how = f"float64 {engine} factor refined in double-double"
+            if self.chol.shifted_from is not None:
+                how = (f"float64 {engine} factor, shifted from factorisation {self.chol.shifted_from} "
+                       f"({self.chol.shift_reason}), solved by conjugate gradients in double-double")
         reason = getattr(self.chol, "fallback_reason", "")
         if reason and getattr(self.chol, "fallback_at", None) is not None:
             reason = f"from factorisation {self.chol.fallback_at}: {reason}"

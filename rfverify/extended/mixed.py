@@ -77,6 +77,70 @@ def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int, stop_at: 
     return best, best_x, steps
 
 
+SHIFT = 64.0
+"""Ulps of each diagonal entry by which a float64 factor that failed is shifted: enough to cover
+the rounding of a Cholesky factorisation (a few ulps of the entries per row), small enough that
+only rows of the size eps⁻¹ and above move by more than a relative 1e-14.  The conjugate
+gradients then meet the shift only on the near-null space of the huge block, a few directions:
+on a 2800-contact touching bed, 3 to 7 where the stiff rows' singular values fall below 1e-6 of
+the largest, and solves to 1e-25 in about 7 steps (docs/DECISIONS.md, "touching piles")."""
+CG_TARGET = 1e-27
+"""Componentwise backward error at which the conjugate gradients stop when the caller refines
+each solve itself (an unchecked float64 solve otherwise): double-double's matrix-vector product
+limits them near 1e-27 on the touching beds measured."""
+CG_GIVE_UP = 1e-8
+"""A shifted solve whose best backward error stays above this (or above 1e-20 when the caller
+asked for 1e-29) falls back to the double-double factor, for good."""
+CG_MAX_STEPS = 40
+CG_PATIENCE = 5  # steps without a better backward error before the best is returned
+
+
+def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target: float,
+                                         max_steps: int = CG_MAX_STEPS, patience: int = CG_PATIENCE):
+    """A x = b (A symmetric positive definite: values (high, low) of its upper triangle in CSC)
+    by conjugate gradients with residuals, products and iterates in double-double and a float64
+    ``preconditioner`` (``preconditioner(r)`` ≈ P⁻¹r, P a float64 factor of a shifted A).  The
+    Polak–Ribière β keeps it convergent when the preconditioner is applied inexactly (a float64
+    solve of a rounded residual: "flexible" CG, Notay 2000).  Each step takes the true residual
+    b − Ax in double-double and its componentwise backward error; stops at ``target``, after
+    ``patience`` steps without a better one, or after ``max_steps``.  Returns (best backward
+    error, (xh, xl) of the best iterate, steps)."""
+    n = Ap.size - 1
+    bh = np.ascontiguousarray(bh, dtype=np.float64)
+    bl = np.ascontiguousarray(bl, dtype=np.float64)
+    zero = np.zeros(n)
+    xh, xl = np.zeros(n), np.zeros(n)
+    rh, rl = bh.copy(), bl.copy()
+    backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
+    best, best_x, since, steps = backward, (xh.copy(), xl.copy()), 0, 0
+    z = preconditioner(rh.copy())
+    ph, pl = z.copy(), np.zeros(n)
+    rz = dd.vdot(rh, rl, z, zero)[0]
+    qh, ql = np.empty(n), np.empty(n)
+    for steps in range(1, max_steps + 1):
+        _symmetric_residual(n, Ap, Ai, A[0], A[1], zero, zero, ph, pl, qh, ql, np.zeros(n))  # q = −A p
+        pq = -dd.vdot(ph, pl, qh, ql)[0]
+        if not (pq > 0.0 and math.isfinite(rz)):
+            break
+        dd.vaxpy(rz / pq, 0.0, ph, pl, xh, xl)
+        r_old = rh.copy()
+        backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
+        if backward < best:
+            best, best_x, since = backward, (xh.copy(), xl.copy()), 0
+        else:
+            since += 1
+        if best <= target or since >= patience or not backward == backward:
+            break
+        z = preconditioner(rh.copy())
+        rz_new = dd.vdot(rh, rl, z, zero)[0]
+        beta = (rz_new - float(np.dot(r_old, z))) / rz
+        rz = rz_new
+        sh, sl = np.empty(n), np.empty(n)
+        dd.vscale(beta, 0.0, ph, pl, sh, sl)
+        dd.vadd(z, zero, sh, sl, ph, pl)
+    return best, best_x, steps
+
+
 class _RefinedFloat64Factor:
     """The part :class:`MixedCholesky` and :class:`CholmodMixed` share: a float64 factor whose
     solves are refined against the double-double matrix (:func:`refine_in_double_double`) to
@@ -103,9 +167,31 @@ class _RefinedFloat64Factor:
         self.factorisations = 0  # numeric factorisations asked for, and the one that fell back
         self.fallback_at = None
         self.factor_seconds = {"float64": 0.0, "double-double": 0.0}
-        self.factor_counts = {"float64": 0, "double-double": 0}
+        self.factor_counts = {"float64": 0, "shifted": 0, "double-double": 0}
+        self.factor_seconds["shifted"] = 0.0
         self.failed_float64 = 0
+        self.shifted_from = None  # the factorisation from which the float64 factor is shifted, and why
+        self.shift_reason = ""
+        self.cg_iterations = 0
         self._A = None
+
+    def _solve_shifted(self, bh: np.ndarray, bl: np.ndarray):
+        """A solve with the shifted factor as the preconditioner of conjugate gradients against
+        the double-double matrix, to ``backward_target`` (:data:`CG_TARGET` when unchecked);
+        where it cannot get within :data:`CG_GIVE_UP` of that, the double-double factor, for good."""
+        target = min(self.backward_target, CG_TARGET)
+        best, best_x, steps = conjugate_gradients_in_double_double(
+            self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target)
+        self.last_backward_error, self.last_steps = best, steps
+        self.solves += 1
+        self.refinement_steps += steps
+        self.cg_iterations += steps
+        if not best <= max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20):
+            if self._fall_back(f"conjugate gradients on the shifted float64 factor stalled at backward error "
+                               f"{best:.1e}") >= 0:
+                return np.full(self.n, np.nan), np.full(self.n, np.nan)
+            return self._dd_solve(bh, bl)
+        return self._from_stored(*best_x)
 
     def set_backward_target(self, backward_target: float) -> None:
         """Solves are refined to a componentwise backward error ≤ ``backward_target`` (1e-29:
@@ -113,6 +199,31 @@ class _RefinedFloat64Factor:
         that refines against a larger system itself and checks what it gets."""
         self.backward_target = float(backward_target)
         self.stop_at = self.backward_target / 100
+
+    def _shifted_values(self) -> np.ndarray:
+        """The high part with each diagonal entry raised by :data:`SHIFT` ulps of itself: a
+        float64 rounding of A moves A's eigenvalues by about eps·max A_ii, which on the near-null
+        space of a huge block swamps the O(1) ones (docs/DECISIONS.md, "touching piles"); a
+        relative shift keeps rows of moderate size almost as they were."""
+        if getattr(self, "_diagonal", None) is None:
+            cols = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.Ap))
+            self._diagonal = np.flatnonzero(self.Ai == cols)
+        values = self._A[0].copy()
+        d = values[self._diagonal]
+        values[self._diagonal] = d + SHIFT * np.finfo(np.float64).eps * np.maximum(d, 0.0)
+        return values
+
+    def _factor_shifted(self, reason: str) -> int:
+        """After a float64 factorisation failed: the shifted matrix in float64, its solves by
+        conjugate gradients (:func:`conjugate_gradients_in_double_double`); the double-double
+        factor where that fails too."""
+        failure = self._timed("shifted", lambda: self._float64_factor(self._shifted_values()))
+        if failure:
+            return self._fall_back(f"{reason}; shifted by {SHIFT:g} ulps: {failure}")
+        if self.shifted_from is None:
+            self.shifted_from, self.shift_reason = self.factorisations, reason
+        self.factored = True
+        return -1
 
     def _fall_back(self, reason: str) -> int:
         self.precision = "double-double"
@@ -137,6 +248,10 @@ class _RefinedFloat64Factor:
         failed = f" and {self.failed_float64} that failed" if self.failed_float64 else ""
         out = (f"{counts['float64']} float64 factorisation{'s' if counts['float64'] != 1 else ''}{failed} "
                f"{secs['float64']:.1f} s")
+        if self.shifted_from is not None:
+            out += (f", {counts['shifted']} shifted in float64 {secs['shifted']:.1f} s with {self.cg_iterations} "
+                    f"conjugate-gradient steps in double-double (shifted from factorisation {self.shifted_from}: "
+                    f"{self.shift_reason})")
         if self.fallback_at is None:
             return out
         return (f"{out}, {counts['double-double']} in double-double {secs['double-double']:.1f} s (double-double "
@@ -150,11 +265,13 @@ class _RefinedFloat64Factor:
         self.factorisations += 1
         if self.precision == "double-double":
             return self._timed("double-double", self._dd_factor)
+        if self.shifted_from is not None:  # the unshifted factor failed before: it fails again as μ falls
+            return self._factor_shifted(self.shift_reason)
         failure = self._timed("float64", self._float64_factor)
         if failure:
             self.factor_counts["float64"] -= 1  # an attempt, not a factor: counted apart
             self.failed_float64 += 1
-            return self._fall_back(failure)
+            return self._factor_shifted(failure)
         self.factored = True
         return -1
 
@@ -163,6 +280,8 @@ class _RefinedFloat64Factor:
         infinite ``backward_target``, one float64 solve of the high part, unchecked."""
         if self.precision == "double-double":
             return self._dd_solve(bh, bl)
+        if self.shifted_from is not None:
+            return self._solve_shifted(bh, bl)
         if self.backward_target == math.inf:
             x = self._float64_solve(np.ascontiguousarray(self._to_stored(bh, bl)[0], dtype=np.float64))
             self.solves += 1
@@ -205,9 +324,10 @@ class MixedCholesky(_RefinedFloat64Factor, DDCholesky):
         self._engine = QDLDLEngine()
         self._init_refinement(backward_target, max_steps)
 
-    def _float64_factor(self) -> str:
+    def _float64_factor(self, values: np.ndarray | None = None) -> str:
+        values = self._A[0] if values is None else values
         try:
-            self._engine.factor(sp.csc_matrix((self._A[0], self.Ai, self.Ap), shape=(self.n, self.n)))
+            self._engine.factor(sp.csc_matrix((values, self.Ai, self.Ap), shape=(self.n, self.n)))
         except (RuntimeError, ValueError) as exc:
             return f"a zero pivot in the float64 factorisation (QDLDL: {' '.join(str(exc).split())})"
         return ""
@@ -312,9 +432,10 @@ class CholmodMixed(_RefinedFloat64Factor):
     def _dd_solve(self, bh: np.ndarray, bl: np.ndarray):
         return self._dd.solve(bh, bl)
 
-    def _float64_factor(self) -> str:
+    def _float64_factor(self, values: np.ndarray | None = None) -> str:
+        values = self._A[0] if values is None else values
         try:
-            self._engine.factor(sp.csc_matrix((self._A[0][self._lower_map], self._lower_indices,
+            self._engine.factor(sp.csc_matrix((values[self._lower_map], self._lower_indices,
                                                self._lower_indptr), shape=(self.n, self.n)))
         except ArithmeticError as exc:
             return f"the float64 factorisation failed ({exc})"
