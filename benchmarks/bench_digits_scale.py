@@ -46,7 +46,7 @@ from _results import recording  # noqa: E402  (stamped results file)
 
 def load(spec: str):
     import rfverify
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     if spec.startswith("random:"):
         nb, nc = (int(x) for x in spec.split(":")[1:3])

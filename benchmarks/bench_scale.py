@@ -64,7 +64,7 @@ def make_problem(kind: str, size: int, seed: int):
         k = bed_side(size)
         return generate("GranularBed", seed=seed, size=k ** 3)[0]
     if kind == "random":
-        from rfverify.random_problems import random_problem
+        from rfverify.scenes.random_problems import random_problem
 
         return random_problem(max(2, int(round(0.3 * size))), size, seed=seed)
     raise ValueError(f"unknown problem kind {kind!r}; kinds: {', '.join(KINDS)}")
@@ -78,7 +78,7 @@ def run_one(kind: str, size: int, seed: int, method: str, tol: float, time_limit
     """Solve one problem with one method here; the row of the table (without memory when the
     problem was given, i.e. when several runs share this process)."""
     import rfverify
-    from rfverify.measures import measures
+    from rfverify.model.measures import measures
     from rfverify.solver import kernels
     from rfverify.solver.engines import cholmod_available
 

@@ -17,12 +17,12 @@ Public API (this release):
 
 import functools as _functools
 
-from .check import SolutionCheck, check_solution
+from .model.check import SolutionCheck, check_solution
 from ._version import __version__
 from .errors import (ConeDomainError, DataWarning, InvalidArgumentError, InvalidProblemError,
                      OutputPathError, ProblemFileError, RfverifyError)
 from .io import bundled_problems, load, save
-from .problem import Problem, StoredSolution
+from .model.problem import Problem, StoredSolution
 from .certificate import Certificate
 from .certification import certify
 from .diagnosis import Diagnosis, diagnose
@@ -37,7 +37,7 @@ def _checked(func, *, tol=False):
     import inspect
 
     from .errors import require_positive_int, require_positive_number
-    from .problem import require_problem
+    from .model.problem import require_problem
 
     signature = inspect.signature(func)
 

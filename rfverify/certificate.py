@@ -195,7 +195,7 @@ def candidate_point(v, r) -> Point:
 
 
 def unscaled_proof(proof: Proof | None, scaling) -> Proof | None:
-    """A proof made in units scaled by exact powers of two (:mod:`rfverify.scaling`) with its
+    """A proof made in units scaled by exact powers of two (:mod:`rfverify.model.scaling`) with its
     per-quantity bounds, norms and scales in the problem's units (bounds rounded up, lower
     bounds down; digits and verdicts are scale-invariant).  ``terms`` stay in the scaled units
     (``terms_units`` says so)."""

@@ -31,7 +31,7 @@ import numpy as np
 
 from .errors import InvalidProblemError
 from .digits import DOUBLE_SETTINGS, ProofDriver, _start_from, extend, solve_on_face
-from .problem import SPACEDIM, Problem
+from .model.problem import SPACEDIM, Problem
 from .proof import FLOAT64_DIGITS, Point, ProofContext, validate_digits
 from .certificate import Certificate, candidate_point, certificate_from_proof
 from .compilation import compile_extended_in_background
@@ -130,7 +130,7 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     if point is None and hasattr(v, "point") and u is None and r is None:
         point = v.point
     v, u, r = _solution_arrays(problem, v, u, r)
-    from .scaling import binary_scaling, scaled_problem
+    from .model.scaling import binary_scaling, scaled_problem
 
     scaling = binary_scaling(problem)
     if scaling is not None:

@@ -51,9 +51,9 @@ import numpy as np
 
 from .exact import ExactAlgorithm, ExactRun, ExactStepError, dd_difference
 from .extended import ipm as ext
-from .lifting import lift
-from .measures import data_scales, measures
-from .problem import SPACEDIM, Problem
+from .model.lifting import lift
+from .model.measures import data_scales, measures
+from .model.problem import SPACEDIM, Problem
 from .solver import DOUBLE_REACH, posed, solve
 from .algorithm.rules import rule_at
 from .solver.result import ALGORITHM1_METHODS, ResultAliases, Status, method_unavailable
@@ -214,7 +214,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     options.setdefault("refine_tol", None)
     options.setdefault("extended_below", None)
     problem = posed(problem, options.pop("as_stored", None), method)
-    from .scaling import binary_scaling, scaled_problem
+    from .model.scaling import binary_scaling, scaled_problem
 
     scaling = binary_scaling(problem)
     note_units = None
@@ -402,7 +402,7 @@ class _Context:
     def _mp_measures(self):
         """The measures in mpmath (40 digits) with M of the posed equations exactly."""
         if getattr(self, "_mp_data", None) is None:
-            from .measures import MeasureData, MpmathArithmetic
+            from .model.measures import MeasureData, MpmathArithmetic
 
             data = MeasureData.of(self.problem, MpmathArithmetic(40))
             data.M = _exact_posed_M(self.problem, data.arith)  # not (M + Mᵀ)/2 rounded to float64
@@ -842,7 +842,7 @@ def _data_facts(ctx, run: ExactRun) -> str:
 
 # ---------------------------------------------------------------------- the mpmath witness
 def _reference_layout(lp, order, v, r_t, z) -> tuple:
-    """A production iterate (v, r̃, z in the lifted layout of :func:`rfverify.lifting.lift`)
+    """A production iterate (v, r̃, z in the lifted layout of :func:`rfverify.model.lifting.lift`)
     as (v, r̃, z cones) in the reference's layout: the same kept components, cones contact by
     contact (friction, rolling, normal ray) instead of all L3 cones first."""
     z = np.asarray(z)

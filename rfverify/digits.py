@@ -35,7 +35,7 @@ from .extended.contactspace import ENGINES
 from .extended.data import ExtendedData
 from .extended.system import choose_backend
 from .extended.workers import threads
-from .problem import SPACEDIM, Problem
+from .model.problem import SPACEDIM, Problem
 from .compilation import (compile_extended_in_background, compile_seconds, extended_cache_is_cold,
                           float64_kernels_deferred)
 from .proof import Point, Proof, ProofContext, merit, validate_digits
@@ -540,7 +540,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         raise InvalidArgumentError("time_limit", f"must be a number of seconds > 0, got {time_limit!r}",
                                    fix="pass e.g. time_limit=60, or None for no limit")
     problem = posed(problem, as_stored, method)
-    from .scaling import binary_scaling, scaled_problem
+    from .model.scaling import binary_scaling, scaled_problem
 
     scaling = binary_scaling(problem)
     if scaling is not None and _on_face is None:  # data beyond float64's safe range: the whole path in scaled units
@@ -739,7 +739,7 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
 
 
 def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsSolution:
-    """A k-digit solution found in the scaled units of ``scaled`` (:mod:`rfverify.scaling`), in
+    """A k-digit solution found in the scaled units of ``scaled`` (:mod:`rfverify.model.scaling`), in
     the problem's own units.  Where the answer scales back exactly its certificate does too;
     where it rounds (subnormal entries) the rounded answer is proven again at the same point,
     in the scaled units (scaling the rounded answer up is exact); where it overflows nothing is

@@ -202,7 +202,7 @@ class _Continuation:
 class ExactAlgorithm:
     """Algorithm 1 in double-double on ``problem`` (its extended data and Newton back end built
     once, :mod:`rfverify.extended`), judged as the double run with ``settings`` judges:
-    ``judge(v, r̃, z)`` (double-double vectors) returns the :class:`rfverify.measures.Measures`
+    ``judge(v, r̃, z)`` (double-double vectors) returns the :class:`rfverify.model.measures.Measures`
     of the answer that iterate would give."""
 
     def __init__(self, problem, settings, judge):
@@ -213,7 +213,7 @@ class ExactAlgorithm:
 
     def point(self, v, r_t, z) -> tuple:
         """An iterate (v (m,) — ignored for a local problem, which has no dofs here —, r̃ (nk,),
-        z (nz,), any float dtype, in the lifted layout of :func:`rfverify.lifting.lift`) as
+        z (nz,), any float dtype, in the lifted layout of :func:`rfverify.model.lifting.lift`) as
         double-double vectors, exactly."""
         v = np.zeros(0, dtype=np.longdouble) if self.local else np.asarray(v, dtype=np.longdouble)
         return tuple(ext.V(*dd.from_longdouble(np.asarray(x, dtype=np.longdouble))) for x in (v, r_t, z))

@@ -23,7 +23,7 @@ KINDS = ("open", "stick", "slide_t", "slide_r", "slide_both")
 
 
 def exact_problem(seed: int, n_contacts: int = 4, *, asymmetry: int = 0, kinds=None, bodies: int | None = None,
-                  mu=0.5, mu_r=0.25, max_asymmetry: float = rfverify.problem.DEFAULT_MAX_ASYMMETRY,
+                  mu=0.5, mu_r=0.25, max_asymmetry: float = rfverify.model.problem.DEFAULT_MAX_ASYMMETRY,
                   free_bodies: int = 0, contact_skew: bool = True):
     """(problem, v*, u*, r*) with exact data.  ``asymmetry``: largest |A_ij| of the skew part
     (integers; the diagonal of M is about 2^12, so 15 gives an entrywise asymmetry of ~7e-3;

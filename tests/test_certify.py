@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import rfverify
-from rfverify.measures import measures
+from rfverify.model.measures import measures
 from rfverify.cli import main
 from rfverify.io.certificate import read_point
 

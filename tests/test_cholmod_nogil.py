@@ -229,7 +229,7 @@ cvxopt.cholmod call raise ValueError)."""
 def _cholmod_problem():
     """A problem on which both paths factor with CHOLMOD: the schur form, and the double-double
     phase's contact-space factor forced to CHOLMOD."""
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     return random_problem(40, 90, seed=3)
 

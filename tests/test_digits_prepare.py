@@ -17,7 +17,7 @@ from rfverify import digits as D
 from rfverify.certificate import candidate_point
 from rfverify.extended.contactspace import ContactSpace
 from rfverify.proof import ProofContext
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from rfverify.scenes import generate
 
 

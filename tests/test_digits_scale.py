@@ -24,7 +24,7 @@ from rfverify.extended.mixed import CholmodMixed, MixedCholesky
 from rfverify.solver.engines import cholmod_available
 from rfverify.extended.system import choose_backend
 from rfverify.extended.wide_cholesky import DenseWideCholesky, SparseWideCholesky
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 from test_extended import singular_in_float64
 from test_wide import newton_residual

@@ -132,7 +132,7 @@ def test_every_form_reaches_its_matrix_through_an_engine():
     """The forms own no factorisation of their own: each hands its matrix to an engine of
     rfverify.solver.engines (the issue's forms/engines split)."""
     import rfverify
-    from rfverify.lifting import lift
+    from rfverify.model.lifting import lift
     from rfverify.solver.forms import FORMS
 
     from rfverify.solver.cones import ProductCone
@@ -150,7 +150,7 @@ def test_without_cvxopt_the_schur_form_factors_by_qdldl_on_the_upper_triangle(mo
     the solves invert the symmetric matrix that triangle stands for (that it is the right S is
     checked through the whole path: test_solver's schur tests against form (16), per engine)."""
     import rfverify
-    from rfverify.lifting import lift
+    from rfverify.model.lifting import lift
     from rfverify.solver.cones import ProductCone
     from rfverify.solver.forms import SchurSystem
     from rfverify.solver.kkt import ScalingPoint

@@ -15,7 +15,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rfverify
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from reference import jordan as RJ
 from rfverify.extended import cones as C
 from rfverify.extended import dd
@@ -325,7 +325,7 @@ def test_extended_run_stops_with_numerical_error_when_a_solve_fails():
 def test_dense_and_blockwise_constructions_of_W_agree():
     """W̃ = H̃M⁻¹H̃ᵀ built as one dense YᵀY (chosen for a lifted local problem: M = I, H dense)
     and block by block of M: the same pair blocks to double-double accuracy."""
-    from rfverify.random_problems import random_local_problem
+    from rfverify.scenes.random_problems import random_local_problem
 
     data = ExtendedData(random_local_problem(30, seed=4))
     built = {}
@@ -349,7 +349,7 @@ def test_dense_and_blockwise_constructions_of_W_agree():
 def test_blockwise_W_equals_a_dense_recomputation():
     """The compiled block-by-block W̃ (one small dense Cholesky per body) against H̃ M⁻¹ H̃ᵀ
     formed densely in long double, pair block by pair block."""
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     data = ExtendedData(random_problem(12, 30, seed=8))
     cs = ContactSpace(data)

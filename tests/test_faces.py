@@ -152,9 +152,9 @@ def test_written_solution_rechecks_and_certifies_from_the_file(tmp_path):
     """The written answer of a self-stressed problem passes the independent recheck of the
     criterion at 1e-10 (its r is r₀ + τy, in K to 1e-11) and certifies again from the file's
     float64 numbers alone (no stored point: the certify path solves on the face too)."""
-    from rfverify.check import check_solution
+    from rfverify.model.check import check_solution
     from rfverify.io import save
-    from rfverify.problem import StoredSolution
+    from rfverify.model.problem import StoredSolution
 
     problem = corner_problem(1, True)
     out = rfverify.solve_to_digits(problem, digits=10)

@@ -1,4 +1,4 @@
-"""The one criterion, value for value (issue 29): :func:`rfverify.measures.measures` against an
+"""The one criterion, value for value (issue 29): :func:`rfverify.model.measures.measures` against an
 independent checker written here from the definitions in the module's docstring (DESIGN §4.5),
 in exact rational arithmetic on dense matrices.
 
@@ -20,8 +20,8 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 
 import rfverify
-from rfverify.measures import measures
-from rfverify.random_problems import random_problem
+from rfverify.model.measures import measures
+from rfverify.scenes.random_problems import random_problem
 
 
 def _q(x) -> Fraction:

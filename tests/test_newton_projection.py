@@ -16,7 +16,7 @@ from rfverify.extended import ipm as X
 from rfverify.extended.contactspace import ContactSpace
 from rfverify.extended.data import ExtendedData
 from rfverify.extended.system import choose_backend
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,7 @@ import rfverify
 from rfverify.proof import Point, ProofContext, bound as B
 from rfverify.proof.dyadic import Dyadic, DyadicCSR
 from rfverify.proof.massbounds import verify_lambda_min_sparse, verify_mass_matrix
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
@@ -275,7 +275,7 @@ def test_solution_of_a_similar_problem_is_refused():
 def _local_problem(W, q, mu, mu_r):
     """A local problem (W 5n × 5n, q) read as rfverify reads a full-precision local file."""
     from rfverify.io.local_lift import LocalProblem, lift_local
-    from rfverify.problem import make_local_form
+    from rfverify.model.problem import make_local_form
     import dataclasses
 
     n = len(np.atleast_1d(mu))

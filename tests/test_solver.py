@@ -15,7 +15,7 @@ import pytest
 import rfverify
 from rfverify.bench import HighPrecisionChecker
 from rfverify.cli import main
-from rfverify.random_problems import random_local_problem, random_problem
+from rfverify.scenes.random_problems import random_local_problem, random_problem
 from rfverify.solver import Status, solve
 
 FORMS = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling"]
@@ -25,7 +25,7 @@ BUNDLED = ["chute", "chute-dat", "sphere", "cube", "sphere-from-global"]
 def recheck_file(path, problem, dps=40):
     """The tests' one deliberately independent oracle: rfverify's criterion recomputed from the
     solution stored in ``path``, in ``dps``-digit mpmath with scalar loops, from the problem
-    data alone — separate code from :mod:`rfverify.measures`, same definitions:
+    data alone — separate code from :mod:`rfverify.model.measures`, same definitions:
 
     dynamics ‖Mv − Hr − f‖∞/max(‖Mv‖, ‖Hr‖, ‖f‖, ‖M‖‖v‖); velocity ‖u − Hᵀv − w‖∞/U;
     cone violations of r ∈ K over R and of u ∈ K* over U; complementarity |rᵀu|/E,
@@ -393,7 +393,7 @@ def _system_at_an_iterate(method, tol=1e-6, **kw):
     from scipy.linalg import block_diag
 
     from rfverify import jordan
-    from rfverify.lifting import lift
+    from rfverify.model.lifting import lift
     from rfverify.solver.cones import ProductCone
     from rfverify.solver.forms import FORMS as KFORMS
     from rfverify.solver.kkt import ScalingPoint
@@ -594,7 +594,7 @@ def test_default_start_and_sigma_rule_take_fewer_iterations_and_stay_verified(tm
 def test_velocity_scaled_start_is_z_on_the_scale_of_w():
     """start="velocity_scaled": z = θ·e with θ = max(1, rms(w̃)), r̃ as the paper's start, so
     μ at iteration 0 is θ·(number of cones)/n; θ = 1 (the paper's start) when rms(w̃) ≤ 1."""
-    from rfverify.lifting import lift
+    from rfverify.model.lifting import lift
     from rfverify.solver.ipm import velocity_scale
 
     p = random_problem(6, 10, seed=5)

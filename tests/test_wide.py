@@ -21,7 +21,7 @@ from rfverify.extended import wide, wide_data, wide_factor
 from rfverify.extended.wide_cholesky import DenseWideCholesky
 from rfverify.extended.data import ExtendedData
 from rfverify.jordan import mpfr as JM
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from rfverify.scenes import generate
 
 BITS = wide.DEFAULT_BITS

@@ -181,7 +181,7 @@ def _min_lam2(trace) -> float | None:
 
 
 def _trajectory(problem, task, npz_path) -> dict:
-    from ..lifting import lift
+    from ..model.lifting import lift
     from ..solver import kernels, solve
 
     kernels.warm_up()  # as in _solve

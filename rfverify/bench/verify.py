@@ -1,7 +1,7 @@
 """High-precision recheck of a candidate (v, u, r): the bench counts a run as solved only on
 this verdict, never on the solver's word.
 
-The measures are rfverify's one definition (:mod:`rfverify.measures`: dynamics, velocity,
+The measures are rfverify's one definition (:mod:`rfverify.model.measures`: dynamics, velocity,
 cone, complementarity, with scales that do not vanish at a correct solution), evaluated in
 mpmath at ``dps`` digits from the exact double data, so no solver arithmetic and no
 longdouble rounding enters the verdict.  ``max`` is the criterion: a run meets ``tol`` when
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..measures import CRITERION, MeasureData
-from ..problem import SPACEDIM, Problem
+from ..model.measures import CRITERION, MeasureData
+from ..model.problem import SPACEDIM, Problem
 
 MEASURES = CRITERION
 

@@ -185,7 +185,7 @@ def _write_certificate(args, problem, sol, u, cert):
     from ..io import save
     from ..io.certificate import write_certificate
     from ..io.output import check_output_file
-    from ..problem import StoredSolution
+    from ..model.problem import StoredSolution
 
     target = getattr(args, "out_target", None) or check_output_file(args.out, inputs=[args.problem, args.solution])
     save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), target,

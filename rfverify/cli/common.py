@@ -65,7 +65,7 @@ def load_problem(args):
     """The PROBLEM argument loaded with the load options, posing the equations ``--as-stored``
     asks for (where the command has that option)."""
     from ..io import load
-    from ..problem import DEFAULT_MAX_ASYMMETRY
+    from ..model.problem import DEFAULT_MAX_ASYMMETRY
 
     limit = DEFAULT_MAX_ASYMMETRY if args.max_asymmetry is None else args.max_asymmetry
     problem = load(args.problem, max_asymmetry=limit)

@@ -173,7 +173,7 @@ def cmd_solve(args) -> int:
         m = result.measures
         if m is not None:
             print(f"criterion {m.max:.2e} (dynamics {m.dynamics:.1e}, velocity {m.velocity:.1e}, cone "
-                  f"{m.cone:.1e}, complementarity {m.complementarity:.1e}; rfverify.measures)")
+                  f"{m.cone:.1e}, complementarity {m.complementarity:.1e}; rfverify.model.measures)")
         compiled = result.timings.get("compile", 0.0)
         compiled = f" (compiling kernels {compiled:.2f} s)" if compiled >= 0.005 else ""
         print(f"iterations {result.nit}, time {wall:.3f} s{compiled}; the paper's measures: pinfeas "
@@ -304,7 +304,7 @@ def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
     .hdf5 file itself when --out names it (everything else in that file is kept)."""
     from ..io import save, write_solution_in_place
     from ..io.output import check_output_file
-    from ..problem import StoredSolution
+    from ..model.problem import StoredSolution
 
     target = getattr(args, "out_target", None) or check_output_file(
         args.out, inputs=[args.problem], in_place_ok=is_hdf5_input(args.problem))

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem import Problem
+from ..model.problem import Problem
 from .bound import (FLOAT64_DIGITS, MAX_CERTIFIABLE_DIGITS, ExactData, Proof, QuantityBound, data_scales,
                     prove as _prove, validate_digits)
 from .dyadic import Dyadic

@@ -68,7 +68,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem import SPACEDIM, Problem
+from ..model.problem import SPACEDIM, Problem
 from .dyadic import Dyadic, DyadicCSR, Quotient, divide_upper, fraction_upper_float, sqrt_upper
 from .massbounds import ETA, MassBounds, gamma, inflate, upper_sum, verify_lambda_min_sparse, verify_mass_matrix
 
@@ -679,7 +679,7 @@ def _r_bound_in(problem, exact, mass, cols, d: Dyadic, g: Dyadic, eps, stored: b
                 den: int = 1):
     """(bounds on |r_j − r*_j| for j in cols, the residual norm bound, "") or (None, nan, why),
     in the problem's units or (``scaled``) in equilibrated ones (:func:`_r_bound`)."""
-    from ..definiteness import equilibration_exponents, ldexp_up, scale_rows, scale_symmetric
+    from ..model.definiteness import equilibration_exponents, ldexp_up, scale_rows, scale_symmetric
 
     HS = sp.csc_matrix(problem.H[:, cols])
     if scaled:

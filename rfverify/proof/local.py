@@ -46,8 +46,8 @@ from fractions import Fraction
 import numpy as np
 import scipy.sparse as sp
 
-from ..definiteness import exact_ldlt
-from ..problem import SPACEDIM, LocalForm, Problem
+from ..model.definiteness import exact_ldlt
+from ..model.problem import SPACEDIM, LocalForm, Problem
 from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cone_violations,
                     cones_failure, eps_M_upper, _up_times,
                     proven_open, validate_digits)
@@ -160,7 +160,7 @@ def prove_psd(W: sp.spmatrix) -> LocalFacts:
 def exact_psd(A: sp.spmatrix) -> str:
     """"definite", "semidefinite" or "indefinite" for the exact (A + Aᵀ)/2 of a small float
     matrix: LDLᵀ in rationals with the largest remaining diagonal as pivot (a PSD matrix whose
-    largest remaining diagonal is 0 has a zero remainder; :func:`rfverify.definiteness.exact_ldlt`)."""
+    largest remaining diagonal is 0 has a zero remainder; :func:`rfverify.model.definiteness.exact_ldlt`)."""
     D = np.asarray(sp.csr_matrix(A).toarray(), dtype=np.float64)
     n = D.shape[0]
     F = [[(Fraction(float(D[i, j])) + Fraction(float(D[j, i]))) / 2 for j in range(n)] for i in range(n)]

@@ -17,7 +17,7 @@ from collections import defaultdict
 import numpy as np
 
 from ..bench.records import refuted_label, worst_measure
-from ..measures import CRITERION
+from ..model.measures import CRITERION
 from ..solver.result import ALGORITHM1_METHODS
 from .data import UNUSABLE, RunData, _is_num, certified_mode
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..bench.records import FIX_RERUN as _FIX_RERUN
 from ..bench.verify import forward_digits
-from ..measures import CRITERION
+from ..model.measures import CRITERION
 from ..solver.result import METHODS
 
 

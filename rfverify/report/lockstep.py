@@ -23,7 +23,7 @@ import numpy as np
 from .._version import __version__
 from ..bench.records import tol_text
 from ..io.output import tag_floats, untag_floats, write_text_atomic
-from ..problem import SPACEDIM, Problem
+from ..model.problem import SPACEDIM, Problem
 from ..solver.result import Settings
 from .aggregates import worst_cases
 from .data import RunData
@@ -32,7 +32,7 @@ from .data import RunData
 def solve_groups(problem: Problem, settings):
     """The independent components the solver splits ``problem`` into with ``settings``
     (exactly its own computation), or None when it solves the problem as one system."""
-    from ..lifting import lift
+    from ..model.lifting import lift
     from ..solver.presolve import independent_components
 
     if not settings.split_components:

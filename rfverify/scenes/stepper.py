@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import RfverifyError
-from ..problem import Problem
+from ..model.problem import Problem
 from .assembly import contact_matrix, generalized_velocity, mass_matrix
 from .geometry import Bodies, Contacts, Statics, detect_contacts, quat_exp, quat_mul
 

@@ -9,9 +9,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..compilation import compile_seconds
-from ..lifting import KIND_NAMES
-from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
-from ..problem import SPACEDIM, Problem
+from ..model.lifting import KIND_NAMES
+from ..model.measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
+from ..model.problem import SPACEDIM, Problem
 from .cones import ProductCone
 from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
@@ -125,7 +125,7 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         iterate so far with status Stopped and ``extras["interrupted"]``.
     """
     problem = posed(problem, as_stored, method)
-    from ..scaling import binary_scaling
+    from ..model.scaling import binary_scaling
 
     scaling = binary_scaling(problem)
     if scaling is not None:
@@ -205,9 +205,9 @@ def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:
 
 def _solved_in_scaled_units(problem, scaling, method, tol, max_iter, keep_iterates, callback, options):
     """:func:`solve` of a problem whose data lie beyond float64's safe range: solved in units
-    scaled by exact powers of two (:mod:`rfverify.scaling`), the answer scaled back exactly and
+    scaled by exact powers of two (:mod:`rfverify.model.scaling`), the answer scaled back exactly and
     judged on the problem as given (longdouble holds its range)."""
-    from ..scaling import scaled_problem
+    from ..model.scaling import scaled_problem
 
     res = solve(scaled_problem(problem, scaling), method, tol, max_iter, keep_iterates, callback, **options)
     note = scaling.describe("solved")
@@ -459,7 +459,7 @@ _SEVERITY = [Status.SOLVED, Status.ALMOST_SOLVED, Status.MAX_ITERATIONS, Status.
 
 def component_judge(problem, lp, dofs, rows, settings):
     """``judge(v, r̃)`` for one independent component: the measures of
-    :mod:`rfverify.measures` on the component's data in the original variables (u = Hᵀv + w,
+    :mod:`rfverify.model.measures` on the component's data in the original variables (u = Hᵀv + w,
     r = P r̃, as returned: in float64), evaluated in the solver's residual precision.  With ∞-norm measures, every component
     meeting tol implies the whole problem does (numerators are maxima, denominators grow)."""
     contacts = np.unique(lp.keep[rows] // SPACEDIM)

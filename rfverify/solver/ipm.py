@@ -8,7 +8,7 @@ Here the loop's interfaces are: numpy vectors in float64, then in the extended d
 float64 solve falls short; the product cone of :mod:`.cones` (numba kernels for float64);
 a pluggable linear-system form of :mod:`.forms` as the Newton solver; and :class:`Termination`
 with the settings' σ rule as the policy.  The stopping test is the criterion of
-:mod:`rfverify.measures` on the (v, u, r) that would be returned — the same function every
+:mod:`rfverify.model.measures` on the (v, u, r) that would be returned — the same function every
 recheck uses; DESIGN's pinfeas, dinfeas and μ = zᵀs / n are computed and traced beside it.
 """
 
@@ -67,7 +67,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     float64, continued in the extended settings (longdouble where asked) once the criterion
     is below ``settings.extended_below`` or a float64 solve falls short (:func:`_adequate`).
 
-    ``judge(v, r̃)`` returns the :class:`rfverify.measures.Measures` of the iterate in the
+    ``judge(v, r̃)`` returns the :class:`rfverify.model.measures.Measures` of the iterate in the
     original variables (the one definition of "solved"); :class:`Termination` decides from it.
     ``callback(IterationInfo)`` is called once per iteration; returning True stops the run
     (status Stopped).  ``printer(IterationInfo)`` (verbose output) is called likewise.
@@ -117,7 +117,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     if bundle is None:
         # The first iterate was never judged (its residuals or measures overflowed): return it
         # as it stands, with NaN measures, never nothing.
-        from ..measures import Measures
+        from ..model.measures import Measures
 
         nan = float("nan")
         bundle = (out.iterate, Measures(nan, nan, nan, nan, nan, nan, nan), (nan, nan, nan))

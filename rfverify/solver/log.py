@@ -32,7 +32,7 @@ def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
         f"nnz(M) = {problem.M.nnz}, nnz(H) = {problem.H.nnz}",
         "cones:    " + ", ".join(f"{v} {k}" for k, v in cone_counts.items() if v)
         + " (full: L3×L3, coulomb/rolling: L3, normal: L1)",
-        f"settings: tol = {st.tol:g} (rfverify.measures criterion), max_iter = {st.max_iter}, "
+        f"settings: tol = {st.tol:g} (rfverify.model.measures criterion), max_iter = {st.max_iter}, "
         f"start = {st.start}, sigma_rule = {st.sigma_rule}, gamma0 = {st.gamma0}"
         + (f", time_limit = {st.time_limit:g} s" if st.time_limit else ""),
         f"          extended: jordan = {st.extended_jordan}, residuals = {st.extended_residuals}, "

@@ -95,7 +95,7 @@ class Settings:
     Attributes
     ----------
     tol : float
-        Stop when the criterion of :mod:`rfverify.measures` — residuals of the returned
+        Stop when the criterion of :mod:`rfverify.model.measures` — residuals of the returned
         (v, u, r) relative to their terms and to scales from the data, which do not vanish at
         a correct solution — is at most ``tol``.  The paper's max(pinfeas, dinfeas, μ)
         (DESIGN §4) is reported beside it.
@@ -251,7 +251,7 @@ TRACE_FIELDS = ("iter", "criterion", "pinfeas", "dinfeas", "mu", "sigma", "alpha
                 "min_lam2_z", "min_lam2_z_cone", "min_lam2_s", "min_lam2_s_cone", "max_cond_Qp",
                 "solve_residual", "refine_steps", "time")
 """Per-iteration trace columns.  ``criterion`` is rfverify's stopping measure
-(:func:`rfverify.measures.measures`, the ``max``) of that iterate's (v, u, r) on its run's own data:
+(:func:`rfverify.model.measures.measures`, the ``max``) of that iterate's (v, u, r) on its run's own data:
 its component, without the contact-free bodies (solved apart), in the iterate's arithmetic — the
 returned answer's criterion on the whole problem is ``SolveResult.criterion``;
 ``pinfeas``, ``dinfeas``, ``mu`` are the paper's (DESIGN §4), reported beside it.
@@ -384,7 +384,7 @@ class SolveResult(Outcome, ResultAliases):
     success : bool            status is Solved
     message : str             human-readable reason (names iteration/operation/cone on errors)
     nit : int                 iterations performed
-    measures : Measures       rfverify's criterion of the returned (v, u, r) (:mod:`rfverify.measures`):
+    measures : Measures       rfverify's criterion of the returned (v, u, r) (:mod:`rfverify.model.measures`):
                               Solved means ``measures.max ≤ tol``
     pinfeas, dinfeas, mu : float   the paper's measures of the returned iterate (DESIGN §4)
     trace : dict of ndarray   per-iteration columns, see TRACE_FIELDS

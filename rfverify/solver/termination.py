@@ -1,7 +1,7 @@
 """When Algorithm 1 stops, and with which iterate: the criterion, the stall rule, the best
 iterate, the iteration and time limits, and a user's callback.
 
-The criterion is :mod:`rfverify.measures`' (judged on what would be returned).  A stall is
+The criterion is :mod:`rfverify.model.measures`' (judged on what would be returned).  A stall is
 ``stall_iterations`` consecutive iterations in which none of the primal (velocity, dual cone),
 dual (dynamics) and gap (complementarity, primal cone) measures that is still above tol fell
 below 0.9 × its own best, counted from the first step with α ≥ 0.5 — before it, a badly

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import InvalidProblemError
+from ..errors import InvalidProblemError
 from .problem import SPACEDIM, Problem
 
 SAFE_EXPONENT = 200
