@@ -100,7 +100,7 @@ def yardstick(spec: str, which: str) -> dict:
     costs): "plain" = ``rfverify.solve(problem)``, what ``rfverify solve FILE`` runs; "alone" =
     the path's own double solve (``digits.DOUBLE_SETTINGS``) with nothing beside it."""
     import rfverify
-    from rfverify.digits import DOUBLE_SETTINGS
+    from rfverify.verify.digits import DOUBLE_SETTINGS
 
     problem = load(spec)
     t0 = time.perf_counter()

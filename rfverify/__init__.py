@@ -23,10 +23,10 @@ from .errors import (ConeDomainError, DataWarning, InvalidArgumentError, Invalid
                      OutputPathError, ProblemFileError, RfverifyError)
 from .io import bundled_problems, load, save
 from .model.problem import Problem, StoredSolution
-from .certificate import Certificate
-from .certification import certify
-from .diagnosis import Diagnosis, diagnose
-from .digits import DigitsSolution, solve_to_digits
+from .verify.certificate import Certificate
+from .verify.certification import certify
+from .verify.diagnosis import Diagnosis, diagnose
+from .verify.digits import DigitsSolution, solve_to_digits
 from .solver import SolveResult, Settings, Status, solve
 
 

@@ -5,7 +5,7 @@ The float64 cone kernels (:mod:`rfverify.solver.kernels`) and the double-double 
 cache folder (``NUMBA_CACHE_DIR``, else ``__pycache__`` beside the sources).  On a fresh
 machine the first solve therefore pays for compilation, later processes load the compiled
 code.  The stage timings of :class:`~rfverify.solver.SolveResult` and
-:class:`~rfverify.digits.DigitsSolution` report that cost as its own entry, ``"compile"``,
+:class:`~rfverify.verify.digits.DigitsSolution` report that cost as its own entry, ``"compile"``,
 and leave it out of the stage it happened in, so that a cold start is not mistaken for a
 slow phase.
 

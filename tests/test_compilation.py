@@ -147,7 +147,7 @@ def test_the_float64_kernels_listed_are_those_the_double_solve_compiles():
 def test_a_cold_cache_runs_the_double_solve_in_numpy_with_the_same_answer(monkeypatch):
     """On a cold cache the k-digit path's double solve does not wait for the float64 cone
     kernels to compile; its answer, and so the whole run's, is bit for bit the warm one."""
-    from rfverify import digits
+    from rfverify.verify import digits
 
     monkeypatch.setenv(compilation.BACKGROUND_ENV, "0")
     runs = {}

@@ -1,4 +1,4 @@
-"""The k-digit path's set-up beside the double solve (rfverify.digits.Preparation) and the double
+"""The k-digit path's set-up beside the double solve (rfverify.verify.digits.Preparation) and the double
 answer's proof left until it is needed (double_answer_may_certify): the same answers as the
 serial path, errors raised where the serial path raises them, and the gate a true necessary
 condition — where it says no proof of the double answer can certify, none does."""
@@ -13,8 +13,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rfverify
-from rfverify import digits as D
-from rfverify.certificate import candidate_point
+from rfverify.verify import digits as D
+from rfverify.verify.certificate import candidate_point
 from rfverify.extended.contactspace import ContactSpace
 from rfverify.proof import ProofContext
 from rfverify.scenes.random_problems import random_problem

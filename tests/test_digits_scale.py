@@ -306,7 +306,7 @@ def test_the_extended_run_refines_each_solve_once_and_is_as_accurate(monkeypatch
     import math
 
     from rfverify.algorithm import rules
-    from rfverify.digits import _start_from
+    from rfverify.verify.digits import _start_from
     from rfverify.extended import ipm as X
     from rfverify.extended.contactspace import NEWTON_REFINED_TARGET
 
@@ -392,7 +392,7 @@ def test_an_unchecked_solve_is_one_float64_solve(monkeypatch):
 
     from rfverify.extended import mixed
 
-    from rfverify.digits import _start_from
+    from rfverify.verify.digits import _start_from
     from rfverify.extended import ipm as X
 
     problem = random_problem(8, 14, seed=1)

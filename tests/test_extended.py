@@ -292,7 +292,7 @@ def test_both_back_ends_solve_the_same_newton_system(name):
 
 
 def test_extended_run_reaches_the_double_double_floor():
-    from rfverify.digits import _start_from
+    from rfverify.verify.digits import _start_from
     from rfverify.extended import ipm as X
 
     problem = rfverify.load("bundled:chute")
@@ -307,7 +307,7 @@ def test_extended_run_reaches_the_double_double_floor():
 def test_extended_run_stops_with_numerical_error_when_a_solve_fails():
     """A back end whose solve returns NaN (a double-double fallback factorisation that lost
     definiteness) ends the run as NumericalError at that iteration, not steps later."""
-    from rfverify.digits import _start_from
+    from rfverify.verify.digits import _start_from
     from rfverify.extended import ipm as X
 
     problem = rfverify.load("bundled:chute")

@@ -70,7 +70,7 @@ def _corner_point(problem):
 def test_a_point_left_slightly_off_the_face_is_never_proven(monkeypatch):
     """The face move replaced by one that leaves v' 2⁻⁶⁰ off the face on one dof: the proof must
     refuse (exact cone test), not certify."""
-    from rfverify.certificate import candidate_point
+    from rfverify.verify.certificate import candidate_point
 
     problem = corner_problem(0)
     double = rfverify.solve(problem, tol=1e-10)
@@ -184,7 +184,7 @@ def test_a_rational_point_is_proven_as_its_equal_with_another_denominator(monkey
     """The moved point v' = V / den: the same point written with den·3 (numerator ×3) must give
     the same proof up to rounding — every bound divides by den exactly once (g and rᵀu) or
     twice (gᵀM⁻¹g), and a missing or extra division changes ε by 3× or 9×."""
-    from rfverify.certificate import candidate_point
+    from rfverify.verify.certificate import candidate_point
 
     problem = corner_problem(2, True)
     double = rfverify.solve(problem, tol=1e-10)

@@ -10,7 +10,7 @@ import pytest
 import rfverify
 from rfverify.algorithm import newton as N
 from rfverify.algorithm.loop import residuals
-from rfverify.digits import _start_from
+from rfverify.verify.digits import _start_from
 from rfverify.extended import dd
 from rfverify.extended import ipm as X
 from rfverify.extended.contactspace import ContactSpace

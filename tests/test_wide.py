@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import rfverify
 import rfverify.io.certificate
 from reference import jordan as RJ
-from rfverify import digits as D
+from rfverify.verify import digits as D
 from rfverify.extended import wide, wide_data, wide_factor
 from rfverify.extended.wide_cholesky import DenseWideCholesky
 from rfverify.extended.data import ExtendedData

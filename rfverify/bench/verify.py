@@ -47,7 +47,7 @@ def verified_criterion(problem: Problem, v, u, r, dps: int = 30) -> dict:
 
 def forward_digits(x, x_ref, *scale_terms) -> float:
     """Correct significant digits of ``x`` against ``x_ref``: −log10(‖x − x_ref‖∞ / scale),
-    scale = max(‖x_ref‖∞, ‖terms‖∞) (see :mod:`rfverify.certification` for why u and Hr need
+    scale = max(‖x_ref‖∞, ‖terms‖∞) (see :mod:`rfverify.verify.certification` for why u and Hr need
     the terms they are computed from).  inf when identical, 0 when no digit is right."""
     x = np.asarray(x, dtype=np.float64)
     x_ref = np.asarray(x_ref, dtype=np.float64)

@@ -65,7 +65,7 @@ def check_outputs(args) -> None:
 
 
 def cmd_certify(args) -> int:
-    from ..certification import certify
+    from ..verify.certification import certify
     from ..compilation import announcing
     from ..errors import ProblemFileError
     from ..io import load
@@ -155,7 +155,7 @@ def _stored_certificate_note(stored: dict | None, where, problem) -> str:
 
 def _velocity(problem, sol):
     """u of a stored (v, r) when the file has none: W r + q (local problem) or Hᵀv + w."""
-    from ..certification import local_velocity
+    from ..verify.certification import local_velocity
 
     return local_velocity(problem, sol.r) if problem.local is not None else problem.H.T @ sol.v + problem.w
 

@@ -98,7 +98,7 @@ def _d(x) -> str:
 
 def cmd_diagnose(args) -> int:
     from ..compilation import announcing
-    from ..diagnosis import WITNESS_SECONDS, diagnose
+    from ..verify.diagnosis import WITNESS_SECONDS, diagnose
 
     problem = load_problem(args)
     with recorded_warnings() as caught:

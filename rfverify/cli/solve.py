@@ -246,7 +246,7 @@ def _solve_digits(args, problem, options, say, after, t_start) -> int:
     import time
 
     from ..compilation import announcing
-    from ..digits import solve_to_digits
+    from ..verify.digits import solve_to_digits
 
     t0 = time.perf_counter()
     callback = None if say is None or args.method in PEER_METHODS else IterationProgress(say, after, t_start)

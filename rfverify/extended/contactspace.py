@@ -435,7 +435,7 @@ class ContactSpace(FactoredBackend):
     def prepare(self) -> None:
         """What the first :meth:`update` does that needs no iterate — M factored in
         double-double, W̃ = H̃M⁻¹H̃ᵀ, the float64 engine's symbolic analysis — done ahead (the
-        k-digit path runs it beside the double solve, :mod:`rfverify.digits`).  Optional: an
+        k-digit path runs it beside the double solve, :mod:`rfverify.verify.digits`).  Optional: an
         update does whatever is still missing, and where M fails here it stops (no W̃), so that
         the update meets the failure again and reports it where it always did."""
         if not self._ensure_W():

@@ -237,7 +237,7 @@ class CholmodMixed(_RefinedFloat64Factor):
     def prepare(self) -> None:
         """CHOLMOD's symbolic analysis of the pattern (it needs no values), done before the
         first :meth:`factor` — on another thread while the double solve runs
-        (:mod:`rfverify.digits`)."""
+        (:mod:`rfverify.verify.digits`)."""
         ones = np.ones(self._lower_indices.size)
         self._engine.analyse(sp.csc_matrix((ones, self._lower_indices, self._lower_indptr), shape=(self.n, self.n)))
 

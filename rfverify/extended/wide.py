@@ -16,7 +16,7 @@ in numpy object arrays) and the Newton solve — the dof-space matrix M + BᵀB,
 minimum-degree order (:class:`.wide_cholesky.SparseWideCholesky`), each solve refined against
 the unreduced three-block system.  The cost is Σ c_j² multiply-subtract pairs (O(m³) at
 worst), so the k-digit path runs this tail only where double-double stalled and the
-factorisation is affordable (:mod:`rfverify.digits`).
+factorisation is affordable (:mod:`rfverify.verify.digits`).
 
 gmpy2's precision is set in a local context for the duration of each call; nothing leaks.
 """

@@ -6,7 +6,7 @@ Two reasons not to call cvxopt's ``cholmod.symbolic``/``numeric``/``solve``:
 * they hold Python's GIL for the whole call (0.2–0.3 s per factorisation at 10⁴ contacts,
   minutes at 10⁵), so no other thread of the process runs meanwhile; a foreign call through
   ctypes releases it: the k-digit path prepares its double-double phase on the second core while
-  the double solve factors (:mod:`rfverify.digits`);
+  the double solve factors (:mod:`rfverify.verify.digits`);
 * they take their options from cvxopt's module-global ``cvxopt.cholmod.options`` (a user's
   ``{"postorder": False}`` or ``{"nmethods": 1}`` changes the ordering, hence every answer bit
   for bit), and setting them around a call makes rfverify's settings visible to the user's

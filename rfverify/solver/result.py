@@ -296,7 +296,7 @@ class IterationInfo:
 
 class ResultAliases(Mapping):
     """What every result (:class:`SolveResult`, :class:`rfverify.DigitsSolution`,
-    :class:`rfverify.Certificate`, :class:`rfverify.diagnosis.Diagnosis`) offers the same way
+    :class:`rfverify.Certificate`, :class:`rfverify.verify.diagnosis.Diagnosis`) offers the same way
     (docs/RESULTS.md): ``time`` is ``timings["total"]`` in seconds, ``iterations`` (Clarabel's
     name) is ``nit``, ``solve_time`` (Clarabel's) is ``time``; ``as_dict()`` is the JSON-able dict
     the CLI prints with ``--json``.

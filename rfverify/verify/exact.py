@@ -30,17 +30,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .algorithm import rules
-from .algorithm.interfaces import Breakdown
-from .algorithm.loop import Precision, iterate
-from .algorithm.newton import ReducedNewton
-from .extended import cones as C
-from .extended import dd
-from .extended import ipm as ext
-from .extended.data import ExtendedData
-from .extended.system import choose_backend
-from .solver.result import Status
-from .solver.termination import Termination, Verdict
+from ..algorithm import rules
+from ..algorithm.interfaces import Breakdown
+from ..algorithm.loop import Precision, iterate
+from ..algorithm.newton import ReducedNewton
+from ..extended import cones as C
+from ..extended import dd
+from ..extended import ipm as ext
+from ..extended.data import ExtendedData
+from ..extended.system import choose_backend
+from ..solver.result import Status
+from ..solver.termination import Termination, Verdict
 
 FLOOR = 1e-31
 """Relative residual to which every Newton solve of an exact step is refined (double-double's

@@ -6,7 +6,7 @@ extended arithmetic (the lockstep's run: its digits measure rounding alone); whe
 the tolerance and the first does not, the precision of the default linear solves is the cause.
 Otherwise:
 
-1. **Lockstep.**  From every double iterate k, the exact step (:mod:`rfverify.exact`: Algorithm
+1. **Lockstep.**  From every double iterate k, the exact step (:mod:`rfverify.verify.exact`: Algorithm
    1 in double-double, every Newton solve refined to that arithmetic's floor) with the double
    run's own γ and σ rule; the difference from the double iterate k+1 is the error of
    iteration k.  Measured where the exact step is defined — v, u = Hᵀv + w and Hr (unique
@@ -32,7 +32,7 @@ Otherwise:
    Where the continuation from the departure does not meet the limit, the exact algorithm is
    also run from the double run's start (iteration 0).  The mpmath reference
    (:mod:`reference`, independent code) repeats the deciding exact step and, within a time
-   budget, the continuation (:func:`rfverify.exact.witness`).
+   budget, the continuation (:func:`rfverify.verify.exact.witness`).
 4. **Remedy.**  Candidates run as ``rfverify solve`` would run them (another ``--method``, more
    ``--max-iter``, ``--digits K``), in an order set by the cause; the first whose answer meets
    the tolerance is the remedy, with its figures.
@@ -50,13 +50,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .exact import ExactAlgorithm, ExactRun, ExactStepError, dd_difference
-from .extended import ipm as ext
-from .model.lifting import lift
-from .model.measures import data_scales, measures
-from .model.problem import SPACEDIM, Problem
-from .solver import DOUBLE_REACH, posed, solve
-from .algorithm.rules import rule_at
-from .solver.result import ALGORITHM1_METHODS, ResultAliases, Status, method_unavailable
+from ..extended import ipm as ext
+from ..model.lifting import lift
+from ..model.measures import data_scales, measures
+from ..model.problem import SPACEDIM, Problem
+from ..solver import DOUBLE_REACH, posed, solve
+from ..algorithm.rules import rule_at
+from ..solver.result import ALGORITHM1_METHODS, ResultAliases, Status, method_unavailable
 
 UNIT_ROUNDOFF = 2.0 ** -53
 
@@ -115,7 +115,7 @@ class Diagnosis(ResultAliases):
     evidence : dict           ``text`` (sentences with the figures), ``departure`` (the first
                               departing step: ``iter``, ``digits``, ``threshold``,
                               ``expected``, ``through``), ``exact`` (the counterfactual run,
-                              :meth:`rfverify.exact.ExactRun.as_dict`), ``exact_from_start``,
+                              :meth:`rfverify.verify.exact.ExactRun.as_dict`), ``exact_from_start``,
                               ``witness``, ``r_unique``, ``mu_zero_contacts``,
                               ``remedies_tried`` (every candidate run: ``args``, ``status``,
                               ``criterion``, ``time``)
@@ -214,7 +214,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     options.setdefault("refine_tol", None)
     options.setdefault("extended_below", None)
     problem = posed(problem, options.pop("as_stored", None), method)
-    from .model.scaling import binary_scaling, scaled_problem
+    from ..model.scaling import binary_scaling, scaled_problem
 
     scaling = binary_scaling(problem)
     note_units = None
@@ -242,7 +242,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
                      failure=None if plain.success else plain.message, tol=float(tol))
     ctx = _Context(problem, res, lp, method, tol, max_iter, say, deadline)
     if lp.nk != ctx.exact.data.nk or lp.nz != ctx.exact.data.nz:
-        from .errors import InvalidArgumentError
+        from ..errors import InvalidArgumentError
 
         raise InvalidArgumentError("reduce_cones", "the exact steps work on the reduced lifting (DESIGN §2.1)",
                                    fix="drop reduce_cones=False")
@@ -316,7 +316,7 @@ class _Context:
     the exact algorithm, the data scales and the form's conditioning."""
 
     def __init__(self, problem, res, lp, method, tol, max_iter, say, deadline):
-        from .solver import component_judge
+        from ..solver import component_judge
 
         self.problem, self.res, self.lp, self.method = problem, res, lp, method
         self.tol, self.max_iter, self.say, self.deadline = tol, max_iter, say, deadline
@@ -402,7 +402,7 @@ class _Context:
     def _mp_measures(self):
         """The measures in mpmath (40 digits) with M of the posed equations exactly."""
         if getattr(self, "_mp_data", None) is None:
-            from .model.measures import MeasureData, MpmathArithmetic
+            from ..model.measures import MeasureData, MpmathArithmetic
 
             data = MeasureData.of(self.problem, MpmathArithmetic(40))
             data.M = _exact_posed_M(self.problem, data.arith)  # not (M + Mᵀ)/2 rounded to float64
@@ -613,7 +613,7 @@ def _refine_target(settings) -> float:
     if rt is None:
         return 4 * np.finfo(np.longdouble if settings.refine_extended else np.float64).eps
     if rt == "adaptive":
-        from .solver.ipm import REFINE_FORCING
+        from ..solver.ipm import REFINE_FORCING
 
         return REFINE_FORCING
     return float(rt)
@@ -1007,7 +1007,7 @@ def _witness(ctx, steps, focus, run, evidence, dps, budget, timings):
 
 def _gamma_after(alpha) -> float:
     """The paper's γ after a step α (the double run's rule)."""
-    from .algorithm.rules import step_fraction
+    from ..algorithm.rules import step_fraction
 
     return step_fraction(float(alpha), 0.09)
 

@@ -27,21 +27,21 @@ import numpy as np
 import scipy.sparse as sp
 
 from .certificate import Certificate, candidate_point, certificate_from_proof
-from .errors import InvalidArgumentError
-from .extended import ipm as ext
-from .extended.dd import vmul_d
-from .extended import wide, wide_factor
-from .extended.contactspace import ENGINES
-from .extended.data import ExtendedData
-from .extended.system import choose_backend
-from .extended.workers import threads
-from .model.problem import SPACEDIM, Problem
-from .compilation import (compile_extended_in_background, compile_seconds, extended_cache_is_cold,
+from ..errors import InvalidArgumentError
+from ..extended import ipm as ext
+from ..extended.dd import vmul_d
+from ..extended import wide, wide_factor
+from ..extended.contactspace import ENGINES
+from ..extended.data import ExtendedData
+from ..extended.system import choose_backend
+from ..extended.workers import threads
+from ..model.problem import SPACEDIM, Problem
+from ..compilation import (compile_extended_in_background, compile_seconds, extended_cache_is_cold,
                           float64_kernels_deferred)
-from .proof import Point, Proof, ProofContext, merit, validate_digits
-from .solver import SolveResult, Status, posed, solve
-from .solver.engines import cholmod_available
-from .solver.result import ResultAliases
+from ..proof import Point, Proof, ProofContext, merit, validate_digits
+from ..solver import SolveResult, Status, posed, solve
+from ..solver.engines import cholmod_available
+from ..solver.result import ResultAliases
 
 
 @dataclass
@@ -175,7 +175,7 @@ def preparing_beside() -> bool:
     (``RFVERIFY_THREADS``) and CHOLMOD factors without the GIL here
     (:mod:`.solver.cholmod_nogil`), so that the double solve's factorisations leave the
     interpreter to the set-up."""
-    from .solver import cholmod_nogil
+    from ..solver import cholmod_nogil
 
     return threads() >= 2 and cholmod_nogil.available()
 
@@ -204,7 +204,7 @@ class Preparation:
         self._cancelled = False
         self._thread = None
         if background:
-            from .solver import cholmod_nogil
+            from ..solver import cholmod_nogil
 
             cholmod_nogil.when_factoring(self._go)
             self._thread = threading.Thread(target=self._build, name="rfverify-prepare", daemon=True)
@@ -217,7 +217,7 @@ class Preparation:
     def _start(self) -> None:
         """Let the thread begin now (the caller needs its results, or it is cancelled)."""
         if not self._go.is_set():
-            from .solver import cholmod_nogil
+            from ..solver import cholmod_nogil
 
             cholmod_nogil.forget(self._go)
             self._go.set()
@@ -395,7 +395,7 @@ class ProofDriver:
         self-stresses into K where the point came from a face (DESIGN §6.8)."""
         v, u, r = self.ctx.rounded(point)
         if self.face is not None:
-            from .proof.face import returned_reactions
+            from ..proof.face import returned_reactions
 
             r = returned_reactions(self.ctx.problem, self.face[1], r)
         return v, u, r
@@ -540,7 +540,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         raise InvalidArgumentError("time_limit", f"must be a number of seconds > 0, got {time_limit!r}",
                                    fix="pass e.g. time_limit=60, or None for no limit")
     problem = posed(problem, as_stored, method)
-    from .model.scaling import binary_scaling, scaled_problem
+    from ..model.scaling import binary_scaling, scaled_problem
 
     scaling = binary_scaling(problem)
     if scaling is not None and _on_face is None:  # data beyond float64's safe range: the whole path in scaled units
@@ -700,7 +700,7 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
     (:func:`.proof.face.returned_reactions`); the result replaces the driver's best when it says
     more.  Returns what was done (for the certificate), or None when no
     self-stress is known."""
-    from .proof.reduction import reduce_to_face
+    from ..proof.reduction import reduce_to_face
 
     stresses = ctx.self_stresses()
     if not stresses:
@@ -869,8 +869,8 @@ def _start_from(data: ExtendedData, double: SolveResult) -> dict:
     r_t = double.extras.get("r_t")
     if data.local:  # the double solve's v belongs to the lifting; the local form has no dofs
         if z is not None and r_t is not None and len(z) == data.nz and len(r_t) == data.nk:
-            from .extended import cones as C
-            from .extended.dd import from_longdouble
+            from ..extended import cones as C
+            from ..extended.dd import from_longdouble
 
             zh, zl = from_longdouble(z)
             sh, sl = data.JT.matvec(*from_longdouble(r_t))
@@ -878,8 +878,8 @@ def _start_from(data: ExtendedData, double: SolveResult) -> dict:
                 return {"v": np.zeros(0, dtype=np.longdouble), "r_t": r_t, "z": z}
         return ext.interior_start(data, np.zeros(0), double.r)
     if z is not None and r_t is not None and len(z) == data.nz and len(r_t) == data.nk:
-        from .extended import cones as C
-        from .extended.dd import from_longdouble
+        from ..extended import cones as C
+        from ..extended.dd import from_longdouble
 
         zh, zl = from_longdouble(z)
         sh, sl = data.JT.matvec(*from_longdouble(r_t))

@@ -29,18 +29,18 @@ import time
 import mpmath
 import numpy as np
 
-from .errors import InvalidProblemError
+from ..errors import InvalidProblemError
 from .digits import DOUBLE_SETTINGS, ProofDriver, _start_from, extend, solve_on_face
-from .model.problem import SPACEDIM, Problem
-from .proof import FLOAT64_DIGITS, Point, ProofContext, validate_digits
+from ..model.problem import SPACEDIM, Problem
+from ..proof import FLOAT64_DIGITS, Point, ProofContext, validate_digits
 from .certificate import Certificate, candidate_point, certificate_from_proof
-from .compilation import compile_extended_in_background
+from ..compilation import compile_extended_in_background
 
 
 def local_velocity(problem: Problem, r) -> np.ndarray:
     """u = (W + Wᵀ)/2 r + q of a local problem, rounded once to nearest from the exact value."""
-    from .proof.dyadic import Dyadic
-    from .proof.local import LocalExact
+    from ..proof.dyadic import Dyadic
+    from ..proof.local import LocalExact
 
     return LocalExact(problem).u_of(Dyadic.from_float(r)).nearest()
 
@@ -120,17 +120,17 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     t0 = time.perf_counter()
     digits = validate_digits(digits)
     if time_limit is not None and not (isinstance(time_limit, (int, float)) and time_limit > 0):
-        from .errors import InvalidArgumentError
+        from ..errors import InvalidArgumentError
 
         raise InvalidArgumentError("time_limit", f"must be a number of seconds > 0, got {time_limit!r}",
                                    fix="pass e.g. time_limit=60, or None for no limit")
-    from .solver import posed
+    from ..solver import posed
 
     problem = posed(problem, as_stored)
     if point is None and hasattr(v, "point") and u is None and r is None:
         point = v.point
     v, u, r = _solution_arrays(problem, v, u, r)
-    from .model.scaling import binary_scaling, scaled_problem
+    from ..model.scaling import binary_scaling, scaled_problem
 
     scaling = binary_scaling(problem)
     if scaling is not None:
@@ -190,9 +190,9 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
     outside) the cone boundaries, and an infeasible interior-point run shrinks its primal
     residual and μ at the same rate, so a start pushed into the cones from it never gets its
     residual below the cone margins (measured on the bundled Chute: ratio 5 at every step)."""
-    from .extended.data import ExtendedData
-    from .extended.system import choose_backend
-    from .solver import solve
+    from ..extended.data import ExtendedData
+    from ..extended.system import choose_backend
+    from ..solver import solve
 
     compile_extended_in_background()  # on a cold numba cache: the other core compiles the extended kernels
     limit = {} if deadline is None else {"time_limit": max(deadline - time.perf_counter(), 1e-3)}

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .proof import Point, Proof
-from .solver.result import ResultAliases, Status
+from ..proof import Point, Proof
+from ..solver.result import ResultAliases, Status
 
 
 @dataclass
@@ -132,7 +132,7 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
     quantity proven zero at the data scale is stated as "zero within e" (DESIGN §6.3), never as
     digits; the problem (:attr:`Proof.statement`) ends the first sentence, and where the stored
     M is unsymmetric a second one says how many digits of the stored equations' solution the
-    answer has.  Where ``extra["proven_at"]`` (:meth:`rfverify.digits.ProofDriver.proven_at`)
+    answer has.  Where ``extra["proven_at"]`` (:meth:`rfverify.verify.digits.ProofDriver.proven_at`)
     says the proof's point is not the last one proven, the first sentence names it."""
     req = proof.requested
     about = f" for {proof.statement}" if proof.statement else ""
