@@ -71,7 +71,7 @@ def one(spec: str, engine: str) -> dict:
     if engine == "noncholmod":
         sys.modules["cvxopt"] = sys.modules["cvxopt.cholmod"] = None  # an import of it now fails
     import rfverify
-    from rfverify.solver.engines import schur_engine_name
+    from rfverify.engines.factor import schur_engine_name
 
     problem = load(spec)
     t0 = time.perf_counter()

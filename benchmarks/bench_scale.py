@@ -80,7 +80,7 @@ def run_one(kind: str, size: int, seed: int, method: str, tol: float, time_limit
     import rfverify
     from rfverify.model.measures import measures
     from rfverify.solver import kernels
-    from rfverify.solver.engines import cholmod_available
+    from rfverify.engines.factor import cholmod_available
 
     t0 = time.perf_counter()
     own = problem is None
@@ -216,7 +216,7 @@ def main(argv=None) -> int:
 
 
 def _run(args, kinds, path) -> int:
-    from rfverify.solver.engines import schur_engine_name
+    from rfverify.engines.factor import schur_engine_name
 
     sizes = [int(s) for s in args.sizes.split(",") if s] + (list(LARGE_SIZES) if args.large else [])
     methods, skipped = available_methods([m for m in args.methods.split(",") if m])

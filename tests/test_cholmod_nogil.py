@@ -1,4 +1,4 @@
-"""CHOLMOD through ctypes with rfverify's own cholmod_common (rfverify.solver.cholmod_nogil): the
+"""CHOLMOD through ctypes with rfverify's own cholmod_common (rfverify.engines.cholmod_nogil): the
 same factor and solves as cvxopt's own calls under its default options, bit for bit; other
 threads run during it; an indefinite matrix is refused as before; anything unexpected means the
 QDLDL fallback; and cvxopt's global ``cholmod.options`` is neither read nor written (issue 48
@@ -13,8 +13,8 @@ import pytest
 import scipy.sparse as sp
 
 import rfverify
-from rfverify.solver import cholmod_nogil
-from rfverify.solver.engines import CholmodEngine
+from rfverify.engines import cholmod_nogil
+from rfverify.engines.factor import CholmodEngine
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
                                 reason="the ctypes call finds libcholmod in /proc/self/maps (Linux)")
@@ -55,7 +55,7 @@ class CvxoptReference:
         self._A = cvxopt.spmatrix(cvxopt.matrix(K.data.astype(np.float64)), cvxopt.matrix(K.indices.astype(np.int64)),
                                   cvxopt.matrix(cols), (n, n))
         if self._F is None:
-            from rfverify.solver.engines import ND_MIN_ROWS, nested_dissection
+            from rfverify.engines.factor import ND_MIN_ROWS, nested_dissection
 
             perm = nested_dissection(K) if n >= ND_MIN_ROWS else None
             self._F = (cholmod.symbolic(self._A, uplo="L") if perm is None
@@ -161,7 +161,7 @@ def test_an_error_reported_by_cholmod_is_raised_not_ignored(monkeypatch):
 
 
 def test_an_unexpected_cholmod_common_layout_means_qdldl(monkeypatch):
-    from rfverify.solver.engines import QDLDLEngine, cholmod_available, schur_engine
+    from rfverify.engines.factor import QDLDLEngine, cholmod_available, schur_engine
 
     monkeypatch.setattr(cholmod_nogil, "_checked", False)
     monkeypatch.setattr(cholmod_nogil, "_lib", None)

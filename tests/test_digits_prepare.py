@@ -216,8 +216,8 @@ def test_an_exact_answer_whose_gap_rounds_up_still_passes_the_gate():
 def test_the_set_up_begins_at_the_double_solves_first_factorisation_or_when_asked():
     """Its thread keeps off the GIL while the double solve sets itself up: it waits for the first
     GIL-free CHOLMOD factorisation, or until its results are asked for."""
-    from rfverify.solver import cholmod_nogil
-    from rfverify.solver.engines import CholmodEngine
+    from rfverify.engines import cholmod_nogil
+    from rfverify.engines.factor import CholmodEngine
 
     problem = random_problem(8, 20, seed=4)
     waiting = D.Preparation(problem, "auto", "auto", background=True)

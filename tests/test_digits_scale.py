@@ -21,7 +21,7 @@ from rfverify.extended.data import ExtendedData
 from rfverify.jordan import mpfr as JM
 from rfverify.extended.ldl import DDCholesky
 from rfverify.extended.mixed import CholmodMixed, MixedCholesky
-from rfverify.solver.engines import cholmod_available
+from rfverify.engines.factor import cholmod_available
 from rfverify.extended.system import choose_backend
 from rfverify.extended.wide_cholesky import DenseWideCholesky, SparseWideCholesky
 from rfverify.scenes.random_problems import random_problem

@@ -17,7 +17,7 @@ from .blocks import block_apply_threaded, contact_factor_inverse_threaded, scatt
 from .data import ExtendedData
 from .factored import FactoredBackend
 from .ldl import DDCholesky
-from ..solver.engines import cholmod_available, cholmod_missing_message
+from ..engines.factor import cholmod_available, cholmod_missing_message
 from .mixed import CholmodMixed, MixedCholesky
 from .workers import split
 

@@ -9,7 +9,7 @@ without pivoting is backward stable.
 
 The fill-reducing ordering is scipy's multiple minimum degree on AᵀA + A (SuperLU's
 ``MMD_AT_PLUS_A``), computed once from the pattern.  The float64 factors refined in
-double-double (:mod:`.mixed`) are those of :mod:`rfverify.solver.engines` (QDLDL, CHOLMOD);
+double-double (:mod:`.mixed`) are those of :mod:`rfverify.engines.factor` (QDLDL, CHOLMOD);
 the multiple-precision tail takes the structure of L from :func:`_numeric`
 (:mod:`.wide_cholesky`).
 """

@@ -4,7 +4,7 @@ A float64 factor of a symmetric positive definite matrix given in double-double 
 "oracle" of an iterative refinement with double-double residuals (as in SoPlex's iterative
 refinement, :func:`refine_in_double_double`): :class:`MixedCholesky` with QDLDL's LDLᵀ,
 :class:`CholmodMixed` with CHOLMOD (cvxopt's wheel, a dependency) — the
-float64 engines of :mod:`rfverify.solver.engines`, the ones the double solver's forms use.
+float64 engines of :mod:`rfverify.engines.factor`, the ones the double solver's forms use.
 Both fall back, for good, to the double-double :class:`.ldl.DDCholesky` where the float64
 factorisation fails or refinement stalls.
 """
@@ -18,7 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import dd
-from ..solver.engines import CholmodEngine, QDLDLEngine
+from ..engines.factor import CholmodEngine, QDLDLEngine
 from .ldl import DDCholesky, _symbolic, symmetric_pattern, upper_csc, upper_positions
 
 

@@ -27,7 +27,7 @@ def auto_sequence(n_contacts: int, fill=None) -> tuple:
     factorisation's ``fill`` (:func:`body_fill`; a number, or a callable that computes it, called
     only when the problem is that large) is at least ``AUTO_SCHUR_MIN_FILL``; else
     ``AUTO_SEQUENCE`` (jqinv first).  The same choice with or without the optional CHOLMOD, which
-    only makes schur faster (:func:`rfverify.solver.engines.schur_engine`).  The names and
+    only makes schur faster (:func:`rfverify.engines.factor.schur_engine`).  The names and
     thresholds are declared in :mod:`rfverify.solver.result`."""
     if n_contacts < AUTO_SCHUR_MIN_CONTACTS:
         return AUTO_SEQUENCE

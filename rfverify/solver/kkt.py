@@ -48,7 +48,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from .cones import ProductCone
-from .engines import QDLDLEngine
+from ..engines.factor import QDLDLEngine
 
 
 @dataclass

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import sys
 
-from .engines import schur_engine_name
+from ..engines.factor import schur_engine_name
 
 COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e}"),
            ("pinfeas", "pinfeas", "{:>9.2e}"), ("dinfeas", "dinfeas", "{:>9.2e}"), ("mu", "mu", "{:>9.2e}"),

@@ -40,7 +40,7 @@ from ..compilation import (compile_extended_in_background, compile_seconds, exte
                           float64_kernels_deferred)
 from ..proof import Point, Proof, ProofContext, merit, validate_digits
 from ..solver import SolveResult, Status, posed, solve
-from ..solver.engines import cholmod_available
+from ..engines.factor import cholmod_available
 from ..solver.result import ResultAliases
 
 
@@ -175,7 +175,7 @@ def preparing_beside() -> bool:
     (``RFVERIFY_THREADS``) and CHOLMOD factors without the GIL here
     (:mod:`.solver.cholmod_nogil`), so that the double solve's factorisations leave the
     interpreter to the set-up."""
-    from ..solver import cholmod_nogil
+    from ..engines import cholmod_nogil
 
     return threads() >= 2 and cholmod_nogil.available()
 
@@ -204,7 +204,7 @@ class Preparation:
         self._cancelled = False
         self._thread = None
         if background:
-            from ..solver import cholmod_nogil
+            from ..engines import cholmod_nogil
 
             cholmod_nogil.when_factoring(self._go)
             self._thread = threading.Thread(target=self._build, name="rfverify-prepare", daemon=True)
@@ -217,7 +217,7 @@ class Preparation:
     def _start(self) -> None:
         """Let the thread begin now (the caller needs its results, or it is cancelled)."""
         if not self._go.is_set():
-            from ..solver import cholmod_nogil
+            from ..engines import cholmod_nogil
 
             cholmod_nogil.forget(self._go)
             self._go.set()
