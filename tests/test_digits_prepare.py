@@ -215,16 +215,18 @@ def test_an_exact_answer_whose_gap_rounds_up_still_passes_the_gate():
 
 def test_the_set_up_begins_at_the_double_solves_first_factorisation_or_when_asked():
     """Its thread keeps off the GIL while the double solve sets itself up: it waits for the first
-    GIL-free CHOLMOD factorisation, or until its results are asked for."""
-    from rfverify.engines import cholmod_nogil
-    from rfverify.engines.factor import CholmodEngine
+    GIL-free CHOLMOD factorisation of an engine made inside the hook's block (the double solve),
+    or until its results are asked for; a factorisation elsewhere does not start it."""
+    from rfverify.engines.factor import CholmodEngine, on_factoring
 
     problem = random_problem(8, 20, seed=4)
+    K = sp.tril(sp.identity(50, format="csc") * 2.0, format="csc")
     waiting = D.Preparation(problem, "auto", "auto", background=True)
-    assert not waiting._ctx_ready.wait(0.3)  # nothing factored yet: not begun
-    K = sp.identity(50, format="csc") * 2.0
-    CholmodEngine().factor(sp.tril(K, format="csc"))
+    CholmodEngine().factor(K)  # outside the block: not its signal
+    assert not waiting._ctx_ready.wait(0.3)  # nothing factored for it yet: not begun
+    with on_factoring(waiting.start):
+        engine = CholmodEngine()
+    engine.factor(K)  # made inside the block: its first factorisation is the signal
     assert waiting._ctx_ready.wait(30) and waiting.context().hypotheses_proven
     asked = D.Preparation(problem, "auto", "auto", background=True)
     assert asked.context().hypotheses_proven and asked.system()[0].n == problem.n_contacts
-    assert asked._go not in cholmod_nogil._waiting  # not kept waiting for a signal it no longer needs

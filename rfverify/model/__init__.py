@@ -8,3 +8,15 @@ units for data beyond float64's safe range; :mod:`.lifting` the rolling cone lif
 check of a stored solution; :mod:`.summary` what ``rfverify info`` says.  No module here imports
 a solver.
 """
+
+
+def __getattr__(name: str):
+    """``rfverify.model.<module>`` without importing it first (PEP 562), as before the move."""
+    import importlib
+
+    try:
+        return importlib.import_module(f"{__name__}.{name}")
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__name__}.{name}":
+            raise
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None

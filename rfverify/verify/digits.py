@@ -13,7 +13,7 @@ The proof is tried only at iterates where a cheap necessary condition holds
 too (:func:`double_answer_may_certify`), whose proof otherwise waits until no later point is
 proven.  With two CPUs the set-up of stage 2 is built on the second one during stage 1
 (:class:`Preparation`): CHOLMOD's factorisations there release the GIL
-(:mod:`.solver.cholmod_nogil`).
+(:mod:`rfverify.engines.cholmod_nogil`).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from ..compilation import (compile_extended_in_background, compile_seconds, exte
                           float64_kernels_deferred)
 from ..proof import Point, Proof, ProofContext, merit, validate_digits
 from ..solver import SolveResult, Status, posed, solve
-from ..engines.factor import cholmod_available
+from ..engines.factor import cholmod_available, on_factoring
 from ..solver.result import ResultAliases
 
 
@@ -173,7 +173,7 @@ def preparing_beside() -> bool:
     """True when the k-digit path builds its double-double phase's set-up on a second thread
     during the double solve (:class:`Preparation`): two threads are allowed
     (``RFVERIFY_THREADS``) and CHOLMOD factors without the GIL here
-    (:mod:`.solver.cholmod_nogil`), so that the double solve's factorisations leave the
+    (:mod:`rfverify.engines.cholmod_nogil`), so that the double solve's factorisations leave the
     interpreter to the set-up."""
     from ..engines import cholmod_nogil
 
@@ -185,8 +185,9 @@ class Preparation:
     the extended data, the Newton back end and what its first update needs no iterate for
     (``prepare()``, e.g. :meth:`.extended.contactspace.ContactSpace.prepare`).
 
-    With ``background`` they are built on a second thread — begun at the double solve's first
-    CHOLMOD factorisation, which releases the GIL (before it the solve sets itself up in Python
+    With ``background`` they are built on a second thread — begun (:meth:`start`, the engines'
+    :func:`~rfverify.engines.factor.on_factoring` hook) at the double solve's first CHOLMOD
+    factorisation, which releases the GIL (before it the solve sets itself up in Python
     and GIL-holding calls, and a thread beside it measurably slowed it), or when the results are
     asked for — and without it here, when asked for, as before.  The results are the same
     either way.  An error is raised where the serial path raises it: ProofContext's by
@@ -204,9 +205,6 @@ class Preparation:
         self._cancelled = False
         self._thread = None
         if background:
-            from ..engines import cholmod_nogil
-
-            cholmod_nogil.when_factoring(self._go)
             self._thread = threading.Thread(target=self._build, name="rfverify-prepare", daemon=True)
             self._thread.start()
 
@@ -214,13 +212,11 @@ class Preparation:
     def in_background(self) -> bool:
         return self._thread is not None
 
-    def _start(self) -> None:
-        """Let the thread begin now (the caller needs its results, or it is cancelled)."""
-        if not self._go.is_set():
-            from ..engines import cholmod_nogil
-
-            cholmod_nogil.forget(self._go)
-            self._go.set()
+    def start(self) -> None:
+        """Let the thread begin now: the double solve's first GIL-free factorisation (the hook
+        :func:`rfverify.engines.factor.on_factoring` calls), or the caller needs its results, or
+        it is cancelled."""
+        self._go.set()
 
     def _build(self) -> None:
         # Waiting for the double solve's first factorisation keeps this thread off the GIL while
@@ -254,7 +250,7 @@ class Preparation:
             if self._ctx is None:
                 self._ctx = ProofContext(self.problem)
             return self._ctx
-        self._start()
+        self.start()
         self._ctx_ready.wait()
         if self._ctx_error is not None:
             raise self._ctx_error
@@ -265,7 +261,7 @@ class Preparation:
     def system(self):
         """(ExtendedData, back end)."""
         if self._thread is not None:
-            self._start()
+            self.start()
             self._thread.join()
             if self._system_error is not None:
                 raise self._system_error
@@ -281,7 +277,7 @@ class Preparation:
 
     def cancel(self) -> None:
         self._cancelled = True
-        self._start()
+        self.start()
 
 
 def double_answer_may_certify(ctx: ProofContext, problem: Problem, v, r, requested: int) -> bool:
@@ -573,8 +569,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     deadline = None if time_limit is None else t0 + time_limit
     limit = {} if time_limit is None else {"time_limit": time_limit}
     try:
-        double = solve(problem, method=method, tol=tol, max_iter=max_iter, callback=callback,
-                       **{**DOUBLE_SETTINGS, **cold, **limit, **options})
+        with on_factoring(prepared.start if prepared.in_background else None):
+            double = solve(problem, method=method, tol=tol, max_iter=max_iter, callback=callback,
+                           **{**DOUBLE_SETTINGS, **cold, **limit, **options})
     except BaseException:
         prepared.cancel()
         raise
