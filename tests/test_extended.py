@@ -292,13 +292,13 @@ def test_both_back_ends_solve_the_same_newton_system(name):
 
 
 def test_extended_run_reaches_the_double_double_floor():
-    from rfverify.verify.digits import _start_from
+    from rfverify.verify.prepare import start_from
     from rfverify.extended import ipm as X
 
     problem = rfverify.load("bundled:chute")
     res = rfverify.solve(problem, tol=1e-10)
     data = ExtendedData(problem)
-    out = X.run(data, _start_from(data, res), max_iter=14)
+    out = X.run(data, start_from(data, res), max_iter=14)
     mu, pinf = out.trace["mu"], out.trace["pinfeas"]
     assert mu[-1] < 1e-25 < mu[0] and pinf[-1] < 1e-29
     assert all(np.diff(np.log10(mu)) < 0)  # μ falls at every iteration
@@ -307,7 +307,7 @@ def test_extended_run_reaches_the_double_double_floor():
 def test_extended_run_stops_with_numerical_error_when_a_solve_fails():
     """A back end whose solve returns NaN (a double-double fallback factorisation that lost
     definiteness) ends the run as NumericalError at that iteration, not steps later."""
-    from rfverify.verify.digits import _start_from
+    from rfverify.verify.prepare import start_from
     from rfverify.extended import ipm as X
 
     problem = rfverify.load("bundled:chute")
@@ -318,7 +318,7 @@ def test_extended_run_stops_with_numerical_error_when_a_solve_fails():
         def solve(self, a, t):
             return (np.full(data.m, np.nan), np.zeros(data.m)), (np.full(data.nk, np.nan), np.zeros(data.nk))
 
-    out = X.run(data, _start_from(data, res), max_iter=5, backend=Failing(data))
+    out = X.run(data, start_from(data, res), max_iter=5, backend=Failing(data))
     assert out.status == "NumericalError" and "solve failed" in out.message and out.nit == 0
 
 

@@ -10,7 +10,7 @@ import pytest
 import rfverify
 from rfverify.algorithm import newton as N
 from rfverify.algorithm.loop import residuals
-from rfverify.verify.digits import _start_from
+from rfverify.verify.prepare import start_from
 from rfverify.extended import dd
 from rfverify.extended import ipm as X
 from rfverify.extended.contactspace import ContactSpace
@@ -23,7 +23,7 @@ from rfverify.scenes.random_problems import random_problem
 def started():
     problem = random_problem(40, 90, seed=23)
     data = ExtendedData(problem)
-    return data, _start_from(data, rfverify.solve(problem, tol=1e-10))
+    return data, start_from(data, rfverify.solve(problem, tol=1e-10))
 
 
 def _spy(monkeypatch, kept: list, tried: list):

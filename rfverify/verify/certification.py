@@ -30,7 +30,10 @@ import mpmath
 import numpy as np
 
 from ..errors import InvalidProblemError
-from .digits import DOUBLE_SETTINGS, ProofDriver, _start_from, extend, solve_on_face
+from .digits import DOUBLE_SETTINGS, solve_on_face
+from .driver import ProofDriver
+from .extend import extend
+from .prepare import start_from
 from ..model.problem import SPACEDIM, Problem
 from ..proof import FLOAT64_DIGITS, Point, ProofContext, validate_digits
 from .certificate import Certificate, candidate_point, certificate_from_proof
@@ -202,7 +205,7 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
     driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say, relative=relative, deadline=deadline)
     say(f"extended point: double solve {double.status} in {double.nit} iterations, then double-double "
         f"({system.name})")
-    out = extend(data, _start_from(data, double), driver, system, max_iter=max_iter, say=say)
+    out = extend(data, start_from(data, double), driver, system, max_iter=max_iter, say=say)
     face = None
     if not driver.certified and not driver.timed_out:  # no interior (a self-stress): solve on its face
         face = solve_on_face(problem, ctx, driver, digits, relative, say, deadline,

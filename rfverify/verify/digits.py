@@ -18,30 +18,36 @@ proven.  With two CPUs the set-up of stage 2 is built on the second one during s
 
 from __future__ import annotations
 
-import math
-import threading
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 
-from .certificate import Certificate, candidate_point, certificate_from_proof
+from ..compilation import (
+    compile_extended_in_background,
+    compile_seconds,
+    extended_cache_is_cold,
+    float64_kernels_deferred,
+)
+from ..engines.factor import cholmod_available, on_factoring
 from ..errors import InvalidArgumentError
 from ..extended import ipm as ext
-from ..extended.dd import vmul_d
-from ..extended import wide, wide_factor
+from ..extended import wide
 from ..extended.contactspace import ENGINES
-from ..extended.data import ExtendedData
-from ..extended.system import choose_backend
 from ..extended.workers import threads
-from ..model.problem import SPACEDIM, Problem
-from ..compilation import (compile_extended_in_background, compile_seconds, extended_cache_is_cold,
-                          float64_kernels_deferred)
-from ..proof import Point, Proof, ProofContext, merit, validate_digits
+from ..model.problem import Problem
+from ..proof import Point, Proof, ProofContext, validate_digits
 from ..solver import SolveResult, Status, posed, solve
-from ..engines.factor import cholmod_available, on_factoring
 from ..solver.result import ResultAliases
+from .certificate import Certificate, candidate_point, certificate_from_proof
+from .driver import ProofDriver, proof_site, proven_answer
+from .extend import Extension, extend
+from .prepare import (
+    Preparation,
+    double_answer_may_certify,
+    preparing_beside,
+    start_from,
+)
 
 
 @dataclass
@@ -121,21 +127,6 @@ class DigitsSolution(ResultAliases):
                 f"    {self.certificate.headline!r})")
 
 
-def point_from_iterate(data: ExtendedData, v, r_t) -> Point:
-    """(v, r = P r̃) of an extended iterate as double-double (r̃ scaled by μ or μr exactly
-    enough: one double-double rounding)."""
-    lp = data.lp
-    n5 = SPACEDIM * data.n
-    th, tl = np.zeros(lp.nk), np.zeros(lp.nk)
-    vmul_d(lp.scale, r_t.h, r_t.l, th, tl)
-    rh, rl = np.zeros(n5), np.zeros(n5)
-    rh[lp.keep], rl[lp.keep] = th, tl
-    if data.local:  # no dofs in the local form: v of the lifting (M = I, f = 0) is H r, information only
-        vh = np.asarray(data.problem.H @ rh, dtype=np.float64)
-        return Point(vh, np.zeros_like(vh), rh, rl)
-    return Point(v.h.copy(), v.l.copy(), rh, rl)
-
-
 DOUBLE_SETTINGS = {"sigma_rule": "paper"}
 """Settings of the double solve the k-digit path continues (a caller's options override
 them).  Its iterate is a start, not an answer: the extended phase continues the central path
@@ -145,338 +136,6 @@ multiple-precision tail took 74 s in all, against μ = 3e-40 and 40 s (measured,
 docs/DECISIONS.md).  It costs the path some time: 25 iterations against the default rule's 23 on
 the 9675-contact GranularBed, whose double solve is about half of the path (docs/DECISIONS.md, "The
 double-double kernels on both cores")."""
-
-RECENT = 8
-"""Iterates the driver keeps: candidates for the wide tail's start, and the last three are
-proven when no proof succeeded."""
-
-WIDE_MAX_FACTOR_OPS = 2e7
-"""Largest factorisation given the tail, in multiply-subtract pairs (Σ c_j² over the column
-counts of L in its minimum-degree order): measured ~0.26 µs each at 320 bits (the whole
-iteration ~2× its factorisation), so about 5 s per factorisation at the limit (a 274-contact
-Lattice: 1.0e6, a 769-contact SpheresPile: 1.5e7).  This is the tail's only limit: its factor
-is sparse (:class:`.extended.wide_cholesky.SparseWideCholesky`, memory O(nnz(L))), so the number
-of dofs does not matter, only the fill (the 9675-contact GranularBed: 1.3e10, about 56 min per
-factorisation; docs/DECISIONS.md, "The 10-digit path at scale")."""
-
-
-WIDE_SECONDS_PER_OP = 0.26e-6
-"""Measured cost of one multiply-subtract pair of the tail's factorisation (320 bits, this
-machine), for the estimate the certificate states when the tail is skipped."""
-
-WIDE_GIVE_UP = 5
-"""The tail stops after this many invalid proofs in a row (measured: a Chute whose wedge
-contacts leave no strictly feasible point stays outside K* at every one of 40 iterations)."""
-
-
-def preparing_beside() -> bool:
-    """True when the k-digit path builds its double-double phase's set-up on a second thread
-    during the double solve (:class:`Preparation`): two threads are allowed
-    (``RFVERIFY_THREADS``) and CHOLMOD factors without the GIL here
-    (:mod:`rfverify.engines.cholmod_nogil`), so that the double solve's factorisations leave the
-    interpreter to the set-up."""
-    from ..engines import cholmod_nogil
-
-    return threads() >= 2 and cholmod_nogil.available()
-
-
-class Preparation:
-    """The double-double phase's set-up: the proof's per-problem pieces (:class:`ProofContext`),
-    the extended data, the Newton back end and what its first update needs no iterate for
-    (``prepare()``, e.g. :meth:`.extended.contactspace.ContactSpace.prepare`).
-
-    With ``background`` they are built on a second thread — begun (:meth:`start`, the engines'
-    :func:`~rfverify.engines.factor.on_factoring` hook) at the double solve's first CHOLMOD
-    factorisation, which releases the GIL (before it the solve sets itself up in Python
-    and GIL-holding calls, and a thread beside it measurably slowed it), or when the results are
-    asked for — and without it here, when asked for, as before.  The results are the same
-    either way.  An error is raised where the serial path raises it: ProofContext's by
-    :meth:`context`, the extended data's and back end's by :meth:`system`; a failure of
-    ``prepare()`` is left to the first update, which repeats the step and reports it where it
-    always did.  :meth:`cancel` (the path ends early) stops the thread at its next step."""
-
-    def __init__(self, problem: Problem, backend: str, engine: str, background: bool, refine=None):
-        self.problem, self.backend, self.engine = problem, backend, engine
-        self.refine = refine  # refine(data): more exact data for the extended phase (a problem on a face)
-        self._ctx = self._ctx_error = None
-        self._system = self._system_error = None
-        self._ctx_ready = threading.Event()
-        self._go = threading.Event()  # start: at the double solve's first GIL-free factorisation, or when asked
-        self._cancelled = False
-        self._thread = None
-        if background:
-            self._thread = threading.Thread(target=self._build, name="rfverify-prepare", daemon=True)
-            self._thread.start()
-
-    @property
-    def in_background(self) -> bool:
-        return self._thread is not None
-
-    def start(self) -> None:
-        """Let the thread begin now: the double solve's first GIL-free factorisation (the hook
-        :func:`rfverify.engines.factor.on_factoring` calls), or the caller needs its results, or
-        it is cancelled."""
-        self._go.set()
-
-    def _build(self) -> None:
-        # Waiting for the double solve's first factorisation keeps this thread off the GIL while
-        # the solve sets itself up (patterns, orderings: Python and GIL-holding calls).
-        self._go.wait()
-        if self._cancelled:
-            self._ctx_ready.set()
-            return
-        try:
-            self._ctx = ProofContext(self.problem)
-        except BaseException as exc:  # noqa: BLE001 — raised again in the caller's thread, by context()
-            self._ctx_error = exc
-        finally:
-            self._ctx_ready.set()
-        if self._cancelled or self._ctx_error is not None:
-            return
-        try:
-            self._system = self._new_system()
-        except BaseException as exc:  # noqa: BLE001 — raised again in the caller's thread, by system()
-            self._system_error = exc
-            return
-        system = self._system[1]
-        if not self._cancelled and hasattr(system, "prepare"):
-            try:
-                system.prepare()
-            except Exception:  # noqa: BLE001, S110 — the first update repeats the step and reports it
-                pass
-
-    def context(self) -> ProofContext:
-        if self._thread is None:
-            if self._ctx is None:
-                self._ctx = ProofContext(self.problem)
-            return self._ctx
-        self.start()
-        self._ctx_ready.wait()
-        if self._ctx_error is not None:
-            raise self._ctx_error
-        if self._ctx is None:  # cancelled before it began
-            self._ctx = ProofContext(self.problem)
-        return self._ctx
-
-    def system(self):
-        """(ExtendedData, back end)."""
-        if self._thread is not None:
-            self.start()
-            self._thread.join()
-            if self._system_error is not None:
-                raise self._system_error
-        if self._system is None:  # serial, or the thread was cancelled before it got here
-            self._system = self._new_system()
-        return self._system
-
-    def _new_system(self):
-        data = ExtendedData(self.problem)
-        if self.refine is not None:
-            self.refine(data)
-        return data, choose_backend(data, self.backend, engine=self.engine)
-
-    def cancel(self) -> None:
-        self._cancelled = True
-        self.start()
-
-
-def double_answer_may_certify(ctx: ProofContext, problem: Problem, v, r, requested: int) -> bool:
-    """:meth:`ProofContext.may_certify` for the double solve's answer (v, r), from its duality
-    gap rᵀu (u = Hᵀv + w, or W r + q for a local problem) computed in long double and lowered by
-    twice a bound of that computation's rounding error, (k + N + 3)·ε·Σ|r_i|(|Hᵀ||v| + |w|)_i
-    (k entries per column of H, N entries of r, ε long double's unit roundoff: float64's where
-    the platform has no wider type), so that an exact answer (gap 0) is always proven.  False:
-    no proof of this answer can certify ``requested`` digits (the proof's ε is at least √(rᵀu))."""
-    ld = np.longdouble
-    r = np.asarray(r, dtype=ld)
-    with np.errstate(all="ignore"):
-        if problem.local is not None:
-            A, x, c = sp.csr_matrix(problem.local.W, dtype=ld), r, np.asarray(problem.local.q, dtype=ld)
-            v_inf = 0.0
-        else:
-            A, x, c = sp.csr_matrix(problem.H.T, dtype=ld), np.asarray(v, dtype=ld), np.asarray(problem.w, dtype=ld)
-            v_inf = float(np.max(np.abs(x), initial=0.0))
-        u = A @ x + c
-        size = abs(A) @ np.abs(x) + np.abs(c)  # ≥ |u_i|, and what u_i's rounding error is relative to
-        k = int(np.max(np.diff(A.indptr), initial=0))
-        gap = float(np.sum(r * u))
-        slack = float(2 * (k + r.size + 3) * np.finfo(ld).eps * np.sum(np.abs(r) * size))
-        u_inf = float(np.max(np.abs(u), initial=0.0))
-    if not (math.isfinite(gap) and math.isfinite(slack) and math.isfinite(u_inf) and math.isfinite(v_inf)):
-        return True  # let the proof say what it can
-    return ctx.may_certify(ctx.eps_lower(max(gap - slack, 0.0)), v_inf, u_inf, requested)
-
-
-def _proven_answer(ctx: ProofContext, point: Point, digits: int, relative: bool):
-    """(proof, (v, u, r)) of a float64 answer's point, its (v, u, r) rounded as the proof
-    judges them."""
-    v, u, r = ctx.rounded(point)
-    return ctx.prove(point, v, u, r, requested=digits, relative=relative), (v, u, r)
-
-
-def proof_site(phase: str, iteration: int | None = None, *, on_face: bool = False) -> dict:
-    """Where a proof's point came from: ``phase`` "double" (the double solve's answer),
-    "extended" (a double-double iterate) or "multiple-precision" (an iterate of the tail),
-    its ``iteration``, and ``on_face`` when it is an iterate of the problem reduced to a face,
-    lifted back (DESIGN §6.5)."""
-    return {"phase": phase, "iteration": iteration, "on_face": bool(on_face)}
-
-
-def site_words(at: dict | None) -> str:
-    """A :func:`proof_site` in words: "extended iteration 4", "the double solve's answer",
-    "extended iteration 3 on the face"."""
-    if at is None:
-        return "no point"
-    words = "the double solve's answer" if at["phase"] == "double" else f"{at['phase']} iteration {at['iteration']}"
-    return words + (" on the face" if at.get("on_face") else "")
-
-
-class ProofDriver:
-    """The ``until`` callback of the extended phase: tries the proof where it may succeed,
-    keeps the best one, and stops the run once ``requested`` digits are proven, or when μ
-    has stalled for ``stall`` iterations."""
-
-    def __init__(self, ctx: ProofContext, data: ExtendedData, requested: int, target=None, stall: int = 4,
-                 progress=None, relative: bool = False, deadline: float | None = None):
-        self.ctx, self.data, self.requested = ctx, data, requested
-        self.relative = relative
-        self.target = target  # (v, u, r) to certify; None: the rounding of each point
-        self.face = None  # (FaceReduction, stresses): iterates of the reduced problem, proven lifted back
-        self.best: tuple | None = None  # (score, proof, point, (v, u, r))
-        self.best_at: dict | None = None  # where the best proof was made (proof_site), and
-        self.last_at: dict | None = None  # where the last one was
-        self.proofs = 0  # points proven in all (the double answer's and a face's included)
-        self.proof_seconds = 0.0
-        self.attempts = 0
-        self.stall = stall
-        self._mu_best = math.inf
-        self._since = 0
-        self.progress = progress
-        self.recent = []  # the last few iterates: handover to the wide tail, and proven at the end
-        self.proven_keys = set()  # ("dd" or "wide", iteration) of the iterates proven
-        self.hopeless = False  # certifying a target: the point is already far closer than the target
-        self.invalid_limit = None  # stop after this many invalid proofs in a row (None: never)
-        self._invalid_run = 0
-        self.gave_up = ""
-        self.deadline = deadline  # time.perf_counter() value past which the run stops (None: never)
-        self.timed_out = False
-
-    @property
-    def certified(self) -> bool:
-        return self.best is not None and self.best[1].certified
-
-    def offer(self, proof: Proof, point: Point, sol, at: dict, *, ties: bool = False, proofs: int = 1) -> bool:
-        """Record a proof made at ``at`` (:func:`proof_site`) — ``proofs`` points proven to
-        reach it (a face's sub-run proves several) — and keep it as the best when it says more
-        (with ``ties``, also when it says as much).  True when it became the best."""
-        self.last_at = at
-        self.proofs += proofs
-        sc = self.score(proof)
-        if self.best is None or sc > self.best[0] or (ties and sc >= self.best[0]):
-            self.best, self.best_at = (sc, proof, point, sol), at
-            return True
-        return False
-
-    def proven_at(self) -> dict | None:
-        """Where the best proof was made, for the certificate (``extra["proven_at"]``): the
-        :func:`proof_site` with ``where`` (its words), ``proofs`` (points proven in all) and
-        ``last`` (where the last one was); None before any proof."""
-        if self.best_at is None:
-            return None
-        return {**self.best_at, "where": site_words(self.best_at), "proofs": self.proofs,
-                "last": site_words(self.last_at)}
-
-    def answer(self, point: Point):
-        """The float64 (v, u, r) a point stands for: its rounding, with r moved along the
-        self-stresses into K where the point came from a face (DESIGN §6.8)."""
-        v, u, r = self.ctx.rounded(point)
-        if self.face is not None:
-            from ..proof.face import returned_reactions
-
-            r = returned_reactions(self.ctx.problem, self.face[1], r)
-        return v, u, r
-
-    def restart(self, invalid_limit: int | None = None):
-        """Forget the stall counter and the recent iterates (a new phase begins); with
-        ``invalid_limit``, stop once that many proofs in a row are invalid (a point outside the
-        cones at every iterate: the feasible set has no interior, and iterating does not help)."""
-        self._mu_best, self._since = math.inf, 0
-        self.recent = []
-        self.invalid_limit, self._invalid_run = invalid_limit, 0
-
-    @staticmethod
-    def score(proof: Proof) -> float:
-        """Fewest proven digits (:func:`rfverify.proof.merit`): which of two proofs says more."""
-        return merit(proof)
-
-    @staticmethod
-    def _distance_dominates(proof: Proof) -> bool:
-        """True when v's or u's bound is uncertified and its point part (√(M⁻¹)_jj·ε or
-        √W_kk·ε, and the free blocks' verified solve: the part more iterations shrink) is below
-        1e-3 of it: the rest is the fixed distance from the point to the candidate."""
-        t = proof.terms
-        own = {"u": t.get("u_point_part", t["max_sqrt_W_kk"] * proof.eps_M)}
-        if not proof.local:
-            own["v"] = t.get("v_point_part", t["max_sqrt_Minv_jj"] * proof.eps_M)
-        return any(not q.certified and own[name] < 1e-3 * q.abs_bound
-                   for name, q in proof.quantities.items() if name in own and q.mode != "information")
-
-    def __call__(self, it: ext.Iterate, force: bool = False, quiet: bool = False) -> bool:
-        if not force and self.deadline is not None and time.perf_counter() > self.deadline:
-            self.timed_out = True  # the time limit: stop here; the best proof so far stands
-            self.recent = (self.recent + [it])[-RECENT:]
-            return True
-        if it.mu < 0.5 * self._mu_best:
-            self._mu_best, self._since = it.mu, 0
-        else:
-            self._since += 1
-        stalled = self._since >= self.stall
-        data = self.data
-        if not force:
-            self.recent = (self.recent + [it])[-RECENT:]
-        if isinstance(it, wide.WideIterate):
-            gap, point, v_inf, u_inf = it.describe()
-            key = ("wide", it.k)
-        else:
-            u_t = ext.V(*data.velocity(it.v.h, it.v.l, it.r_t.h, it.r_t.l))
-            gap = abs(it.r_t.dot(u_t))
-            point = point_from_iterate(data, it.v, it.r_t)
-            v_inf = float(np.max(np.abs(it.v.h), initial=0.0))
-            if data.local:
-                u_inf = float(np.max(np.abs(data.problem.local.W @ point.r_hi + data.problem.local.q), initial=0.0))
-            else:
-                u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
-            key = ("dd", it.k)
-        eps_lower = self.ctx.eps_lower(gap)
-        if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested):
-            return False
-        if key in self.proven_keys:
-            return False
-        self.proven_keys.add(key)
-        t0 = time.perf_counter()
-        if self.face is not None:  # an iterate of the problem on a face: proven on the problem itself
-            point = self.face[0].lift(point)
-        sol = self.target if self.target is not None else self.answer(point)
-        proof = self.ctx.prove(point, *sol, requested=self.requested, relative=self.relative)
-        self.proof_seconds += time.perf_counter() - t0
-        self.attempts += 1
-        phase = "multiple-precision" if key[0] == "wide" else "extended"
-        self.offer(proof, point, sol, proof_site(phase, it.k, on_face=self.face is not None))
-        if self.progress and not quiet:
-            self.progress(f"proof at {phase} iteration {it.k} (μ = {it.mu:.1e}): {proof.summary()}")
-        if proof.certified:
-            return True
-        self._invalid_run = 0 if proof.valid else self._invalid_run + 1
-        if self.invalid_limit is not None and self._invalid_run >= self.invalid_limit:
-            self.gave_up = f"{self._invalid_run} proofs in a row were invalid ({proof.summary()})"
-            return True
-        if self.target is not None and proof.valid and self._distance_dominates(proof):
-            # Certifying a given solution: once an uncertified quantity's bound is the distance
-            # from the point to the solution, more iterations cannot certify it.
-            self.hopeless = True
-            return True
-        return stalled
-
 
 def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", tol: float = 1e-10,
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
@@ -599,7 +258,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     first = None
     if _on_face is None and (out_of_time or interrupted or not ctx.hypotheses_proven
                              or double_answer_may_certify(ctx, problem, double.v, double.r, digits)):
-        first = _proven_answer(ctx, point, digits, relative)
+        first = proven_answer(ctx, point, digits, relative)
     if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted):
         prepared.cancel()
         proof, (v, u, r) = first
@@ -629,11 +288,11 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     t_setup = time.perf_counter() - t1
     c2 = compile_seconds()
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
-    start = _start_from(data, double)
+    start = start_from(data, double)
     driver = ProofDriver(ctx, data, digits, progress=say, relative=relative, deadline=deadline)
     if _on_face is not None:
         driver.face, driver.target = _on_face[1:3], _on_face[3]
-    c_ext = compile_seconds()  # (what _start_from compiled counts in "compile" only)
+    c_ext = compile_seconds()  # (what start_from compiled counts in "compile" only)
     if first is not None:  # the double answer's proof, to beat
         driver.offer(first[0], point, first[1], proof_site("double"))
     try:
@@ -645,7 +304,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                             "not run (interrupted)", None, time.perf_counter() - t1, 0.0)
     if first is None and not driver.certified and _on_face is None:  # the double answer's proof, left until now
         t_first = time.perf_counter()
-        first = _proven_answer(ctx, point, digits, relative)
+        first = proven_answer(ctx, point, digits, relative)
         driver.proof_seconds += time.perf_counter() - t_first
         # ties: the double answer, as when it was proven first
         became_best = driver.offer(first[0], point, first[1], proof_site("double"), ties=True)
@@ -765,121 +424,3 @@ def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsS
     return dataclasses.replace(out, **back, point=cert.point, certificate=cert)
 
 
-@dataclass
-class Extension:
-    """What :func:`extend` ran: the double-double run, the multiple-precision tail (None if it
-    did not run; ``wide_note`` says why), and their wall times without the proofs."""
-
-    run: ext.ExtendedResult
-    wide: wide.WideResult | None
-    wide_note: str
-    handover_iteration: int | None
-    seconds_dd: float
-    seconds_wide: float
-
-    @property
-    def point_source(self) -> str:
-        if self.wide is not None:
-            return f"extended phase, then the {self.wide.bits}-bit multiple-precision tail"
-        return "extended phase"
-
-    def summary(self) -> dict:
-        out = {"extended_status": self.run.status, "extended_iterations": self.run.nit, "backend": self.run.backend,
-               "wide_tail": self.wide_note}
-        if self.wide is not None:
-            out.update(wide_status=self.wide.status, wide_iterations=self.wide.nit, wide_bits=self.wide.bits,
-                       wide_handover_iteration=self.handover_iteration)
-        return out
-
-
-def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_iter: int = 80,
-           wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40, say=None,
-           verbose: bool = False) -> Extension:
-    """Algorithm 1 in double-double from ``start`` until ``driver`` accepts a proof or the run
-    stalls; then, if no proof succeeded and the tail's factor is within
-    ``WIDE_MAX_FACTOR_OPS``, the multiple-precision tail (:mod:`.extended.wide`) from the latest healthy double-double
-    iterate.  At the end, if nothing was certified, the last iterates are proven so that the
-    driver's best proof reports the best digits reached."""
-    say = say or (lambda msg: None)
-
-    def tick(phase):
-        return (lambda k, mu, pinf, dinf: say(f"  {phase} iteration {k}: μ = {mu:.2e}, pinfeas = {pinf:.1e}, "
-                                              f"dinfeas = {dinf:.1e}")) if verbose else None
-
-    t0 = time.perf_counter()
-    p0 = driver.proof_seconds
-    run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system, progress=tick("extended"))
-    seconds_dd = time.perf_counter() - t0 - (driver.proof_seconds - p0)
-    tail, note, hand_k, seconds_wide = None, "not needed", None, 0.0
-    if not driver.certified:
-        if driver.timed_out:
-            note = "not run (the time limit was reached)"
-        elif not wide_tail:
-            note = "not run (switched off)"
-        elif driver.hopeless:
-            note = "not run (the candidate is farther from the point than any tail could fix)"
-        elif data.local:
-            note = "not run (the tail works in the dofs of a global problem; a local problem has none)"
-        elif driver.face is None and (driver.ctx.self_stresses() or (driver.recent and not isinstance(driver.recent[-1], wide.WideIterate)
-                                            and driver.ctx.look_for_self_stress(point_from_iterate(
-                                                data, driver.recent[-1].v, driver.recent[-1].r_t).r_hi))):
-            note = ("not run (a self-stress leaves the feasible set no interior: more precision cannot help, "
-                    "the problem is solved on its face instead)")
-        elif (ordering := wide_factor.dof_space_ordering(data))[1] > WIDE_MAX_FACTOR_OPS:
-            ops = ordering[1]
-            note = (f"not run (its factorisation would take {ops:.1e} multiply-subtract pairs > "
-                    f"{WIDE_MAX_FACTOR_OPS:.0e}, about {ops * WIDE_SECONDS_PER_OP:.0f} s per factorisation)")
-        else:
-            it = wide.handover(data, driver.recent, bits=wide_bits)
-            if it is None:
-                note = "not run (no interior, centred double-double iterate to start from)"
-            else:
-                hand_k = it.k
-                say(f"multiple-precision tail: {wide_bits}-bit mpfr, sparse dof-space factor, from extended "
-                    f"iteration {it.k} (μ = {it.mu:.2e})")
-                driver.restart(invalid_limit=WIDE_GIVE_UP)
-                t1 = time.perf_counter()
-                p1 = driver.proof_seconds
-                tail = wide.run(data, {"v": (it.v.h, it.v.l), "r_t": (it.r_t.h, it.r_t.l), "z": (it.z.h, it.z.l)},
-                                until=driver, max_iter=wide_max_iter, bits=wide_bits, perm=ordering[0],
-                                progress=tick("multiple-precision"))
-                seconds_wide = time.perf_counter() - t1 - (driver.proof_seconds - p1)
-                note = f"{tail.status}: {tail.message}" + (f"; {driver.gave_up}" if driver.gave_up else "")
-    if not driver.certified:
-        # No proof succeeded: prove the last iterates (the final one may have left a cone
-        # after a failed step) so that the verdict reports the best proven digits.
-        again = [it for it in driver.recent[-3:] if ("dd", it.k) not in driver.proven_keys
-                 and ("wide", it.k) not in driver.proven_keys]
-        for it in again:
-            driver(it, force=True, quiet=True)
-        if again and driver.best is not None:
-            # one line, not one per iterate: the progress goes forward
-            say(f"the last iterates ({', '.join(str(it.k) for it in again)}) proven too, in case the final one "
-                f"left a cone: the best proof is {site_words(driver.best_at)}'s: {driver.best[1].summary()}")
-    return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide)
-
-
-def _start_from(data: ExtendedData, double: SolveResult) -> dict:
-    """The double solver's last lifted iterate if it is interior, else a point pushed into the
-    interior from its (v, r)."""
-    z = double.extras.get("z")
-    r_t = double.extras.get("r_t")
-    if data.local:  # the double solve's v belongs to the lifting; the local form has no dofs
-        if z is not None and r_t is not None and len(z) == data.nz and len(r_t) == data.nk:
-            from ..extended import cones as C
-            from ..extended.dd import from_longdouble
-
-            zh, zl = from_longdouble(z)
-            sh, sl = data.JT.matvec(*from_longdouble(r_t))
-            if C.min_lambda2(data.n3, zh, zl)[0] > 0 and C.min_lambda2(data.n3, sh, sl)[0] > 0:
-                return {"v": np.zeros(0, dtype=np.longdouble), "r_t": r_t, "z": z}
-        return ext.interior_start(data, np.zeros(0), double.r)
-    if z is not None and r_t is not None and len(z) == data.nz and len(r_t) == data.nk:
-        from ..extended import cones as C
-        from ..extended.dd import from_longdouble
-
-        zh, zl = from_longdouble(z)
-        sh, sl = data.JT.matvec(*from_longdouble(r_t))
-        if C.min_lambda2(data.n3, zh, zl)[0] > 0 and C.min_lambda2(data.n3, sh, sl)[0] > 0:
-            return {"v": np.asarray(double.v, dtype=np.longdouble), "r_t": r_t, "z": z}
-    return ext.interior_start(data, double.v, double.r)
