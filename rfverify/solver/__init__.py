@@ -125,11 +125,12 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         iterate so far with status Stopped and ``extras["interrupted"]``.
     """
     problem = posed(problem, as_stored, method)
-    from ..model.scaling import binary_scaling
+    from ..model.scaling import in_scaled_units
 
-    scaling = binary_scaling(problem)
-    if scaling is not None:
-        return _solved_in_scaled_units(problem, scaling, method, tol, max_iter, keep_iterates, callback, options)
+    scaled = in_scaled_units(problem, lambda sp_, _: solve(sp_, method, tol, max_iter, keep_iterates, callback,
+                                                           **options), _unscaled_result)
+    if scaled is not None:
+        return scaled
     data = problem.local.q if problem.local is not None else np.concatenate((problem.f, problem.w))
     if not np.any(data):
         return _zero_data_result(problem, method, tol, max_iter, options)
@@ -203,17 +204,12 @@ def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:
                        presolve={}, extras={"zero_data": True})
 
 
-def _solved_in_scaled_units(problem, scaling, method, tol, max_iter, keep_iterates, callback, options):
-    """:func:`solve` of a problem whose data lie beyond float64's safe range: solved in units
-    scaled by exact powers of two (:mod:`rfverify.model.scaling`), the answer scaled back exactly and
-    judged on the problem as given (longdouble holds its range)."""
-    from ..model.scaling import scaled_problem
-
-    res = solve(scaled_problem(problem, scaling), method, tol, max_iter, keep_iterates, callback, **options)
+def _unscaled_result(res: SolveResult, scaled: Problem, scaling) -> SolveResult:
+    """:func:`solve`'s answer found in units scaled by exact powers of two
+    (:mod:`rfverify.model.scaling`), scaled back and judged on the problem as given (longdouble
+    holds its range)."""
     note = scaling.describe("solved")
-    with np.errstate(all="ignore"):  # an answer rounded back to subnormals is one more rounding
-        back = {name: np.ldexp(np.asarray(getattr(res, name), dtype=np.float64), -scaling.exponent(name))
-                for name in ("v", "u", "r")}
+    back = {name: scaling.back(name, getattr(res, name)) for name in ("v", "u", "r")}
     extras = {**res.extras, "binary_scaling": note, "lifted_units": "scaled"}
     if not all(np.all(np.isfinite(x)) for x in back.values()):
         return dataclasses.replace(res, **back, status=Status.NUMERICAL_ERROR, extras=extras,

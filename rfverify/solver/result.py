@@ -9,6 +9,8 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass
 
 import numpy as np
 
+from ..errors import require_time_limit
+
 ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur")
 """Linear-system forms of Algorithm 1 (DESIGN §4): (14), (11), (15), (16), (6), and (16) with its
 identity block eliminated (``schur``: factored by CHOLMOD with the optional extra ``cholmod``, else
@@ -236,8 +238,7 @@ class Settings:
                 isinstance(self.refine_tol, (int, float)) and not isinstance(self.refine_tol, bool)
                 and 0 < self.refine_tol < 1)):
             raise ValueError(f"refine_tol = {self.refine_tol!r} must be 'adaptive', None or a number in (0, 1)")
-        if self.time_limit is not None and not (self.time_limit > 0):
-            raise ValueError(f"time_limit = {self.time_limit!r} must be a positive number of seconds")
+        require_time_limit(self.time_limit)
 
     def as_dict(self) -> dict:
         return asdict(self)

@@ -30,11 +30,12 @@ from ..compilation import (
     float64_kernels_deferred,
 )
 from ..engines.factor import cholmod_available, on_factoring
-from ..errors import InvalidArgumentError
+from ..errors import InvalidArgumentError, require_time_limit
 from ..extended import ipm as ext
 from ..extended import wide
 from ..extended.contactspace import ENGINES
 from ..extended.workers import threads
+from ..model.scaling import in_scaled_units
 from ..model.problem import Problem
 from ..proof import Point, Proof, ProofContext, validate_digits
 from ..solver import SolveResult, Status, posed, solve
@@ -191,31 +192,17 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     semidefinite as stored) no point can be proven: the path stops after the double solve
     and says why."""
     digits = validate_digits(digits)
-    if time_limit is not None and not (isinstance(time_limit, (int, float)) and time_limit > 0):
-        raise InvalidArgumentError("time_limit", f"must be a number of seconds > 0, got {time_limit!r}",
-                                   fix="pass e.g. time_limit=60, or None for no limit")
+    require_time_limit(time_limit)
     problem = posed(problem, as_stored, method)
-    from ..model.scaling import binary_scaling, scaled_problem
-
-    scaling = binary_scaling(problem)
-    if scaling is not None and _on_face is None:  # data beyond float64's safe range: the whole path in scaled units
-        scaled = scaled_problem(problem, scaling)
-        out = solve_to_digits(scaled, digits, method, tol, max_iter,
-                              extended_max_iter=extended_max_iter, backend=backend, wide_tail=wide_tail,
-                              wide_bits=wide_bits, wide_max_iter=wide_max_iter, relative=relative, progress=progress,
-                              factor_engine=factor_engine, time_limit=time_limit, callback=callback, **options)
-        return _unscaled_solution(out, scaled, scaling)
-    threads()  # a bad RFVERIFY_THREADS is refused now, not after the double solve
-    if factor_engine not in ENGINES:
-        raise InvalidArgumentError("factor_engine", f"{factor_engine!r} is not one of {', '.join(ENGINES)}",
-                                   fix="use 'auto', 'cholmod' or 'ldl'")
-    if factor_engine == "cholmod" and not cholmod_available():
-        raise InvalidArgumentError("factor_engine", "'cholmod' needs cvxopt (a dependency of rfverify), which "
-                                                    "does not import here",
-                                   fix="pip install cvxopt, or use factor_engine='auto'")
-    if method == "clarabel":
-        raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
-                                   fix="use method='auto' (default) or an Algorithm 1 form")
+    if _on_face is None:  # data beyond float64's safe range: the whole path in scaled units
+        out = in_scaled_units(problem, lambda scaled, _: solve_to_digits(
+            scaled, digits, method, tol, max_iter, extended_max_iter=extended_max_iter, backend=backend,
+            wide_tail=wide_tail, wide_bits=wide_bits, wide_max_iter=wide_max_iter, relative=relative,
+            progress=progress, factor_engine=factor_engine, time_limit=time_limit, callback=callback, **options),
+            _unscaled_solution)
+        if out is not None:
+            return out
+    _check_path_arguments(method, factor_engine)
     say = progress or (lambda msg: None)
     # On a cold numba cache the other core compiles the kernels, and the double solve runs its
     # cone operations in numpy (bit for bit the compiled ones) instead of compiling them first.
@@ -261,29 +248,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         first = proven_answer(ctx, point, digits, relative)
     if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted):
         prepared.cancel()
-        proof, (v, u, r) = first
-        if proof.certified:
-            say(f"the double solve's answer is proven as it is: {proof.summary()}")
-            source, why = "the double solve's answer itself", "not needed"
-        elif interrupted:
-            source, why = "the double solve (interrupted)", "interrupted (Ctrl-C)"
-        elif out_of_time:
-            say(f"time limit of {time_limit:g} s reached after the double solve: {proof.summary()}")
-            source, why = "the double solve (time limit reached)", f"time limit of {time_limit:g} s reached"
-        else:
-            say(f"no proof is possible: {proof.failure}")
-            source, why = "the double solve (no proof possible)", proof.failure
-        extra = {"point_source": source}
-        if out_of_time and not proof.certified:
-            extra["time_limit"] = time_limit
-        cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra=extra)
-        return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
-                              extended=ext.ExtendedResult(None, None, None, "NotRun", why, 0),
-                              timings={"double": t_double - (c1 - c0),
-                                       "setup": time.perf_counter() - t1 - (compile_seconds() - c1), "extended": 0.0,
-                                       "wide": 0.0, "proof": proof.seconds, "compile": compile_seconds() - c0,
-                                       "total": time.perf_counter() - t0},
-                              timed_out=out_of_time and not proof.certified, interrupted=interrupted)
+        return _ended_after_double(first, ctx, point, double, say, interrupted=interrupted, out_of_time=out_of_time,
+                                   time_limit=time_limit, clock=(t0, c0, t1, c1, t_double))
     data, system = prepared.system()
     t_setup = time.perf_counter() - t1
     c2 = compile_seconds()
@@ -303,14 +269,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         ext_out = Extension(ext.ExtendedResult(None, None, None, "Stopped", "interrupted (Ctrl-C)", 0), None,
                             "not run (interrupted)", None, time.perf_counter() - t1, 0.0)
     if first is None and not driver.certified and _on_face is None:  # the double answer's proof, left until now
-        t_first = time.perf_counter()
-        first = proven_answer(ctx, point, digits, relative)
-        driver.proof_seconds += time.perf_counter() - t_first
-        # ties: the double answer, as when it was proven first
-        became_best = driver.offer(first[0], point, first[1], proof_site("double"), ties=True)
-        if driver.proofs > 1:  # after the iterates' proofs: a line, as they have
-            say(f"the double solve's answer proven too: {first[0].summary()}"
-                + ("; it is the best proof" if became_best else ""))
+        _prove_double_answer_last(driver, ctx, point, digits, relative, say)
     face_note = None
     if (not driver.certified and not interrupted and not driver.timed_out and _face_depth < MAX_FACE_DEPTH
             and _on_face is None):
@@ -339,6 +298,64 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         timings["face"] = face_note["seconds"]  # the solve on the face (its final proof is in "proof")
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
                           wide=ext_out.wide, timings=timings, timed_out=timed_out, interrupted=interrupted)
+
+
+def _check_path_arguments(method: str, factor_engine: str) -> None:
+    """Refuse, before the double solve, what the path could only refuse after it."""
+    threads()  # a bad RFVERIFY_THREADS is refused now, not after the double solve
+    if factor_engine not in ENGINES:
+        raise InvalidArgumentError("factor_engine", f"{factor_engine!r} is not one of {', '.join(ENGINES)}",
+                                   fix="use 'auto', 'cholmod' or 'ldl'")
+    if factor_engine == "cholmod" and not cholmod_available():
+        raise InvalidArgumentError("factor_engine", "'cholmod' needs cvxopt (a dependency of rfverify), which "
+                                                    "does not import here",
+                                   fix="pip install cvxopt, or use factor_engine='auto'")
+    if method == "clarabel":
+        raise InvalidArgumentError("method", "the k-digit path continues an Algorithm 1 iterate, not Clarabel's",
+                                   fix="use method='auto' (default) or an Algorithm 1 form")
+
+
+def _ended_after_double(first, ctx, point, double, say, *, interrupted: bool, out_of_time: bool, time_limit,
+                        clock: tuple) -> DigitsSolution:
+    """The path's answer when it ends with the double solve's: proven as it is, interrupted, out
+    of time, or no proof possible on these data.  ``clock``: (t0, c0, t1, c1, t_double), the
+    path's start, the double solve's end and its seconds (perf_counter, compile_seconds)."""
+    t0, c0, t1, c1, t_double = clock
+    proof, (v, u, r) = first
+    if proof.certified:
+        say(f"the double solve's answer is proven as it is: {proof.summary()}")
+        source, why = "the double solve's answer itself", "not needed"
+    elif interrupted:
+        source, why = "the double solve (interrupted)", "interrupted (Ctrl-C)"
+    elif out_of_time:
+        say(f"time limit of {time_limit:g} s reached after the double solve: {proof.summary()}")
+        source, why = "the double solve (time limit reached)", f"time limit of {time_limit:g} s reached"
+    else:
+        say(f"no proof is possible: {proof.failure}")
+        source, why = "the double solve (no proof possible)", proof.failure
+    extra = {"point_source": source}
+    if out_of_time and not proof.certified:
+        extra["time_limit"] = time_limit
+    cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra=extra)
+    return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double,
+                          extended=ext.ExtendedResult(None, None, None, "NotRun", why, 0),
+                          timings={"double": t_double - (c1 - c0),
+                                   "setup": time.perf_counter() - t1 - (compile_seconds() - c1), "extended": 0.0,
+                                   "wide": 0.0, "proof": proof.seconds, "compile": compile_seconds() - c0,
+                                   "total": time.perf_counter() - t0},
+                          timed_out=out_of_time and not proof.certified, interrupted=interrupted)
+
+
+def _prove_double_answer_last(driver: ProofDriver, ctx, point, digits: int, relative: bool, say) -> None:
+    """The double answer's proof, made after the extended phases only when no iterate was
+    proven; on a tie it is the best (as when it is proven first)."""
+    t_first = time.perf_counter()
+    first = proven_answer(ctx, point, digits, relative)
+    driver.proof_seconds += time.perf_counter() - t_first
+    became_best = driver.offer(first[0], point, first[1], proof_site("double"), ties=True)
+    if driver.proofs > 1:  # after the iterates' proofs: a line, as they have
+        say(f"the double solve's answer proven too: {first[0].summary()}"
+            + ("; it is the best proof" if became_best else ""))
 
 
 MAX_FACE_DEPTH = 2
@@ -408,9 +425,7 @@ def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsS
     if all(x is not None for x in back.values()):
         cert = unscaled_certificate(out.certificate, scaling)
         return dataclasses.replace(out, **back, point=cert.point, certificate=cert)
-    with np.errstate(all="ignore"):
-        back = {name: np.ldexp(np.asarray(getattr(out, name), dtype=np.float64), -scaling.exponent(name))
-                for name in ("v", "u", "r")}
+    back = {name: scaling.back(name, getattr(out, name)) for name in ("v", "u", "r")}
     if not all(np.all(np.isfinite(x)) for x in back.values()):
         cert = Certificate(out.certificate.requested, False, "not certified: the proven answer overflows float64 in "
                                                              f"the problem's own units ({scaling.describe()})",
