@@ -440,8 +440,7 @@ class ContactSpace(FactoredBackend):
         the update meets the failure again and reports it where it always did."""
         if not self._ensure_W():
             return
-        if hasattr(self.chol, "prepare"):
-            self.chol.prepare()
+        self.chol.prepare()
 
     def _ensure_W(self) -> bool:
         """M factored in double-double and W̃ built, once; False when M is not positive

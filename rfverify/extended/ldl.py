@@ -203,6 +203,11 @@ class DDCholesky:
         self.Dl = np.zeros(n)
         self.factored = False
 
+    def prepare(self) -> None:
+        """Nothing to do ahead: the symbolic analysis is done here, on construction (the float64
+        factors a back end may hold instead, :mod:`.mixed`, have the same hook)."""
+        return None
+
     @property
     def nnz_L(self) -> int:
         return int(self.Lp[-1])

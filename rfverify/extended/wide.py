@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..algorithm.interfaces import Breakdown
+from ..algorithm.interfaces import Breakdown, ReducedBackend
 from ..algorithm.loop import Precision, iterate
 from ..algorithm.newton import NEWTON_ENOUGH, PREDICTOR_ENOUGH, ReducedNewton
 from ..algorithm.policy import UntilPolicy, extended_trace
@@ -169,7 +169,7 @@ class _WideCones:
         return _WideScaling(self.n3, self.n_cones, self.e, z, s)
 
 
-class _WideBackend:
+class _WideBackend(ReducedBackend):
     """A dof-space factor seen through the Newton interface (it takes the scaling's
     :class:`Scaling` and mpfr vectors as they are)."""
 

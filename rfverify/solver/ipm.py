@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..algorithm import rules
-from ..algorithm.interfaces import PROMOTE, Breakdown, Direction
+from ..algorithm.interfaces import PROMOTE, Breakdown, Direction, Policy
 from ..algorithm.loop import Precision, iterate
 from ..errors import ConeDomainError
 from .cones import ProductCone
@@ -244,7 +244,7 @@ class _NumpyCones:
         return _NumpyScaling(self.cones, self.precision.jd, z, s, self.precision.newton.system.symmetric)
 
 
-class _DoublePolicy:
+class _DoublePolicy(Policy):
     """The double solver's policy: :class:`Termination` (criterion, stall, limits, callback,
     best iterate), the switch to the extended arithmetic, the σ rule of the settings, the
     paper's γ = 0.9 + 0.09α, the λ₂ check of every iterate, and the trace columns."""

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..algorithm import rules
-from ..algorithm.interfaces import Breakdown
+from ..algorithm.interfaces import Breakdown, Policy
 from ..algorithm.loop import Precision, iterate
 from ..algorithm.newton import ReducedNewton
 from ..extended import cones as C
@@ -117,7 +117,7 @@ class _ExactCones(ext.DDCones):
         return _ExactScaling(self.n3, self.nz, self.n_cones, self.e, z, s)
 
 
-class _OneStep:
+class _OneStep(Policy):
     """Policy of one exact step: γ and the σ rule given, stop at the next iterate."""
 
     def __init__(self, gamma: float, rule: str):
@@ -146,7 +146,7 @@ class _OneStep:
         return Verdict(Status.NUMERICAL_ERROR, message)
 
 
-class _Continuation:
+class _Continuation(Policy):
     """The double run's policy in exact arithmetic: its criterion (``judge``), stall rule and
     iteration limit (:class:`Termination`, iterations counted as the double run's), its σ
     rule and γ; a deadline ends it with MaxTime."""

@@ -90,7 +90,7 @@ class Preparation:
             self._system_error = exc
             return
         system = self._system[1]
-        if not self._cancelled and hasattr(system, "prepare"):
+        if not self._cancelled:
             try:
                 system.prepare()
             except Exception:  # noqa: BLE001, S110 — the first update repeats the step and reports it
