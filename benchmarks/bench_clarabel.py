@@ -58,7 +58,7 @@ def main(argv=None):
     ap = comparison_parser(__doc__, tol=1e-8, methods="jqinv,clarabel")
     ap.add_argument("--min-contacts", type=int, default=750, help="skip problems with fewer contacts (default 750)")
     ap.add_argument("--options", default="",
-                    help="solver options for the Algorithm 1 methods, e.g. sigma_rule=siconos,extended_below=None")
+                    help="solver options for the Algorithm 1 methods, e.g. sigma_rule=siconos,longdouble_below=None")
     args = ap.parse_args(argv)
     options = {k: _value(v) for k, v in (kv.split("=", 1) for kv in args.options.split(",") if kv)}
     methods = args.methods.split(",")

@@ -18,7 +18,7 @@ SpheresPile, Chute and PrimitiveSoup at their published sizes.  ``--files`` adds
 ``--quick`` keeps only the committed files (and ``--files``).
 
     python benchmarks/sweep.py --b '{"sigma_rule": "siconos"}'
-    python benchmarks/sweep.py --a '{"extended_below": null}' --tol 1e-8
+    python benchmarks/sweep.py --a '{"longdouble_below": null}' --tol 1e-8
 """
 
 from __future__ import annotations

@@ -83,7 +83,7 @@ def _checked(func, *, tol=False):
         if tol and given.get("options"):
             from .solver import Settings as _Settings
 
-            unknown = sorted(set(given["options"]) - set(_Settings.names()) - {"keep_iterates"})
+            unknown = sorted(set(given["options"]) - set(_Settings.accepted()) - {"keep_iterates"})
             if unknown:
                 raise InvalidArgumentError(", ".join(unknown), "unknown solver option(s)",
                                            fix=f"use fields of rfverify.Settings: {', '.join(_Settings.names())}")

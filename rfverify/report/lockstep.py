@@ -60,7 +60,7 @@ def component_problem(problem: Problem, lp, group) -> tuple[Problem, np.ndarray]
 # (diagnose alone would refine every solve to 4·eps and start in the extended arithmetic, see
 # rfverify.verify.diagnosis.diagnose).  The mpmath witness gets a shorter budget than the command's:
 # a report diagnoses several runs.
-AS_BENCHED = {"refine_tol": Settings.refine_tol, "extended_below": Settings.extended_below, "witness_time": 20.0}
+AS_BENCHED = {"refine_tol": Settings.refine_tol, "longdouble_below": Settings.longdouble_below, "witness_time": 20.0}
 
 
 def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int = 100, dps: int = 40,

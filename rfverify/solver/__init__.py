@@ -16,7 +16,7 @@ from .cones import ProductCone
 from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, TRACE_FIELDS, IterationInfo, Settings, SolveResult, Status,
-                     method_unavailable)
+                     method_unavailable, renamed_settings)
 
 __all__ = ["solve", "posed", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence", "body_fill"]
 
@@ -125,6 +125,7 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         iterate so far with status Stopped and ``extras["interrupted"]``.
     """
     problem = posed(problem, as_stored, method)
+    options = renamed_settings(options)
     from ..model.scaling import in_scaled_units
 
     scaled = in_scaled_units(problem, lambda sp_, _: solve(sp_, method, tol, max_iter, keep_iterates, callback,
@@ -186,7 +187,7 @@ def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:
 
     if method not in METHODS:
         raise ValueError(f"method {method!r} is not one of {', '.join(METHODS)}")
-    unknown = set(options) - set(Settings.names())
+    unknown = set(options) - set(Settings.accepted())
     if unknown:
         raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}; valid: {', '.join(Settings.names())}")
     if method_unavailable(method) is not None:
@@ -275,7 +276,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
 
         raise InvalidArgumentError("method", missing.split("; fix: ")[0],
                                    fix=f"{OPTIONAL_METHODS[method][1]}, or use method='auto'")
-    unknown = set(options) - set(Settings.names())
+    unknown = set(options) - set(Settings.accepted())
     if unknown:
         raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}; "
                         f"valid: {', '.join(Settings.names())}")
@@ -372,7 +373,8 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
         timings=timings, method=method, settings=settings, presolve=presolve_info,
         extras={"factorisations": sum(o.factorisations for o in runs),
                 "unregularised_factorisations": sum(o.unregularised_factorisations for o in runs),
-                "extended_from": [o.extended_from for o in runs],
+                "longdouble_from": [o.longdouble_from for o in runs],
+                "extended_from": [o.longdouble_from for o in runs],  # its name before issue 50, kept for callers
                 "r_t": r_t, "z": z, "run_verdict": (run_status, run_message),
                 "returned_iteration": [o.returned_iteration for o in runs],
                 "interrupted": any(o.interrupted for o in runs),
@@ -473,7 +475,7 @@ def component_judge(problem, lp, dofs, rows, settings):
         # Judge what would be returned: the iterate rounded to float64, u = Hᵀv + w in float64.
         # (A longdouble iterate of a hyperstatic lattice met 1e-10 with r ~ 600·‖f‖ of
         # self-stress; rounded, its Hr lost 1e-9 of f.)  The arithmetic is the iterate's: float64
-        # in the run's float64 phase (Settings.extended_below), where the criterion is far above
+        # in the run's float64 phase (Settings.longdouble_below), where the criterion is far above
         # the rounding of either; solve() judges the returned answer in longdouble regardless.
         dtype = np.dtype(np.longdouble if np.asarray(v).dtype == np.longdouble else np.float64)
         if dtype not in data:

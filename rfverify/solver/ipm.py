@@ -4,7 +4,7 @@
     M v − H̃ᵀ r̃ = f,   H̃ v + w̃ = J z,   z ∘ Jᵀr̃ = 0,   z, Jᵀr̃ ∈ L3^{n3} × L1^{n1}.
 
 Here the loop's interfaces are: numpy vectors in float64, then in the extended dtypes
-(longdouble where the settings ask) once the criterion is below ``extended_below`` or a
+(longdouble where the settings ask) once the criterion is below ``longdouble_below`` or a
 float64 solve falls short; the product cone of :mod:`.cones` (numba kernels for float64);
 a pluggable linear-system form of :mod:`.forms` as the Newton solver; and :class:`Termination`
 with the settings' σ rule as the policy.  The stopping test is the criterion of
@@ -53,7 +53,7 @@ class RunResult(Outcome):
     tol: float
     iterates: list = field(default_factory=list)
     # Iteration from which the run used the extended arithmetic (None: float64 throughout).
-    extended_from: int | None = None
+    longdouble_from: int | None = None
     # True when Ctrl-C ended the run (status Stopped, the last judged iterate returned).
     interrupted: bool = False
     # The iteration whose iterate is returned (the best one when the run did not end Solved).
@@ -65,7 +65,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
         component: int = 0, t0: float | None = None, printer=None, M_eq=None) -> RunResult:
     """Run Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) on one lifted problem in
     float64, continued in the extended settings (longdouble where asked) once the criterion
-    is below ``settings.extended_below`` or a float64 solve falls short (:func:`_adequate`).
+    is below ``settings.longdouble_below`` or a float64 solve falls short (:func:`_adequate`).
 
     ``judge(v, r̃)`` returns the :class:`rfverify.model.measures.Measures` of the iterate in the
     original variables (the one definition of "solved"); :class:`Termination` decides from it.
@@ -82,7 +82,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     t_run = time.perf_counter()
     M_eq = M if M_eq is None else M_eq
     arithmetic = _Arithmetic(settings, M_eq, H_t, J, f, w_t)
-    extended = settings.extended_below is None or not _float64_safe(M.data, H_t.data, f, w_t)
+    extended = settings.longdouble_below is None or not _float64_safe(M.data, H_t.data, f, w_t)
     work, jd, ref = arithmetic.dtypes(extended)
     system = FORMS[form](M, H_t, J, cones, dtype_ref=ref,
                          static_reg=settings.static_reg, adaptive_reg=settings.adaptive_reg,
@@ -130,7 +130,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                      pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o), measures=judged_o,
                      trace=trace, timings=timings,
                      factorisations=system.factor_count, unregularised_factorisations=system.unregularised_count,
-                     tol=settings.tol, iterates=policy.iterates, extended_from=policy.extended_from,
+                     tol=settings.tol, iterates=policy.iterates, longdouble_from=policy.longdouble_from,
                      interrupted=getattr(policy, "was_interrupted", False), returned_iteration=returned_k)
 
 
@@ -255,7 +255,7 @@ class _DoublePolicy(Policy):
         self.form = form
         self.describe_cone = describe_cone
         self.extended = extended
-        self.extended_from = 0 if extended else None
+        self.longdouble_from = 0 if extended else None
         self.keep_iterates, self.component, self.printer = keep_iterates, component, printer
         self.gamma0 = settings.gamma0
         self.iterates = []
@@ -283,9 +283,9 @@ class _DoublePolicy(Policy):
         verdict = self.term.observe(k, judged, paper, (v.copy(), r_t.copy(), z.copy()))
         if verdict is not None:
             return verdict
-        promote = not self.extended and (judged.max <= self.settings.extended_below or self.double_short)
+        promote = not self.extended and (judged.max <= self.settings.longdouble_below or self.double_short)
         if promote:
-            self.extended, self.extended_from = True, k
+            self.extended, self.longdouble_from = True, k
         if lam2_z <= 0 or lam2_s <= 0:
             which, c, val = ("z", cz, lam2_z) if lam2_z <= 0 else ("Jᵀr̃", cs, lam2_s)
             return Verdict(Status.NUMERICAL_ERROR, f"iteration {k}: λ2({which}) = {val:.3e} ≤ 0 at "
@@ -339,7 +339,7 @@ def _float64_safe(*arrays) -> bool:
 
 class _Arithmetic:
     """The run's two arithmetics: float64 while the criterion is above
-    ``settings.extended_below``, then the extended settings (longdouble where asked).  The
+    ``settings.longdouble_below``, then the extended settings (longdouble where asked).  The
     data as operators in each dtype are built on first use."""
 
     def __init__(self, settings, M, H_t, J, f, w_t):
@@ -352,9 +352,9 @@ class _Arithmetic:
         st = self.settings
         if not extended:
             return np.float64, np.float64, np.float64
-        ext = np.longdouble if st.extended_residuals else np.float64
-        jd = np.longdouble if st.extended_jordan else np.float64
-        return np.result_type(ext, jd), jd, np.longdouble if st.refine_extended else np.float64
+        ext = np.longdouble if st.longdouble_residuals else np.float64
+        jd = np.longdouble if st.longdouble_jordan else np.float64
+        return np.result_type(ext, jd), jd, np.longdouble if st.refine_longdouble else np.float64
 
     def operators(self, work):
         """(M, H̃, H̃ᵀ, J, Jᵀ, f, w̃) in ``work``."""

@@ -178,7 +178,7 @@ def try_remedies(ctx: DiagnosisContext, cause, run: ExactRun, user_options: dict
     base = ["--max-iter", str(max_iter)] if max_iter != 100 else []
     if problem.as_stored:
         base += ["--as-stored"]
-    options = {k: v for k, v in user_options.items() if k not in ("refine_tol", "extended_below", "as_stored")}
+    options = {k: v for k, v in user_options.items() if k not in ("refine_tol", "longdouble_below", "as_stored")}
     forms = [m for m in ALGORITHM1_METHODS if m != method and method_unavailable(m) is None]
     reached = None if run is None else run.reached_at
     more = max(2 * max_iter, int(1.25 * reached) + 5) if reached is not None else 2 * max_iter

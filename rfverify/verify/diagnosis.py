@@ -51,7 +51,7 @@ import numpy as np
 from ..model.lifting import lift
 from ..model.problem import Problem
 from ..solver import posed, solve
-from ..solver.result import ResultAliases, Status
+from ..solver.result import ResultAliases, Status, renamed_settings
 from .cause import (
     better_run,
     cause_of,
@@ -194,8 +194,8 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     kept, and stages not reached leave ``cause`` None).  Unless ``refine_tol`` is among the
     options, the double run refines every linear solve to 4·eps (``refine_tol=None``) instead
     of the solver's default inexact-Newton stop, so that the digits of agreement measure
-    rounding alone, and unless ``extended_below`` is, it runs in the extended arithmetic from
-    the first iteration (``extended_below=None``), so that every iteration's digits measure the
+    rounding alone, and unless ``longdouble_below`` is, it runs in the extended arithmetic from
+    the first iteration (``longdouble_below=None``), so that every iteration's digits measure the
     same arithmetic.  The remedies run with the solver's defaults, as ``rfverify solve`` does.
 
     ``noscaling``'s Newton direction (Arw(s), Arw(z)) is not the NT direction the exact steps
@@ -204,11 +204,12 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     """
     say = progress or (lambda message: None)
     t0 = time.perf_counter()
+    options = renamed_settings(options)
     time_limit = options.get("time_limit")
     deadline = None if time_limit is None else t0 + time_limit
     user_options = {k: v for k, v in options.items() if k != "time_limit"}
     options.setdefault("refine_tol", None)
-    options.setdefault("extended_below", None)
+    options.setdefault("longdouble_below", None)
     problem = posed(problem, options.pop("as_stored", None), method)
     from ..model.scaling import binary_scaling, scaled_problem
 
@@ -252,7 +253,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     evidence["run"] = run_record(plain, "as `rfverify solve` runs it")
     evidence["lockstep_run"] = run_record(res, "one system, every linear solve refined to the floor, extended "
                                                 "arithmetic from the first iteration (refine_tol=None, "
-                                                "extended_below=None unless given)")
+                                                "longdouble_below=None unless given)")
     if note_units:
         evidence["units"] = note_units
     timings = {"double": t1 - t0, "setup": t2 - t1, "steps": t3 - t2, "exact": 0.0, "witness": 0.0,

@@ -340,7 +340,7 @@ def shortfall(ctx: DiagnosisContext, steps: list) -> dict | None:
 def _refine_target(settings) -> float:
     rt = settings.refine_tol
     if rt is None:
-        return 4 * np.finfo(np.longdouble if settings.refine_extended else np.float64).eps
+        return 4 * np.finfo(np.longdouble if settings.refine_longdouble else np.float64).eps
     if rt == "adaptive":
         from ..solver.ipm import REFINE_FORCING
 
