@@ -133,3 +133,21 @@ def symmetrised_solution(problem, dps: int = 60, tol: float = 1e-45):
     ref = reference.solve(problem, dps=dps, tol=tol)
     assert ref.success, ref.message
     return ref
+
+
+def solve_rational(A, b) -> list:
+    """x with A x = b, by Gaussian elimination with row pivoting in exact rationals (A a
+    nonsingular list of rows of Fractions, b a list of Fractions)."""
+    n = len(b)
+    T = [list(row) + [bb] for row, bb in zip(A, b)]
+    for k in range(n):
+        p = next(i for i in range(k, n) if T[i][k] != 0)
+        T[k], T[p] = T[p], T[k]
+        for i in range(k + 1, n):
+            if T[i][k]:
+                c = T[i][k] / T[k][k]
+                T[i] = [a - c * b for a, b in zip(T[i], T[k])]
+    x = [Fraction(0)] * n
+    for k in reversed(range(n)):
+        x[k] = (T[k][n] - sum(T[k][j] * x[j] for j in range(k + 1, n))) / T[k][k]
+    return x

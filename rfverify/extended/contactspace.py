@@ -13,7 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import dd
-from .blocks import block_apply_threaded, contact_factor_inverse_threaded, scatter_add
+from .blocks import applied_blocks, contact_factor_inverse_threaded, scatter_add
 from .data import ExtendedData
 from .factored import FactoredBackend
 from .ldl import DDCholesky
@@ -472,11 +472,7 @@ class ContactSpace(FactoredBackend):
 
     def _F_inverse(self, xh, xl, transpose: bool):
         """F⁻¹x, or F⁻ᵀx with ``transpose`` (double-double (hi, lo), kept rows)."""
-        d = self.data
-        oh, ol = np.empty(d.nk), np.empty(d.nk)
-        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, transpose, np.ascontiguousarray(xh),
-                             np.ascontiguousarray(xl), oh, ol)
-        return oh, ol
+        return applied_blocks(self.data, self.Fh, self.Fl, transpose, xh, xl, threaded=True)
 
     def apply_G_inverse(self, eh, el):
         """G⁻¹ e = F⁻ᵀ F⁻¹ e (double-double (hi, lo), kept rows) at the current scaling: for the

@@ -69,26 +69,32 @@ class QuantityBound:
             return None
         return log_ratio(self.data_scale, z)
 
+    def _not_relative(self) -> tuple[str, str] | None:
+        """(short, long) words of a bound that is not in relative digits — not unique, exactly 0,
+        or zero within a bound — else None."""
+        n = self.name
+        if self.mode == "information":
+            return f"{n} not unique", f"{n}: not unique ({self.note}); error bound not available"
+        if self.mode == "absolute" and self.zero_within == 0:
+            return f"{n} exactly 0", f"{n}: exactly 0 (the candidate is the solution: error bound 0)"
+        if self.mode == "absolute":
+            return (f"{n} zero within {self.zero_within:.1e} ({self.scale_digits:.1f} digits of {self.data_scale_name})",
+                    f"{n}: zero within {self.zero_within:.2e} (‖{n}*‖∞ ≤ {self.zero_within:.2e} = "
+                    f"{self.scale_digits:.1f} digits below the data scale {self.data_scale_name} = "
+                    f"{self.data_scale:.2e}; |error| ≤ {self.abs_bound:.2e}; no significant digits are claimed)")
+        return None
+
     def short(self) -> str:
         """One phrase that claims exactly what was proven: relative digits, or "zero within"."""
-        if self.mode == "information":
-            return f"{self.name} not unique"
-        if self.mode == "absolute" and self.zero_within == 0:
-            return f"{self.name} exactly 0"
-        if self.mode == "absolute":
-            return (f"{self.name} zero within {self.zero_within:.1e} ({self.scale_digits:.1f} digits of "
-                    f"{self.data_scale_name})")
+        words = self._not_relative()
+        if words is not None:
+            return words[0]
         return f"{self.name} {self.digits:.1f} digits" if self.digits is not None else f"{self.name} no relative digits"
 
     def describe(self) -> str:
-        if self.mode == "information":
-            return f"{self.name}: not unique ({self.note}); error bound not available"
-        if self.mode == "absolute" and self.zero_within == 0:
-            return f"{self.name}: exactly 0 (the candidate is the solution: error bound 0)"
-        if self.mode == "absolute":
-            return (f"{self.name}: zero within {self.zero_within:.2e} (‖{self.name}*‖∞ ≤ {self.zero_within:.2e} = "
-                    f"{self.scale_digits:.1f} digits below the data scale {self.data_scale_name} = "
-                    f"{self.data_scale:.2e}; |error| ≤ {self.abs_bound:.2e}; no significant digits are claimed)")
+        words = self._not_relative()
+        if words is not None:
+            return words[1]
         d = "no relative digits" if self.digits is None else f"{self.digits:.1f} digits"
         extra = f"; {self.note}" if self.note and not self.certified and self.digits is None else ""
         return (f"{self.name}: {d} (|error| ≤ {self.abs_bound:.2e}, ‖{self.name}*‖∞ ≥ {self.own_scale:.2e})"

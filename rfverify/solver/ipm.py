@@ -20,14 +20,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..algorithm import rules
-from ..algorithm.interfaces import PROMOTE, Breakdown, Direction, Policy
+from ..algorithm.interfaces import PROMOTE, Breakdown, Direction
 from ..algorithm.loop import Precision, iterate
 from ..errors import ConeDomainError
 from .cones import ProductCone
 from .forms import FORMS
 from .kkt import ScalingPoint, _amax
 from .result import TRACE_FIELDS, IterationInfo, Outcome, Settings, Status
-from .termination import Termination, Verdict
+from .termination import PaperPolicy, Termination, Verdict
 
 _TINY = np.finfo(float).tiny
 
@@ -244,7 +244,7 @@ class _NumpyCones:
         return _NumpyScaling(self.cones, self.precision.jd, z, s, self.precision.newton.system.symmetric)
 
 
-class _DoublePolicy(Policy):
+class _DoublePolicy(PaperPolicy):
     """The double solver's policy: :class:`Termination` (criterion, stall, limits, callback,
     best iterate), the switch to the extended arithmetic, the σ rule of the settings, the
     paper's γ = 0.9 + 0.09α, the λ₂ check of every iterate, and the trace columns."""
@@ -312,14 +312,6 @@ class _DoublePolicy(Policy):
 
     def after_step(self, alpha):
         self.term.after_step(alpha)
-
-    @staticmethod
-    def next_gamma(alpha):
-        return rules.step_fraction(alpha, 0.09)
-
-    @staticmethod
-    def breakdown(message):
-        return Verdict(Status.NUMERICAL_ERROR, message)
 
     def interrupted(self, k):
         """Ctrl-C at iteration k: stop, returning the last iterate judged (Stopped)."""

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..algorithm import rules
+from ..algorithm.interfaces import Policy
 from .result import Status
 
 
@@ -31,6 +33,20 @@ class Verdict:
 
     status: Status
     message: str
+
+
+class PaperPolicy(Policy):
+    """What the double run's policy (:mod:`.ipm`) and its continuations in exact arithmetic
+    (:mod:`rfverify.verify.exact`) answer alike: the next step-to-boundary fraction by the paper's
+    rule, γ = 0.9 + 0.09α, and a breakdown ends the run NumericalError."""
+
+    @staticmethod
+    def next_gamma(alpha):
+        return rules.step_fraction(alpha, 0.09)
+
+    @staticmethod
+    def breakdown(message):
+        return Verdict(Status.NUMERICAL_ERROR, message)
 
 
 class Termination:

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..algorithm import rules
-from ..algorithm.interfaces import Breakdown, Policy
+from ..algorithm.interfaces import Breakdown
 from ..algorithm.loop import Precision, iterate
 from ..algorithm.newton import ReducedNewton
 from ..extended import cones as C
@@ -40,7 +40,7 @@ from ..extended import ipm as ext
 from ..extended.data import ExtendedData
 from ..extended.system import choose_backend
 from ..solver.result import Status
-from ..solver.termination import Termination, Verdict
+from ..solver.termination import PaperPolicy, Termination, Verdict
 
 FLOOR = 1e-31
 """Relative residual to which every Newton solve of an exact step is refined (double-double's
@@ -117,7 +117,7 @@ class _ExactCones(ext.DDCones):
         return _ExactScaling(self.n3, self.nz, self.n_cones, self.e, z, s)
 
 
-class _OneStep(Policy):
+class _OneStep(PaperPolicy):
     """Policy of one exact step: γ and the σ rule given, stop at the next iterate."""
 
     def __init__(self, gamma: float, rule: str):
@@ -137,16 +137,8 @@ class _OneStep(Policy):
     def after_step(alpha):
         return None
 
-    @staticmethod
-    def next_gamma(alpha):
-        return rules.step_fraction(alpha, 0.09)
 
-    @staticmethod
-    def breakdown(message):
-        return Verdict(Status.NUMERICAL_ERROR, message)
-
-
-class _Continuation(Policy):
+class _Continuation(PaperPolicy):
     """The double run's policy in exact arithmetic: its criterion (``judge``), stall rule and
     iteration limit (:class:`Termination`, iterations counted as the double run's), its σ
     rule and γ; a deadline ends it with MaxTime."""
@@ -193,10 +185,6 @@ class _Continuation(Policy):
     def next_gamma(self, alpha):
         self.gamma = rules.step_fraction(alpha, 0.09)
         return self.gamma
-
-    @staticmethod
-    def breakdown(message):
-        return Verdict(Status.NUMERICAL_ERROR, message)
 
 
 class ExactAlgorithm:
