@@ -205,7 +205,7 @@ def test_analyse_then_factor_is_the_same_as_factor_alone():
 def test_the_factors_own_order_and_column_counts_are_those_of_the_pattern():
     """nnz(L) and Σc² for the statistics read from CHOLMOD's factor: the same as a symbolic
     analysis of the pattern in CHOLMOD's order, and the order the same as cvxopt's solve gives."""
-    from rfverify.extended.ldl import _symbolic, upper_csc
+    from rfverify.extended.ldl import symbolic_ldl, upper_csc
 
     for n, seed in ((900, 1), (3000, 2)):  # AMD, and nested dissection or AMD (ND_MIN_ROWS)
         K = spd(n, seed)
@@ -217,7 +217,7 @@ def test_the_factors_own_order_and_column_counts_are_those_of_the_pattern():
         assert np.array_equal(perm, theirs.permutation())
         full = (K + sp.tril(K, -1).T).tocsc()
         Ap, Ai, _ = upper_csc(full[perm][:, perm])
-        assert np.array_equal(ours.column_counts(), np.diff(_symbolic(n, Ap, Ai)[1]))
+        assert np.array_equal(ours.column_counts(), np.diff(symbolic_ldl(n, Ap, Ai)[1]))
 
 
 # ---------------------------------------------------------------------- cvxopt's global options

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 
 from . import dd
 from ..engines.factor import CholmodEngine, QDLDLEngine
-from .ldl import DDCholesky, _symbolic, symmetric_pattern, upper_csc, upper_positions
+from .ldl import DDCholesky, symbolic_ldl, symmetric_pattern, upper_csc, upper_positions
 
 
 @numba.njit(cache=True, nogil=True)
@@ -253,7 +253,7 @@ class CholmodMixed(_RefinedFloat64Factor):
         perm = self._engine.permutation()
         perm = np.arange(self.n) if perm is None else perm
         Ap, Ai, _ = upper_csc(self.pattern[perm][:, perm])
-        return _symbolic(self.n, Ap, Ai)[1]
+        return symbolic_ldl(self.n, Ap, Ai)[1]
 
     @property
     def nnz_L(self) -> int:

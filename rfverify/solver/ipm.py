@@ -25,7 +25,7 @@ from ..algorithm.loop import Precision, iterate
 from ..errors import ConeDomainError
 from .cones import ProductCone
 from .forms import FORMS
-from .kkt import ScalingPoint, _amax
+from .kkt import ScalingPoint, abs_max
 from .result import TRACE_FIELDS, IterationInfo, Outcome, Settings, Status
 from .termination import PaperPolicy, Termination, Verdict
 
@@ -270,8 +270,8 @@ class _DoublePolicy(PaperPolicy):
             self.iterates.append((v.copy(), r_t.copy(), z.copy()))
         # The sizes of the terms of the dual and primal residuals (see _adequate; only the
         # float64 phase asks).
-        self.term_scales = None if self.extended else (max(_amax(t) for t in res.dual_terms),
-                                                       max(_amax(t) for t in res.primal_terms), 0.0)
+        self.term_scales = None if self.extended else (max(abs_max(t) for t in res.dual_terms),
+                                                       max(abs_max(t) for t in res.primal_terms), 0.0)
         judged = self.judge(v, r_t)
         self.criterion = judged.max
         lam2_z, cz = self.cones.min_lambda2(z)
