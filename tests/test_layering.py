@@ -324,3 +324,27 @@ def test_a_package_root_of_eight_modules_is_too_many(tmp_path):
     for i in range(ROOT_MODULES_MAX + 1):
         (tmp_path / "rfverify" / f"m{i}.py").write_text("")
     assert len(root_modules(tmp_path)) > ROOT_MODULES_MAX
+
+
+def _anchor(heading: str) -> str:
+    """The anchor a Markdown renderer (GitHub) gives a heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_architecture_is_a_map_of_short_lines():
+    """Readable in five minutes: no paragraph-long table rows (issue 50)."""
+    long = [i for i, line in enumerate(ARCHITECTURE.read_text(encoding="utf-8").splitlines(), 1) if len(line) > 400]
+    assert long == [], f"docs/ARCHITECTURE.md lines over 400 characters: {long}"
+
+
+def test_decisions_open_with_an_index_by_topic_whose_links_resolve():
+    """docs/DECISIONS.md: an index by topic first (each topic's decision in force, then its
+    sections), then the history; every link of the index names a section that exists."""
+    text = (ROOT / "docs" / "DECISIONS.md").read_text(encoding="utf-8")
+    first = re.search(r"^## (.+)$", text, re.M).group(1)
+    assert first == "Index by topic"
+    index = text.split("## Index by topic", 1)[1].split("\n## ", 1)[0]
+    anchors = {_anchor(h) for h in re.findall(r"^#{2,3} (.+)$", text, re.M)}
+    links = re.findall(r"\]\(#([^)]+)\)", index)
+    assert len(links) >= 15 and set(links) <= anchors, sorted(set(links) - anchors)
+    assert index.count("\n- **") >= 10  # topics, each with its current decision
