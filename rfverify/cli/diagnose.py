@@ -37,7 +37,7 @@ first whose answer meets --tol is printed with its figures.
 The first line states the cause and the remedy. The run diagnosed is --method as 'rfverify
 solve' runs it; the lockstep's run is the same form as one system (no split into independent
 components), every linear solve refined to 4*eps (solver setting refine_tol=None) and the
-extended arithmetic from the first iteration (longdouble_below=None), so that the digits measure
+longdouble arithmetic from the first iteration (longdouble_below=None), so that the digits measure
 the rounding of one arithmetic. Where that run meets --tol and the plain one does not, the cause
 is the precision of the default linear solves."""
 

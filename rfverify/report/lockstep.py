@@ -57,7 +57,7 @@ def component_problem(problem: Problem, lp, group) -> tuple[Problem, np.ndarray]
 
 
 # The bench runs the solver with its default settings; the diagnosis repeats that run
-# (diagnose alone would refine every solve to 4·eps and start in the extended arithmetic, see
+# (diagnose alone would refine every solve to 4·eps and start in longdouble arithmetic, see
 # rfverify.verify.diagnosis.diagnose).  The mpmath witness gets a shorter budget than the command's:
 # a report diagnoses several runs.
 AS_BENCHED = {"refine_tol": Settings.refine_tol, "longdouble_below": Settings.longdouble_below, "witness_time": 20.0}

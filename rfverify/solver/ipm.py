@@ -52,7 +52,7 @@ class RunResult(Outcome):
     unregularised_factorisations: int
     tol: float
     iterates: list = field(default_factory=list)
-    # Iteration from which the run used the extended arithmetic (None: float64 throughout).
+    # Iteration from which the run used longdouble arithmetic (None: float64 throughout).
     longdouble_from: int | None = None
     # True when Ctrl-C ended the run (status Stopped, the last judged iterate returned).
     interrupted: bool = False
@@ -246,7 +246,7 @@ class _NumpyCones:
 
 class _DoublePolicy(PaperPolicy):
     """The double solver's policy: :class:`Termination` (criterion, stall, limits, callback,
-    best iterate), the switch to the extended arithmetic, the σ rule of the settings, the
+    best iterate), the switch to longdouble arithmetic, the σ rule of the settings, the
     paper's γ = 0.9 + 0.09α, the λ₂ check of every iterate, and the trace columns."""
 
     def __init__(self, settings: Settings, term: Termination, judge, cones: ProductCone, extended: bool,
@@ -298,7 +298,7 @@ class _DoublePolicy(PaperPolicy):
 
     def after_direction(self, k, record, predictor, corrector):
         # In float64 a solve must give the iteration what it needs (_adequate); one that
-        # falls short needs the extended arithmetic from the next iteration.
+        # falls short needs longdouble arithmetic from the next iteration.
         self.double_short = not self.extended and not (_adequate(predictor.info, self.settings.tol, self.term_scales)
                                                        and _adequate(corrector.info, self.settings.tol,
                                                                      self.term_scales))
@@ -319,7 +319,7 @@ class _DoublePolicy(PaperPolicy):
         return Verdict(Status.STOPPED, f"interrupted (Ctrl-C) at iteration {k}")
 
 
-# Data entries above this start the run in the extended arithmetic: their products and squares
+# Data entries above this start the run in longdouble arithmetic: their products and squares
 # in residuals and norms would approach float64's range (tiny entries are harmless: they
 # underflow gracefully, and the cone kernels rescale rows on their own).
 FLOAT64_SAFE_MAGNITUDE = 2.0 ** 128
@@ -407,7 +407,7 @@ TOL_MARGIN = 1e-2
 
 def _adequate(info, tol, term_scales) -> bool:
     """Whether a float64 solve gave the iteration what it needs (else the run switches to
-    the extended arithmetic): it converged (the inexact-Newton test or the refinement target),
+    longdouble arithmetic): it converged (the inexact-Newton test or the refinement target),
     or every block residual e_i is at most max(REFINE_FORCING·‖rhs_i‖, TOL_MARGIN·tol·s_i),
     with s_i the size of the terms of the dual and primal residuals (‖Mv‖, ‖f‖, ‖H̃ᵀr̃‖ and
     ‖H̃v‖, ‖w̃‖, ‖Jz‖, ∞-norms) and s_i = 0 for complementarity.  Near the solution the dual

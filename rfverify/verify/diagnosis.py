@@ -2,7 +2,7 @@
 
 :func:`diagnose` runs ``method`` in double as ``rfverify solve`` runs it (the run diagnosed), and
 again as one system keeping every iterate, every linear solve refined to the floor of the
-extended arithmetic (the lockstep's run: its digits measure rounding alone); where that run meets
+longdouble arithmetic (the lockstep's run: its digits measure rounding alone); where that run meets
 the tolerance and the first does not, the precision of the default linear solves is the cause.
 Otherwise:
 
@@ -194,7 +194,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     kept, and stages not reached leave ``cause`` None).  Unless ``refine_tol`` is among the
     options, the double run refines every linear solve to 4·eps (``refine_tol=None``) instead
     of the solver's default inexact-Newton stop, so that the digits of agreement measure
-    rounding alone, and unless ``longdouble_below`` is, it runs in the extended arithmetic from
+    rounding alone, and unless ``longdouble_below`` is, it runs in longdouble arithmetic from
     the first iteration (``longdouble_below=None``), so that every iteration's digits measure the
     same arithmetic.  The remedies run with the solver's defaults, as ``rfverify solve`` does.
 
@@ -326,7 +326,7 @@ def _conclusion(d: Diagnosis) -> str:
     if d.cause == "precision" and not run:
         lock = ev.get("lockstep_run") or {}
         what = (f"Cause: double precision — the {d.method} run ended {d.status} as `rfverify solve` runs it, while the "
-                f"same form with every linear solve refined to the floor of the extended arithmetic meets tol = "
+                f"same form with every linear solve refined to the floor of longdouble arithmetic meets tol = "
                 f"{d.tol:g} ({lock.get('status')} after {lock.get('nit')} iterations).")
     elif d.cause == "precision":
         reached = run.get("reached_at") if run.get("reached_at") is not None else early.get("reached_at")

@@ -402,7 +402,7 @@ def refined_text(ctx, plain, res) -> str:
     how = f", split into {len(split)} independent components" if split else ""
     return (f"as `rfverify solve` runs it (default inexact linear solves, float64 until the criterion is 1e-9{how}) "
             f"the {ctx.method} run ends {plain.status} at criterion {plain.criterion:.1e}; the same form as one system "
-            f"with every linear solve refined to the floor of the extended arithmetic meets the tolerance "
+            f"with every linear solve refined to the floor of longdouble arithmetic meets the tolerance "
             f"({res.status} after {res.nit} iterations, criterion {res.criterion:.1e}; its steps against the exact "
             f"ones below): more precision in the linear algebra is what the run lacks")
 
