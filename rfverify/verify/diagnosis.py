@@ -251,7 +251,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
                 "mu_zero_contacts": int(np.sum(problem.mu == 0)), "form_block": FORM_BLOCK.get(method),
                 "form_power": FORM_POWER.get(method), "form_order": ctx.order, "text": []}
     evidence["run"] = run_record(plain, "as `rfverify solve` runs it")
-    evidence["lockstep_run"] = run_record(res, "one system, every linear solve refined to the floor, extended "
+    evidence["lockstep_run"] = run_record(res, "one system, every linear solve refined to the floor, longdouble "
                                                 "arithmetic from the first iteration (refine_tol=None, "
                                                 "longdouble_below=None unless given)")
     if note_units:
