@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 import rfverify
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import recorded  # noqa: E402  (stamped results file)

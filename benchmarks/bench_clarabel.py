@@ -4,7 +4,7 @@ Clarabel").
 For each problem with at least ``--min-contacts`` contacts: both methods solve at ``--tol``
 (default 1e-8), alternating (jqinv, Clarabel, jqinv, ...) ``--repeat`` times in one process,
 median wall time kept; each answer is judged by rfverify's one criterion
-(:func:`rfverify.measures.measures`, recomputed in longdouble from the returned (v, u, r)),
+(:func:`rfverify.model.measures.measures`, recomputed in longdouble from the returned (v, u, r)),
 never by the solver's word.  Prints the per-problem ratio jqinv/Clarabel (over problems both
 verified) and its median.  Numba's once-per-process start-up of the compiled cone kernels
 (~0.3 s) is paid before the first timed run, as Clarabel's library load is paid at import.
@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 import rfverify
-from rfverify.measures import measures
+from rfverify.model.measures import measures
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import recorded  # noqa: E402  (stamped results file)
@@ -38,7 +38,7 @@ def problem_set(args):
         return
     for label, scene, size in SETS:
         yield label, rfverify.load(scene_file(Path(args.cache), scene, size, 1, 0))
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     yield "random 1000", random_problem(600, 1000, seed=3)
 
@@ -58,7 +58,7 @@ def main(argv=None):
     ap = comparison_parser(__doc__, tol=1e-8, methods="jqinv,clarabel")
     ap.add_argument("--min-contacts", type=int, default=750, help="skip problems with fewer contacts (default 750)")
     ap.add_argument("--options", default="",
-                    help="solver options for the Algorithm 1 methods, e.g. sigma_rule=siconos,extended_below=None")
+                    help="solver options for the Algorithm 1 methods, e.g. sigma_rule=siconos,longdouble_below=None")
     args = ap.parse_args(argv)
     options = {k: _value(v) for k, v in (kv.split("=", 1) for kv in args.options.split(",") if kv)}
     methods = args.methods.split(",")

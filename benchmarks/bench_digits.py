@@ -31,8 +31,8 @@ import numpy as np
 import rfverify
 from rfverify.io import save
 from rfverify.io.certificate import read_point, write_certificate
-from rfverify.problem import StoredSolution
-from rfverify.random_problems import random_local_problem
+from rfverify.model.problem import StoredSolution
+from rfverify.scenes.random_problems import random_local_problem
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import recorded  # noqa: E402  (stamped results file)
@@ -124,7 +124,7 @@ def problem_set(args):
     if args.files:
         yield from user_files(args.files)
         return
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     cache = Path(args.cache)
     if args.quick:

@@ -48,7 +48,7 @@ from _results import recording  # noqa: E402  (stamped results file)
 
 def load(spec: str):
     import rfverify
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     if spec.startswith("random:"):
         nb, nc = (int(x) for x in spec.split(":")[1:3])
@@ -74,7 +74,7 @@ def one(spec: str, engine: str) -> dict:
     if engine == "noncholmod":
         sys.modules["cvxopt"] = sys.modules["cvxopt.cholmod"] = None  # an import of it now fails
     import rfverify
-    from rfverify.solver.engines import schur_engine_name
+    from rfverify.engines.factor import schur_engine_name
 
     problem = load(spec)
     t0 = time.perf_counter()
@@ -103,7 +103,7 @@ def yardstick(spec: str, which: str) -> dict:
     costs): "plain" = ``rfverify.solve(problem)``, what ``rfverify solve FILE`` runs; "alone" =
     the path's own double solve (``digits.DOUBLE_SETTINGS``) with nothing beside it."""
     import rfverify
-    from rfverify.digits import DOUBLE_SETTINGS
+    from rfverify.verify.digits import DOUBLE_SETTINGS
 
     problem = load(spec)
     t0 = time.perf_counter()

@@ -3,7 +3,7 @@
 Runs every method on the same problems in one process, one after the other, several
 repetitions each (median kept), and prints a table plus the time ratios to Clarabel.
 Accuracy is rfverify's criterion recomputed in longdouble from the returned (v, u, r)
-(:func:`rfverify.measures.measures`), never the solver's own numbers; a run counts as solved at
+(:func:`rfverify.model.measures.measures`), never the solver's own numbers; a run counts as solved at
 a tolerance only when that recomputation meets it.  Not a test: timings on a shared 2-core
 machine are noisy, so compare the ratios measured within one run.
 
@@ -24,8 +24,8 @@ import numpy as np
 
 import rfverify
 from rfverify.bench.runner import BenchInputError, discover_problems
-from rfverify.measures import measures
-from rfverify.random_problems import random_problem
+from rfverify.model.measures import measures
+from rfverify.scenes.random_problems import random_problem
 from rfverify.solver import METHODS, solve
 from rfverify.solver.result import method_unavailable
 

@@ -71,7 +71,7 @@ def make_problem(kind: str, size: int, seed: int):
         k = bed_side(size)
         return generate("GranularBed", seed=seed, size=k ** 3, **BED_PARAMS[kind])[0]
     if kind == "random":
-        from rfverify.random_problems import random_problem
+        from rfverify.scenes.random_problems import random_problem
 
         return random_problem(max(2, int(round(0.3 * size))), size, seed=seed)
     raise ValueError(f"unknown problem kind {kind!r}; kinds: {', '.join(KINDS)}")
@@ -85,9 +85,9 @@ def run_one(kind: str, size: int, seed: int, method: str, tol: float, time_limit
     """Solve one problem with one method here; the row of the table (without memory when the
     problem was given, i.e. when several runs share this process)."""
     import rfverify
-    from rfverify.measures import measures
+    from rfverify.model.measures import measures
     from rfverify.solver import kernels
-    from rfverify.solver.engines import cholmod_available
+    from rfverify.engines.factor import cholmod_available
 
     t0 = time.perf_counter()
     own = problem is None
@@ -224,7 +224,7 @@ def main(argv=None) -> int:
 
 
 def _run(args, kinds, path) -> int:
-    from rfverify.solver.engines import schur_engine_name
+    from rfverify.engines.factor import schur_engine_name
 
     sizes = [int(s) for s in args.sizes.split(",") if s] + (list(LARGE_SIZES) if args.large else [])
     methods, skipped = available_methods([m for m in args.methods.split(",") if m])

@@ -3,7 +3,7 @@ accurate is each, against the independent mpmath reference solution?
 
 For every FCLIB file given (default: the committed example collection), both solvers run at
 tol = 1e-10; each answer's stopping criterion is recomputed in longdouble from (v, u, r)
-(:func:`rfverify.check.criterion`), and for problems with at most ``--max-contacts``
+(:func:`rfverify.model.check.criterion`), and for problems with at most ``--max-contacts``
 contacts the reference (:func:`reference.solve`, 50 digits, independent mode) gives each
 answer's correct digits of v.  Digits are measured against
 max(‖v_ref‖∞, ‖M⁻¹f‖∞): at rest (AllSticking, Lattice) v_ref is ~0 and a relative error of v
@@ -27,7 +27,7 @@ import numpy as np
 import reference
 import rfverify
 from rfverify.bench.runner import BenchInputError, discover_problems
-from rfverify.measures import measures
+from rfverify.model.measures import measures
 from rfverify.scenes.analysis import contact_state_mix, free_velocity
 
 sys.path.insert(0, str(Path(__file__).parent))

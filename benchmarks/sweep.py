@@ -3,7 +3,7 @@ every problem?
 
 Solves each problem with two option sets A and B (JSON, e.g. ``--a '{}' --b
 '{"sigma_rule": "siconos"}'``) of one method (``--method``, default ``auto``) at ``--tol`` and
-judges each answer by rfverify's one criterion (:func:`rfverify.measures.measures`, recomputed
+judges each answer by rfverify's one criterion (:func:`rfverify.model.measures.measures`, recomputed
 in longdouble from the returned (v, u, r)), never by the solver's status.  Prints one line per
 problem and the counts verified, iterations and seconds of A and B.  Not a test: a sweep for
 deciding defaults.  It counts verified answers only: forward accuracy at the same criterion
@@ -18,7 +18,7 @@ SpheresPile, Chute and PrimitiveSoup at their published sizes.  ``--files`` adds
 ``--quick`` keeps only the committed files (and ``--files``).
 
     python benchmarks/sweep.py --b '{"sigma_rule": "siconos"}'
-    python benchmarks/sweep.py --a '{"extended_below": null}' --tol 1e-8
+    python benchmarks/sweep.py --a '{"longdouble_below": null}' --tol 1e-8
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 import rfverify
-from rfverify.measures import measures
+from rfverify.model.measures import measures
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).parent))
@@ -52,7 +52,7 @@ def committed_files():
 
 def generated_problems(cache: Path):
     """Fresh problems the defaults were not tuned on (cached after the first run)."""
-    from rfverify.random_problems import random_local_problem, random_problem
+    from rfverify.scenes.random_problems import random_local_problem, random_problem
     from rfverify.scenes import SCENES, generate, save_collection
 
     def cached(tag, make):

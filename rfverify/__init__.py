@@ -16,18 +16,45 @@ Public API (this release):
 """
 
 import functools as _functools
+import importlib as _importlib
 
-from .check import SolutionCheck, check_solution
 from ._version import __version__
 from .errors import (ConeDomainError, DataWarning, InvalidArgumentError, InvalidProblemError,
                      OutputPathError, ProblemFileError, RfverifyError)
-from .io import bundled_problems, load, save
-from .problem import Problem, StoredSolution
-from .certificate import Certificate
-from .certification import certify
-from .diagnosis import Diagnosis, diagnose
-from .digits import DigitsSolution, solve_to_digits
-from .solver import SolveResult, Settings, Status, solve
+
+# The public names are attributes made on first use (PEP 562), so that ``import rfverify`` (and
+# the console script, rfverify/__main__.py) costs no numpy, scipy or numba until one is asked for.
+_HOMES = {
+    "load": ".io", "save": ".io", "bundled_problems": ".io",
+    "Problem": ".model.problem", "StoredSolution": ".model.problem", "SolutionCheck": ".model.check",
+    "Certificate": ".verify.certificate", "Diagnosis": ".verify.diagnosis",
+    "DigitsSolution": ".verify.digits", "SolveResult": ".solver", "Settings": ".solver", "Status": ".solver",
+}
+_CHECKED = {  # name: (module, whether tol, max_iter, method and options are checked too)
+    "solve": (".solver", True), "diagnose": (".verify.diagnosis", True),
+    "solve_to_digits": (".verify.digits", True), "certify": (".verify.certification", False),
+    "check_solution": (".model.check", False),
+}
+_SUBPACKAGES = {"algorithm", "bench", "cli", "compilation", "data", "engines", "errors", "extended", "io", "jordan",
+                "model", "proof", "progress", "report", "scenes", "solver", "verify"}
+
+
+def __getattr__(name: str):
+    if name in _HOMES:
+        value = getattr(_importlib.import_module(_HOMES[name], __name__), name)
+    elif name in _CHECKED:
+        home, tol = _CHECKED[name]
+        value = _checked(getattr(_importlib.import_module(home, __name__), name), tol=tol)
+    elif name in _SUBPACKAGES:
+        value = _importlib.import_module(f".{name}", __name__)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value  # made once: later uses find it here
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__) | _SUBPACKAGES)
 
 
 def _checked(func, *, tol=False):
@@ -37,7 +64,7 @@ def _checked(func, *, tol=False):
     import inspect
 
     from .errors import require_positive_int, require_positive_number
-    from .problem import require_problem
+    from .model.problem import require_problem
 
     signature = inspect.signature(func)
 
@@ -56,7 +83,7 @@ def _checked(func, *, tol=False):
         if tol and given.get("options"):
             from .solver import Settings as _Settings
 
-            unknown = sorted(set(given["options"]) - set(_Settings.names()) - {"keep_iterates"})
+            unknown = sorted(set(given["options"]) - set(_Settings.accepted()) - {"keep_iterates"})
             if unknown:
                 raise InvalidArgumentError(", ".join(unknown), "unknown solver option(s)",
                                            fix=f"use fields of rfverify.Settings: {', '.join(_Settings.names())}")
@@ -70,13 +97,6 @@ def _checked(func, *, tol=False):
         return func(*args, **kwargs)
 
     return wrapper
-
-
-solve = _checked(solve, tol=True)
-diagnose = _checked(diagnose, tol=True)
-solve_to_digits = _checked(solve_to_digits, tol=True)
-certify = _checked(certify)
-check_solution = _checked(check_solution)
 
 
 __all__ = [

@@ -5,7 +5,7 @@ The float64 cone kernels (:mod:`rfverify.solver.kernels`) and the double-double 
 cache folder (``NUMBA_CACHE_DIR``, else ``__pycache__`` beside the sources).  On a fresh
 machine the first solve therefore pays for compilation, later processes load the compiled
 code.  The stage timings of :class:`~rfverify.solver.SolveResult` and
-:class:`~rfverify.digits.DigitsSolution` report that cost as its own entry, ``"compile"``,
+:class:`~rfverify.verify.digits.DigitsSolution` report that cost as its own entry, ``"compile"``,
 and leave it out of the stage it happened in, so that a cold start is not mistaken for a
 slow phase.
 
@@ -115,7 +115,7 @@ EXTENDED_KERNELS = (
     ("contactspace", "_scaled_blocks", "(int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[:, :, ::1], float64[::1], float64[::1])"),
     ("blocks", "contact_factor_inverse", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1])"),
     ("contactspace", "_small_blocks_W", "(int64[::1], int64[::1], int64[::1], int64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], int64, int64[::1], float64[:, :, ::1], float64[:, :, ::1])"),
-    ("ldl", "_numeric", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1])"),
+    ("ldl", "numeric_ldl", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1])"),
     ("blocks", "scatter_add", "(int64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "nt_scaling", "(int64, float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[:, ::1])"),
     ("dd", "vmul_d", "(float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),

@@ -157,6 +157,17 @@ def require_positive_number(value, argument: str, *, finite: bool = True) -> flo
     return val
 
 
+def require_time_limit(value) -> float | None:
+    """A time limit in seconds: None (no limit) or a real number > 0 (not a bool, not NaN).  The
+    one check of every entry point's ``time_limit`` (:class:`rfverify.Settings`, hence
+    :func:`rfverify.solve` and :func:`rfverify.diagnose`; :func:`rfverify.solve_to_digits`,
+    :func:`rfverify.certify`)."""
+    if value is not None and not (isinstance(value, numbers.Real) and not isinstance(value, bool) and value > 0):
+        raise InvalidArgumentError("time_limit", f"must be a number of seconds > 0, got {value!r}",
+                                   fix="pass e.g. time_limit=60, or None for no limit")
+    return value
+
+
 def require_positive_int(value, argument: str) -> int:
     """An integer ≥ 1 (numpy integers accepted; bools, floats and strings refused)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):

@@ -23,7 +23,7 @@ KINDS = ("open", "stick", "slide_t", "slide_r", "slide_both")
 
 
 def exact_problem(seed: int, n_contacts: int = 4, *, asymmetry: int = 0, kinds=None, bodies: int | None = None,
-                  mu=0.5, mu_r=0.25, max_asymmetry: float = rfverify.problem.DEFAULT_MAX_ASYMMETRY,
+                  mu=0.5, mu_r=0.25, max_asymmetry: float = rfverify.model.problem.DEFAULT_MAX_ASYMMETRY,
                   free_bodies: int = 0, contact_skew: bool = True):
     """(problem, v*, u*, r*) with exact data.  ``asymmetry``: largest |A_ij| of the skew part
     (integers; the diagonal of M is about 2^12, so 15 gives an entrywise asymmetry of ~7e-3;
@@ -133,3 +133,21 @@ def symmetrised_solution(problem, dps: int = 60, tol: float = 1e-45):
     ref = reference.solve(problem, dps=dps, tol=tol)
     assert ref.success, ref.message
     return ref
+
+
+def solve_rational(A, b) -> list:
+    """x with A x = b, by Gaussian elimination with row pivoting in exact rationals (A a
+    nonsingular list of rows of Fractions, b a list of Fractions)."""
+    n = len(b)
+    T = [list(row) + [bb] for row, bb in zip(A, b)]
+    for k in range(n):
+        p = next(i for i in range(k, n) if T[i][k] != 0)
+        T[k], T[p] = T[p], T[k]
+        for i in range(k + 1, n):
+            if T[i][k]:
+                c = T[i][k] / T[k][k]
+                T[i] = [a - c * b for a, b in zip(T[i], T[k])]
+    x = [Fraction(0)] * n
+    for k in reversed(range(n)):
+        x[k] = (T[k][n] - sum(T[k][j] * x[j] for j in range(k + 1, n))) / T[k][k]
+    return x

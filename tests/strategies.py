@@ -14,7 +14,7 @@ Two entry points:
                          (``M``, ``H`` as scipy CSC, vectors as float64 arrays, texts,
                          ``solution``, ``guesses``) plus ``"meta"`` describing the layout
                          (bodies, contacts, which bodies are contact-free, ...).
-``problems(...)``        the validated :class:`~rfverify.problem.Problem` built from it.
+``problems(...)``        the validated :class:`~rfverify.model.problem.Problem` built from it.
 
 Design note (speed): hypothesis draws the *structure* (sizes, which bodies each contact
 touches, flags, texts) and a seed; the bulk floating-point values come from a numpy
@@ -31,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from hypothesis import strategies as st
 
-from rfverify.problem import DEFAULT_MAX_ASYMMETRY, Problem, StoredSolution
+from rfverify.model.problem import DEFAULT_MAX_ASYMMETRY, Problem, StoredSolution
 
 DOFS_PER_BODY = 6
 SPACEDIM = 5

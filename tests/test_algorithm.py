@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 import rfverify
 from rfverify.algorithm import loop
-from rfverify.algorithm.interfaces import PROMOTE, Breakdown
+from rfverify.algorithm.interfaces import PROMOTE, Breakdown, Policy
 from rfverify.extended import ipm as dd_ipm
 from rfverify.extended import wide
 from rfverify.extended.data import ExtendedData
@@ -77,7 +77,7 @@ class _RefusingCones:
         raise Breakdown("cone 0 is not strictly interior")
 
 
-class _Policy:
+class _Policy(Policy):
     gamma0 = 0.9
 
     def __init__(self, decisions):
@@ -152,6 +152,44 @@ def test_an_error_the_precision_does_not_explain_is_not_swallowed():
     with pytest.raises(ZeroDivisionError, match="a bug"):
         loop.iterate(loop.Precision(_Space(np.float64), Cones(), None), _Policy([]), _start(), n_contacts=1,
                      n_cones=1, clock_origin=0.0)
+
+
+def test_ctrl_c_is_the_policys_to_answer_and_by_default_goes_on():
+    """The Policy protocol's default hook lets a KeyboardInterrupt through; a policy that keeps
+    its best iterate answers it with a verdict instead (no probing for the hook)."""
+    class Cones:
+        def scaling(self, z, s):
+            raise KeyboardInterrupt
+
+    def run(policy):
+        return loop.iterate(loop.Precision(_Space(np.float64), Cones(), None), policy, _start(), n_contacts=1,
+                            n_cones=1, clock_origin=0.0)
+
+    with pytest.raises(KeyboardInterrupt):
+        run(_Policy([]))
+
+    class Keeping(_Policy):
+        def interrupted(self, k):
+            return ("Stopped", f"interrupted at iteration {k}")
+
+    assert run(Keeping([])).verdict == ("Stopped", "interrupted at iteration 0")
+
+
+def test_the_reduced_newton_hooks_have_defaults_and_are_never_probed():
+    """A back end that fills in no hook (the multiple-precision tail's) gets the protocol's
+    defaults: nothing observed, no retry, no primal projection."""
+    from rfverify.algorithm.interfaces import ReducedBackend
+    from rfverify.extended.factored import FactoredBackend, NewtonBackend
+
+    class Bare(ReducedBackend):
+        name = "bare"
+
+    bare = Bare()
+    assert bare.observe(0, 1.0, None) is None and bare.retry_solve(1.0) is False and not bare.projects_primal
+    with pytest.raises(NotImplementedError):
+        bare.apply_G_inverse(None)
+    assert NewtonBackend in FactoredBackend.__mro__ and FactoredBackend().retry_solve(1.0) is False
+    assert dd_ipm.DDBackend.projects_primal
 
 
 def test_a_stop_verdict_ends_the_run_before_any_scaling():

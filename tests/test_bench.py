@@ -16,9 +16,9 @@ import pytest
 from rfverify import load, solve
 from rfverify.bench import HighPrecisionChecker, run_bench
 from rfverify.bench.runner import BenchInputError, discover_problems
-from rfverify.measures import measures
+from rfverify.model.measures import measures
 from rfverify.cli import main
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from rfverify.report import load_run, make_report
 from rfverify.report.aggregates import performance_profile, sgm
 from rfverify.report.data import RunData
@@ -430,7 +430,7 @@ def test_refuted_claims_equal_an_independent_recount_of_the_records(run_dir):
     header, groups = _table_with(_section(text, "Refuted claims"), "method", "shown as", "runs")
     assert sum(int(g[2]) for g in groups) == recount
     # Each refuted run's label, recomputed from its record: its claim and its worst recheck measure.
-    from rfverify.measures import CRITERION
+    from rfverify.model.measures import CRITERION
 
     examples = " ".join(g[5] for g in groups)
     for rec in _records(path, "solve"):

@@ -21,7 +21,7 @@ import pytest
 from rfverify.bench import run_bench
 from rfverify.cli import main
 from rfverify.io import save
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 IN_CI = os.environ.get("CI", "").lower() in {"1", "true", "yes"}
 try:

@@ -1,4 +1,4 @@
-"""CHOLMOD through ctypes with rfverify's own cholmod_common (rfverify.solver.cholmod_nogil): the
+"""CHOLMOD through ctypes with rfverify's own cholmod_common (rfverify.engines.cholmod_nogil): the
 same factor and solves as cvxopt's own calls under its default options, bit for bit; other
 threads run during it; an indefinite matrix is refused as before; anything unexpected means the
 QDLDL fallback; and cvxopt's global ``cholmod.options`` is neither read nor written (issue 48
@@ -13,8 +13,8 @@ import pytest
 import scipy.sparse as sp
 
 import rfverify
-from rfverify.solver import cholmod_nogil
-from rfverify.solver.engines import CholmodEngine
+from rfverify.engines import cholmod_nogil
+from rfverify.engines.factor import CholmodEngine
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
                                 reason="the ctypes call finds libcholmod in /proc/self/maps (Linux)")
@@ -55,7 +55,7 @@ class CvxoptReference:
         self._A = cvxopt.spmatrix(cvxopt.matrix(K.data.astype(np.float64)), cvxopt.matrix(K.indices.astype(np.int64)),
                                   cvxopt.matrix(cols), (n, n))
         if self._F is None:
-            from rfverify.solver.engines import ND_MIN_ROWS, nested_dissection
+            from rfverify.engines.factor import ND_MIN_ROWS, nested_dissection
 
             perm = nested_dissection(K) if n >= ND_MIN_ROWS else None
             self._F = (cholmod.symbolic(self._A, uplo="L") if perm is None
@@ -161,7 +161,7 @@ def test_an_error_reported_by_cholmod_is_raised_not_ignored(monkeypatch):
 
 
 def test_an_unexpected_cholmod_common_layout_means_qdldl(monkeypatch):
-    from rfverify.solver.engines import QDLDLEngine, cholmod_available, schur_engine
+    from rfverify.engines.factor import QDLDLEngine, cholmod_available, schur_engine
 
     monkeypatch.setattr(cholmod_nogil, "_checked", False)
     monkeypatch.setattr(cholmod_nogil, "_lib", None)
@@ -205,7 +205,7 @@ def test_analyse_then_factor_is_the_same_as_factor_alone():
 def test_the_factors_own_order_and_column_counts_are_those_of_the_pattern():
     """nnz(L) and Σc² for the statistics read from CHOLMOD's factor: the same as a symbolic
     analysis of the pattern in CHOLMOD's order, and the order the same as cvxopt's solve gives."""
-    from rfverify.extended.ldl import _symbolic, upper_csc
+    from rfverify.extended.ldl import symbolic_ldl, upper_csc
 
     for n, seed in ((900, 1), (3000, 2)):  # AMD, and nested dissection or AMD (ND_MIN_ROWS)
         K = spd(n, seed)
@@ -217,7 +217,7 @@ def test_the_factors_own_order_and_column_counts_are_those_of_the_pattern():
         assert np.array_equal(perm, theirs.permutation())
         full = (K + sp.tril(K, -1).T).tocsc()
         Ap, Ai, _ = upper_csc(full[perm][:, perm])
-        assert np.array_equal(ours.column_counts(), np.diff(_symbolic(n, Ap, Ai)[1]))
+        assert np.array_equal(ours.column_counts(), np.diff(symbolic_ldl(n, Ap, Ai)[1]))
 
 
 # ---------------------------------------------------------------------- cvxopt's global options
@@ -229,7 +229,7 @@ cvxopt.cholmod call raise ValueError)."""
 def _cholmod_problem():
     """A problem on which both paths factor with CHOLMOD: the schur form, and the double-double
     phase's contact-space factor forced to CHOLMOD."""
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     return random_problem(40, 90, seed=3)
 

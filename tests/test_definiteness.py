@@ -1,4 +1,4 @@
-"""Issue 48 item 1: positive definiteness of M decided whatever its scale (rfverify.definiteness).
+"""Issue 48 item 1: positive definiteness of M decided whatever its scale (rfverify.model.definiteness).
 
 M = D·M0·D with M0 an exact SPD integer matrix and D = diag(2^±k) is exactly SPD at every k
 (the scaling is exact); before the equilibrated test it was called "not positive definite" at
@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 import rfverify
 from rfverify.cli import main
-from rfverify.definiteness import EXACT_LIMIT, exact_ldlt, verify_definite
+from rfverify.model.definiteness import EXACT_LIMIT, exact_ldlt, verify_definite
 from rfverify.errors import InvalidProblemError
 from rfverify.proof.massbounds import verify_mass_matrix
 

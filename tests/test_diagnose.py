@@ -17,7 +17,7 @@ import scipy.sparse as sp
 
 import rfverify
 from rfverify.cli import main
-from rfverify.diagnosis import diagnose
+from rfverify.verify.diagnosis import diagnose
 
 HARD = Path(__file__).parent / "data" / "hard"
 MASSRATIO = HARD / "MassRatio-ndof-24-nc-5-0.hdf5"  # issue 46's first case
@@ -116,7 +116,7 @@ def test_a_run_that_stalls_only_with_the_default_solves_is_precision(monkeypatch
     form with every solve refined (the lockstep's run) meets the tolerance, the cause is the
     precision of the linear algebra, not "none".  (Here the plain run is made to refine nothing,
     refine_max=0: qp2 on the 4-contact wedge Chute then ends AlmostSolved at 1.4e-10.)"""
-    from rfverify import diagnosis as D
+    from rfverify.verify import diagnosis as D
 
     real = D.solve
 
@@ -143,7 +143,7 @@ def test_the_cause_follows_the_counterfactual_not_a_constant(monkeypatch):
     """With the continuation's outcome forced, the cause follows it: never reaching → data;
     reaching at once → precision.  (A diagnosis that decided without running it would give the
     same cause in both.)"""
-    from rfverify import exact as X
+    from rfverify.verify import exact as X
 
     real = X.ExactAlgorithm.run
     p = rfverify.load(MASSRATIO)
@@ -190,7 +190,7 @@ def test_iterate_without_an_exact_step_is_reported(monkeypatch):
     """Where the exact step cannot be taken from the double iterate (not interior in exact
     arithmetic), that iteration has no digits (NaN, null in JSON) and a flag says why; the
     other iterations are diagnosed as usual, and the step before is the departure."""
-    from rfverify import exact as X
+    from rfverify.verify import exact as X
 
     real_step = X.ExactAlgorithm.step
     calls = []

@@ -1,4 +1,4 @@
-"""The k-digit path's set-up beside the double solve (rfverify.digits.Preparation) and the double
+"""The k-digit path's set-up beside the double solve (rfverify.verify.digits.Preparation) and the double
 answer's proof left until it is needed (double_answer_may_certify): the same answers as the
 serial path, errors raised where the serial path raises them, and the gate a true necessary
 condition — where it says no proof of the double answer can certify, none does."""
@@ -13,11 +13,13 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rfverify
-from rfverify import digits as D
-from rfverify.certificate import candidate_point
+from rfverify.verify import digits as D
+from rfverify.verify import driver as DR
+from rfverify.verify import prepare as P
+from rfverify.verify.certificate import candidate_point
 from rfverify.extended.contactspace import ContactSpace
 from rfverify.proof import ProofContext
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from rfverify.scenes import generate
 
 
@@ -67,7 +69,7 @@ def test_a_proof_context_error_is_raised_as_in_the_serial_path(beside, monkeypat
 
     def broken(problem):
         raise RuntimeError("proof context broke")
-    monkeypatch.setattr(D, "ProofContext", broken)
+    monkeypatch.setattr(P, "ProofContext", broken)
     with pytest.raises(RuntimeError, match="proof context broke"):
         rfverify.solve_to_digits(random_problem(10, 25, seed=2), digits=10)
 
@@ -78,7 +80,7 @@ def test_a_back_end_error_is_raised_only_where_the_serial_path_needs_the_back_en
 
     def broken(*a, **k):
         raise MemoryError("no room for the back end")
-    monkeypatch.setattr(D, "choose_backend", broken)
+    monkeypatch.setattr(P, "choose_backend", broken)
     with pytest.raises(MemoryError, match="no room"):
         rfverify.solve_to_digits(random_problem(10, 25, seed=2), digits=10)
     # an exact answer is proven from the double solve: the back end is never needed
@@ -109,7 +111,7 @@ def test_a_failed_prepare_is_left_to_the_first_update(beside, monkeypatch):
 
 def test_a_cancelled_preparation_builds_what_is_asked_for_afterwards():
     problem = random_problem(8, 20, seed=4)
-    prep = D.Preparation(problem, "auto", "auto", background=True)
+    prep = P.Preparation(problem, "auto", "auto", background=True)
     prep.cancel()
     ctx = prep.context()
     data, system = prep.system()
@@ -124,7 +126,7 @@ def _gate_and_proof(problem, v, r, digits=10):
     point = candidate_point(v, r)
     vv, uu, rr = ctx.rounded(point)
     proof = ctx.prove(point, vv, uu, rr, requested=digits)
-    return D.double_answer_may_certify(ctx, problem, v, r, digits), proof
+    return P.double_answer_may_certify(ctx, problem, v, r, digits), proof
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -190,7 +192,7 @@ def test_the_double_answers_proof_stands_where_no_iterate_beats_it():
 def test_on_a_tie_the_double_answers_proof_is_the_one_reported(monkeypatch):
     """As when it was proven first and an iterate had to beat it: with every proof scored alike,
     the double answer (proven last now) is the answer."""
-    monkeypatch.setattr(D.ProofDriver, "score", staticmethod(lambda proof: 0.0))
+    monkeypatch.setattr(DR.ProofDriver, "score", staticmethod(lambda proof: 0.0))
     problem = generate("GranularBed", count=1, seed=3, size=125)[0]
     out = rfverify.solve_to_digits(problem, digits=15, extended_max_iter=3, wide_tail=False)
     assert out.extended.nit > 0 and not out.certificate.certified
@@ -215,16 +217,18 @@ def test_an_exact_answer_whose_gap_rounds_up_still_passes_the_gate():
 
 def test_the_set_up_begins_at_the_double_solves_first_factorisation_or_when_asked():
     """Its thread keeps off the GIL while the double solve sets itself up: it waits for the first
-    GIL-free CHOLMOD factorisation, or until its results are asked for."""
-    from rfverify.solver import cholmod_nogil
-    from rfverify.solver.engines import CholmodEngine
+    GIL-free CHOLMOD factorisation of an engine made inside the hook's block (the double solve),
+    or until its results are asked for; a factorisation elsewhere does not start it."""
+    from rfverify.engines.factor import CholmodEngine, on_factoring
 
     problem = random_problem(8, 20, seed=4)
-    waiting = D.Preparation(problem, "auto", "auto", background=True)
-    assert not waiting._ctx_ready.wait(0.3)  # nothing factored yet: not begun
-    K = sp.identity(50, format="csc") * 2.0
-    CholmodEngine().factor(sp.tril(K, format="csc"))
+    K = sp.tril(sp.identity(50, format="csc") * 2.0, format="csc")
+    waiting = P.Preparation(problem, "auto", "auto", background=True)
+    CholmodEngine().factor(K)  # outside the block: not its signal
+    assert not waiting._ctx_ready.wait(0.3)  # nothing factored for it yet: not begun
+    with on_factoring(waiting.start):
+        engine = CholmodEngine()
+    engine.factor(K)  # made inside the block: its first factorisation is the signal
     assert waiting._ctx_ready.wait(30) and waiting.context().hypotheses_proven
-    asked = D.Preparation(problem, "auto", "auto", background=True)
+    asked = P.Preparation(problem, "auto", "auto", background=True)
     assert asked.context().hypotheses_proven and asked.system()[0].n == problem.n_contacts
-    assert asked._go not in cholmod_nogil._waiting  # not kept waiting for a signal it no longer needs

@@ -24,10 +24,10 @@ from rfverify.jordan import mpfr as JM
 from rfverify.extended.ldl import DDCholesky
 from rfverify.extended import mixed as mixed_module
 from rfverify.extended.mixed import CholmodMixed, MixedCholesky
-from rfverify.solver.engines import cholmod_available
+from rfverify.engines.factor import cholmod_available
 from rfverify.extended.system import choose_backend
 from rfverify.extended.wide_cholesky import DenseWideCholesky, SparseWideCholesky
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 from test_extended import singular_in_float64
 from test_wide import newton_residual
@@ -324,13 +324,13 @@ def test_the_extended_run_refines_each_solve_once_and_is_as_accurate(monkeypatch
     import math
 
     from rfverify.algorithm import rules
-    from rfverify.digits import _start_from
+    from rfverify.verify.prepare import start_from
     from rfverify.extended import ipm as X
     from rfverify.extended.contactspace import NEWTON_REFINED_TARGET
 
     problem = random_problem(40, 90, seed=23)
     data = ExtendedData(problem)
-    start = _start_from(data, rfverify.solve(problem, tol=1e-10))
+    start = start_from(data, rfverify.solve(problem, tol=1e-10))
     light = choose_backend(data)
     assert light.chol.backward_target == NEWTON_REFINED_TARGET == math.inf
     strict = ContactSpace(data)
@@ -410,14 +410,14 @@ def test_an_unchecked_solve_is_one_float64_solve(monkeypatch):
 
     from rfverify.extended import mixed
 
-    from rfverify.digits import _start_from
+    from rfverify.verify.prepare import start_from
     from rfverify.extended import ipm as X
 
     problem = random_problem(8, 14, seed=1)
     data = ExtendedData(problem)
     back = choose_backend(data)
     assert back.chol.backward_target == math.inf
-    X.run(data, _start_from(data, rfverify.solve(problem, tol=1e-10)), max_iter=1, backend=back)
+    X.run(data, start_from(data, rfverify.solve(problem, tol=1e-10)), max_iter=1, backend=back)
     chol = back.chol
     rng = np.random.default_rng(0)
     bh = rng.standard_normal(chol.n)

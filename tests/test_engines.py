@@ -1,4 +1,4 @@
-"""The contract of the float64 factorisation engines (rfverify.solver.engines): every engine
+"""The contract of the float64 factorisation engines (rfverify.engines.factor): every engine
 factors the matrix it is handed and solves with it to float64 accuracy, factors again on the
 same pattern, counts only the factorisations that succeeded, and refuses a matrix it cannot
 factor by raising, never by returning a wrong answer."""
@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse as sp
 from hypothesis import given, settings, strategies as st
 
-from rfverify.solver.engines import CholmodEngine, QDLDLEngine, SuperLUEngine
+from rfverify.engines.factor import CholmodEngine, QDLDLEngine, SuperLUEngine
 
 from conftest import block_cvxopt
 
@@ -130,9 +130,9 @@ def test_without_cvxopt_the_cholmod_engine_says_what_to_install(monkeypatch):
 
 def test_every_form_reaches_its_matrix_through_an_engine():
     """The forms own no factorisation of their own: each hands its matrix to an engine of
-    rfverify.solver.engines (the issue's forms/engines split)."""
+    rfverify.engines.factor (the issue's forms/engines split)."""
     import rfverify
-    from rfverify.lifting import lift
+    from rfverify.model.lifting import lift
     from rfverify.solver.forms import FORMS
 
     from rfverify.solver.cones import ProductCone
@@ -150,7 +150,7 @@ def test_without_cvxopt_the_schur_form_factors_by_qdldl_on_the_upper_triangle(mo
     the solves invert the symmetric matrix that triangle stands for (that it is the right S is
     checked through the whole path: test_solver's schur tests against form (16), per engine)."""
     import rfverify
-    from rfverify.lifting import lift
+    from rfverify.model.lifting import lift
     from rfverify.solver.cones import ProductCone
     from rfverify.solver.forms import SchurSystem
     from rfverify.solver.kkt import ScalingPoint

@@ -11,7 +11,7 @@ import pytest
 
 import rfverify
 from rfverify.cli import main
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 
 def run(capsys, *argv):

@@ -15,7 +15,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import rfverify
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from reference import jordan as RJ
 from rfverify.extended import cones as C
 from rfverify.extended import dd
@@ -302,13 +302,13 @@ def test_both_back_ends_solve_the_same_newton_system(name):
 
 
 def test_extended_run_reaches_the_double_double_floor():
-    from rfverify.digits import _start_from
+    from rfverify.verify.prepare import start_from
     from rfverify.extended import ipm as X
 
     problem = rfverify.load("bundled:chute")
     res = rfverify.solve(problem, tol=1e-10)
     data = ExtendedData(problem)
-    out = X.run(data, _start_from(data, res), max_iter=14)
+    out = X.run(data, start_from(data, res), max_iter=14)
     mu, pinf = out.trace["mu"], out.trace["pinfeas"]
     assert mu[-1] < 1e-25 < mu[0] and pinf[-1] < 1e-29
     assert all(np.diff(np.log10(mu)) < 0)  # μ falls at every iteration
@@ -317,7 +317,7 @@ def test_extended_run_reaches_the_double_double_floor():
 def test_extended_run_stops_with_numerical_error_when_a_solve_fails():
     """A back end whose solve returns NaN (a double-double fallback factorisation that lost
     definiteness) ends the run as NumericalError at that iteration, not steps later."""
-    from rfverify.digits import _start_from
+    from rfverify.verify.prepare import start_from
     from rfverify.extended import ipm as X
 
     problem = rfverify.load("bundled:chute")
@@ -328,14 +328,14 @@ def test_extended_run_stops_with_numerical_error_when_a_solve_fails():
         def solve(self, a, t):
             return (np.full(data.m, np.nan), np.zeros(data.m)), (np.full(data.nk, np.nan), np.zeros(data.nk))
 
-    out = X.run(data, _start_from(data, res), max_iter=5, backend=Failing(data))
+    out = X.run(data, start_from(data, res), max_iter=5, backend=Failing(data))
     assert out.status == "NumericalError" and "solve failed" in out.message and out.nit == 0
 
 
 def test_dense_and_blockwise_constructions_of_W_agree():
     """W̃ = H̃M⁻¹H̃ᵀ built as one dense YᵀY (chosen for a lifted local problem: M = I, H dense)
     and block by block of M: the same pair blocks to double-double accuracy."""
-    from rfverify.random_problems import random_local_problem
+    from rfverify.scenes.random_problems import random_local_problem
 
     data = ExtendedData(random_local_problem(30, seed=4))
     built = {}
@@ -359,7 +359,7 @@ def test_dense_and_blockwise_constructions_of_W_agree():
 def test_blockwise_W_equals_a_dense_recomputation():
     """The compiled block-by-block W̃ (one small dense Cholesky per body) against H̃ M⁻¹ H̃ᵀ
     formed densely in long double, pair block by pair block."""
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     data = ExtendedData(random_problem(12, 30, seed=8))
     cs = ContactSpace(data)

@@ -67,17 +67,23 @@ def _corner_point(problem):
     return ctx, red.lift(sub.point), stresses
 
 
+def _proven_after_a_face_move(problem):
+    """(problem, its ProofContext, the double answer's point, its proof), the point having been
+    moved onto the face of the problem's self-stress (asserted)."""
+    from rfverify.verify.certificate import candidate_point
+
+    double = rfverify.solve(problem, tol=1e-10)
+    point = candidate_point(double.v, double.r)
+    ctx = ProofContext(problem)
+    proof = ctx.prove(point, *ctx.rounded(point), requested=6)
+    assert proof.valid and proof.face is not None and proof.face.moved > 0
+    return problem, ctx, point, proof
+
+
 def test_a_point_left_slightly_off_the_face_is_never_proven(monkeypatch):
     """The face move replaced by one that leaves v' 2⁻⁶⁰ off the face on one dof: the proof must
     refuse (exact cone test), not certify."""
-    from rfverify.certificate import candidate_point
-
-    problem = corner_problem(0)
-    double = rfverify.solve(problem, tol=1e-10)
-    point = candidate_point(double.v, double.r)  # off the face by the double solve's error
-    ctx = ProofContext(problem)
-    good = ctx.prove(point, *ctx.rounded(point), requested=6)
-    assert good.valid and good.face is not None and good.face.moved > 0
+    problem, ctx, point, good = _proven_after_a_face_move(corner_problem(0))  # off the face by the double solve's error
     real_restore = face.restore
 
     def off_face(problem_, exact, point_v, stresses):
@@ -152,9 +158,9 @@ def test_written_solution_rechecks_and_certifies_from_the_file(tmp_path):
     """The written answer of a self-stressed problem passes the independent recheck of the
     criterion at 1e-10 (its r is r₀ + τy, in K to 1e-11) and certifies again from the file's
     float64 numbers alone (no stored point: the certify path solves on the face too)."""
-    from rfverify.check import check_solution
+    from rfverify.model.check import check_solution
     from rfverify.io import save
-    from rfverify.problem import StoredSolution
+    from rfverify.model.problem import StoredSolution
 
     problem = corner_problem(1, True)
     out = rfverify.solve_to_digits(problem, digits=10)
@@ -184,14 +190,7 @@ def test_a_rational_point_is_proven_as_its_equal_with_another_denominator(monkey
     """The moved point v' = V / den: the same point written with den·3 (numerator ×3) must give
     the same proof up to rounding — every bound divides by den exactly once (g and rᵀu) or
     twice (gᵀM⁻¹g), and a missing or extra division changes ε by 3× or 9×."""
-    from rfverify.certificate import candidate_point
-
-    problem = corner_problem(2, True)
-    double = rfverify.solve(problem, tol=1e-10)
-    point = candidate_point(double.v, double.r)
-    ctx = ProofContext(problem)
-    one = ctx.prove(point, *ctx.rounded(point), requested=6)
-    assert one.valid and one.face is not None and one.face.moved > 0
+    problem, ctx, point, one = _proven_after_a_face_move(corner_problem(2, True))
     real_restore = face.restore
 
     def thirds(problem_, exact, point_v, stresses):

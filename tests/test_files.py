@@ -14,7 +14,7 @@ import pytest
 
 import rfverify
 from rfverify import InvalidProblemError, ProblemFileError
-from rfverify.check import check_solution
+from rfverify.model.check import check_solution
 from rfverify.io import bundled_problems, parse_siconos_dat
 
 SHA256 = {  # the originals' checksums: the bundled copies are these files, byte for byte

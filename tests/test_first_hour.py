@@ -11,7 +11,7 @@ import pytest
 import rfverify
 from rfverify.cli import main
 from rfverify.cli.common import PROGRESS_AFTER_ENV, IterationProgress
-from rfverify.random_problems import random_local_problem
+from rfverify.scenes.random_problems import random_local_problem
 from rfverify.solver.result import IterationInfo
 
 ITERATION_LINE = re.compile(r"^rfverify solve:   (\w+) iteration (\d+)(?: \(component \d+\))?: "

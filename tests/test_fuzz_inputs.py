@@ -24,8 +24,8 @@ from hypothesis import strategies as st
 
 from rfverify.cli import main
 from rfverify.io import bundled_problems, write_fclib
-from rfverify.problem import StoredSolution
-from rfverify.random_problems import random_problem
+from rfverify.model.problem import StoredSolution
+from rfverify.scenes.random_problems import random_problem
 
 EXAMPLES = int(os.environ.get("RFVERIFY_FUZZ_EXAMPLES", "0")) or min(settings.default.max_examples, 50)
 # capsys is read out after every example, so sharing it between examples is safe.

@@ -21,7 +21,7 @@ from rfverify.bench.records import task_stem
 from rfverify.bench.runner import BenchInputError, RunLock
 from rfverify.cli import main
 from rfverify.io import save
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from rfverify.report import load_run, make_report
 
 QUICK = dict(methods=("jqinv", "clarabel"), tols=(1e-8,), trajectories=False, digits=0, quiet=True)

@@ -16,7 +16,7 @@ import rfverify
 from rfverify.cli import main
 from rfverify.errors import InvalidArgumentError, RfverifyError
 from rfverify.io import write_fclib
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 from privileges import as_ordinary_user, world_traversable_dir
 

@@ -15,7 +15,7 @@ import rfverify
 from rfverify.cli import EXIT_BROKEN_PIPE, main
 from rfverify.io import write_fclib
 from rfverify.io.output import dumps, json_safe
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 
 def run(capsys, *argv):

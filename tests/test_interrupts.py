@@ -22,12 +22,35 @@ REPEATS = 20
 
 
 def _command():
-    """The console script (as a user runs it): the one beside this interpreter, else on PATH."""
+    """The console script as pyproject declares it (``rfverify.__main__:main``), run as its
+    installed wrapper runs it: import that module, call that function.  (The wrapper beside this
+    interpreter may come from an older install of another checkout.)"""
+    import tomllib
     from pathlib import Path
 
-    beside = Path(sys.executable).with_name("rfverify")
-    exe = str(beside) if beside.exists() else shutil.which("rfverify")
-    return [exe] if exe else [sys.executable, "-m", "rfverify_launch"]
+    entry = tomllib.loads((Path(__file__).resolve().parent.parent / "pyproject.toml").read_text())
+    module, func = entry["project"]["scripts"]["rfverify"].split(":")
+    return [sys.executable, "-c", f"import sys; from {module} import {func}; sys.exit({func}())"]
+
+
+@pytest.mark.parametrize("how", ["console script", "python -m rfverify"])
+def test_ctrl_c_while_starting_gives_one_line_and_exit_130(how):
+    """A Ctrl-C while the command's imports run (numpy, scipy, numba: most of a second) ends it
+    with its one line and exit 130, for the console script and for ``python -m rfverify`` alike:
+    the package starts light, so the handler is in place before any heavy import."""
+    command = _command() if how == "console script" else [sys.executable, "-m", "rfverify"]
+    env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
+    seen = []
+    for delay in (0.25, 0.35, 0.45):
+        proc = subprocess.Popen(command + ["solve", "bundled:chute", "--quiet"], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, env=env)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+        seen.append((proc.returncode, err.decode()))
+    interrupted = [s for s in seen if s[0] != 0]
+    assert interrupted, seen  # at least one signal landed before the solve ended
+    assert all(s == (130, "rfverify solve: interrupted\n") for s in interrupted), seen
 
 
 def _group_alive(pgid: int) -> bool:

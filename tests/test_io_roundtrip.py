@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 import rfverify.io as rio
 from rfverify.errors import ProblemFileError
 from rfverify.io.fclib import read_fclib, write_fclib
-from rfverify.problem import Problem, StoredSolution
+from rfverify.model.problem import Problem, StoredSolution
 
 try:
     from strategies import build_problem, problem_arrays

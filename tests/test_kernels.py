@@ -157,7 +157,7 @@ def test_whole_solves_are_bitwise_the_same_with_and_without_the_kernels(case, me
     and the iteration count, must be identical (at 1e-10 the run also passes through its
     longdouble phase, which the kernels leave to numpy)."""
     import rfverify
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     problem = rfverify.load(case) if case != "random" else random_problem(70, 130, seed=20261202, free_bodies=2)
     fast = rfverify.solve(problem, method=method, tol=1e-10)

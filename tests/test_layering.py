@@ -200,3 +200,151 @@ def test_imports_go_only_to_the_same_or_a_higher_layer():
                     module.startswith(a) and name.startswith(b) for a, b in LAYER_EXCEPTIONS):
                 bad.append(f"{path.relative_to(ROOT)}:{line} ({layers[own][0]}) imports {name} ({layers[other][0]})")
     assert not bad, "imports against the layers of docs/ARCHITECTURE.md:\n" + "\n".join(sorted(set(bad)))
+
+
+# ---------------------------------------------------------------- the house rules (issue 50)
+ROOT_MODULES_MAX = 7
+"""Modules at the package root (``__init__`` and ``__main__`` included): the rest live in the
+package that owns them (docs/ARCHITECTURE.md)."""
+MODULE_LINES_MAX = 600
+FUNCTION_CODE_LINES_MAX = 100
+"""Lines of code of one function: its body after the docstring, blank and comment-only lines
+not counted."""
+NO_PROBING = ("algorithm", "extended")
+"""Packages whose interfaces are typing.Protocols with default hooks: no ``hasattr`` there."""
+
+
+def _sources(root: Path):
+    return sorted((root / "rfverify").rglob("*.py"))
+
+
+def root_modules(root: Path) -> list[str]:
+    return sorted(p.name for p in (root / "rfverify").glob("*.py"))
+
+
+def long_modules(root: Path) -> list[str]:
+    return [f"{p.relative_to(root)}: {n} lines" for p in _sources(root)
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MODULE_LINES_MAX]
+
+
+def function_code_lines(node: ast.AST, lines: list[str]) -> int:
+    body = node.body
+    first = body[0]
+    if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
+        if len(body) == 1:
+            return 0
+        first = body[1]
+    return sum(1 for line in lines[first.lineno - 1:node.end_lineno]
+               if line.strip() and not line.strip().startswith("#"))
+
+
+def long_functions(root: Path) -> list[str]:
+    bad = []
+    for p in _sources(root):
+        text = p.read_text(encoding="utf-8")
+        lines = text.splitlines()
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = function_code_lines(node, lines)
+                if n > FUNCTION_CODE_LINES_MAX:
+                    bad.append(f"{p.relative_to(root)}:{node.lineno} {node.name}: {n} lines of code")
+    return bad
+
+
+def hasattr_probes(root: Path) -> list[str]:
+    bad = []
+    for package in NO_PROBING:
+        for p in sorted((root / "rfverify" / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "hasattr":
+                    bad.append(f"{p.relative_to(root)}:{node.lineno}")
+    return bad
+
+
+def private_imports(root: Path) -> list[str]:
+    """``from M import _name`` where M is not itself a private module: a module's private names
+    are its own (a package's private modules, ``jordan._formulas``, are that package's insides)."""
+    bad = []
+    for p in _sources(root):
+        for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom) or (node.module or "").split(".")[-1].startswith("_"):
+                continue
+            for a in node.names:
+                if a.name.startswith("_") and not a.name.endswith("__"):
+                    bad.append(f"{p.relative_to(root)}:{node.lineno} imports {a.name} from {node.module}")
+    return bad
+
+
+def test_the_package_root_holds_at_most_seven_modules():
+    assert len(root_modules(ROOT)) <= ROOT_MODULES_MAX, root_modules(ROOT)
+
+
+def test_no_module_is_longer_than_600_lines():
+    assert long_modules(ROOT) == []
+
+
+def test_no_function_has_more_than_100_lines_of_code():
+    assert long_functions(ROOT) == []
+
+
+def test_no_hasattr_probing_in_the_algorithm_and_the_extended_phase():
+    assert hasattr_probes(ROOT) == [], "declare the hook in the Protocol with a default instead"
+
+
+def test_no_private_name_is_imported_from_another_module():
+    assert private_imports(ROOT) == []
+
+
+def test_no_top_level_module_is_installed_beside_the_packages():
+    tool = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert "py-modules" not in tool["tool"]["setuptools"]
+    module, _ = tool["project"]["scripts"]["rfverify"].split(":")
+    assert module.startswith("rfverify."), "the console script lives inside the package"
+
+
+@pytest.mark.parametrize("rule, source, where", [
+    (long_modules, "x = 1\n" * (MODULE_LINES_MAX + 1), "rfverify/verify/big.py"),
+    (long_functions, "def f():\n    '''doc'''\n" + "    x = 1\n" * (FUNCTION_CODE_LINES_MAX + 1), "rfverify/verify/f.py"),
+    (hasattr_probes, "def f(b):\n    return hasattr(b, 'observe')\n", "rfverify/extended/x.py"),
+    (private_imports, "from .digits import _start_from\n", "rfverify/verify/certification.py"),
+])
+def test_each_house_rule_finds_what_breaks_it(tmp_path, rule, source, where):
+    for pkg in ("rfverify", "rfverify/verify", "rfverify/extended", "rfverify/algorithm"):
+        (tmp_path / pkg).mkdir(parents=True, exist_ok=True)
+        (tmp_path / pkg / "__init__.py").write_text("")
+    (tmp_path / "rfverify/verify/ok.py").write_text(
+        "from ._x import _inside\n\n\ndef g():\n    '''doc'''\n" + "    # why\n\n" * 200 + "    return 1\n")
+    assert rule(tmp_path) == []
+    (tmp_path / where).write_text(source)
+    assert len(rule(tmp_path)) == 1
+
+
+def test_a_package_root_of_eight_modules_is_too_many(tmp_path):
+    (tmp_path / "rfverify").mkdir()
+    for i in range(ROOT_MODULES_MAX + 1):
+        (tmp_path / "rfverify" / f"m{i}.py").write_text("")
+    assert len(root_modules(tmp_path)) > ROOT_MODULES_MAX
+
+
+def _anchor(heading: str) -> str:
+    """The anchor a Markdown renderer (GitHub) gives a heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_architecture_is_a_map_of_short_lines():
+    """Readable in five minutes: no paragraph-long table rows (issue 50)."""
+    long = [i for i, line in enumerate(ARCHITECTURE.read_text(encoding="utf-8").splitlines(), 1) if len(line) > 400]
+    assert long == [], f"docs/ARCHITECTURE.md lines over 400 characters: {long}"
+
+
+def test_decisions_open_with_an_index_by_topic_whose_links_resolve():
+    """docs/DECISIONS.md: an index by topic first (each topic's decision in force, then its
+    sections), then the history; every link of the index names a section that exists."""
+    text = (ROOT / "docs" / "DECISIONS.md").read_text(encoding="utf-8")
+    first = re.search(r"^## (.+)$", text, re.M).group(1)
+    assert first == "Index by topic"
+    index = text.split("## Index by topic", 1)[1].split("\n## ", 1)[0]
+    anchors = {_anchor(h) for h in re.findall(r"^#{2,3} (.+)$", text, re.M)}
+    links = re.findall(r"\]\(#([^)]+)\)", index)
+    assert len(links) >= 15 and set(links) <= anchors, sorted(set(links) - anchors)
+    assert index.count("\n- **") >= 10  # topics, each with its current decision

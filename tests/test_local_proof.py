@@ -161,7 +161,7 @@ def test_an_exact_answer_certifies_without_computing_a_point():
     u = 0, r = (1, 0, ...) is a solution with no strictly feasible point around it.  certify
     tries the candidate itself first and certifies it with ε = 0, in O(nnz)."""
     from rfverify.io.local_lift import LocalProblem, lift_local
-    from rfverify.problem import make_local_form
+    from rfverify.model.problem import make_local_form
 
     W = np.diag([1.0, 0, 0, 0, 0])
     data = LocalProblem(W=W, q=np.array([-1.0, 0, 0, 0, 0]), mu=np.zeros(1), mu_r=np.zeros(1))
@@ -276,7 +276,7 @@ def _sticking_identity_problem():
     """W = I, q = (−1, 0.1, 0, 0, 0), μ = 0.5, μr = 0.1: the contact sticks, u* = 0 and
     r* = −q = (1, −0.1, 0, 0, 0) exactly."""
     from rfverify.io.local_lift import LocalProblem, lift_local
-    from rfverify.problem import make_local_form
+    from rfverify.model.problem import make_local_form
 
     W = np.eye(5)
     data = LocalProblem(W=W, q=np.array([-1.0, 0.1, 0, 0, 0]), mu=np.array([0.5]), mu_r=np.array([0.1]))

@@ -1,4 +1,4 @@
-"""The one criterion, value for value (issue 29): :func:`rfverify.measures.measures` against an
+"""The one criterion, value for value (issue 29): :func:`rfverify.model.measures.measures` against an
 independent checker written here from the definitions in the module's docstring (DESIGN §4.5),
 in exact rational arithmetic on dense matrices.
 
@@ -20,8 +20,9 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 
 import rfverify
-from rfverify.measures import measures
-from rfverify.random_problems import random_problem
+from exact_problems import solve_rational
+from rfverify.model.measures import measures
+from rfverify.scenes.random_problems import random_problem
 
 
 def _q(x) -> Fraction:
@@ -42,23 +43,6 @@ def _matvec(A, x) -> list:
 
 def _transpose(A) -> list:
     return [list(col) for col in zip(*A)]
-
-
-def _solve(A, b) -> list:
-    """Exact Gaussian elimination with row pivoting (A nonsingular)."""
-    n = len(b)
-    T = [list(row) + [bb] for row, bb in zip(A, b)]
-    for k in range(n):
-        p = next(i for i in range(k, n) if T[i][k] != 0)
-        T[k], T[p] = T[p], T[k]
-        for i in range(k + 1, n):
-            if T[i][k]:
-                c = T[i][k] / T[k][k]
-                T[i] = [a - c * b for a, b in zip(T[i], T[k])]
-    x = [Fraction(0)] * n
-    for k in reversed(range(n)):
-        x[k] = (T[k][n] - sum(T[k][j] * x[j] for j in range(k + 1, n))) / T[k][k]
-    return x
 
 
 def _amax(x) -> Fraction:
@@ -88,7 +72,7 @@ class IndependentChecker:
         self.HT = _transpose(self.H)
         self.f, self.w = _qvec(problem.f), _qvec(problem.w)
         self.mu, self.mu_r = _qvec(problem.mu), _qvec(problem.mu_r)
-        v_free = _solve(self.M, self.f)
+        v_free = solve_rational(self.M, self.f)
         self.U0 = _amax([a + b for a, b in zip(_matvec(self.HT, v_free), self.w)])
         col_norm = max(_norm2(col) for col in self.HT)
         self.R0 = float(_amax(self.f)) / col_norm if col_norm > 0 else 0.0

@@ -10,20 +10,20 @@ import pytest
 import rfverify
 from rfverify.algorithm import newton as N
 from rfverify.algorithm.loop import residuals
-from rfverify.digits import _start_from
+from rfverify.verify.prepare import start_from
 from rfverify.extended import dd
 from rfverify.extended import ipm as X
 from rfverify.extended.contactspace import ContactSpace
 from rfverify.extended.data import ExtendedData
 from rfverify.extended.system import choose_backend
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 
 @pytest.fixture(scope="module")
 def started():
     problem = random_problem(40, 90, seed=23)
     data = ExtendedData(problem)
-    return data, _start_from(data, rfverify.solve(problem, tol=1e-10))
+    return data, start_from(data, rfverify.solve(problem, tol=1e-10))
 
 
 def _spy(monkeypatch, kept: list, tried: list):

@@ -100,7 +100,7 @@ def _first_proof_is_best(monkeypatch):
     """Every later proof scores lower than the ones before it: the best is the first made."""
     import itertools
 
-    from rfverify.digits import ProofDriver
+    from rfverify.verify.digits import ProofDriver
 
     calls = itertools.count()
     monkeypatch.setattr(ProofDriver, "score", staticmethod(lambda proof: -next(calls)))

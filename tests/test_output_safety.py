@@ -15,7 +15,7 @@ import rfverify
 from rfverify.cli import main
 from rfverify.errors import OutputPathError
 from rfverify.io import write_fclib
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 from privileges import as_ordinary_user, world_traversable_dir
 
@@ -89,9 +89,9 @@ def test_solve_onto_bundled_file_is_refused(capsys, no_solve):
 
 
 def test_certify_out_onto_an_input_is_refused(capsys, tmp_path, problem_file, monkeypatch):
-    import rfverify.certification
+    import rfverify.verify.certification
 
-    monkeypatch.setattr(rfverify.certification, "certify",
+    monkeypatch.setattr(rfverify.verify.certification, "certify",
                         lambda *a, **k: pytest.fail("certify ran before the output check"))
     sol = tmp_path / "sol.h5"
     code, _, err = run(capsys, "solve", problem_file, "--tol", "1e-8", "--out", sol)
@@ -185,9 +185,9 @@ def test_fifo_target_is_refused_and_kept(capsys, tmp_path, no_solve):
 
 
 def test_directory_target_is_refused(capsys, tmp_path, no_solve, monkeypatch):
-    import rfverify.certification
+    import rfverify.verify.certification
 
-    monkeypatch.setattr(rfverify.certification, "certify",
+    monkeypatch.setattr(rfverify.verify.certification, "certify",
                         lambda *a, **k: pytest.fail("certify ran before the output check"))
     refused(capsys, "solve", "bundled:sphere", "--out", tmp_path, expect=["directory"])
     refused(capsys, "certify", "bundled:sphere", "--out", tmp_path, expect=["directory"])

@@ -17,10 +17,10 @@ from hypothesis import strategies as st
 
 import reference
 import rfverify
-from rfverify.proof import Point, ProofContext, bound as B
+from rfverify.proof import FLOAT64_DIGITS, Point, ProofContext, bound as B
 from rfverify.proof.dyadic import Dyadic, DyadicCSR
 from rfverify.proof.massbounds import verify_lambda_min_sparse, verify_mass_matrix
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
@@ -275,7 +275,7 @@ def test_solution_of_a_similar_problem_is_refused():
 def _local_problem(W, q, mu, mu_r):
     """A local problem (W 5n × 5n, q) read as rfverify reads a full-precision local file."""
     from rfverify.io.local_lift import LocalProblem, lift_local
-    from rfverify.problem import make_local_form
+    from rfverify.model.problem import make_local_form
     import dataclasses
 
     n = len(np.atleast_1d(mu))
@@ -302,7 +302,7 @@ def test_zero_quantities_are_judged_absolutely_never_zero_or_inf_digits():
     q = out.certificate.quantities["u"]
     assert out.success and q.mode == "absolute" and q.certified and q.abs_bound < 1e-9 * q.data_scale
     for qq in out.certificate.quantities.values():
-        assert qq.digits is None or (0 < qq.digits <= B.FLOAT64_DIGITS)
+        assert qq.digits is None or (0 < qq.digits <= FLOAT64_DIGITS)
     allopen = _all_open_problem()
     out2 = rfverify.solve_to_digits(allopen, digits=10)
     r = out2.certificate.quantities["r"]

@@ -12,7 +12,7 @@ import pytest
 import reference
 import rfverify
 from reference import jordan as RJ
-from rfverify.measures import measures
+from rfverify.model.measures import measures
 from rfverify.solver import solve as solve_double
 
 try:
@@ -69,7 +69,7 @@ def test_reference_precision_is_private():
 
 
 def test_reference_zero_coefficients(tmp_path):
-    from rfverify.random_problems import random_problem
+    from rfverify.scenes.random_problems import random_problem
 
     problem = random_problem(5, 7, seed=4, mu_zero_fraction=0.4, mu_r_zero_fraction=0.4)
     assert np.any((problem.mu == 0) & (problem.mu_r == 0)) or np.any(problem.mu == 0)

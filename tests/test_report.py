@@ -14,7 +14,7 @@ import scipy
 import scipy.sparse as sp
 
 from rfverify import Problem, solve
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from rfverify.report.aggregates import median, worst_cases
 from rfverify.report.data import RunData
 from rfverify.report.figures import work_precision_medians

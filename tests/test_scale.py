@@ -45,7 +45,7 @@ def test_auto_sequence_starts_with_schur_only_when_large_and_filling():
 
 def test_schur_runs_with_either_engine(schur_engine):
     assert method_unavailable("schur") is None and method_unavailable("jqinv") is None
-    from rfverify.solver.engines import schur_engine_name
+    from rfverify.engines.factor import schur_engine_name
 
     assert schur_engine_name() == schur_engine
 

@@ -361,7 +361,7 @@ def test_generate_help_and_list_show_the_scene(capsys):
 # Issue 13 item 2.  With the paper's stopping test (pinfeas relative to
 # max(|Jz|, |H~v|, |w~|), which vanishes when every contact sticks with w = 0) jqinv ended
 # InsufficientProgress after 16 iterations with v, u off by 8.2e-5 of the free velocity and r by
-# 8.1e-3.  rfverify.measures' criterion (scales that do not vanish): Solved in 10 iterations,
+# 8.1e-3.  rfverify.model.measures' criterion (scales that do not vanish): Solved in 10 iterations,
 # v, u off by 5.2e-10, r by 5.2e-8 (measured).
 def test_jqinv_solves_the_sticking_block(frozen, exact):
     res = rfverify.solve(frozen, method="jqinv", tol=1e-10)

@@ -20,7 +20,7 @@ import pytest
 import rfverify
 from rfverify.errors import InvalidArgumentError
 from rfverify.io import load
-from rfverify.measures import measures
+from rfverify.model.measures import measures
 from rfverify.solver import Status
 from rfverify.solver.result import method_unavailable
 

@@ -15,7 +15,7 @@ import pytest
 import rfverify
 from rfverify.bench import HighPrecisionChecker
 from rfverify.cli import main
-from rfverify.random_problems import random_local_problem, random_problem
+from rfverify.scenes.random_problems import random_local_problem, random_problem
 from rfverify.solver import Status, solve
 
 FORMS = ["jqinv", "qp2", "reduced", "reduced_factored", "noscaling"]
@@ -25,7 +25,7 @@ BUNDLED = ["chute", "chute-dat", "sphere", "cube", "sphere-from-global"]
 def recheck_file(path, problem, dps=40):
     """The tests' one deliberately independent oracle: rfverify's criterion recomputed from the
     solution stored in ``path``, in ``dps``-digit mpmath with scalar loops, from the problem
-    data alone — separate code from :mod:`rfverify.measures`, same definitions:
+    data alone — separate code from :mod:`rfverify.model.measures`, same definitions:
 
     dynamics ‖Mv − Hr − f‖∞/max(‖Mv‖, ‖Hr‖, ‖f‖, ‖M‖‖v‖); velocity ‖u − Hᵀv − w‖∞/U;
     cone violations of r ∈ K over R and of u ∈ K* over U; complementarity |rᵀu|/E,
@@ -319,7 +319,7 @@ def test_refinement_resolves_the_primal_block(tmp_path):
     # Refinement that stops at a 0.5 contraction rate (LAPACK's) ended this lattice at
     # pinfeas 1.5e-9 (AlmostSolved); the 0.8 rate solves it.  Measured, see data/hard/README.md.
     # It also needs the float64 phase to end at the first float64 solve that falls short
-    # (Settings.extended_below): switching on the criterion alone ended it InsufficientProgress.
+    # (Settings.longdouble_below): switching on the criterion alone ended it InsufficientProgress.
     problem = rfverify.load(HARD_DIR / "Lattice-ndof-360-nc-274-1.hdf5")
     res, chk = _solve_and_recheck(problem, "jqinv", tmp_path)
     assert res.status is Status.SOLVED, res.message
@@ -393,7 +393,7 @@ def _system_at_an_iterate(method, tol=1e-6, **kw):
     from scipy.linalg import block_diag
 
     from rfverify import jordan
-    from rfverify.lifting import lift
+    from rfverify.model.lifting import lift
     from rfverify.solver.cones import ProductCone
     from rfverify.solver.forms import FORMS as KFORMS
     from rfverify.solver.kkt import ScalingPoint
@@ -506,21 +506,21 @@ def test_auto_is_jqinv_where_jqinv_solves_and_stops_on_the_users_word():
 @pytest.mark.parametrize("seed", [3, 4])
 def test_float64_start_then_extended_arithmetic(seed):
     """The default run starts in float64 and switches to longdouble for good at the iteration
-    it reports, never later than the first iterate whose criterion is ≤ extended_below, and
-    its answer is verified; extended_below=None is longdouble throughout."""
+    it reports, never later than the first iterate whose criterion is ≤ longdouble_below, and
+    its answer is verified; longdouble_below=None is longdouble throughout."""
     problem = random_problem(30, 60, seed=seed)
-    # extended_below = 1e-6, well above tol, so that the switch happens before the end.
-    res = solve(problem, method="jqinv", keep_iterates=True, split_components=False, extended_below=1e-6)
+    # longdouble_below = 1e-6, well above tol, so that the switch happens before the end.
+    res = solve(problem, method="jqinv", keep_iterates=True, split_components=False, longdouble_below=1e-6)
     assert res.success and res.criterion <= 1e-10
-    (k,) = res.extras["extended_from"]
+    (k,) = res.extras["longdouble_from"]
     assert 0 < k < len(res.extras["iterates"])
     dtypes = [v.dtype for v, r_t, z in res.extras["iterates"]]
     # Iterate k is the float64 one the switch converts; the steps from it on are longdouble.
     assert set(dtypes[:k + 1]) == {np.dtype(np.float64)} and set(dtypes[k + 1:]) == {np.dtype(np.longdouble)}
     crit = res.trace["criterion"]
-    assert np.all(crit[:k] > res.settings.extended_below)
-    full = solve(problem, method="jqinv", keep_iterates=True, split_components=False, extended_below=None)
-    assert full.extras["extended_from"] == [0] and full.success
+    assert np.all(crit[:k] > res.settings.longdouble_below)
+    full = solve(problem, method="jqinv", keep_iterates=True, split_components=False, longdouble_below=None)
+    assert full.extras["longdouble_from"] == [0] and full.success
     assert {v.dtype for v, r_t, z in full.extras["iterates"]} == {np.dtype(np.longdouble)}
     # Both are answers to the same problem: they agree far beyond the tolerance's scale.
     assert np.max(np.abs(res.v - full.v)) <= 1e-6 * max(np.max(np.abs(full.v)), 1.0)
@@ -532,13 +532,13 @@ def test_data_beyond_float64_comfort_start_extended():
     s = 2.0 ** 150
     big = rfverify.Problem.from_arrays(p.M * s, p.H * s, p.f * s, p.w, p.mu, p.mu_r)
     res = solve(big, method="jqinv", split_components=False)
-    assert res.extras["extended_from"] == [0]
+    assert res.extras["longdouble_from"] == [0]
 
 
 @pytest.mark.parametrize("bad", [0.0, -1e-6, float("nan"), True, "1e-6"])
 def test_extended_below_is_checked(bad):
-    with pytest.raises(ValueError, match="extended_below"):
-        solve(rfverify.load("bundled:cube"), extended_below=bad)
+    with pytest.raises(ValueError, match="longdouble_below"):
+        solve(rfverify.load("bundled:cube"), longdouble_below=bad)
 
 
 def test_hybrid_sigma_is_mehrotras_far_and_the_papers_near(monkeypatch):
@@ -594,7 +594,7 @@ def test_default_start_and_sigma_rule_take_fewer_iterations_and_stay_verified(tm
 def test_velocity_scaled_start_is_z_on_the_scale_of_w():
     """start="velocity_scaled": z = θ·e with θ = max(1, rms(w̃)), r̃ as the paper's start, so
     μ at iteration 0 is θ·(number of cones)/n; θ = 1 (the paper's start) when rms(w̃) ≤ 1."""
-    from rfverify.lifting import lift
+    from rfverify.model.lifting import lift
     from rfverify.solver.ipm import velocity_scale
 
     p = random_problem(6, 10, seed=5)
@@ -626,7 +626,7 @@ def test_slow_refinement_takes_the_factorisation_without_delta(name, monkeypatch
     assert res.extras["unregularised_factorisations"] > off.extras["unregularised_factorisations"]
     assert 2 * res.trace["refine_steps"].sum() < off.trace["refine_steps"].sum()
     if name.startswith("Lattice"):
-        assert res.extras["extended_from"] == [None] and off.extras["extended_from"] != [None]
+        assert res.extras["longdouble_from"] == [None] and off.extras["longdouble_from"] != [None]
 
 
 @pytest.mark.parametrize("option, bad", [("sigma_rule", "mehrotra"), ("sigma_rule", "cubic"), ("start", "origin")])
@@ -652,15 +652,15 @@ def test_a_float64_solve_short_only_in_negligible_blocks_keeps_float64(monkeypat
     monkeypatch.setattr(ipm, "TOL_MARGIN", 0.0)
     old = solve(chute, method="jqinv", tol=1e-8)
     assert res.success and old.success and res.criterion <= 1e-8
-    assert res.extras["extended_from"] == [None] and old.extras["extended_from"] != [None]
+    assert res.extras["longdouble_from"] == [None] and old.extras["longdouble_from"] != [None]
     assert res.nit == old.nit
     # the same answer in its unique parts: r is not unique on this chute (its two runs, both
     # Solved at 1e-8, differ by 4e-8 in r with numpy 2.4.6, by 1e-13 in v and Hr)
     assert np.max(np.abs(res.v - old.v)) <= 1e-10 * np.max(np.abs(old.v))
     Hr, Hr_old = chute.H @ res.r, chute.H @ old.r
     assert np.max(np.abs(Hr - Hr_old)) <= 1e-10 * np.max(np.abs(Hr_old))
-    (k,) = lat.extras["extended_from"]
-    assert lat.success and k is not None and lat.trace["criterion"][k] > lat.settings.extended_below
+    (k,) = lat.extras["longdouble_from"]
+    assert lat.success and k is not None and lat.trace["criterion"][k] > lat.settings.longdouble_below
 
 
 def test_adequate_solve_rule():
@@ -753,3 +753,24 @@ def test_schur_takes_the_path_of_form_16(problem, schur_engine):
     assert abs(res.nit - ref.nit) <= 1
     scale = max(np.abs(ref.v).max(), 1e-300)
     assert np.abs(res.v - ref.v).max() <= 1e-6 * scale
+
+
+def test_the_former_names_of_the_longdouble_settings_still_work():
+    """Issue 50 renamed Settings.extended_* (longdouble, not the double-double phase) to
+    longdouble_*; the former names are public API: accepted with a DeprecationWarning, readable,
+    and the same run."""
+    from rfverify import Settings
+    from rfverify.solver.result import RENAMED_SETTINGS
+
+    problem = rfverify.load("bundled:sphere")
+    new = solve(problem, method="jqinv", longdouble_below=None)
+    with pytest.warns(DeprecationWarning, match="now called 'longdouble_below'"):
+        old = solve(problem, method="jqinv", extended_below=None)
+    assert np.array_equal(old.v, new.v) and np.array_equal(old.r, new.r) and old.nit == new.nit
+    assert old.extras["extended_from"] == old.extras["longdouble_from"] == [0]
+    with pytest.warns(DeprecationWarning):
+        s = Settings(extended_jordan=False, refine_extended=False)
+    assert not s.longdouble_jordan and not s.extended_jordan and not s.refine_longdouble
+    assert set(RENAMED_SETTINGS.values()) <= set(Settings.names())
+    with pytest.raises(TypeError, match="given twice"):
+        Settings(extended_below=None, longdouble_below=1e-9)

@@ -21,7 +21,7 @@ from rfverify.proof.bound import prove
 from rfverify.proof.freeblocks import FreeBlocks
 from rfverify.proof.massbounds import solve_upper, verified_left_inverses
 
-from exact_problems import exact_problem
+from exact_problems import exact_problem, solve_rational
 
 
 def _true_errors(answer, v, u, r, H):
@@ -115,24 +115,10 @@ def test_the_verified_inverse_bounds_the_exact_solve(seed, s, skew):
         return
     Af = [[Fraction(x) for x in row] for row in A]
     for corner in (g_mid - g_rad, g_mid + g_rad, g_mid):
-        exact = _solve_exact(Af, [Fraction(x) for x in corner])
+        exact = solve_rational(Af, [Fraction(x) for x in corner])
         assert all(abs(x) <= Fraction(b) for x, b in zip(exact, bound))
     # and not wildly loose: within 1% of the exact solve at the midpoint (plus the interval)
-    exact = _solve_exact(Af, [Fraction(x) for x in g_mid])
+    exact = solve_rational(Af, [Fraction(x) for x in g_mid])
     assert np.all(bound <= 1.01 * np.abs(np.array([float(x) for x in exact])) + 1e-6 * np.max(bound))
 
 
-def _solve_exact(A, b):
-    """Gaussian elimination in rationals."""
-    n = len(b)
-    M = [row[:] + [b[i]] for i, row in enumerate(A)]
-    for k in range(n):
-        piv = next(i for i in range(k, n) if M[i][k] != 0)
-        M[k], M[piv] = M[piv], M[k]
-        for i in range(k + 1, n):
-            f = M[i][k] / M[k][k]
-            M[i] = [a - f * c for a, c in zip(M[i], M[k])]
-    x = [Fraction(0)] * n
-    for i in reversed(range(n)):
-        x[i] = (M[i][n] - sum(M[i][j] * x[j] for j in range(i + 1, n))) / M[i][i]
-    return x

@@ -356,3 +356,20 @@ def test_a_local_file_with_an_unsymmetric_W_states_the_stored_equations_digits()
     assert "also proven to 10 digits for W as stored" in cert.verdict
     # the stored equations' solution is not the symmetrised one: that claim fails
     assert not cert.certified
+
+
+@pytest.mark.parametrize("case", [0, 1])  # scaled 2^700, 2^-700
+def test_answers_found_in_scaled_units_come_back_in_the_problems_units(case):
+    """Every entry point works on such data in exactly scaled units (model.scaling.in_scaled_units)
+    and returns its answer in the problem's own: close to the exact solution, not off by a power
+    of two (a wrong exponent on the way back is caught here)."""
+    from rfverify.model.scaling import binary_scaling
+
+    name, problem, exact = _extreme_cases()[case]
+    assert binary_scaling(problem) is not None, name  # the case really takes the scaled path
+    assert rfverify.certify(problem, *exact, digits=8).success, name
+    for out in (rfverify.solve(problem), rfverify.solve_to_digits(problem, digits=8)):
+        assert out.success, (name, out.message)
+        for q, x, want in zip("vur", (out.v, out.u, out.r), exact):
+            if np.any(want):
+                assert np.max(np.abs(x - want)) <= 1e-3 * np.max(np.abs(want)), (name, type(out).__name__, q)

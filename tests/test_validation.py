@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 from rfverify.errors import InvalidProblemError
 from rfverify.io.fclib import read_fclib, write_fclib
-from rfverify.problem import DEFAULT_MAX_ASYMMETRY, Problem, StoredSolution
+from rfverify.model.problem import DEFAULT_MAX_ASYMMETRY, Problem, StoredSolution
 
 try:
     from strategies import build_problem, from_arrays_kwargs, problem_arrays, problems

@@ -16,12 +16,15 @@ from hypothesis import strategies as st
 import rfverify
 import rfverify.io.certificate
 from reference import jordan as RJ
-from rfverify import digits as D
+from rfverify.verify import digits as D
+from rfverify.verify import driver as DR
+from rfverify.verify import extend as E
+from rfverify.verify import prepare as P
 from rfverify.extended import wide, wide_data, wide_factor
 from rfverify.extended.wide_cholesky import DenseWideCholesky
 from rfverify.extended.data import ExtendedData
 from rfverify.jordan import mpfr as JM
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 from rfverify.scenes import generate
 
 BITS = wide.DEFAULT_BITS
@@ -305,8 +308,8 @@ def test_handover_skips_iterates_outside_the_cones(lattice):
     problem, _ = lattice
     out = rfverify.solve_to_digits(problem, digits=10, wide_tail=False)
     data = ExtendedData(problem)
-    driver = D.ProofDriver(D.ProofContext(problem), data, 10)
-    D.extend(data, D._start_from(data, out.double), driver, D.choose_backend(data), wide_tail=False)
+    driver = DR.ProofDriver(P.ProofContext(problem), data, 10)
+    E.extend(data, P.start_from(data, out.double), driver, P.choose_backend(data), wide_tail=False)
     good = wide.handover(data, driver.recent)
     assert good is not None
     broken = driver.recent[-1]
@@ -324,7 +327,7 @@ def test_help_states_the_tails_limits(capsys):
         main(["solve", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert f"{wide.DEFAULT_BITS}-bit" in text
-    assert f"at most {D.WIDE_MAX_FACTOR_OPS:.0e}".replace("e+0", "e") in text
+    assert f"at most {E.WIDE_MAX_FACTOR_OPS:.0e}".replace("e+0", "e") in text
 
 
 def test_the_tail_gives_up_where_no_point_can_be_proven(monkeypatch):
@@ -339,8 +342,8 @@ def test_the_tail_gives_up_where_no_point_can_be_proven(monkeypatch):
     problem = rfverify.load(Path(__file__).parent / "data" / "hard" / "Chute-ndof-24-nc-4-0.hdf5")
     out = rfverify.solve_to_digits(problem, digits=10)
     assert not out.success and not out.certificate.proof.valid
-    assert out.wide is not None and out.wide.nit < D.WIDE_GIVE_UP + 2
-    assert f"{D.WIDE_GIVE_UP} proofs in a row were invalid" in out.certificate.extra["wide_tail"]
+    assert out.wide is not None and out.wide.nit < E.WIDE_GIVE_UP + 2
+    assert f"{E.WIDE_GIVE_UP} proofs in a row were invalid" in out.certificate.extra["wide_tail"]
     assert "no self-stress" in out.message  # the verdict says what was looked for
 
 
@@ -370,8 +373,8 @@ def test_certify_without_a_stored_point_goes_on_to_the_tail(lattice):
 def test_the_tail_is_skipped_when_its_factor_would_be_too_costly(lattice, monkeypatch):
     problem, _ = lattice
     _, ops = wide_factor.dof_space_ordering(ExtendedData(problem))
-    assert 0 < ops < D.WIDE_MAX_FACTOR_OPS
-    monkeypatch.setattr(D, "WIDE_MAX_FACTOR_OPS", ops / 2)
+    assert 0 < ops < E.WIDE_MAX_FACTOR_OPS
+    monkeypatch.setattr(E, "WIDE_MAX_FACTOR_OPS", ops / 2)
     out = rfverify.solve_to_digits(problem, digits=10)
     assert not out.success and out.wide is None and "multiply-subtract pairs" in out.certificate.extra["wide_tail"]
 

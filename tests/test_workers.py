@@ -18,7 +18,7 @@ from rfverify.extended import cones as C
 from rfverify.extended import contactspace as CS
 from rfverify.extended import data as D
 from rfverify.extended import workers as W
-from rfverify.random_problems import random_problem
+from rfverify.scenes.random_problems import random_problem
 
 
 def _force_split(monkeypatch, parts: int):

@@ -129,3 +129,42 @@ class Policy(Protocol):
 
     def breakdown(self, message: str):
         """The verdict of a :class:`Breakdown` (message already prefixed)."""
+
+    def interrupted(self, k: int):
+        """Ctrl-C during iteration k: a verdict that returns the best iterate so far, or None (this
+        default) to let the KeyboardInterrupt go on to the caller."""
+        return None
+
+
+class ReducedBackend(Protocol):
+    """What :class:`.newton.ReducedNewton` solves with: the reduced system
+
+        M dv − H̃ᵀ dr̃ = a,   H̃ dv + G dr̃ = t,   G = J Q_{p⁻²} Jᵀ,
+
+    in a precision's vectors.  A back end subclasses this protocol and so has its default hooks:
+    :meth:`observe` does nothing, :meth:`retry_solve` has nothing more accurate to try, and
+    ``projects_primal`` is False (no :meth:`apply_G_inverse`: the reduced solve's primal residual
+    is not projected away)."""
+
+    name: str
+    projects_primal: bool = False
+
+    def update(self, scaling: Scaling) -> bool:
+        """Factor at the scaling; False when the matrix is not positive definite."""
+
+    def solve(self, a, t) -> tuple:
+        """(dv, dr̃) of the reduced system."""
+
+    def observe(self, k: int, mu: float, solve_residual: float | None) -> None:
+        """Once per iteration, before :meth:`update`, with the largest relative residual of the
+        previous iteration's solves (None at the first)."""
+        return None
+
+    def retry_solve(self, residual: float) -> bool:
+        """Asked after a solve whose refinement stalled at ``residual``: True when the back end
+        has made its solves more accurate (the system is then solved again)."""
+        return False
+
+    def apply_G_inverse(self, e):
+        """G⁻¹e at the current scaling; called only where ``projects_primal`` is True."""
+        raise NotImplementedError("this back end does not project the primal residual (projects_primal is False)")

@@ -126,9 +126,9 @@ def iterate(precision: Precision, policy, start: tuple, *, n_contacts: int, n_co
         verdict = policy.breakdown(f"iteration {k}: {exc}")
     except KeyboardInterrupt:
         # Ctrl-C: a policy that can return its best iterate does (and says so); else it propagates.
-        if not hasattr(policy, "interrupted"):
-            raise
         verdict = policy.interrupted(k)
+        if verdict is None:
+            raise
     except Exception as exc:  # a precision's own domain error (e.g. ConeDomainError), if it names one
         message = precision.explain(exc)
         if message is None:

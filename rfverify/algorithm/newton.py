@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from .interfaces import Breakdown, Direction
+from .interfaces import Breakdown, Direction, ReducedBackend
 from .rules import refined_newton
 
 NEWTON_ENOUGH = 1e-8
@@ -27,13 +27,14 @@ class ReducedNewton:
 
         M dv − H̃ᵀ dr̃ = a,   H̃ dv + G dr̃ = t,   G = J Q_{p⁻²} Jᵀ
 
-    (``backend.update(scaling) -> bool``, ``backend.solve(a, t) -> (dv, dr)`` in the space's
-    vectors, ``backend.name``; optionally ``backend.observe(k, mu, last_residual)`` before each
-    update, and ``backend.retry_solve(residual) -> bool``, asked after a solve whose refinement
+    (a :class:`~.interfaces.ReducedBackend`: ``update(scaling) -> bool``, ``solve(a, t) -> (dv, dr)``
+    in the space's vectors, ``name``; its hooks ``observe(k, mu, last_residual)`` before each
+    update, and ``retry_solve(residual) -> bool``, asked after a solve whose refinement
     stalled above ``floor`` short of ``enough``: True when the back end has made its solves more
-    accurate, and the system is solved again; and ``backend.apply_G_inverse(e) -> G⁻¹e``, with
-    which each reduced solve's primal residual is projected away, :meth:`_project_primal` — the
-    double-double back ends have it, the multiple-precision tail's does not).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
+    accurate, and the system is solved again; and where ``projects_primal``,
+    ``apply_G_inverse(e) -> G⁻¹e``, with which each reduced solve's primal residual is projected
+    away, :meth:`_project_primal` — the double-double back ends do, the multiple-precision tail's
+    does not).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
     dz = Q_{p⁻¹}(c − Q_{p⁻¹} Jᵀ dr̃), and the primal row H̃ dv − J dz = b then reads
     H̃ dv + G dr̃ = t with t = b + J Q_{p⁻¹} c.  ``scaling.quad(k, y)`` applies Q_{p^k}.
     Refinement: at most ``refine_max`` steps, down to the relative residual ``floor`` (about the
@@ -42,7 +43,7 @@ class ReducedNewton:
     ``predictor_enough`` where given (its direction only sets σ and the corrector's second-order
     term)."""
 
-    def __init__(self, space, backend, *, refine_max: int, floor: float, inf, enough: float | None = None,
+    def __init__(self, space, backend: ReducedBackend, *, refine_max: int, floor: float, inf, enough: float | None = None,
                  predictor_enough: float | None = None):
         self.space = space
         self.backend = backend
@@ -59,8 +60,7 @@ class ReducedNewton:
         self.projections = 0  # statistics: primal residuals projected away (_project_primal)
 
     def update(self, scaling, k: int, mu: float) -> None:
-        if hasattr(self.backend, "observe"):
-            self.backend.observe(k, mu, self._last_residual)
+        self.backend.observe(k, mu, self._last_residual)
         self.scaling = scaling
         try:
             ok = self.backend.update(scaling)
@@ -74,7 +74,7 @@ class ReducedNewton:
         sp, q = self.space, self.scaling.quad
         dv, dr = self.backend.solve(a, b + sp.J @ q(-1, c))
         dz = q(-1, c - q(-1, sp.JT @ dr))
-        if hasattr(self.backend, "apply_G_inverse"):
+        if self.backend.projects_primal:
             dz = self._project_primal(b, c, dv, dr, dz)
         return dv, dr, dz
 
@@ -111,8 +111,7 @@ class ReducedNewton:
     def solve(self, a, b, c, phase: str) -> Direction:
         enough = self.predictor_enough if phase == "predictor" else self.enough
         dv, dr, dz, steps, res, settled = self._refined(a, b, c, enough)
-        retry = getattr(self.backend, "retry_solve", None)
-        if not settled and retry is not None and retry(res):
+        if not settled and self.backend.retry_solve(res):
             # the back end made its solves more accurate: solve this system again
             dv, dr, dz, more, res, settled = self._refined(a, b, c, enough)
             steps += more

@@ -4,9 +4,10 @@ of their results."""
 from __future__ import annotations
 
 from . import rules
+from .interfaces import Policy
 
 
-class UntilPolicy:
+class UntilPolicy(Policy):
     """The extended phases' policy: stop when ``until(iterate)`` accepts an iterate (status
     "Stopped") or at ``max_iter``; the paper's σ rule; γ = min(γ_max, 0.9 + (γ_max − 0.9)α)."""
 

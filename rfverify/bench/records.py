@@ -58,7 +58,7 @@ from typing import Callable
 
 from ..errors import BenchInputError
 from ..io.output import dumps
-from ..measures import CRITERION
+from ..model.measures import CRITERION
 
 FORMAT_VERSION = 2
 """Version of the record layout, written as ``"schema"``.  2: strict JSON (null for non-finite

@@ -8,7 +8,7 @@ Task kinds
                 iterate (mapped back to the original variables) is rechecked, giving the
                 verified error against elapsed time (work–precision data) and how far double
                 precision gets.
-``digits``      the mixed-precision path (:func:`rfverify.digits.solve_to_digits`, timed in
+``digits``      the mixed-precision path (:func:`rfverify.verify.digits.solve_to_digits`, timed in
                 its parts) and its certificate; its proven extended-precision point is saved
                 (every float64 term) and serves as the problem's reference: the report proves
                 every other saved answer's digits at it (:mod:`rfverify.report.proven`).
@@ -181,7 +181,7 @@ def _min_lam2(trace) -> float | None:
 
 
 def _trajectory(problem, task, npz_path) -> dict:
-    from ..lifting import lift
+    from ..model.lifting import lift
     from ..solver import kernels, solve
 
     kernels.warm_up()  # as in _solve
@@ -223,7 +223,7 @@ def _finite(x):
 
 
 def _digits(problem, task, npz_path) -> dict:
-    from ..digits import solve_to_digits
+    from ..verify.digits import solve_to_digits
 
     digits = int(task["digits"])
     t0 = time.perf_counter()

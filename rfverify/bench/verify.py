@@ -1,7 +1,7 @@
 """High-precision recheck of a candidate (v, u, r): the bench counts a run as solved only on
 this verdict, never on the solver's word.
 
-The measures are rfverify's one definition (:mod:`rfverify.measures`: dynamics, velocity,
+The measures are rfverify's one definition (:mod:`rfverify.model.measures`: dynamics, velocity,
 cone, complementarity, with scales that do not vanish at a correct solution), evaluated in
 mpmath at ``dps`` digits from the exact double data, so no solver arithmetic and no
 longdouble rounding enters the verdict.  ``max`` is the criterion: a run meets ``tol`` when
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..measures import CRITERION, MeasureData
-from ..problem import SPACEDIM, Problem
+from ..model.measures import CRITERION, MeasureData
+from ..model.problem import SPACEDIM, Problem
 
 MEASURES = CRITERION
 
@@ -47,7 +47,7 @@ def verified_criterion(problem: Problem, v, u, r, dps: int = 30) -> dict:
 
 def forward_digits(x, x_ref, *scale_terms) -> float:
     """Correct significant digits of ``x`` against ``x_ref``: −log10(‖x − x_ref‖∞ / scale),
-    scale = max(‖x_ref‖∞, ‖terms‖∞) (see :mod:`rfverify.certification` for why u and Hr need
+    scale = max(‖x_ref‖∞, ‖terms‖∞) (see :mod:`rfverify.verify.certification` for why u and Hr need
     the terms they are computed from).  inf when identical, 0 when no digit is right."""
     x = np.asarray(x, dtype=np.float64)
     x_ref = np.asarray(x_ref, dtype=np.float64)

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from .argtypes import digit_count, out_path, positive_float, positive_int
-from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_equations_option,
-                     add_load_options, dumps, is_hdf5_input,
-                     load_problem, print_quantities, progress_printer)
+from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, dumps, end_problem_command, exit_codes,
+                     is_hdf5_input, load_problem, print_quantities, progress_printer)
 
 HELP = "prove how many digits of a solution are right (a rigorous error bound)"
 
@@ -51,9 +50,7 @@ def add_parser(sub) -> None:
     cert.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
                       help="stop the search for a proof point after S seconds and report the best proof "
                            "reached (status MaxTime when short of --digits, exit 1)")
-    add_equations_option(cert)
-    add_load_options(cert)
-    cert.set_defaults(func=cmd_certify, check_outputs=check_outputs)
+    end_problem_command(cert, cmd_certify, check_outputs)
 
 
 def check_outputs(args) -> None:
@@ -65,11 +62,11 @@ def check_outputs(args) -> None:
 
 
 def cmd_certify(args) -> int:
-    from ..certification import certify
     from ..compilation import announcing
     from ..errors import ProblemFileError
     from ..io import load
     from ..io.certificate import read_point, read_stored_certificate
+    from ..verify.certification import certify
 
     problem = load_problem(args)
     point = stored = None
@@ -155,7 +152,7 @@ def _stored_certificate_note(stored: dict | None, where, problem) -> str:
 
 def _velocity(problem, sol):
     """u of a stored (v, r) when the file has none: W r + q (local problem) or Hᵀv + w."""
-    from ..certification import local_velocity
+    from ..verify.certification import local_velocity
 
     return local_velocity(problem, sol.r) if problem.local is not None else problem.H.T @ sol.v + problem.w
 
@@ -185,7 +182,7 @@ def _write_certificate(args, problem, sol, u, cert):
     from ..io import save
     from ..io.certificate import write_certificate
     from ..io.output import check_output_file
-    from ..problem import StoredSolution
+    from ..model.problem import StoredSolution
 
     target = getattr(args, "out_target", None) or check_output_file(args.out, inputs=[args.problem, args.solution])
     save(problem.with_solution(StoredSolution(v=sol.v, u=u, r=sol.r)), target,

@@ -61,11 +61,28 @@ def add_equations_option(p: argparse.ArgumentParser):
     p.add_argument("--as-stored", action="store_true", help=AS_STORED_HELP)
 
 
+def add_run_limits(p: argparse.ArgumentParser, *, tol_help: str, max_iter_help: str) -> None:
+    """``--tol T`` and ``--max-iter K`` of a command that runs Algorithm 1 (solve, diagnose); the
+    help says what they bound there."""
+    from .argtypes import positive_int, tolerance
+
+    p.add_argument("--tol", type=tolerance, default=1e-10, metavar="T", help=tol_help)
+    p.add_argument("--max-iter", type=positive_int, default=100, metavar="K", help=max_iter_help)
+
+
+def end_problem_command(p: argparse.ArgumentParser, func, check_outputs) -> None:
+    """What a command that poses a problem's equations ends with (solve, certify): ``--as-stored``,
+    the load options, and the functions that check its outputs and run it."""
+    add_equations_option(p)
+    add_load_options(p)
+    p.set_defaults(func=func, check_outputs=check_outputs)
+
+
 def load_problem(args):
     """The PROBLEM argument loaded with the load options, posing the equations ``--as-stored``
     asks for (where the command has that option)."""
     from ..io import load
-    from ..problem import DEFAULT_MAX_ASYMMETRY
+    from ..model.problem import DEFAULT_MAX_ASYMMETRY
 
     limit = DEFAULT_MAX_ASYMMETRY if args.max_asymmetry is None else args.max_asymmetry
     problem = load(args.problem, max_asymmetry=limit)

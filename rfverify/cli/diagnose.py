@@ -6,8 +6,8 @@ from __future__ import annotations
 import math
 
 from ..solver.result import ALGORITHM1_METHODS
-from .argtypes import nonneg_float, out_path, positive_float, positive_int, tolerance
-from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, dumps, load_problem,
+from .argtypes import nonneg_float, out_path, positive_float, positive_int
+from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, add_run_limits, dumps, load_problem,
                      print_warnings, progress_printer, recorded_warnings, warning_summary)
 
 HELP = "why a run stalled: the same algorithm in exact arithmetic, and a remedy it has tried"
@@ -37,7 +37,7 @@ first whose answer meets --tol is printed with its figures.
 The first line states the cause and the remedy. The run diagnosed is --method as 'rfverify
 solve' runs it; the lockstep's run is the same form as one system (no split into independent
 components), every linear solve refined to 4*eps (solver setting refine_tol=None) and the
-extended arithmetic from the first iteration (extended_below=None), so that the digits measure
+longdouble arithmetic from the first iteration (longdouble_below=None), so that the digits measure
 the rounding of one arithmetic. Where that run meets --tol and the plain one does not, the cause
 is the precision of the default linear solves."""
 
@@ -46,22 +46,21 @@ Exit codes: 0 the double run was Solved; 1 it was not (MaxIterations, NumericalE
 the diagnosis is printed either way; 2 bad input or option; 3 internal error."""
 
 
+PLOT_HELP = ("write the figure (PNG): digits of agreement with the threshold, cond(Q_p), λ2 of z and Jᵀr̃ in double "
+             "and exactly, and the criterion of the run beside the exact continuation, per iteration, the departure "
+             "marked")
+
 def add_parser(sub) -> None:
     """The ``diagnose`` subcommand."""
     diag = sub.add_parser("diagnose", help=HELP, description=DESCRIPTION, epilog=EPILOG)
     diag.add_argument("problem", metavar="PROBLEM", help=PROBLEM_HELP)
     diag.add_argument("--method", choices=ALGORITHM1_METHODS, default="jqinv",
                       help="linear-system form of the double run (default: %(default)s)")
-    diag.add_argument("--tol", type=tolerance, default=1e-10, metavar="T",
-                      help="tolerance of the double run; set it below what double precision "
-                           "reaches (e.g. 1e-25) to watch it fail (default: %(default)g)")
-    diag.add_argument("--max-iter", type=positive_int, default=100, metavar="K",
-                      help="iteration limit of the double run, and of the exact continuation for the "
-                           "cause 'precision' (default: %(default)s)")
-    diag.add_argument("--plot", type=out_path, default=None, metavar="FILE",
-                      help="write the figure (PNG): digits of agreement with the threshold, cond(Q_p), λ2 of z "
-                           "and Jᵀr̃ in double and exactly, and the criterion of the run beside the exact "
-                           "continuation, per iteration, the departure marked")
+    add_run_limits(diag, tol_help="tolerance of the double run; set it below what double precision reaches (e.g. "
+                                  "1e-25) to watch it fail (default: %(default)g)",
+                   max_iter_help="iteration limit of the double run, and of the exact continuation for the cause "
+                                 "'precision' (default: %(default)s)")
+    diag.add_argument("--plot", type=out_path, default=None, metavar="FILE", help=PLOT_HELP)
     diag.add_argument("--dps", type=positive_int, default=40, metavar="D",
                       help="digits of the mpmath witness (default: %(default)s)")
     diag.add_argument("--witness-time", type=nonneg_float, default=None, metavar="S",
@@ -98,7 +97,7 @@ def _d(x) -> str:
 
 def cmd_diagnose(args) -> int:
     from ..compilation import announcing
-    from ..diagnosis import WITNESS_SECONDS, diagnose
+    from ..verify.diagnosis import WITNESS_SECONDS, diagnose
 
     problem = load_problem(args)
     with recorded_warnings() as caught:

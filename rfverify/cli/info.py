@@ -34,7 +34,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_info(args) -> int:
-    from ..summary import format_summary, problem_summary
+    from ..model.summary import format_summary, problem_summary
 
     problem = load_problem(args)
     with recorded_warnings() as caught:

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS, PEER_METHODS
-from .argtypes import digit_count, out_path, positive_float, positive_int, tolerance
-from .common import (DOCS_NOTE, PROGRESS_AFTER, PROGRESS_AFTER_ENV, exit_codes, EXIT_NOT_SOLVED, EXIT_OK,
-                     PROBLEM_HELP, IterationProgress, add_equations_option, add_load_options, dumps,
-                     is_hdf5_input, load_problem, print_quantities, print_warnings, progress_after,
-                     progress_printer, recorded_warnings, warning_summary)
+from .argtypes import digit_count, out_path, positive_float
+from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, PROGRESS_AFTER, PROGRESS_AFTER_ENV,
+                     IterationProgress, add_run_limits, dumps, end_problem_command, exit_codes, is_hdf5_input,
+                     load_problem, print_quantities, print_warnings, progress_after, progress_printer,
+                     recorded_warnings, warning_summary)
 
 HELP = "solve a problem with Algorithm 1 (or the Clarabel peer)"
 
@@ -46,11 +46,8 @@ def add_parser(sub) -> None:
                           "Siconos's GRFC3D_IPM, the paper's own solver, in a child process (needs a build: "
                           "bash benchmarks/peers/siconos/build.sh, then RFVERIFY_SICONOS=<its prefix>) "
                           "(default: %(default)s)")
-    sol.add_argument("--tol", type=tolerance, default=1e-10, metavar="T",
-                     help="stop when the criterion of DESIGN §4.5 is <= T (default: "
-                          "%(default)g)")
-    sol.add_argument("--max-iter", type=positive_int, default=100, metavar="K",
-                     help="iteration limit (default: %(default)s)")
+    add_run_limits(sol, tol_help="stop when the criterion of DESIGN §4.5 is <= T (default: %(default)g)",
+                   max_iter_help="iteration limit (default: %(default)s)")
     sol.add_argument("--out", metavar="SOL.h5", type=out_path,
                      help="write the problem data plus /solution/{v,u,r} (FCLIB layout) here, in "
                           "the input's own layout (3-D /fclib_global: 3 per contact; /fclib_local: "
@@ -90,9 +87,7 @@ def add_parser(sub) -> None:
     sol.add_argument("--no-presolve", action="store_true",
                      help="switch off the presolve reductions (cone reduction for mu = 0 / "
                           "mu_r = 0 requires them; such problems are refused)")
-    add_equations_option(sol)
-    add_load_options(sol)
-    sol.set_defaults(func=cmd_solve, check_outputs=check_outputs)
+    end_problem_command(sol, cmd_solve, check_outputs)
 
 
 def check_outputs(args) -> None:
@@ -173,7 +168,7 @@ def cmd_solve(args) -> int:
         m = result.measures
         if m is not None:
             print(f"criterion {m.max:.2e} (dynamics {m.dynamics:.1e}, velocity {m.velocity:.1e}, cone "
-                  f"{m.cone:.1e}, complementarity {m.complementarity:.1e}; rfverify.measures)")
+                  f"{m.cone:.1e}, complementarity {m.complementarity:.1e}; rfverify.model.measures)")
         compiled = result.timings.get("compile", 0.0)
         compiled = f" (compiling kernels {compiled:.2f} s)" if compiled >= 0.005 else ""
         print(f"iterations {result.nit}, time {wall:.3f} s{compiled}; the paper's measures: pinfeas "
@@ -246,7 +241,7 @@ def _solve_digits(args, problem, options, say, after, t_start) -> int:
     import time
 
     from ..compilation import announcing
-    from ..digits import solve_to_digits
+    from ..verify.digits import solve_to_digits
 
     t0 = time.perf_counter()
     callback = None if say is None or args.method in PEER_METHODS else IterationProgress(say, after, t_start)
@@ -306,7 +301,7 @@ def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
     .hdf5 file itself when --out names it (everything else in that file is kept)."""
     from ..io import save, write_solution_in_place
     from ..io.output import check_output_file
-    from ..problem import StoredSolution
+    from ..model.problem import StoredSolution
 
     target = getattr(args, "out_target", None) or check_output_file(
         args.out, inputs=[args.problem], in_place_ok=is_hdf5_input(args.problem))

@@ -249,6 +249,17 @@ def block_apply_threaded(n, row_start, row_count, Fh, Fl, transpose, xh, xl, oh,
     split(n, run, min_items=8192)  # 0.2 µs a contact
 
 
+def applied_blocks(data, Bh, Bl, transpose: bool, xh, xl, *, threaded: bool = False) -> tuple:
+    """(hi, lo) of the per-contact blocks ``B`` (G⁻¹, or the factor F⁻¹; ``transpose``: Bᵀ) applied
+    to the double-double vector x over ``data``'s kept rows: the one product both Newton-system
+    back ends make (:meth:`.dofspace.DofSpace.apply_G_inverse`, :class:`.contactspace.ContactSpace`'s
+    F⁻¹ and F⁻ᵀ), ``threaded`` over the CPUs (bit for bit the one-call result)."""
+    oh, ol = np.empty(data.nk), np.empty(data.nk)
+    (block_apply_threaded if threaded else block_apply)(data.n, data.row_start, data.row_count, Bh, Bl, transpose,
+                                                        np.ascontiguousarray(xh), np.ascontiguousarray(xl), oh, ol)
+    return oh, ol
+
+
 def contact_factor_inverse_threaded(n, kinds, fric, roll, normal, spec, Fh, Fl) -> int:
     """:func:`contact_factor_inverse` over the threads: the first contact whose factor is
     singular, or -1."""

@@ -13,11 +13,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import dd
-from .blocks import block_apply_threaded, contact_factor_inverse_threaded, scatter_add
+from .blocks import applied_blocks, contact_factor_inverse_threaded, scatter_add
 from .data import ExtendedData
 from .factored import FactoredBackend
 from .ldl import DDCholesky
-from ..solver.engines import cholmod_available, cholmod_missing_message
+from ..engines.factor import cholmod_available, cholmod_missing_message
 from .mixed import CholmodMixed, MixedCholesky
 from .workers import split
 
@@ -293,7 +293,7 @@ class ContactSpace(FactoredBackend):
 
     def describe_cost(self) -> str:
         """The factorisations that ran and their cost (:meth:`.mixed._RefinedFloat64Factor.describe_cost`)."""
-        if hasattr(self.chol, "describe_cost"):
+        if isinstance(self.chol, (CholmodMixed, MixedCholesky)):
             return self.chol.describe_cost()
         return super().describe_cost()
 
@@ -446,13 +446,12 @@ class ContactSpace(FactoredBackend):
     def prepare(self) -> None:
         """What the first :meth:`update` does that needs no iterate — M factored in
         double-double, W̃ = H̃M⁻¹H̃ᵀ, the float64 engine's symbolic analysis — done ahead (the
-        k-digit path runs it beside the double solve, :mod:`rfverify.digits`).  Optional: an
+        k-digit path runs it beside the double solve, :mod:`rfverify.verify.digits`).  Optional: an
         update does whatever is still missing, and where M fails here it stops (no W̃), so that
         the update meets the failure again and reports it where it always did."""
         if not self._ensure_W():
             return
-        if hasattr(self.chol, "prepare"):
-            self.chol.prepare()
+        self.chol.prepare()
 
     def _ensure_W(self) -> bool:
         """M factored in double-double and W̃ built, once; False when M is not positive
@@ -484,11 +483,7 @@ class ContactSpace(FactoredBackend):
 
     def _F_inverse(self, xh, xl, transpose: bool):
         """F⁻¹x, or F⁻ᵀx with ``transpose`` (double-double (hi, lo), kept rows)."""
-        d = self.data
-        oh, ol = np.empty(d.nk), np.empty(d.nk)
-        block_apply_threaded(d.n, d.row_start, d.row_count, self.Fh, self.Fl, transpose, np.ascontiguousarray(xh),
-                             np.ascontiguousarray(xl), oh, ol)
-        return oh, ol
+        return applied_blocks(self.data, self.Fh, self.Fl, transpose, xh, xl, threaded=True)
 
     def apply_G_inverse(self, eh, el):
         """G⁻¹ e = F⁻ᵀ F⁻¹ e (double-double (hi, lo), kept rows) at the current scaling: for the

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from ..lifting import lift
-from ..problem import SPACEDIM, Problem
+from ..model.lifting import lift
+from ..model.problem import SPACEDIM, Problem
 from . import dd
 from .workers import split
 

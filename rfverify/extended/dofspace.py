@@ -8,7 +8,7 @@ import numba
 import numpy as np
 
 from . import dd
-from .blocks import block_apply, contact_Ginv, scatter_add, small_product
+from .blocks import applied_blocks, block_apply, contact_Ginv, scatter_add, small_product
 from .data import ExtendedData, contact_dof_pattern, contact_local_H
 from .factored import FactoredBackend
 from .ldl import DDCholesky
@@ -88,11 +88,7 @@ class DofSpace(FactoredBackend):
 
     def apply_G_inverse(self, eh, el):
         """G⁻¹ e (double-double (hi, lo)) from the closed-form blocks of the current scaling."""
-        d = self.data
-        oh, ol = np.empty(d.nk), np.empty(d.nk)
-        block_apply(d.n, d.row_start, d.row_count, self.Gih, self.Gil, False, np.ascontiguousarray(eh),
-                    np.ascontiguousarray(el), oh, ol)
-        return oh, ol
+        return applied_blocks(self.data, self.Gih, self.Gil, False, eh, el)
 
     def solve(self, a, t):
         """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t (local form: (W̃ + G) dr̃ = t)."""

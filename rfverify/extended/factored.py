@@ -1,11 +1,61 @@
-"""What every Newton-system back end that factors one matrix per iteration reports about it."""
+"""The interface of the extended phase's Newton-system back ends (:class:`NewtonBackend`), and
+what every one that factors one matrix per iteration reports about it (:class:`FactoredBackend`)."""
 
 from __future__ import annotations
+
+from typing import Protocol
 
 import numpy as np
 
 
-class FactoredBackend:
+class NewtonBackend(Protocol):
+    """A back end of the double-double phase (:mod:`.system`): it solves
+
+        [ M    −H̃ᵀ ] [dv ]   [a]
+        [ H̃     G  ] [dr̃] = [t],      G = J Q_{p⁻²} Jᵀ,
+
+    with double-double vectors given as (hi, lo) pairs of float64 arrays.  A back end
+    subclasses this protocol and so has its default hooks: :meth:`observe` and :meth:`prepare`
+    do nothing, :meth:`retry_solve` has nothing more accurate to try, :meth:`stats` reports
+    nothing.  :class:`.ipm.DDBackend` shows one to :class:`rfverify.algorithm.newton.ReducedNewton`."""
+
+    name: str
+    factorisations: int
+
+    def update(self, ph, pl, pih, pil, spec) -> bool:
+        """Factor at the NT point p, p⁻¹ and p's spectral data (:func:`.cones.nt_scaling`); False
+        when the matrix is not positive definite or a contact block is singular."""
+
+    def solve(self, a: tuple, t: tuple) -> tuple:
+        """((dv_hi, dv_lo), (dr_hi, dr_lo)) from a, t given as (hi, lo) pairs."""
+
+    def apply_G_inverse(self, eh, el) -> tuple:
+        """G⁻¹e at the current scaling, as a (hi, lo) pair: the Newton driver projects the reduced
+        solve's primal residual away with it."""
+
+    def observe(self, k: int, mu: float, solve_residual: float | None) -> None:
+        """Once per iteration, before the update (the hybrid switches forms here)."""
+        return None
+
+    def retry_solve(self, residual: float) -> bool:
+        """After a Newton solve that refined badly: True when the solves were made more accurate."""
+        return False
+
+    def prepare(self) -> None:
+        """What the first update needs no iterate for, done ahead (the k-digit path runs it beside
+        the double solve)."""
+        return None
+
+    def stats(self) -> dict:
+        """What the factorisation costs (for benchmarks); {} where there is no single factor."""
+        return {}
+
+    def describe_cost(self) -> str:
+        """Which factorisations ran and what they cost, for the time line ("" where not known)."""
+        return ""
+
+
+class FactoredBackend(NewtonBackend):
     """Base of the Newton-system back ends (:mod:`.system`): the cost of the one matrix
     ``self.chol`` a back end factors.  :class:`.system.Hybrid`, which holds two, has no
     ``chol``: its ``flops`` and ``stats`` raise AttributeError."""

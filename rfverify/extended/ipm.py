@@ -27,13 +27,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..algorithm.interfaces import Breakdown
+from ..algorithm.interfaces import Breakdown, ReducedBackend
 from ..algorithm.loop import Precision, iterate
 from ..algorithm.newton import NEWTON_ENOUGH, PREDICTOR_ENOUGH, ReducedNewton
 from ..algorithm.policy import UntilPolicy, extended_trace
 from . import cones as C
 from . import dd
 from .data import ExtendedData
+from .factored import NewtonBackend
 from .system import choose_backend
 
 
@@ -267,17 +268,24 @@ class DDCones:
         return DDScaling(self.n3, self.nz, self.n_cones, self.e, z, s)
 
 
-class DDBackend:
-    """A back end of :mod:`.system` seen through double-double vectors."""
+class DDBackend(ReducedBackend):
+    """A back end of :mod:`.system` (a :class:`.factored.NewtonBackend`) seen through
+    double-double vectors."""
 
-    def __init__(self, backend):
+    projects_primal = True
+
+    def __init__(self, backend: NewtonBackend):
         self.backend = backend
         self.name = backend.name
-        for hook in ("observe", "retry_solve"):
-            if hasattr(backend, hook):
-                setattr(self, hook, getattr(backend, hook))
-        if hasattr(backend, "apply_G_inverse"):
-            self.apply_G_inverse = lambda e: V(*backend.apply_G_inverse(e.h, e.l))
+
+    def observe(self, k: int, mu: float, solve_residual: float | None) -> None:
+        self.backend.observe(k, mu, solve_residual)
+
+    def retry_solve(self, residual: float) -> bool:
+        return self.backend.retry_solve(residual)
+
+    def apply_G_inverse(self, e: V) -> V:
+        return V(*self.backend.apply_G_inverse(e.h, e.l))
 
     def update(self, sc: DDScaling) -> bool:
         return self.backend.update(sc.ph, sc.pl, sc.pih, sc.pil, sc.spec)
@@ -312,14 +320,11 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
     out = iterate(Precision(space, DDCones(data), newton), policy, begin, n_contacts=data.n,
                   n_cones=data.n3 + data.n1, clock_origin=t0)
     status, message = out.verdict
-    cost = backend.describe_cost() if hasattr(backend, "describe_cost") else ""
+    cost = backend.describe_cost()
     return ExtendedResult(*out.iterate, status, message, out.k, extended_trace(out.records), backend.name,
                           time.perf_counter() - t0, out.timings["factor"], _stats(backend), cost)
 
 
 def _stats(backend) -> dict:
     """The back end's factorisation statistics (benchmarks); {} where it has none."""
-    try:
-        return backend.stats() if hasattr(backend, "stats") else {}
-    except AttributeError:  # a back end without a single factor (the hybrid)
-        return {}
+    return backend.stats()

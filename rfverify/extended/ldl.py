@@ -9,8 +9,8 @@ without pivoting is backward stable.
 
 The fill-reducing ordering is scipy's multiple minimum degree on AᵀA + A (SuperLU's
 ``MMD_AT_PLUS_A``), computed once from the pattern.  The float64 factors refined in
-double-double (:mod:`.mixed`) are those of :mod:`rfverify.solver.engines` (QDLDL, CHOLMOD);
-the multiple-precision tail takes the structure of L from :func:`_numeric`
+double-double (:mod:`.mixed`) are those of :mod:`rfverify.engines.factor` (QDLDL, CHOLMOD);
+the multiple-precision tail takes the structure of L from :func:`numeric_ldl`
 (:mod:`.wide_cholesky`).
 """
 
@@ -39,7 +39,7 @@ def fill_reducing_order(pattern: sp.spmatrix) -> np.ndarray:
 # The kernels below take their work arrays from the caller: allocating inside compiled code
 # compiles numba's np.zeros/np.empty/np.full for each dtype and shape kind, time a cold
 # start pays and a warm one does not save (see docs/DECISIONS.md, "Cold start").
-def _symbolic(n, Ap, Ai):
+def symbolic_ldl(n, Ap, Ai):
     """(elimination tree parent, column pointers Lp of L) of the upper-CSC pattern (Ap, Ai)."""
     parent = np.full(n, -1, dtype=np.int64)
     Lp = np.zeros(n + 1, dtype=np.int64)
@@ -64,7 +64,7 @@ def _symbolic_kernel(n, Ap, Ai, parent, flag, lnz, Lp):
         Lp[k + 1] = Lp[k] + lnz[k]
 
 
-def _workspace(n):
+def ldl_workspace(n):
     """flag and pattern for :func:`_row_pattern`; lnz, the entries of each column of L so far."""
     return np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
 
@@ -93,9 +93,9 @@ def _row_pattern(k, Ap, Ai, parent, flag, pattern, n):
 
 
 @numba.njit(cache=True, nogil=True)
-def _numeric(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl, yh, yl, flag, pattern, lnz):
+def numeric_ldl(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl, yh, yl, flag, pattern, lnz):
     """Returns -1 on success, else the index of the first non-positive pivot.  Work arrays:
-    yh, yl zero (n,); flag, pattern, lnz from :func:`_workspace`."""
+    yh, yl zero (n,); flag, pattern, lnz from :func:`ldl_workspace`."""
     for k in range(n):
         for p in range(Ap[k], Ap[k + 1]):
             if Ai[p] <= k:
@@ -194,7 +194,7 @@ class DDCholesky:
         self.iperm[self.perm] = np.arange(n)
         # _keys: col * n + row of each stored upper entry, in permuted coordinates
         self.Ap, self.Ai, self._keys = upper_csc(P[self.perm][:, self.perm])
-        self.parent, self.Lp = _symbolic(n, self.Ap, self.Ai)
+        self.parent, self.Lp = symbolic_ldl(n, self.Ap, self.Ai)
         nnz = int(self.Lp[-1])
         self.Li = np.zeros(nnz, dtype=np.int64)
         self.Lxh = np.zeros(nnz)
@@ -202,6 +202,11 @@ class DDCholesky:
         self.Dh = np.zeros(n)
         self.Dl = np.zeros(n)
         self.factored = False
+
+    def prepare(self) -> None:
+        """Nothing to do ahead: the symbolic analysis is done here, on construction (the float64
+        factors a back end may hold instead, :mod:`.mixed`, have the same hook)."""
+        return None
 
     @property
     def nnz_L(self) -> int:
@@ -219,8 +224,8 @@ class DDCholesky:
 
     def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
         """Numeric factorisation; returns -1 on success, else the first non-positive pivot."""
-        bad = _numeric(self.n, self.Ap, self.Ai, Axh, Axl, self.Lp, self.parent, self.Li, self.Lxh,
-                       self.Lxl, self.Dh, self.Dl, np.zeros(self.n), np.zeros(self.n), *_workspace(self.n))
+        bad = numeric_ldl(self.n, self.Ap, self.Ai, Axh, Axl, self.Lp, self.parent, self.Li, self.Lxh,
+                       self.Lxl, self.Dh, self.Dl, np.zeros(self.n), np.zeros(self.n), *ldl_workspace(self.n))
         self.factored = bad < 0
         return int(bad)
 

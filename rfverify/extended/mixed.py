@@ -4,7 +4,7 @@ A float64 factor of a symmetric positive definite matrix given in double-double 
 "oracle" of an iterative refinement with double-double residuals (as in SoPlex's iterative
 refinement, :func:`refine_in_double_double`): :class:`MixedCholesky` with QDLDL's LDLᵀ,
 :class:`CholmodMixed` with CHOLMOD (cvxopt's wheel, a dependency) — the
-float64 engines of :mod:`rfverify.solver.engines`, the ones the double solver's forms use.
+float64 engines of :mod:`rfverify.engines.factor`, the ones the double solver's forms use.
 Both fall back, for good, to the double-double :class:`.ldl.DDCholesky` where the float64
 factorisation fails or refinement stalls.
 """
@@ -19,8 +19,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import dd
-from ..solver.engines import CholmodEngine, QDLDLEngine
-from .ldl import DDCholesky, _symbolic, symmetric_pattern, upper_csc, upper_positions
+from ..engines.factor import CholmodEngine, QDLDLEngine
+from .ldl import DDCholesky, symbolic_ldl, symmetric_pattern, upper_csc, upper_positions
 
 
 @numba.njit(cache=True, nogil=True)
@@ -389,7 +389,7 @@ class CholmodMixed(_RefinedFloat64Factor):
     def prepare(self) -> None:
         """CHOLMOD's symbolic analysis of the pattern (it needs no values), done before the
         first :meth:`factor` — on another thread while the double solve runs
-        (:mod:`rfverify.digits`)."""
+        (:mod:`rfverify.verify.digits`)."""
         ones = np.ones(self._lower_indices.size)
         self._engine.analyse(sp.csc_matrix((ones, self._lower_indices, self._lower_indptr), shape=(self.n, self.n)))
 
@@ -405,7 +405,7 @@ class CholmodMixed(_RefinedFloat64Factor):
         perm = self._engine.permutation()
         perm = np.arange(self.n) if perm is None else perm
         Ap, Ai, _ = upper_csc(self.pattern[perm][:, perm])
-        return _symbolic(self.n, Ap, Ai)[1]
+        return symbolic_ldl(self.n, Ap, Ai)[1]
 
     @property
     def nnz_L(self) -> int:

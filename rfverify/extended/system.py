@@ -15,14 +15,10 @@ and differs only in what it factors (both are symmetric positive definite):
   local problems).
 * :class:`Hybrid` — the first while it is accurate, then the second.
 
-A back end has ``name`` (str); ``update(ph, pl, pih, pil, spec) -> bool``, which factors at
-the NT point p, p⁻¹ and p's spectral data (:func:`.cones.nt_scaling`) and is False when the
-matrix is not positive definite or a contact block is singular; ``solve(a, t)`` →
-((dv_hi, dv_lo), (dr_hi, dr_lo)), with a, t given as (hi, lo) float64 pairs; ``stats()``
-(:class:`.factored.FactoredBackend`); ``apply_G_inverse(eh, el)`` → G⁻¹e at the current scaling
-(for the Newton driver's projection of the primal residual); the hybrid only, ``observe(k, mu, solve_residual)``,
-once per iteration; and the contact-space forms, ``retry_solve(residual) -> bool``, after a
-Newton solve that refined badly (:class:`.algorithm.newton.ReducedNewton`).
+A back end is a :class:`.factored.NewtonBackend` (a typing.Protocol with default hooks):
+``name``, ``update(ph, pl, pih, pil, spec) -> bool``, ``solve(a, t)``, ``apply_G_inverse(eh, el)``,
+and the hooks the hybrid (``observe``) and the contact-space forms (``retry_solve``,
+``prepare``) fill in; ``stats()`` from :class:`.factored.FactoredBackend`.
 :func:`choose_backend` builds one.
 """
 
@@ -92,6 +88,10 @@ class Hybrid(FactoredBackend):
 
     def apply_G_inverse(self, eh, el):
         return self.current.apply_G_inverse(eh, el)
+
+    def stats(self) -> dict:
+        """{}: the hybrid holds two factors, not one."""
+        return {}
 
 
 def choose_backend(data: ExtendedData, backend: str = "auto", engine: str = "auto"):

@@ -16,7 +16,7 @@ in numpy object arrays) and the Newton solve — the dof-space matrix M + BᵀB,
 minimum-degree order (:class:`.wide_cholesky.SparseWideCholesky`), each solve refined against
 the unreduced three-block system.  The cost is Σ c_j² multiply-subtract pairs (O(m³) at
 worst), so the k-digit path runs this tail only where double-double stalled and the
-factorisation is affordable (:mod:`rfverify.digits`).
+factorisation is affordable (:mod:`rfverify.verify.digits`).
 
 gmpy2's precision is set in a local context for the duration of each call; nothing leaks.
 """
@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..algorithm.interfaces import Breakdown
+from ..algorithm.interfaces import Breakdown, ReducedBackend
 from ..algorithm.loop import Precision, iterate
 from ..algorithm.newton import NEWTON_ENOUGH, PREDICTOR_ENOUGH, ReducedNewton
 from ..algorithm.policy import UntilPolicy, extended_trace
@@ -169,7 +169,7 @@ class _WideCones:
         return _WideScaling(self.n3, self.n_cones, self.e, z, s)
 
 
-class _WideBackend:
+class _WideBackend(ReducedBackend):
     """A dof-space factor seen through the Newton interface (it takes the scaling's
     :class:`Scaling` and mpfr vectors as they are)."""
 

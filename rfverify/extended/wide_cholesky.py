@@ -18,7 +18,7 @@ import gmpy2
 import numpy as np
 import scipy.sparse as sp
 
-from .ldl import _numeric, _symbolic, _workspace
+from .ldl import numeric_ldl, symbolic_ldl, ldl_workspace
 from .wide_data import dot, zeros
 
 
@@ -43,7 +43,7 @@ class OrderedPattern:
         upper = sp.triu(full, format="csc")
         upper.sort_indices()
         self.upper_indptr, self.upper_indices = upper.indptr.astype(np.int64), upper.indices.astype(np.int64)
-        self.parent, self.column_pointers = _symbolic(m, self.upper_indptr, self.upper_indices)
+        self.parent, self.column_pointers = symbolic_ldl(m, self.upper_indptr, self.upper_indices)
         lower = sp.tril(full, format="csc")
         lower.sort_indices()
         self.indptr, self.indices = lower.indptr.astype(np.int64), lower.indices.astype(np.int64)
@@ -149,8 +149,8 @@ class SparseWideCholesky:
         dominant = np.where(Ai == np.repeat(np.arange(m), np.diff(Ap)), float(m + 1), 1.0)
         nnz = int(Lp[-1])
         Li = np.zeros(nnz, dtype=np.int64)
-        if _numeric(m, Ap, Ai, dominant, np.zeros(Ai.size), Lp, pattern.parent, Li, np.zeros(nnz), np.zeros(nnz),
-                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), *_workspace(m)) >= 0:
+        if numeric_ldl(m, Ap, Ai, dominant, np.zeros(Ai.size), Lp, pattern.parent, Li, np.zeros(nnz), np.zeros(nnz),
+                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), *ldl_workspace(m)) >= 0:
             raise AssertionError("a diagonally dominant matrix lost a pivot")
         self.Lp, self.Li = Lp, Li
         # row j of L: the columns k < j with an entry there, each with the offset of that entry

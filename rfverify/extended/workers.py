@@ -48,7 +48,7 @@ def _reset_after_fork() -> None:  # a forked child has the pool object but not i
     _pool, _pool_size = None, 0
 
 
-if hasattr(os, "register_at_fork"):
+if os.name == "posix":  # where fork exists (os.register_at_fork is POSIX-only)
     os.register_at_fork(after_in_child=_reset_after_fork)
 
 

@@ -11,7 +11,7 @@ import numbers
 from pathlib import Path
 
 from ..errors import InvalidArgumentError, ProblemFileError
-from ..problem import DEFAULT_MAX_ASYMMETRY, Problem
+from ..model.problem import DEFAULT_MAX_ASYMMETRY, Problem
 from ._paths import BUNDLED_PREFIX, bundled_problems, read_head, resolve_path
 from .fclib import read_fclib, write_fclib, write_solution_in_place
 from .local_lift import LocalProblem, lift_local
@@ -23,7 +23,7 @@ __all__ = ["load", "save", "read_fclib", "write_fclib", "write_solution_in_place
 
 def load(path, *, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY) -> Problem:
     """Read a problem file (FCLIB ``.hdf5``/``.h5`` or Siconos ``.dat``) into a validated
-    :class:`~rfverify.problem.Problem`.  ``path`` may be ``"bundled:NAME"`` (see
+    :class:`~rfverify.model.problem.Problem`.  ``path`` may be ``"bundled:NAME"`` (see
     :func:`bundled_problems`).  A local ``.dat`` problem is lifted to global form.
 
     FCLIB files: ``/fclib_global_rolling`` (rolling friction) is read as it is; the 3-D Coulomb

@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import DataWarning, InvalidProblemError, ProblemFileError
-from ..problem import SPACEDIM, StoredSolution
+from ..model.problem import SPACEDIM, StoredSolution
 from ._exact import FIX_INEXACT, exact_csc
 
 NZ_CSC = -1

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
-from ..problem import DEFAULT_MAX_ASYMMETRY, Problem, StoredSolution
+from ..model.problem import DEFAULT_MAX_ASYMMETRY, Problem, StoredSolution
 from ._hdf5 import (STORAGE_FORMATS, check_declared_sizes, damaged, first_line, h5py_module, matrix_meta, member,
                     read_guesses, read_info, read_matrix, read_scalar_int, read_solution, read_vector,
                     write_matrix, write_solution)

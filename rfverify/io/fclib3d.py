@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
-from ..problem import SPACEDIM, Problem, StoredSolution, make_local_form
+from ..model.problem import SPACEDIM, Problem, StoredSolution, make_local_form
 from ._hdf5 import (check_mass_declaration, h5py_module, matrix_meta, member, read_guesses, read_info, read_matrix,
                     read_scalar_int,
                     read_solution, read_vector, write_matrix, write_solution_arrays)

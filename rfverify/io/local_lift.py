@@ -4,7 +4,7 @@ and an FCLIB ``/fclib_local`` group (:mod:`.fclib3d`).
 
 :func:`factor_delassus` factors W = HᵀH (dense symmetric eigendecomposition, the numerical rank
 kept) and reports what it did (:class:`LiftReport`); :func:`lift_local` builds the global
-:class:`~rfverify.problem.Problem` M = I, H, f = 0, w = q.  The lifting is a solver device: the
+:class:`~rfverify.model.problem.Problem` M = I, H, f = 0, w = q.  The lifting is a solver device: the
 extended phase and the proof work on the file's own W (``Problem.local``, DESIGN §6.1b).
 """
 
@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidProblemError
-from ..problem import DEFAULT_MAX_ASYMMETRY, Problem, SymmetryReport, asymmetry_error
+from ..model.problem import DEFAULT_MAX_ASYMMETRY, Problem, SymmetryReport, asymmetry_error
 
 _TINY = np.finfo(float).tiny
 

@@ -32,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidProblemError, ProblemFileError
-from ..problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, make_local_form
+from ..model.problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, make_local_form
 from ._exact import FIX_INEXACT, exact_csc
 from ._paths import read_head
 from .local_lift import LOCAL_DENSE_LIMIT, LocalProblem, lift_local

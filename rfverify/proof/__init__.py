@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem import Problem
-from .bound import (FLOAT64_DIGITS, MAX_CERTIFIABLE_DIGITS, ExactData, Proof, QuantityBound, data_scales,
-                    prove as _prove, validate_digits)
+from ..model.problem import Problem
+from .bound import ExactData, Proof, data_scales, prove as _prove
+from .quantity import FLOAT64_DIGITS, MAX_CERTIFIABLE_DIGITS, QuantityBound, validate_digits
 from .dyadic import Dyadic
 from .massbounds import MassBounds, verify_mass_matrix
 

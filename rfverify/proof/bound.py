@@ -68,15 +68,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem import SPACEDIM, Problem
-from .dyadic import Dyadic, DyadicCSR, Quotient, divide_upper, fraction_upper_float, sqrt_upper
-from .massbounds import ETA, MassBounds, gamma, inflate, upper_sum, verify_lambda_min_sparse, verify_mass_matrix
+from ..model.problem import SPACEDIM, Problem
+from .dyadic import Dyadic, DyadicCSR, Quotient, divide_upper, fraction_upper_float
+from .quantity import (DATA_SCALE_NAMES, QuantityBound, down, quantity_bound, up, up_times, validate_digits)
+from .reactions import r_bound
+from .massbounds import MassBounds, inflate, upper_sum, verify_mass_matrix
 
-FLOAT64_DIGITS = 53 * math.log10(2)  # ≈ 15.95: what a float64 can carry relative to its norm
-MAX_CERTIFIABLE_DIGITS = 15
-QUANTITIES = ("v", "u", "Hr", "r")
-DATA_SCALE_NAMES = {"v": "‖M⁻¹f‖∞", "u": "‖HᵀM⁻¹f + w‖∞", "Hr": "‖f‖∞", "r": "‖f‖∞ / max_k ‖h_k‖₂"}
-DATA_SCALE_NAMES_LOCAL = {"u": "‖q‖∞", "r": "‖q‖∞ / max_k W_kk"}
 THEOREM_GLOBAL = ("Global problem, M_s = (M+M^T)/2 positive definite, M the posed matrix (M_s, or M as stored): for "
                   "any v with u(v) = H^T v + w in K* and any r in K, with g = Mv - Hr - f: ||v - v*||_Ms^2 <= "
                   "g^T(v - v*) + r^T u(v), so ||v - v*||_Ms <= (sqrt(g^T Ms^-1 g) + sqrt(g^T Ms^-1 g + 4 r^T u(v)))/2 "
@@ -84,90 +81,6 @@ THEOREM_GLOBAL = ("Global problem, M_s = (M+M^T)/2 positive definite, M the pose
                   "product, with g restricted to the blocks of M that touch a contact; on the blocks no contact "
                   "touches (decoupled, verified), v - v* = M_b^-1 g_b bounded by a verified inverse; carried to the "
                   "stored solution by the triangle inequality (DESIGN 6.1).")
-
-
-def _up(x):
-    return np.nextafter(np.asarray(x, dtype=np.float64), np.inf)
-
-
-def _up_times(x, eps: float):
-    """x·eps rounded up, exactly 0 when eps is exactly 0 (a product with an exact zero is exact)."""
-    return np.zeros_like(np.asarray(x, dtype=np.float64)) if eps == 0 else _up(x * eps)
-
-
-def _down(x):
-    return np.nextafter(np.asarray(x, dtype=np.float64), -np.inf)
-
-
-@dataclass
-class QuantityBound:
-    """Proven error of one returned quantity (``v``, ``u``, ``Hr`` or ``r``).
-
-    ``abs_bound`` ≥ ‖x − x*‖∞ (rigorous); ``norm`` = ‖x‖∞ of the returned vector;
-    ``own_scale`` ≤ ‖x*‖∞ (rigorous, 0 when unknown); ``digits`` = −log10(abs_bound/own_scale)
-    (None when own_scale ≤ abs_bound), capped at what float64 carries; ``mode`` is
-    ``"relative"`` (digits against ‖x*‖∞), ``"absolute"`` (x* is zero at the requested
-    accuracy: judged against ``data_scale``) or ``"information"`` (r where it is not unique).
-    """
-
-    name: str
-    abs_bound: float
-    norm: float
-    own_scale: float
-    data_scale: float
-    data_scale_name: str
-    digits: float | None
-    mode: str
-    certified: bool
-    note: str = ""
-
-    @property
-    def zero_within(self) -> float:
-        """Proven upper bound of ‖x*‖∞ (‖x‖∞ + abs_bound, rounded up; 0 when x = x* = 0 exactly)."""
-        if not math.isfinite(self.abs_bound):
-            return math.inf
-        return 0.0 if self.norm == 0 and self.abs_bound == 0 else float(_up(self.norm + self.abs_bound))
-
-    @property
-    def scale_digits(self) -> float | None:
-        """−log10(zero_within / data_scale): how far below its data scale x* is proven to be
-        (the absolute mode's measure; not significant digits of x*)."""
-        z = max(self.zero_within, self.abs_bound)
-        if z == 0:
-            return FLOAT64_DIGITS
-        if not (self.data_scale > 0 and math.isfinite(z)):
-            return None
-        return log_ratio(self.data_scale, z)
-
-    def short(self) -> str:
-        """One phrase that claims exactly what was proven: relative digits, or "zero within"."""
-        if self.mode == "information":
-            return f"{self.name} not unique"
-        if self.mode == "absolute" and self.zero_within == 0:
-            return f"{self.name} exactly 0"
-        if self.mode == "absolute":
-            return (f"{self.name} zero within {self.zero_within:.1e} ({self.scale_digits:.1f} digits of "
-                    f"{self.data_scale_name})")
-        return f"{self.name} {self.digits:.1f} digits" if self.digits is not None else f"{self.name} no relative digits"
-
-    def describe(self) -> str:
-        if self.mode == "information":
-            return f"{self.name}: not unique ({self.note}); error bound not available"
-        if self.mode == "absolute" and self.zero_within == 0:
-            return f"{self.name}: exactly 0 (the candidate is the solution: error bound 0)"
-        if self.mode == "absolute":
-            return (f"{self.name}: zero within {self.zero_within:.2e} (‖{self.name}*‖∞ ≤ {self.zero_within:.2e} = "
-                    f"{self.scale_digits:.1f} digits below the data scale {self.data_scale_name} = "
-                    f"{self.data_scale:.2e}; |error| ≤ {self.abs_bound:.2e}; no significant digits are claimed)")
-        d = "no relative digits" if self.digits is None else f"{self.digits:.1f} digits"
-        extra = f"; {self.note}" if self.note and not self.certified and self.digits is None else ""
-        return (f"{self.name}: {d} (|error| ≤ {self.abs_bound:.2e}, ‖{self.name}*‖∞ ≥ {self.own_scale:.2e})"
-                + extra)
-
-    def as_dict(self) -> dict:
-        return {"abs_bound": self.abs_bound, "norm": self.norm, "own_scale": self.own_scale,
-                "data_scale": self.data_scale, "data_scale_name": self.data_scale_name,
-                "digits": self.digits, "mode": self.mode, "certified": self.certified, "note": self.note}
 
 
 @dataclass
@@ -283,11 +196,11 @@ class ExactData:
         if self._skew_norm is None:
             M = sp.csr_matrix(self.problem.M)
             D = (M - M.T).tocsr()
-            D.data = _up(np.abs(D.data) * 0.5 * (1 + 2.0 ** -52))
+            D.data = up(np.abs(D.data) * 0.5 * (1 + 2.0 ** -52))
             k = int(np.max(np.diff(D.indptr), initial=1)) + 2
             rows = inflate(np.asarray(D.sum(axis=1)).ravel(), k)
             cols = inflate(np.asarray(D.sum(axis=0)).ravel(), k)
-            self._skew_norm = float(_up(math.sqrt(float(_up(float(np.max(rows, initial=0.0))
+            self._skew_norm = float(up(math.sqrt(float(up(float(np.max(rows, initial=0.0))
                                                             * float(np.max(cols, initial=0.0)))))))
         return self._skew_norm
 
@@ -337,8 +250,8 @@ def data_scales(problem: Problem, exact: ExactData | None = None, mass: MassBoun
     sq = Hc.multiply(Hc)
     k = int(np.max(np.diff(Hc.indptr), initial=1)) + 2
     col_sq = inflate(np.asarray(sq.sum(axis=0)).ravel(), k)
-    col_max = float(_up(math.sqrt(float(np.max(col_sq, initial=0.0)))))
-    r_scale = float(_down(f_inf / col_max)) if col_max > 0 and math.isfinite(col_max) else 0.0
+    col_max = float(up(math.sqrt(float(np.max(col_sq, initial=0.0)))))
+    r_scale = float(down(f_inf / col_max)) if col_max > 0 and math.isfinite(col_max) else 0.0
     out = {"v": 0.0, "u": 0.0, "Hr": f_inf, "r": max(r_scale, 0.0)}
     if exact is None or mass is None or not mass.proven:
         return out
@@ -351,15 +264,15 @@ def data_scales(problem: Problem, exact: ExactData | None = None, mass: MassBoun
         x = np.zeros(problem.n_dofs)
     xd = Dyadic.from_float(x)
     rho = exact.f - exact.M_apply(xd, problem.as_stored)
-    root = float(_up(math.sqrt(gMinvg_upper(rho, mass))))
-    e_x = _up(_up(np.sqrt(mass.minv_diag_upper)) * root)
-    x_lo = _down(np.abs(x) - e_x)
+    root = float(up(math.sqrt(gMinvg_upper(rho, mass))))
+    e_x = up(up(np.sqrt(mass.minv_diag_upper)) * root)
+    x_lo = down(np.abs(x) - e_x)
     out["v"] = max(float(np.max(x_lo, initial=0.0)), 0.0)
     if w_diag is None:
         w_diag = mass.quad_upper_columns(problem.H)
     ut = exact.HT.matvec(xd) + exact.w
     mag_lo = np.where(ut.sign() >= 0, ut.lower(), -ut.upper())  # |ũ| rounded down
-    u_lo = _down(mag_lo - _up(_up(np.sqrt(w_diag)) * root))
+    u_lo = down(mag_lo - up(up(np.sqrt(w_diag)) * root))
     out["u"] = max(float(np.max(u_lo, initial=0.0)), 0.0)
     return out
 
@@ -375,22 +288,16 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     t0 = time.perf_counter()
     requested = validate_digits(requested)
     m, n = problem.n_dofs, problem.n_contacts
-    v, u, r = (np.asarray(x, dtype=np.float64).ravel() for x in (v, u, r))
-    for name, arr, size in (("v", v, m), ("u", u, SPACEDIM * n), ("r", r, SPACEDIM * n)):
-        if arr.size != size:
-            from ..errors import InvalidProblemError
-
-            raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {size}",
-                                      fix="certify a solution of this problem")
+    v, u, r = _solution_arrays(problem, v, u, r)
     stored = problem.as_stored
     named = {"statement": problem.statement, "equations": "stored" if stored else "symmetrised"}
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
-        return _invalid(requested, "the solution contains NaN or Inf", t0, **named)
+        return invalid_proof(requested, "the solution contains NaN or Inf", t0, **named)
     exact = exact or ExactData(problem)
     mass = mass or verify_mass_matrix(problem.M, problem.M_sym, problem.blocks)
     if not mass.proven:
         fb = mass.failures[0]
-        return _invalid(requested, f"M_s = (M + Mᵀ)/2 is not proven positive definite: block {fb.block} "
+        return invalid_proof(requested, f"M_s = (M + Mᵀ)/2 is not proven positive definite: block {fb.block} "
                                    f"(dofs {fb.dofs[:6].tolist()}{'…' if fb.dofs.size > 6 else ''}): {fb.reason}",
                         t0, **named)
     if w_diag is None:
@@ -406,21 +313,14 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     if outside:
         face, why = _onto_face(problem, exact, point_v, point_r, u_p)
         if face is None:
-            return _invalid(requested, outside + why, t0, **named)
+            return invalid_proof(requested, outside + why, t0, **named)
         point_v = face.point_v
     # A point moved onto a face is rational, v' = V / den (den = 1 otherwise): cone membership is
     # decided on the numerators (K and K* are cones), and every bound is divided by den upwards.
     V, den = (point_v.num, point_v.den) if isinstance(point_v, Quotient) else (point_v, 1)
     u_num = u_p if face is None else exact.HT.matvec(V) + exact.w.times_int(den)
-    if face is not None:
-        bad_dual, bad_primal = cone_violations(exact, u_num, point_r)
-        shifted = np.concatenate([face.stresses[i].contacts for i in face.shifts] or [np.zeros(0, dtype=np.int64)])
-        bad_primal = np.setdiff1d(bad_primal, shifted)  # r + τy ∈ K there, proven by the face step
-        if bad_dual.size or bad_primal.size:  # the move left a neighbour outside its cone
-            what = [f"u(v') = Hᵀv' + w ∉ K* at {bad_dual.size} contact(s), first {int(bad_dual[0])}"] if bad_dual.size else []
-            what += [f"r ∉ K at {bad_primal.size} contact(s), first {int(bad_primal[0])}"] if bad_primal.size else []
-            return _invalid(requested, f"the point is not in the cones after it was moved onto a face ({'; '.join(what)}; "
-                                       f"{face.describe()})", t0, **named)
+    if face is not None and (why := _outside_after_face(exact, face, u_num, point_r)):
+        return invalid_proof(requested, why, t0, **named)
     Hr_p = exact.H.matvec(point_r)
     g_num = exact.M_apply(V, stored) - (Hr_p + exact.f).times_int(den)
     gap = point_r.dot(u_num) / den  # ≥ 0: a sum of products of cone-dual pairs
@@ -440,25 +340,25 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
 
     # ---- carry to the returned solution
     vd = Dyadic.from_float(v)
-    sqrt_minv = _up(np.sqrt(mass.minv_diag_upper))
-    own_v = _up_times(sqrt_minv, eps_C)
+    sqrt_minv = up(np.sqrt(mass.minv_diag_upper))
+    own_v = up_times(sqrt_minv, eps_C)
     if d_free is not None:  # free dofs: the verified solve, or Cauchy–Schwarz with the whole ε
-        own_v = np.where(free.coupled, own_v, np.minimum(d_free, _up_times(sqrt_minv, eps)))
+        own_v = np.where(free.coupled, own_v, np.minimum(d_free, up_times(sqrt_minv, eps)))
     e_v = upper_sum(divide_upper((vd.times_int(den) - V).abs_upper(), den), own_v)
-    sqrtW = _up(np.sqrt(w_diag))
+    sqrtW = up(np.sqrt(w_diag))
     e_u = upper_sum(divide_upper((Dyadic.from_float(u).times_int(den) - u_num).abs_upper(), den),
-                    _up_times(sqrtW, eps_C))
+                    up_times(sqrtW, eps_C))
     Hr_ret = exact.H.matvec(Dyadic.from_float(r))
     g_abs = divide_upper(g_num.abs_upper(), den)
     # |e_iᵀM d| ≤ √(m_iᵀM_s⁻¹m_i)·ε_C; for a symmetric M that is √(M_ii)·ε_C.  A row of H that is
     # zero has (Hr)_i = (Hr*)_i = 0 exactly: no bound there.
-    row_norm = _up(np.sqrt(exact.row_quad_upper(mass))) if stored else _up(np.sqrt(mass.m_diag_upper))
-    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, _up_times(row_norm, eps_C))
+    row_norm = up(np.sqrt(exact.row_quad_upper(mass))) if stored else up(np.sqrt(mass.m_diag_upper))
+    e_Hr = upper_sum((Hr_ret - Hr_p).abs_upper(), g_abs, up_times(row_norm, eps_C))
     e_Hr = np.where(exact.H_row_zero, 0.0, e_Hr)
 
     terms = {"eps_M": eps, "eps_M_coupled": eps_C, "gMinvg_coupled_upper": q_gC,
              "free_blocks_solved": free.count, "free_dofs_solved": int(free.dofs.size),
-             "v_point_part": float(np.max(own_v, initial=0.0)), "u_point_part": float(np.max(_up_times(sqrtW, eps_C), initial=0.0)),
+             "v_point_part": float(np.max(own_v, initial=0.0)), "u_point_part": float(np.max(up_times(sqrtW, eps_C), initial=0.0)),
              "gap_rTu": gap_up, "gMinvg_upper": q_g, "g_inf": float(np.max(g_abs, initial=0.0)),
              "lam_min_M_lower": float(np.nanmin(mass.lam_lower)), "lam_max_M_upper": mass.lam_max_upper,
              "max_sqrt_Minv_jj": float(np.max(np.sqrt(mass.minv_diag_upper), initial=0.0)),
@@ -467,10 +367,10 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
     if stored:
         terms["skew_norm2_upper"] = exact.skew_norm_upper()
     q = {}
-    q["v"] = _quantity("v", e_v, v, scales, requested, relative=relative)
-    q["u"] = _quantity("u", e_u, u, scales, requested, relative=relative)
+    q["v"] = quantity_bound("v", e_v, v, scales, requested, relative=relative)
+    q["u"] = quantity_bound("u", e_u, u, scales, requested, relative=relative)
     Hr_float = Hr_ret.nearest()
-    q["Hr"] = _quantity("Hr", e_Hr, Hr_float, scales, requested, relative=relative)
+    q["Hr"] = quantity_bound("Hr", e_Hr, Hr_float, scales, requested, relative=relative)
 
     if face is not None:
         terms["face_moved_v_inf"] = face.moved
@@ -480,15 +380,42 @@ def prove(problem: Problem, point_v: Dyadic, point_r: Dyadic, v, u, r, *, reques
                                       f"{', '.join(s.contact_list() for s in face.stresses)} can be added to any "
                                       "solution's r (Hr is unique)"), {}
     else:
-        e_r, r_note, r_terms = _r_bound(problem, exact, mass, Quotient(u_num, den), sqrtW * eps_C, point_r, Hr_p,
+        e_r, r_note, r_terms = r_bound(problem, exact, mass, Quotient(u_num, den), sqrtW * eps_C, point_r, Hr_p,
                                         g_C, eps_C, r, stored, den=den)
     terms.update(r_terms)
     if e_r is None:
         q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
                                DATA_SCALE_NAMES["r"], None, "information", False, r_note)
     else:
-        q["r"] = _quantity("r", e_r, r, scales, requested, note=r_note, relative=relative)
+        q["r"] = quantity_bound("r", e_r, r, scales, requested, note=r_note, relative=relative)
     return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, face=face, **named)
+
+
+def _solution_arrays(problem: Problem, v, u, r) -> tuple:
+    """(v, u, r) as flat float64 arrays of the problem's sizes, or the error naming the one that is not."""
+    v, u, r = (np.asarray(x, dtype=np.float64).ravel() for x in (v, u, r))
+    m, n = problem.n_dofs, problem.n_contacts
+    for name, arr, size in (("v", v, m), ("u", u, SPACEDIM * n), ("r", r, SPACEDIM * n)):
+        if arr.size != size:
+            from ..errors import InvalidProblemError
+
+            raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {size}",
+                                      fix="certify a solution of this problem")
+    return v, u, r
+
+
+def _outside_after_face(exact, face, u_num: Dyadic, point_r: Dyadic) -> str:
+    """Why a point moved onto a face is still outside the cones ("" when it is inside): the move
+    left a neighbour outside its cone.  Where r was shifted along a self-stress, r + τy ∈ K is
+    proven by the face step itself."""
+    bad_dual, bad_primal = cone_violations(exact, u_num, point_r)
+    shifted = np.concatenate([face.stresses[i].contacts for i in face.shifts] or [np.zeros(0, dtype=np.int64)])
+    bad_primal = np.setdiff1d(bad_primal, shifted)
+    if not (bad_dual.size or bad_primal.size):
+        return ""
+    what = [f"u(v') = Hᵀv' + w ∉ K* at {bad_dual.size} contact(s), first {int(bad_dual[0])}"] if bad_dual.size else []
+    what += [f"r ∉ K at {bad_primal.size} contact(s), first {int(bad_primal[0])}"] if bad_primal.size else []
+    return f"the point is not in the cones after it was moved onto a face ({'; '.join(what)}; {face.describe()})"
 
 
 def _onto_face(problem, exact, point_v, point_r, u_p):
@@ -547,196 +474,21 @@ def gMinvg_upper(g: Dyadic, mass: MassBounds) -> float:
     counts = np.bincount(mass.labels, minlength=nb)
     starts = np.concatenate(([0], np.cumsum(counts)))[:-1]
     per_block = g_sq[order].segment_sums(starts, starts + counts).abs_upper()
-    return float(_up(math.fsum(_up(per_block / mass.lam_scaled).tolist())))
+    return float(up(math.fsum(up(per_block / mass.lam_scaled).tolist())))
 
 
 def eps_M_upper(q_g: float, gap_up: float) -> float:
     """ε ≥ (√(gᵀM_s⁻¹g) + √(gᵀM_s⁻¹g + 4rᵀu))/2 ≥ ‖v − v*‖_{M_s}, from upper bounds of both terms."""
     if q_g == 0 and gap_up == 0:  # g = 0 and rᵀu = 0 exactly: the point is the solution
         return 0.0
-    root_q = float(_up(math.sqrt(q_g)))
+    root_q = float(up(math.sqrt(q_g)))
     # (a negative gap is impossible for r ∈ K, u ∈ K*: only a broken cone test gets here)
-    root_all = float(_up(math.sqrt(max(float(_up(q_g + float(_up(4.0 * gap_up)))), 0.0))))
-    return float(_up(float(_up(root_q + root_all)) * 0.5))
+    root_all = float(up(math.sqrt(max(float(up(q_g + float(up(4.0 * gap_up)))), 0.0))))
+    return float(up(float(up(root_q + root_all)) * 0.5))
 
 
-def validate_digits(digits) -> int:
-    """Requested digits must be an integer in [1, 15]: a float64 carries at most 15.95."""
-    from ..errors import InvalidArgumentError
-
-    if isinstance(digits, bool) or not isinstance(digits, (int, np.integer)):
-        if isinstance(digits, float) and digits.is_integer():
-            digits = int(digits)
-        else:
-            raise InvalidArgumentError("digits", f"must be an integer, got {digits!r}",
-                                       fix=f"ask for 1 … {MAX_CERTIFIABLE_DIGITS} digits, e.g. digits=10")
-    digits = int(digits)
-    if not 1 <= digits <= MAX_CERTIFIABLE_DIGITS:
-        raise InvalidArgumentError("digits", f"is {digits}; a float64 solution carries at most "
-                                             f"{FLOAT64_DIGITS:.2f} significant digits",
-                                   fix=f"ask for 1 … {MAX_CERTIFIABLE_DIGITS} digits")
-    return digits
-
-
-def _invalid(requested, why, t0, theorem: str = THEOREM_GLOBAL, **named) -> Proof:
+def invalid_proof(requested, why, t0, theorem: str = THEOREM_GLOBAL, **named) -> Proof:
     return Proof(False, requested, math.inf, {}, {}, failure=why, seconds=time.perf_counter() - t0, theorem=theorem,
                  **named)
 
 
-def log_ratio(big: float, small: float) -> float:
-    """log10(big / small) for positive finite floats, without forming a ratio that under- or
-    overflows (a bound of 1e-300 on a vector of norm 1e300)."""
-    return math.log10(big) - math.log10(small)
-
-
-def _quantity(name, e, x, scales, requested, note="", names=DATA_SCALE_NAMES, relative: bool = False) -> QuantityBound:
-    """The record of one quantity.  ``relative=True`` accepts only relative digits: a quantity
-    whose x* may be zero is then not certified (its relative digits are meaningless)."""
-    e_inf = float(np.max(e, initial=0.0))
-    norm = float(np.max(np.abs(x), initial=0.0))
-    own = max(float(_down(norm - e_inf)), 0.0) if math.isfinite(e_inf) else 0.0
-    data = scales[name]
-    digits = None
-    if own > e_inf and e_inf >= 0:
-        digits = min(FLOAT64_DIGITS, log_ratio(own, e_inf)) if e_inf > 0 else FLOAT64_DIGITS
-    tol = 10.0 ** (-requested)
-    if digits is not None and digits >= requested:
-        return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", True, note)
-    if e_inf == 0 and norm == 0 and not relative:
-        # The bound is 0 and x = 0: x* = 0 exactly, whatever the data scale (the all-zero problem).
-        return QuantityBound(name, 0.0, 0.0, 0.0, data, names[name], None, "absolute", True,
-                             note or f"{name}* = 0 exactly (error bound 0)")
-    if relative:
-        if digits is None:
-            note = note or (f"relative digits requested, but ‖{name}*‖∞ may be 0 (‖{name}‖∞ = {norm:.2e} ≤ "
-                            f"error bound {e_inf:.2e}): relative digits are meaningless here")
-        return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)
-    # x* may be zero: judge absolutely against the data scale when it is negligible there.
-    limit = float(_down(float(_down(tol)) * data))  # ≤ 10⁻ᵏ·scale exactly
-    if data > 0 and float(_up(norm + e_inf)) <= limit and e_inf <= limit:
-        return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "absolute", True,
-                             note or f"‖{name}*‖∞ ≤ {float(_up(norm + e_inf)):.2e} ≤ 1e-{requested}·{names[name]}")
-    return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)
-
-
-def proven_open(u_p: Dyadic, u_radius, mu, mur, n: int) -> np.ndarray:
-    """Contacts where u* ∈ int K*_i is proven (so r*_i = 0 for every solution): the whole box
-    u_p ± radius lies inside.  A sufficient test in float64 with every rounding pushed against it."""
-    lo, hi = u_p.lower(), u_p.upper()
-    uc_lo, uc_hi = lo.reshape(n, SPACEDIM), hi.reshape(n, SPACEDIM)
-    rad = np.asarray(u_radius).reshape(n, SPACEDIM)
-    mag_hi = _up(np.maximum(np.abs(uc_lo), np.abs(uc_hi)) + rad)
-    nT = _up(np.hypot(mag_hi[:, 1], mag_hi[:, 2]))
-    nR = _up(np.hypot(mag_hi[:, 3], mag_hi[:, 4]))
-    rhs = inflate(mu * nT + mur * nR, 6)
-    lhs = _down(_down(uc_lo[:, 0] - rad[:, 0]) * (1 - 4 * 2.0 ** -53))
-    return lhs > rhs
-
-
-def _r_bound(problem, exact, mass, u_p, u_radius, point_r, Hr_p, g, eps, r, stored: bool = False, den: int = 1):
-    """Per-component bound on r − r* when r* is unique on the loaded contacts, else None
-    (g = g_num / ``den``: the residual of a point moved onto a face is rational).
-
-    ‖r_S − r*_S‖₂ ≤ ‖H_S r_S − Hr*‖₂ / σmin(H_S), tried first in the problem's units; where
-    σmin(H_S) > 0 cannot be proven there (rows of H in badly scaled units), in equilibrated
-    ones: with S the exact power-of-two equilibration of M (:mod:`.massbounds`) and C that of
-    the columns of S H_S, |r_j − r*_j| ≤ c_j ‖S(H_S r_S − Hr*)‖₂ / σmin(S H_S C) (the same
-    identity, S H_S C (C⁻¹d) = S(H_S r_S − Hr*)), and ‖S M(v − v*)‖₂ ≤ √λmax(S M_s S)·ε."""
-    n = problem.n_contacts
-    mu, mur = problem.mu, problem.mu_r
-    open_ = proven_open(u_p, u_radius, mu, mur, n)
-    S = np.flatnonzero(~open_)
-    terms = {"contacts_proven_open": int(open_.sum()), "contacts_possibly_loaded": int(S.size)}
-    kept = [np.zeros(S.size, dtype=bool) + True, mu[S] > 0, mu[S] > 0, mur[S] > 0, mur[S] > 0]
-    cols = np.concatenate([SPACEDIM * S[kept[k]] + k for k in range(SPACEDIM)]) if S.size else np.zeros(0, dtype=np.int64)
-    cols = np.sort(cols)
-    m = problem.n_dofs
-    if cols.size > m:
-        return None, (f"H has {cols.size} columns on the {S.size} possibly loaded contacts and only {m} rows: "
-                      "r is not unique (hyperstatic), Hr is"), terms
-    e = np.abs(r).astype(np.float64)  # off S (and dropped components): r* = 0 there
-    r_S = np.zeros_like(r)
-    r_S[cols] = r[cols]
-    d = exact.H.matvec(Dyadic.from_float(r_S)) - Hr_p
-    if cols.size == 0:
-        e_S, total = None, 0.0
-    else:
-        e_S, total, why = _r_bound_in(problem, exact, mass, cols, d, g, eps, stored, terms, scaled=False, den=den)
-        if why:
-            e_S, total, why_s = _r_bound_in(problem, exact, mass, cols, d, g, eps, stored, terms, scaled=True, den=den)
-            if why_s:
-                return None, (f"full column rank of H on the {S.size} possibly loaded contacts not proven ({why}; "
-                              f"with rows and columns equilibrated: {why_s}): r may not be unique, Hr is"), terms
-    if e_S is not None:
-        e[cols] = e_S
-    terms["r_residual_2norm"] = total
-    note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), H of full column rank on the other "
-            f"{S.size}")
-    return e, note, terms
-
-
-def _r_bound_in(problem, exact, mass, cols, d: Dyadic, g: Dyadic, eps, stored: bool, terms: dict, scaled: bool,
-                den: int = 1):
-    """(bounds on |r_j − r*_j| for j in cols, the residual norm bound, "") or (None, nan, why),
-    in the problem's units or (``scaled``) in equilibrated ones (:func:`_r_bound`)."""
-    from ..definiteness import equilibration_exponents, ldexp_up, scale_rows, scale_symmetric
-
-    HS = sp.csc_matrix(problem.H[:, cols])
-    if scaled:
-        rows, bad = scale_rows(HS, mass.exponents)
-        if bad.any():
-            return None, math.nan, "the row scaling underflows"
-        HS = rows.tocsc()
-        col_e = equilibration_exponents(np.asarray(HS.multiply(HS).sum(axis=0)).ravel())
-        HS_c = sp.csc_matrix((np.ldexp(HS.data, np.repeat(col_e, np.diff(HS.indptr))), HS.indices, HS.indptr),
-                             shape=HS.shape)
-        if not np.array_equal(np.ldexp(HS_c.data, -np.repeat(col_e, np.diff(HS.indptr))), HS.data):
-            return None, math.nan, "the column scaling underflows"
-        HS = HS_c
-    A = (HS.T @ HS).tocsc()
-    absHS = abs(HS)
-    kmax = int(np.max(np.diff(HS.indptr), initial=1))
-    A_err = (absHS.T @ absHS) * gamma(kmax + 2)
-    lam, why = verify_lambda_min_sparse(A, A_err)
-    terms["sigma_min_HS_sq_lower" + ("_equilibrated" if scaled else "")] = lam
-    if why:
-        return None, math.nan, why
-    if scaled:
-        two_e = Dyadic.from_float(np.ldexp(1.0, mass.exponents))
-        d, g = d * two_e, g * two_e
-        # ‖S M d‖₂ ≤ √λmax(S M_s S)·ε (row sums of |S M_s S|), plus ‖S K S‖₂ ε/√λmin(S M_s S) for
-        # the skew part K of a stored M (the M_s-norm of v − v* is the 2-norm of S⁻¹(v − v*) in S M_s S)
-        SMS, under = scale_symmetric(problem.M_sym, mass.exponents)
-        absS = abs(SMS)
-        absS.data = absS.data + np.where(under, ETA, 0.0)
-        k = int(np.max(np.diff(SMS.indptr), initial=1)) + 2
-        lam_max = float(inflate(np.max(np.asarray(absS.sum(axis=1)).ravel(), initial=0.0) * (1 + 4 * 2.0 ** -53), k))
-        gain = float(_up(math.sqrt(lam_max)))
-        if stored:
-            Mr = sp.csr_matrix(problem.M)
-            K, under_k = scale_symmetric((Mr - Mr.T) * 0.5, mass.exponents)
-            K.data = _up(np.abs(K.data) * (1 + 2.0 ** -52)) + np.where(under_k, ETA, 0.0)
-            kk = int(np.max(np.diff(K.indptr), initial=1)) + 2
-            rsum = float(np.max(inflate(np.asarray(K.sum(axis=1)).ravel(), kk), initial=0.0))
-            csum = float(np.max(inflate(np.asarray(K.sum(axis=0)).ravel(), kk), initial=0.0))
-            skew = float(_up(math.sqrt(float(_up(rsum * csum)))))
-            lam_min = float(np.nanmin(mass.lam_scaled))
-            gain = float(_up(gain + float(_up(skew / float(_down(math.sqrt(lam_min) * (1 - 4 * 2.0 ** -53)))))))
-    else:
-        # ‖M d‖₂ ≤ √λmax(M_s)·ε, plus ‖A‖₂‖d‖₂ ≤ ‖A‖₂ ε/√λmin(M_s) for the skew part A of a stored M
-        gain = float(_up(math.sqrt(mass.lam_max_upper)))
-        if stored:
-            lam_min = float(np.nanmin(mass.lam_lower))
-            gain = float(_up(gain + float(_up(exact.skew_norm_upper() / float(_down(math.sqrt(lam_min)
-                                                                                      * (1 - 4 * 2.0 ** -53)))))))
-    # ‖H_S r_S − Hr*‖₂ ≤ ‖H_S r_S − H r_p‖₂ + ‖g‖₂ + gain·ε (each scaled by S in equilibrated units)
-    dist = sqrt_upper(d.square().total())
-    gnorm = sqrt_upper(g.square().total() / (den * den))  # g = g_num / den
-    if dist == 0 and gnorm == 0 and eps == 0:  # an exact point, the returned r on it: H_S r_S = Hr*
-        return np.zeros(cols.size), 0.0, ""
-    total = float(_up(_up(dist + gnorm) + _up(gain * eps)))
-    total = float(_up(total + float(_up(gain * 4 * 2.0 ** -53 * eps))))
-    e_S = float(_up(total / float(_down(math.sqrt(lam) * (1 - 4 * 2.0 ** -53)))))
-    if scaled:
-        return ldexp_up(np.full(cols.size, e_S), col_e), total, ""
-    return np.full(cols.size, e_S), total, ""

@@ -37,7 +37,7 @@ from fractions import Fraction
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem import SPACEDIM
+from ..model.problem import SPACEDIM
 from . import rational as Q
 from .dyadic import Dyadic, Quotient
 

@@ -16,7 +16,7 @@ equilibrated by the exact powers of two S of :mod:`.massbounds` (d_b = S (S M_b 
 The rest of the theorem then needs only the other blocks (C): with M_FC = M_CF = 0 and H_F = 0,
 M_C d_C − H_C(r − r*) = g_C and Hᵀd = H_Cᵀd_C = u − u*, so ‖d_C‖_{M_s} ≤ ε_C, the ε of §6.1
 evaluated with g_C alone (:mod:`.bound`).  Blocks where the verified inverse is not available
-(larger than :data:`~rfverify.definiteness.DENSE_LIMIT`, or ρ ≥ 1) simply stay in C.
+(larger than :data:`~rfverify.model.definiteness.DENSE_LIMIT`, or ρ ≥ 1) simply stay in C.
 
 Where the free blocks' equations differ between the stored M and (M + Mᵀ)/2 — the bundled
 Chute's free bodies have unsymmetric inertia blocks — this is what bounds how far the
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..definiteness import DENSE_LIMIT, ETA, U, ldexp_up, scale_symmetric
+from ..model.definiteness import DENSE_LIMIT, ETA, U, ldexp_up, scale_symmetric
 from .dyadic import Dyadic
 from .massbounds import MassBounds, solve_upper, verified_left_inverses
 

@@ -46,11 +46,11 @@ from fractions import Fraction
 import numpy as np
 import scipy.sparse as sp
 
-from ..definiteness import exact_ldlt
-from ..problem import SPACEDIM, LocalForm, Problem
-from .bound import (DATA_SCALE_NAMES_LOCAL, Proof, QuantityBound, _invalid, _quantity, _up, cone_violations,
-                    cones_failure, eps_M_upper, _up_times,
-                    proven_open, validate_digits)
+from ..model.definiteness import exact_ldlt
+from ..model.problem import SPACEDIM, LocalForm, Problem
+from .bound import Proof, cone_violations, cones_failure, eps_M_upper, invalid_proof
+from .quantity import DATA_SCALE_NAMES_LOCAL, QuantityBound, quantity_bound, up, up_times, validate_digits
+from .reactions import proven_open
 from .dyadic import Dyadic, DyadicCSR, fraction_upper_float, sqrt_upper
 from .massbounds import MassBounds, inflate, upper_sum, verify_mass_matrix
 
@@ -103,10 +103,10 @@ class LocalExact:
         """Upper bounds of ‖row k of (W − Wᵀ)/2‖₂ (each difference rounded up)."""
         W = sp.csr_matrix(self.local.W)
         D = (W - W.T).tocsr()
-        D.data = _up(np.abs(D.data) * 0.5 * (1 + 2.0 ** -52))
+        D.data = up(np.abs(D.data) * 0.5 * (1 + 2.0 ** -52))
         sq = D.multiply(D)
         k = int(np.max(np.diff(D.indptr), initial=1)) + 2
-        return _up(np.sqrt(inflate(np.asarray(sq.sum(axis=1)).ravel(), k)))
+        return up(np.sqrt(inflate(np.asarray(sq.sum(axis=1)).ravel(), k)))
 
     def quad(self, r: Dyadic) -> Fraction:
         """rᵀ (W + Wᵀ)/2 r = rᵀ W r, exactly."""
@@ -160,7 +160,7 @@ def prove_psd(W: sp.spmatrix) -> LocalFacts:
 def exact_psd(A: sp.spmatrix) -> str:
     """"definite", "semidefinite" or "indefinite" for the exact (A + Aᵀ)/2 of a small float
     matrix: LDLᵀ in rationals with the largest remaining diagonal as pivot (a PSD matrix whose
-    largest remaining diagonal is 0 has a zero remainder; :func:`rfverify.definiteness.exact_ldlt`)."""
+    largest remaining diagonal is 0 has a zero remainder; :func:`rfverify.model.definiteness.exact_ldlt`)."""
     D = np.asarray(sp.csr_matrix(A).toarray(), dtype=np.float64)
     n = D.shape[0]
     F = [[(Fraction(float(D[i, j])) + Fraction(float(D[j, i]))) / 2 for j in range(n)] for i in range(n)]
@@ -196,11 +196,11 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
             raise InvalidProblemError(f"solution.{name}", f"has {arr.size} entries, the problem needs {SPACEDIM * n}",
                                       fix="certify a solution of this problem")
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
-        return _invalid(requested, "the solution contains NaN or Inf", t0, theorem=THEOREM_LOCAL, statement=problem.statement)
+        return invalid_proof(requested, "the solution contains NaN or Inf", t0, theorem=THEOREM_LOCAL, statement=problem.statement)
     ex = exact or LocalExact(problem)
     scales = scales or local_data_scales(problem)
     if not ex.facts.psd:
-        return _invalid(requested, ex.facts.why, t0, theorem=THEOREM_LOCAL, statement=problem.statement)
+        return invalid_proof(requested, ex.facts.why, t0, theorem=THEOREM_LOCAL, statement=problem.statement)
     if len(point_r) != SPACEDIM * n:
         raise ValueError("the point does not match the problem's sizes")
 
@@ -212,8 +212,8 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
     if outside:
         shifted = _shift_into_dual_cone(problem, ex, u_p, point_r)
         if shifted is None:
-            return _invalid(requested, outside, t0, theorem=THEOREM_LOCAL, statement=problem.statement)
-    sqrtW = _up(np.sqrt(ex.facts.w_diag))
+            return invalid_proof(requested, outside, t0, theorem=THEOREM_LOCAL, statement=problem.statement)
+    sqrtW = up(np.sqrt(ex.facts.w_diag))
     if shifted is None:
         gap = point_r.dot(u_p)  # ≥ 0: pairs of K and K*
         gap_up = fraction_upper_float(gap)
@@ -223,13 +223,13 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         u_shift, e_norm = shifted
         gap_up = fraction_upper_float(point_r.dot(u_shift))
         lam = ex.facts.lam_lower
-        disc = float(_up(float(_up(e_norm * e_norm)) + float(_up(4 * lam * gap_up))))
-        root = float(_up(math.sqrt(disc)))
-        delta = float(_up(float(_up(e_norm + root)) / float(np.nextafter(2 * lam, 0))))
-        eps = float(_up(math.sqrt(float(_up(gap_up + float(_up(e_norm * delta)))))))
+        disc = float(up(float(up(e_norm * e_norm)) + float(up(4 * lam * gap_up))))
+        root = float(up(math.sqrt(disc)))
+        delta = float(up(float(up(e_norm + root)) / float(np.nextafter(2 * lam, 0))))
+        eps = float(up(math.sqrt(float(up(gap_up + float(up(e_norm * delta)))))))
         terms = {"eps_W": eps, "gap_rTu": gap_up, "dual_shift_2norm": e_norm, "r_dist_2norm_upper": delta,
                  "lam_min_W_lower": lam}
-    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), _up_times(sqrtW, eps))
+    e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), up_times(sqrtW, eps))
     terms.update({"max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)), "W_psd": ex.facts.how})
     u_note = ""
     if stored:
@@ -239,8 +239,8 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
                       "use: its skew part is not bounded, u is not")
             e_u = np.full(e_u.size, np.inf)
         else:
-            e_u = upper_sum(e_u, _up_times(skew_gain, eps))
-    q = {"u": _quantity("u", e_u, u, scales, requested, names=DATA_SCALE_NAMES_LOCAL, relative=relative,
+            e_u = upper_sum(e_u, up_times(skew_gain, eps))
+    q = {"u": quantity_bound("u", e_u, u, scales, requested, names=DATA_SCALE_NAMES_LOCAL, relative=relative,
                         note=u_note)}
     if shifted is None:
         e_r, note, r_terms = _local_r_bound(problem, ex, u_p, sqrtW * eps, point_r, eps, r)
@@ -253,7 +253,7 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
                                DATA_SCALE_NAMES_LOCAL["r"], None, "information", False, note)
     else:
-        q["r"] = _quantity("r", e_r, r, scales, requested, note=note, names=DATA_SCALE_NAMES_LOCAL,
+        q["r"] = quantity_bound("r", e_r, r, scales, requested, note=note, names=DATA_SCALE_NAMES_LOCAL,
                            relative=relative)
     return Proof(True, requested, eps, q, terms, seconds=time.perf_counter() - t0, theorem=THEOREM_LOCAL,
                  statement=problem.statement, equations=named["equations"],
@@ -277,7 +277,7 @@ def _skew_gain(problem, ex: LocalExact):
     if not np.all(in_F[kept.ravel()]):
         return None
     root = float(np.nextafter(np.sqrt(facts.lam_lower) * (1 - 4 * 2.0 ** -53), 0))
-    return _up(ex.skew_row_norms_upper() / root)
+    return up(ex.skew_row_norms_upper() / root)
 
 
 def _shift_into_dual_cone(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic):
@@ -298,16 +298,16 @@ def _shift_into_dual_cone(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic)
     if not np.all(in_F[kept.ravel()]):
         return None
     mag = np.maximum(np.abs(u_p.lower()), np.abs(u_p.upper())).reshape(n, SPACEDIM)
-    need = inflate(mu * _up(np.hypot(mag[:, 1], mag[:, 2])) + mur * _up(np.hypot(mag[:, 3], mag[:, 4])), 6)
-    tau = np.maximum(_up(need - u_p.lower().reshape(n, SPACEDIM)[:, 0]), 0.0)
-    tau = np.where(tau > 0, _up(tau * (1 + 2.0 ** -40)), 0.0)
+    need = inflate(mu * up(np.hypot(mag[:, 1], mag[:, 2])) + mur * up(np.hypot(mag[:, 3], mag[:, 4])), 6)
+    tau = np.maximum(up(need - u_p.lower().reshape(n, SPACEDIM)[:, 0]), 0.0)
+    tau = np.where(tau > 0, up(tau * (1 + 2.0 ** -40)), 0.0)
     full = np.zeros(SPACEDIM * n)
     full[0::SPACEDIM] = tau
     u_shift = u_p + Dyadic.from_float(full)
     bad_dual, _ = cone_violations(ex, u_shift, point_r)
     if bad_dual.size:
         return None
-    return u_shift, float(_up(np.sqrt(float(_up(np.sum(_up(tau * tau)) * (1 + 2.0 ** -40))))))
+    return u_shift, float(up(np.sqrt(float(up(np.sum(up(tau * tau)) * (1 + 2.0 ** -40))))))
 
 
 def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyadic, eps: float, r):
@@ -333,13 +333,13 @@ def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyad
     r_O[cols] = 0
     rO = Dyadic(r_O, point_r.exp)
     t = sqrt_upper(max(ex.quad(rO), Fraction(0)))
-    radius = 0.0 if eps == 0 and t == 0 else float(_up(eps + t))
+    radius = 0.0 if eps == 0 and t == 0 else float(up(eps + t))
     lam = mass.lam_lower[mass.labels]  # per column of the loaded set
     d_r = (Dyadic.from_float(r[cols]) - point_r[cols]).abs_upper()
     # |d_j| ≤ √((W_b⁻¹)_jj)·‖W_b^½ d_b‖ (Cauchy–Schwarz), never more than ‖d_b‖₂ ≤ ‖W_b^½ d_b‖/√λmin(W_b)
-    per = np.minimum(_up(np.sqrt(mass.minv_diag_upper)),
-                     _up(1.0 / np.nextafter(np.sqrt(lam) * (1 - 4 * 2.0 ** -53), 0)))
-    e[cols] = upper_sum(d_r, _up(radius * per) if radius else np.zeros(cols.size))
+    per = np.minimum(up(np.sqrt(mass.minv_diag_upper)),
+                     up(1.0 / np.nextafter(np.sqrt(lam) * (1 - 4 * 2.0 ** -53), 0)))
+    e[cols] = upper_sum(d_r, up(radius * per) if radius else np.zeros(cols.size))
     terms.update({"lam_min_W_S_lower": float(np.min(lam)), "W_norm_r_open": t})
     note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), W definite on the other {S.size} "
             f"(verified λmin ≥ {float(np.min(lam)):.2e})")

@@ -9,7 +9,7 @@ The certificate (DESIGN §6) needs, rigorously:
 * an upper bound on λmax(M).
 
 Everything is proven on the **equilibrated** blocks S M_b S, S = diag(2^e_j) exact
-(:mod:`rfverify.definiteness`: verified floating point with a-priori rounding-error bounds,
+(:mod:`rfverify.model.definiteness`: verified floating point with a-priori rounding-error bounds,
 exact rationals where that cannot decide), and carried back through the exact S:
 (M⁻¹)_jj = s_j²((SMS)⁻¹)_jj, hᵀM⁻¹h = (Sh)ᵀ(SMS)⁻¹(Sh) ≤ ‖Sh‖²/λmin(SMS), λmin(M_b) ≥
 λmin(S M_b S)/max s_j².  So the bounds do not depend on the units of the dofs: a body whose
@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..definiteness import (DENSE_LIMIT, ETA, U, BlockFailure, Definiteness, deflate, gamma, gather_blocks,
+from ..model.definiteness import (DENSE_LIMIT, ETA, U, BlockFailure, Definiteness, deflate, gamma, gather_blocks,
                             inflate, ldexp_up, scale_rows, scale_symmetric, sparse_lambda_lower, upper_sum,
                             verify_definite)
 
@@ -131,7 +131,7 @@ def verify_mass_matrix(M_raw: sp.spmatrix, M_sym: sp.spmatrix | None = None,
                        facts: Definiteness | None = None) -> MassBounds:
     """Verified bounds for the exact symmetrisation (M_raw + M_rawᵀ)/2 (see module doc).
     ``M_sym`` is its float64 rounding when already computed; ``facts`` the definiteness facts
-    :func:`rfverify.definiteness.verify_definite` gave for it (``problem.blocks``), reused
+    :func:`rfverify.model.definiteness.verify_definite` gave for it (``problem.blocks``), reused
     rather than proven again."""
     M_raw = sp.csc_matrix(M_raw, dtype=np.float64)
     if M_sym is None:

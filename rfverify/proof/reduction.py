@@ -37,7 +37,7 @@ import scipy.sparse as sp
 
 from fractions import Fraction
 
-from ..problem import SPACEDIM, Problem
+from ..model.problem import SPACEDIM, Problem
 from . import Point
 from . import rational as Q
 from .dyadic import Dyadic

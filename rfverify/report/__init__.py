@@ -12,7 +12,7 @@ are those of the tables below it (one median, one shifted geometric mean, the sa
 
 Counts come from the bench's independent high-precision recheck of each saved solution;
 correct digits from the proven extended-precision point of each problem's k-digit path;
-per-iteration diagnostics from a lockstep run (:func:`rfverify.diagnosis.diagnose`) of the
+per-iteration diagnostics from a lockstep run (:func:`rfverify.verify.diagnosis.diagnose`) of the
 worst cases — failures first, each diagnosed as the bench ran it (components included,
 :mod:`rfverify.report.lockstep`) — cached in ``RUN_DIR/diagnostics/``.
 

@@ -17,9 +17,9 @@ from collections import defaultdict
 import numpy as np
 
 from ..bench.records import refuted_label, worst_measure
-from ..measures import CRITERION
+from ..model.measures import CRITERION
 from ..solver.result import ALGORITHM1_METHODS
-from .data import UNUSABLE, RunData, _is_num, certified_mode
+from .data import UNUSABLE, RunData, is_number, certified_mode
 
 SGM_SHIFT = 0.01
 """Shift (seconds) of the shifted geometric mean of times: keeps runs of a few milliseconds
@@ -162,7 +162,7 @@ def failure_cause(rec: dict) -> str:
         return f"{status}: {msg}"
     if not ver.get("finite", True):
         return f"non-finite iterate returned ({status}: {msg})"
-    measures = [k for k in CRITERION if _is_num(ver.get(k)) and not math.isnan(ver[k])]
+    measures = [k for k in CRITERION if is_number(ver.get(k)) and not math.isnan(ver[k])]
     worst = max(measures, key=lambda k: ver[k]) if measures else None
     recheck = (f"recheck: {worst} = {ver[worst]:.2e} > tol {rec['tol']:g}" if worst else "no recheck")
     if _refuted(rec):

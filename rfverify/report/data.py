@@ -19,7 +19,7 @@ import numpy as np
 
 from ..bench.records import FIX_RERUN as _FIX_RERUN
 from ..bench.verify import forward_digits
-from ..measures import CRITERION
+from ..model.measures import CRITERION
 from ..solver.result import METHODS
 
 
@@ -60,7 +60,7 @@ UNUSABLE = ("Missing", "Damaged")
 """Statuses the report gives a planned solve whose record is absent or unreadable: it is
 counted as a run that did not solve, never silently left out."""
 
-def _is_num(x) -> bool:
+def is_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
@@ -186,7 +186,7 @@ def _expected(data: RunData):
                 yield t["problem"], t["stem"], task
         return
     methods = [m for m in data.manifest.get("methods", []) if isinstance(m, str)]
-    tols = [t for t in data.manifest.get("tols", []) if _is_num(t)]
+    tols = [t for t in data.manifest.get("tols", []) if is_number(t)]
     for key in data.problems:
         for m in methods:
             for t in tols:

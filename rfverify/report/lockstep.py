@@ -1,4 +1,4 @@
-"""Lockstep diagnosis of exactly what the bench ran (:func:`rfverify.diagnosis.diagnose`).
+"""Lockstep diagnosis of exactly what the bench ran (:func:`rfverify.verify.diagnosis.diagnose`).
 
 The bench's timed solves split a problem into its independent components (presolve, DESIGN
 §2.1) and solve each one by itself; a lockstep run keeps every iterate and therefore never
@@ -23,7 +23,7 @@ import numpy as np
 from .._version import __version__
 from ..bench.records import tol_text
 from ..io.output import tag_floats, untag_floats, write_text_atomic
-from ..problem import SPACEDIM, Problem
+from ..model.problem import SPACEDIM, Problem
 from ..solver.result import Settings
 from .aggregates import worst_cases
 from .data import RunData
@@ -32,7 +32,7 @@ from .data import RunData
 def solve_groups(problem: Problem, settings):
     """The independent components the solver splits ``problem`` into with ``settings``
     (exactly its own computation), or None when it solves the problem as one system."""
-    from ..lifting import lift
+    from ..model.lifting import lift
     from ..solver.presolve import independent_components
 
     if not settings.split_components:
@@ -57,10 +57,10 @@ def component_problem(problem: Problem, lp, group) -> tuple[Problem, np.ndarray]
 
 
 # The bench runs the solver with its default settings; the diagnosis repeats that run
-# (diagnose alone would refine every solve to 4·eps and start in the extended arithmetic, see
-# rfverify.diagnosis.diagnose).  The mpmath witness gets a shorter budget than the command's:
+# (diagnose alone would refine every solve to 4·eps and start in longdouble arithmetic, see
+# rfverify.verify.diagnosis.diagnose).  The mpmath witness gets a shorter budget than the command's:
 # a report diagnoses several runs.
-AS_BENCHED = {"refine_tol": Settings.refine_tol, "extended_below": Settings.extended_below, "witness_time": 20.0}
+AS_BENCHED = {"refine_tol": Settings.refine_tol, "longdouble_below": Settings.longdouble_below, "witness_time": 20.0}
 
 
 def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int = 100, dps: int = 40,
@@ -68,11 +68,11 @@ def diagnose_as_run(problem: Problem, method: str, tol: float, *, max_iter: int 
     """Lockstep diagnosis of the run the bench made (``kind`` "solve": a timed solve, split
     into components as the solver does; "trajectory": one system, as trajectories run).
 
-    Returns the :meth:`~rfverify.diagnosis.Diagnosis.to_dict` dict with a ``scope`` entry: ``mode``
+    Returns the :meth:`~rfverify.verify.diagnosis.Diagnosis.to_dict` dict with a ``scope`` entry: ``mode``
     ("whole", "component" or "unsplit"), ``text`` (one sentence for the reader), and for a
     component its ``index``, ``count``, ``contacts``, ``n_dofs``, the ``status`` and ``nit``
     it had inside the bench's run and whether the diagnosed run ``reproduced`` them."""
-    from ..diagnosis import diagnose
+    from ..verify.diagnosis import diagnose
     from ..solver import Status, solve
 
     if kind == "trajectory":

@@ -42,7 +42,7 @@ from .geometry import Bodies, Contacts, Statics, detect_contacts
 from .library import ALIASES, ALL_SCENES, FE_SCENES, SCENES, resolve_scene
 from .scene import Scene, World
 from .stepper import STEP_SOLVER_SETTINGS, MoreauJean, SceneError, StepRecord
-from ..problem import Problem
+from ..model.problem import Problem
 
 GENERATOR_VERSION = "2"
 """Bumped whenever the same (scene, seed, options) would give different arrays."""
@@ -293,7 +293,7 @@ def _generate_finite_element(sc: Scene, p: dict, size: int, count: int, seed: in
     :class:`.fem.ElasticMoreauJean` from rest; problem K is the problem of step (K+1)·steps
     (1-based) of that run, written with its known solution (the clamped solve, every contact
     checked strictly inside its cone) as ``/solution``.  No interior-point solve is made."""
-    from ..problem import StoredSolution
+    from ..model.problem import StoredSolution
     from .fem import entry_range
 
     say(0.0, f"{sc.name}: mesh and matrices")

@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from ..problem import Problem
+from ..model.problem import Problem
 
 
 @dataclass

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import RfverifyError
-from ..problem import Problem
+from ..model.problem import Problem
 from .assembly import contact_matrix, generalized_velocity, mass_matrix
 from .geometry import Bodies, Contacts, Statics, detect_contacts, quat_exp, quat_mul
 
@@ -88,7 +88,7 @@ class StepRecord:
     desaxce_solves: int = 0
 
 
-STEP_SOLVER_SETTINGS = {"sigma_rule": "paper", "start": "paper", "extended_below": None}
+STEP_SOLVER_SETTINGS = {"sigma_rule": "paper", "start": "paper", "longdouble_below": None}
 """Solver settings of every step solve, fixed here: a scene's trajectory, hence its problems,
 depends on each step's answer to the last digits, so the published collections must not change
 when the solver's speed-oriented defaults do (these are the settings they were generated with)."""

@@ -9,14 +9,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..compilation import compile_seconds
-from ..lifting import KIND_NAMES
-from ..measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
-from ..problem import SPACEDIM, Problem
+from ..model.lifting import KIND_NAMES
+from ..model.measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
+from ..model.problem import SPACEDIM, Problem
 from .cones import ProductCone
 from .presolve import presolve
 from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, TRACE_FIELDS, IterationInfo, Settings, SolveResult, Status,
-                     method_unavailable)
+                     method_unavailable, renamed_settings)
 
 __all__ = ["solve", "posed", "Settings", "SolveResult", "Status", "METHODS", "IterationInfo", "auto_sequence", "body_fill"]
 
@@ -27,7 +27,7 @@ def auto_sequence(n_contacts: int, fill=None) -> tuple:
     factorisation's ``fill`` (:func:`body_fill`; a number, or a callable that computes it, called
     only when the problem is that large) is at least ``AUTO_SCHUR_MIN_FILL``; else
     ``AUTO_SEQUENCE`` (jqinv first).  The same choice with or without the optional CHOLMOD, which
-    only makes schur faster (:func:`rfverify.solver.engines.schur_engine`).  The names and
+    only makes schur faster (:func:`rfverify.engines.factor.schur_engine`).  The names and
     thresholds are declared in :mod:`rfverify.solver.result`."""
     if n_contacts < AUTO_SCHUR_MIN_CONTACTS:
         return AUTO_SEQUENCE
@@ -125,11 +125,13 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         iterate so far with status Stopped and ``extras["interrupted"]``.
     """
     problem = posed(problem, as_stored, method)
-    from ..scaling import binary_scaling
+    options = renamed_settings(options)
+    from ..model.scaling import in_scaled_units
 
-    scaling = binary_scaling(problem)
-    if scaling is not None:
-        return _solved_in_scaled_units(problem, scaling, method, tol, max_iter, keep_iterates, callback, options)
+    scaled = in_scaled_units(problem, lambda sp_, _: solve(sp_, method, tol, max_iter, keep_iterates, callback,
+                                                           **options), _unscaled_result)
+    if scaled is not None:
+        return scaled
     data = problem.local.q if problem.local is not None else np.concatenate((problem.f, problem.w))
     if not np.any(data):
         return _zero_data_result(problem, method, tol, max_iter, options)
@@ -185,7 +187,7 @@ def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:
 
     if method not in METHODS:
         raise ValueError(f"method {method!r} is not one of {', '.join(METHODS)}")
-    unknown = set(options) - set(Settings.names())
+    unknown = set(options) - set(Settings.accepted())
     if unknown:
         raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}; valid: {', '.join(Settings.names())}")
     if method_unavailable(method) is not None:
@@ -203,17 +205,12 @@ def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:
                        presolve={}, extras={"zero_data": True})
 
 
-def _solved_in_scaled_units(problem, scaling, method, tol, max_iter, keep_iterates, callback, options):
-    """:func:`solve` of a problem whose data lie beyond float64's safe range: solved in units
-    scaled by exact powers of two (:mod:`rfverify.scaling`), the answer scaled back exactly and
-    judged on the problem as given (longdouble holds its range)."""
-    from ..scaling import scaled_problem
-
-    res = solve(scaled_problem(problem, scaling), method, tol, max_iter, keep_iterates, callback, **options)
+def _unscaled_result(res: SolveResult, scaled: Problem, scaling) -> SolveResult:
+    """:func:`solve`'s answer found in units scaled by exact powers of two
+    (:mod:`rfverify.model.scaling`), scaled back and judged on the problem as given (longdouble
+    holds its range)."""
     note = scaling.describe("solved")
-    with np.errstate(all="ignore"):  # an answer rounded back to subnormals is one more rounding
-        back = {name: np.ldexp(np.asarray(getattr(res, name), dtype=np.float64), -scaling.exponent(name))
-                for name in ("v", "u", "r")}
+    back = {name: scaling.back(name, getattr(res, name)) for name in ("v", "u", "r")}
     extras = {**res.extras, "binary_scaling": note, "lifted_units": "scaled"}
     if not all(np.all(np.isfinite(x)) for x in back.values()):
         return dataclasses.replace(res, **back, status=Status.NUMERICAL_ERROR, extras=extras,
@@ -279,7 +276,7 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
 
         raise InvalidArgumentError("method", missing.split("; fix: ")[0],
                                    fix=f"{OPTIONAL_METHODS[method][1]}, or use method='auto'")
-    unknown = set(options) - set(Settings.names())
+    unknown = set(options) - set(Settings.accepted())
     if unknown:
         raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}; "
                         f"valid: {', '.join(Settings.names())}")
@@ -376,7 +373,8 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
         timings=timings, method=method, settings=settings, presolve=presolve_info,
         extras={"factorisations": sum(o.factorisations for o in runs),
                 "unregularised_factorisations": sum(o.unregularised_factorisations for o in runs),
-                "extended_from": [o.extended_from for o in runs],
+                "longdouble_from": [o.longdouble_from for o in runs],
+                "extended_from": [o.longdouble_from for o in runs],  # its name before issue 50, kept for callers
                 "r_t": r_t, "z": z, "run_verdict": (run_status, run_message),
                 "returned_iteration": [o.returned_iteration for o in runs],
                 "interrupted": any(o.interrupted for o in runs),
@@ -459,7 +457,7 @@ _SEVERITY = [Status.SOLVED, Status.ALMOST_SOLVED, Status.MAX_ITERATIONS, Status.
 
 def component_judge(problem, lp, dofs, rows, settings):
     """``judge(v, r̃)`` for one independent component: the measures of
-    :mod:`rfverify.measures` on the component's data in the original variables (u = Hᵀv + w,
+    :mod:`rfverify.model.measures` on the component's data in the original variables (u = Hᵀv + w,
     r = P r̃, as returned: in float64), evaluated in the solver's residual precision.  With ∞-norm measures, every component
     meeting tol implies the whole problem does (numerators are maxima, denominators grow)."""
     contacts = np.unique(lp.keep[rows] // SPACEDIM)
@@ -477,7 +475,7 @@ def component_judge(problem, lp, dofs, rows, settings):
         # Judge what would be returned: the iterate rounded to float64, u = Hᵀv + w in float64.
         # (A longdouble iterate of a hyperstatic lattice met 1e-10 with r ~ 600·‖f‖ of
         # self-stress; rounded, its Hr lost 1e-9 of f.)  The arithmetic is the iterate's: float64
-        # in the run's float64 phase (Settings.extended_below), where the criterion is far above
+        # in the run's float64 phase (Settings.longdouble_below), where the criterion is far above
         # the rounding of either; solve() judges the returned answer in longdouble regardless.
         dtype = np.dtype(np.longdouble if np.asarray(v).dtype == np.longdouble else np.float64)
         if dtype not in data:

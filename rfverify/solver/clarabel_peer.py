@@ -7,7 +7,7 @@ Clarabel solves  min ½xᵀPx + qᵀx  s.t.  Ax + s = b, s ∈ K.  With x = (v, 
     [0, −I] x + s = 0,    s ∈ L3^{n3} × R₊^{n1}   (z in the lifted cones)
 
 Stationarity in v gives M v − f + H̃ᵀ y_eq = 0, so r̃ = −y_eq.  The status is rfverify's
-criterion (:mod:`rfverify.measures`) recomputed from the returned (v, u, r), exactly as for
+criterion (:mod:`rfverify.model.measures`) recomputed from the returned (v, u, r), exactly as for
 Algorithm 1; Clarabel's own status is kept verbatim in ``extras["clarabel_status"]``.
 """
 
@@ -18,9 +18,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from ..lifting import lift
-from ..measures import measures
-from ..problem import Problem
+from ..model.lifting import lift
+from ..model.measures import measures
+from ..model.problem import Problem
 from .result import Settings, SolveResult, Status
 
 _STATUS = {
@@ -75,7 +75,7 @@ def solve_clarabel(problem: Problem, settings: Settings) -> SolveResult:
     r = lp.r_from_lifted(r_t)
     u = lp.u_from_v(v)
     # Clarabel's own stopping test is not ours: its answer is judged by rfverify's criterion
-    # (rfverify.measures), exactly like Algorithm 1's; its own status is kept verbatim in
+    # (rfverify.model.measures), exactly like Algorithm 1's; its own status is kept verbatim in
     # extras["clarabel_status"].
     judged = measures(problem, v, u, r, "longdouble")
     merit = judged.max

@@ -7,7 +7,7 @@ of cones (see :meth:`ProductCone.rows`).  Rows of ordinary magnitude are recogni
 cheap test of the flat vector and never rescaled, so the hot path is the formulas themselves;
 rows of extreme magnitude are rescaled by powers of two exactly as the public functions do.
 Row indices are the global cone indices, which domain errors report and
-:class:`~rfverify.lifting.LiftedProblem` maps to contacts.
+:class:`~rfverify.model.lifting.LiftedProblem` maps to contacts.
 """
 
 from __future__ import annotations

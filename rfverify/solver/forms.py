@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .engines import SuperLUEngine, schur_engine
+from ..engines.factor import SuperLUEngine, schur_engine
 from .kkt import KKTSystem, SparseAssembler
 
 

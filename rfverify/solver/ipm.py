@@ -4,11 +4,11 @@
     M v − H̃ᵀ r̃ = f,   H̃ v + w̃ = J z,   z ∘ Jᵀr̃ = 0,   z, Jᵀr̃ ∈ L3^{n3} × L1^{n1}.
 
 Here the loop's interfaces are: numpy vectors in float64, then in the extended dtypes
-(longdouble where the settings ask) once the criterion is below ``extended_below`` or a
+(longdouble where the settings ask) once the criterion is below ``longdouble_below`` or a
 float64 solve falls short; the product cone of :mod:`.cones` (numba kernels for float64);
 a pluggable linear-system form of :mod:`.forms` as the Newton solver; and :class:`Termination`
 with the settings' σ rule as the policy.  The stopping test is the criterion of
-:mod:`rfverify.measures` on the (v, u, r) that would be returned — the same function every
+:mod:`rfverify.model.measures` on the (v, u, r) that would be returned — the same function every
 recheck uses; DESIGN's pinfeas, dinfeas and μ = zᵀs / n are computed and traced beside it.
 """
 
@@ -25,9 +25,9 @@ from ..algorithm.loop import Precision, iterate
 from ..errors import ConeDomainError
 from .cones import ProductCone
 from .forms import FORMS
-from .kkt import ScalingPoint, _amax
+from .kkt import ScalingPoint, abs_max
 from .result import TRACE_FIELDS, IterationInfo, Outcome, Settings, Status
-from .termination import Termination, Verdict
+from .termination import PaperPolicy, Termination, Verdict
 
 _TINY = np.finfo(float).tiny
 
@@ -52,8 +52,8 @@ class RunResult(Outcome):
     unregularised_factorisations: int
     tol: float
     iterates: list = field(default_factory=list)
-    # Iteration from which the run used the extended arithmetic (None: float64 throughout).
-    extended_from: int | None = None
+    # Iteration from which the run used longdouble arithmetic (None: float64 throughout).
+    longdouble_from: int | None = None
     # True when Ctrl-C ended the run (status Stopped, the last judged iterate returned).
     interrupted: bool = False
     # The iteration whose iterate is returned (the best one when the run did not end Solved).
@@ -65,9 +65,9 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
         component: int = 0, t0: float | None = None, printer=None, M_eq=None) -> RunResult:
     """Run Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) on one lifted problem in
     float64, continued in the extended settings (longdouble where asked) once the criterion
-    is below ``settings.extended_below`` or a float64 solve falls short (:func:`_adequate`).
+    is below ``settings.longdouble_below`` or a float64 solve falls short (:func:`_adequate`).
 
-    ``judge(v, r̃)`` returns the :class:`rfverify.measures.Measures` of the iterate in the
+    ``judge(v, r̃)`` returns the :class:`rfverify.model.measures.Measures` of the iterate in the
     original variables (the one definition of "solved"); :class:`Termination` decides from it.
     ``callback(IterationInfo)`` is called once per iteration; returning True stops the run
     (status Stopped).  ``printer(IterationInfo)`` (verbose output) is called likewise.
@@ -82,7 +82,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     t_run = time.perf_counter()
     M_eq = M if M_eq is None else M_eq
     arithmetic = _Arithmetic(settings, M_eq, H_t, J, f, w_t)
-    extended = settings.extended_below is None or not _float64_safe(M.data, H_t.data, f, w_t)
+    extended = settings.longdouble_below is None or not _float64_safe(M.data, H_t.data, f, w_t)
     work, jd, ref = arithmetic.dtypes(extended)
     system = FORMS[form](M, H_t, J, cones, dtype_ref=ref,
                          static_reg=settings.static_reg, adaptive_reg=settings.adaptive_reg,
@@ -117,7 +117,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     if bundle is None:
         # The first iterate was never judged (its residuals or measures overflowed): return it
         # as it stands, with NaN measures, never nothing.
-        from ..measures import Measures
+        from ..model.measures import Measures
 
         nan = float("nan")
         bundle = (out.iterate, Measures(nan, nan, nan, nan, nan, nan, nan), (nan, nan, nan))
@@ -130,7 +130,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
                      pinfeas=float(pinf_o), dinfeas=float(dinf_o), mu=float(mu_o), measures=judged_o,
                      trace=trace, timings=timings,
                      factorisations=system.factor_count, unregularised_factorisations=system.unregularised_count,
-                     tol=settings.tol, iterates=policy.iterates, extended_from=policy.extended_from,
+                     tol=settings.tol, iterates=policy.iterates, longdouble_from=policy.longdouble_from,
                      interrupted=getattr(policy, "was_interrupted", False), returned_iteration=returned_k)
 
 
@@ -244,9 +244,9 @@ class _NumpyCones:
         return _NumpyScaling(self.cones, self.precision.jd, z, s, self.precision.newton.system.symmetric)
 
 
-class _DoublePolicy:
+class _DoublePolicy(PaperPolicy):
     """The double solver's policy: :class:`Termination` (criterion, stall, limits, callback,
-    best iterate), the switch to the extended arithmetic, the σ rule of the settings, the
+    best iterate), the switch to longdouble arithmetic, the σ rule of the settings, the
     paper's γ = 0.9 + 0.09α, the λ₂ check of every iterate, and the trace columns."""
 
     def __init__(self, settings: Settings, term: Termination, judge, cones: ProductCone, extended: bool,
@@ -255,7 +255,7 @@ class _DoublePolicy:
         self.form = form
         self.describe_cone = describe_cone
         self.extended = extended
-        self.extended_from = 0 if extended else None
+        self.longdouble_from = 0 if extended else None
         self.keep_iterates, self.component, self.printer = keep_iterates, component, printer
         self.gamma0 = settings.gamma0
         self.iterates = []
@@ -270,8 +270,8 @@ class _DoublePolicy:
             self.iterates.append((v.copy(), r_t.copy(), z.copy()))
         # The sizes of the terms of the dual and primal residuals (see _adequate; only the
         # float64 phase asks).
-        self.term_scales = None if self.extended else (max(_amax(t) for t in res.dual_terms),
-                                                       max(_amax(t) for t in res.primal_terms), 0.0)
+        self.term_scales = None if self.extended else (max(abs_max(t) for t in res.dual_terms),
+                                                       max(abs_max(t) for t in res.primal_terms), 0.0)
         judged = self.judge(v, r_t)
         self.criterion = judged.max
         lam2_z, cz = self.cones.min_lambda2(z)
@@ -283,9 +283,9 @@ class _DoublePolicy:
         verdict = self.term.observe(k, judged, paper, (v.copy(), r_t.copy(), z.copy()))
         if verdict is not None:
             return verdict
-        promote = not self.extended and (judged.max <= self.settings.extended_below or self.double_short)
+        promote = not self.extended and (judged.max <= self.settings.longdouble_below or self.double_short)
         if promote:
-            self.extended, self.extended_from = True, k
+            self.extended, self.longdouble_from = True, k
         if lam2_z <= 0 or lam2_s <= 0:
             which, c, val = ("z", cz, lam2_z) if lam2_z <= 0 else ("Jᵀr̃", cs, lam2_s)
             return Verdict(Status.NUMERICAL_ERROR, f"iteration {k}: λ2({which}) = {val:.3e} ≤ 0 at "
@@ -298,7 +298,7 @@ class _DoublePolicy:
 
     def after_direction(self, k, record, predictor, corrector):
         # In float64 a solve must give the iteration what it needs (_adequate); one that
-        # falls short needs the extended arithmetic from the next iteration.
+        # falls short needs longdouble arithmetic from the next iteration.
         self.double_short = not self.extended and not (_adequate(predictor.info, self.settings.tol, self.term_scales)
                                                        and _adequate(corrector.info, self.settings.tol,
                                                                      self.term_scales))
@@ -313,21 +313,13 @@ class _DoublePolicy:
     def after_step(self, alpha):
         self.term.after_step(alpha)
 
-    @staticmethod
-    def next_gamma(alpha):
-        return rules.step_fraction(alpha, 0.09)
-
-    @staticmethod
-    def breakdown(message):
-        return Verdict(Status.NUMERICAL_ERROR, message)
-
     def interrupted(self, k):
         """Ctrl-C at iteration k: stop, returning the last iterate judged (Stopped)."""
         self.was_interrupted = True
         return Verdict(Status.STOPPED, f"interrupted (Ctrl-C) at iteration {k}")
 
 
-# Data entries above this start the run in the extended arithmetic: their products and squares
+# Data entries above this start the run in longdouble arithmetic: their products and squares
 # in residuals and norms would approach float64's range (tiny entries are harmless: they
 # underflow gracefully, and the cone kernels rescale rows on their own).
 FLOAT64_SAFE_MAGNITUDE = 2.0 ** 128
@@ -339,7 +331,7 @@ def _float64_safe(*arrays) -> bool:
 
 class _Arithmetic:
     """The run's two arithmetics: float64 while the criterion is above
-    ``settings.extended_below``, then the extended settings (longdouble where asked).  The
+    ``settings.longdouble_below``, then the extended settings (longdouble where asked).  The
     data as operators in each dtype are built on first use."""
 
     def __init__(self, settings, M, H_t, J, f, w_t):
@@ -352,9 +344,9 @@ class _Arithmetic:
         st = self.settings
         if not extended:
             return np.float64, np.float64, np.float64
-        ext = np.longdouble if st.extended_residuals else np.float64
-        jd = np.longdouble if st.extended_jordan else np.float64
-        return np.result_type(ext, jd), jd, np.longdouble if st.refine_extended else np.float64
+        ext = np.longdouble if st.longdouble_residuals else np.float64
+        jd = np.longdouble if st.longdouble_jordan else np.float64
+        return np.result_type(ext, jd), jd, np.longdouble if st.refine_longdouble else np.float64
 
     def operators(self, work):
         """(M, H̃, H̃ᵀ, J, Jᵀ, f, w̃) in ``work``."""
@@ -415,7 +407,7 @@ TOL_MARGIN = 1e-2
 
 def _adequate(info, tol, term_scales) -> bool:
     """Whether a float64 solve gave the iteration what it needs (else the run switches to
-    the extended arithmetic): it converged (the inexact-Newton test or the refinement target),
+    longdouble arithmetic): it converged (the inexact-Newton test or the refinement target),
     or every block residual e_i is at most max(REFINE_FORCING·‖rhs_i‖, TOL_MARGIN·tol·s_i),
     with s_i the size of the terms of the dual and primal residuals (‖Mv‖, ‖f‖, ‖H̃ᵀr̃‖ and
     ‖H̃v‖, ‖w̃‖, ‖Jz‖, ∞-norms) and s_i = 0 for complementarity.  Near the solution the dual

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from .cones import ProductCone
-from .engines import QDLDLEngine
+from ..engines.factor import QDLDLEngine
 
 
 @dataclass
@@ -109,7 +109,7 @@ class KKTSolver(Protocol):
 SLOW_REFINEMENT_STEPS = 3
 
 
-def _amax(x) -> float:
+def abs_max(x) -> float:
     """‖x‖∞, taken on the float64 image of x: a norm needs no more than float64's relative
     precision, and longdouble arithmetic costs five times as much."""
     with np.errstate(over="ignore"):
@@ -409,7 +409,7 @@ class KKTSystem:
         x = self.solve_once(rhs).astype(work)
         m, mk = self.m, self.m + self.nk
         cuts = ((0, m), (m, mk), (mk, rhs.size))
-        rhs_norms = [_amax(rhs[i:j]) for i, j in cuts]
+        rhs_norms = [abs_max(rhs[i:j]) for i, j in cuts]
         best_rel, best_x, prev = np.inf, x, np.inf
         best_res = ()
         steps = 0
@@ -417,8 +417,8 @@ class KKTSystem:
         tiny = np.finfo(float).tiny
         for steps in range(self.refine_max + 1):
             r = rhs - self.apply(x)
-            xn = _amax(x)
-            block_res = [_amax(r[i:j]) for i, j in cuts]
+            xn = abs_max(x)
+            block_res = [abs_max(r[i:j]) for i, j in cuts]
             rel = max(e / max(nrm * xn + rn, tiny) for e, nrm, rn in zip(block_res, self.block_norms, rhs_norms))
             if not np.isfinite(rel):
                 best_rel, best_x = float("nan"), x

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import sys
 
-from .engines import schur_engine_name
+from ..engines.factor import schur_engine_name
 
 COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e}"),
            ("pinfeas", "pinfeas", "{:>9.2e}"), ("dinfeas", "dinfeas", "{:>9.2e}"), ("mu", "mu", "{:>9.2e}"),
@@ -32,13 +32,13 @@ def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
         f"nnz(M) = {problem.M.nnz}, nnz(H) = {problem.H.nnz}",
         "cones:    " + ", ".join(f"{v} {k}" for k, v in cone_counts.items() if v)
         + " (full: L3×L3, coulomb/rolling: L3, normal: L1)",
-        f"settings: tol = {st.tol:g} (rfverify.measures criterion), max_iter = {st.max_iter}, "
+        f"settings: tol = {st.tol:g} (rfverify.model.measures criterion), max_iter = {st.max_iter}, "
         f"start = {st.start}, sigma_rule = {st.sigma_rule}, gamma0 = {st.gamma0}"
         + (f", time_limit = {st.time_limit:g} s" if st.time_limit else ""),
-        f"          extended: jordan = {st.extended_jordan}, residuals = {st.extended_residuals}, "
-        f"refinement = {st.refine_extended} (max {st.refine_max} steps, refine_tol = {st.refine_tol}), "
-        + ("from the start" if st.extended_below is None else
-           f"once the criterion is ≤ {st.extended_below:g} or a float64 solve falls short"),
+        f"          longdouble: jordan = {st.longdouble_jordan}, residuals = {st.longdouble_residuals}, "
+        f"refinement = {st.refine_longdouble} (max {st.refine_max} steps, refine_tol = {st.refine_tol}), "
+        + ("from the start" if st.longdouble_below is None else
+           f"once the criterion is ≤ {st.longdouble_below:g} or a float64 solve falls short"),
         f"          static_reg = {st.static_reg:g}, adaptive_reg = {st.adaptive_reg}, "
         f"stall_iterations = {st.stall_iterations}, compiled_kernels = {st.compiled_kernels}",
         f"presolve: reduce_cones = {st.reduce_cones}, drop_free_bodies = {st.drop_free_bodies}, "

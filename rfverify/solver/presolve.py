@@ -14,8 +14,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from ..lifting import LiftedProblem, lift
-from ..problem import Problem
+from ..model.lifting import LiftedProblem, lift
+from ..model.problem import Problem
 from .result import Settings
 
 

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import enum
+import functools
 import sys
+import warnings
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 
 import numpy as np
+
+from ..errors import require_time_limit
 
 ALGORITHM1_METHODS = ("jqinv", "qp2", "reduced", "reduced_factored", "noscaling", "schur")
 """Linear-system forms of Algorithm 1 (DESIGN §4): (14), (11), (15), (16), (6), and (16) with its
@@ -95,7 +99,7 @@ class Settings:
     Attributes
     ----------
     tol : float
-        Stop when the criterion of :mod:`rfverify.measures` — residuals of the returned
+        Stop when the criterion of :mod:`rfverify.model.measures` — residuals of the returned
         (v, u, r) relative to their terms and to scales from the data, which do not vanish at
         a correct solution — is at most ``tol``.  The paper's max(pinfeas, dinfeas, μ)
         (DESIGN §4) is reported beside it.
@@ -121,12 +125,12 @@ class Settings:
         ``least_squares``: the Newton step at identity scaling from the origin (a
         least-squares point of the primal and dual equations, CVXOPT's and Clarabel's start),
         each cone part shifted by (1 + its most negative λ2)·e where it is not interior.
-    extended_jordan : bool
+    longdouble_jordan : bool
         Jordan operations, NT scaling and step lengths in numpy.longdouble.
-    extended_residuals : bool
+    longdouble_residuals : bool
         Residuals, right-hand sides and iterates in numpy.longdouble.
-    extended_below : float or None
-        When the three ``extended_*`` settings take effect.  ``None``: from the first
+    longdouble_below : float or None
+        When the ``longdouble_*`` settings take effect.  ``None``: from the first
         iteration (also when the data have entries above 2^128 in magnitude).  A number
         (default 1e-9): the run starts in float64 throughout and switches for good at the
         first iterate whose criterion is at most this, or after an iteration whose float64
@@ -137,12 +141,13 @@ class Settings:
         bits, which cost about five times as much: at the default tol = 1e-10 the last one or
         two iterations run extended, at tol = 1e-8 usually none (the robustness sweep at 1e-10
         verified the same problems with 1e-9 as with 1e-6 and with None; docs/DECISIONS.md).
-        ``extras["extended_from"]`` gives the iteration of the switch for each run.
+        ``extras["longdouble_from"]`` gives the iteration of the switch for each run (also
+        under its former name ``extras["extended_from"]``).
     refine_max : int
         Maximum iterative-refinement steps per linear solve (0 disables refinement).
         Refinement also stops, keeping its best iterate, once a step reduces the backward
         error by less than 20%.
-    refine_extended : bool
+    refine_longdouble : bool
         Iterative-refinement residuals in numpy.longdouble.
     refine_tol : "adaptive", float or None
         Refinement stops once the blockwise backward error of the unreduced system is at
@@ -198,11 +203,11 @@ class Settings:
     sigma_rule: str = "hybrid"
     gamma0: float = 0.9
     start: str = "velocity_scaled"
-    extended_jordan: bool = True
-    extended_residuals: bool = True
-    extended_below: float | None = 1e-9
+    longdouble_jordan: bool = True
+    longdouble_residuals: bool = True
+    longdouble_below: float | None = 1e-9
     refine_max: int = 10
-    refine_extended: bool = True
+    refine_longdouble: bool = True
     refine_tol: float | str | None = "adaptive"
     compiled_kernels: bool = True
     static_reg: float = 1e-12
@@ -226,18 +231,17 @@ class Settings:
             raise ValueError(f"sigma_rule = {self.sigma_rule!r} must be 'hybrid', 'paper' or 'siconos'")
         if not 0 < self.gamma0 < 1:
             raise ValueError(f"gamma0 = {self.gamma0!r} must be in (0, 1)")
-        if self.extended_below is not None and not (isinstance(self.extended_below, (int, float))
-                                                    and not isinstance(self.extended_below, bool)
-                                                    and self.extended_below > 0):
-            raise ValueError(f"extended_below = {self.extended_below!r} must be None or a positive number")
+        if self.longdouble_below is not None and not (isinstance(self.longdouble_below, (int, float))
+                                                    and not isinstance(self.longdouble_below, bool)
+                                                    and self.longdouble_below > 0):
+            raise ValueError(f"longdouble_below = {self.longdouble_below!r} must be None or a positive number")
         if self.refine_max < 0:
             raise ValueError("refine_max must be ≥ 0")
         if not (self.refine_tol is None or self.refine_tol == "adaptive" or (
                 isinstance(self.refine_tol, (int, float)) and not isinstance(self.refine_tol, bool)
                 and 0 < self.refine_tol < 1)):
             raise ValueError(f"refine_tol = {self.refine_tol!r} must be 'adaptive', None or a number in (0, 1)")
-        if self.time_limit is not None and not (self.time_limit > 0):
-            raise ValueError(f"time_limit = {self.time_limit!r} must be a positive number of seconds")
+        require_time_limit(self.time_limit)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -246,12 +250,53 @@ class Settings:
     def names(cls):
         return [f.name for f in fields(cls)]
 
+    @classmethod
+    def accepted(cls):
+        """Every name a setting may be given by: :meth:`names` and the former names of the
+        longdouble settings (:data:`RENAMED_SETTINGS`)."""
+        return cls.names() + list(RENAMED_SETTINGS)
+
+
+RENAMED_SETTINGS = {"extended_jordan": "longdouble_jordan", "extended_residuals": "longdouble_residuals",
+                    "extended_below": "longdouble_below", "refine_extended": "refine_longdouble"}
+"""Former names of the longdouble settings (before issue 50 "extended" also named the
+double-double phase and :attr:`rfverify.DigitsSolution.extended`).  Still accepted, with a
+DeprecationWarning, wherever a setting is given (``Settings(...)``, ``rfverify.solve(...,
+extended_below=None)``, :func:`dataclasses.replace`), and readable as attributes."""
+
+
+def renamed_settings(options: dict) -> dict:
+    """``options`` with the former names of settings (:data:`RENAMED_SETTINGS`) given their
+    current ones, each with a DeprecationWarning; a setting given under both names is refused."""
+    if not any(old in options for old in RENAMED_SETTINGS):
+        return options
+    options = dict(options)
+    for old, new in RENAMED_SETTINGS.items():
+        if old in options:
+            if new in options:
+                raise TypeError(f"the setting {new!r} is given twice, also under its former name {old!r}")
+            warnings.warn(f"the setting {old!r} is now called {new!r}", DeprecationWarning, stacklevel=3)
+            options[new] = options.pop(old)
+    return options
+
+
+def _accepting_former_names(init):
+    @functools.wraps(init)
+    def __init__(self, *args, **kwargs):
+        init(self, *args, **renamed_settings(kwargs))
+    return __init__
+
+
+Settings.__init__ = _accepting_former_names(Settings.__init__)
+for _old, _new in RENAMED_SETTINGS.items():
+    setattr(Settings, _old, property(lambda self, _new=_new: getattr(self, _new), doc=f"Former name of ``{_new}``."))
+
 
 TRACE_FIELDS = ("iter", "criterion", "pinfeas", "dinfeas", "mu", "sigma", "alpha_aff", "alpha", "gamma",
                 "min_lam2_z", "min_lam2_z_cone", "min_lam2_s", "min_lam2_s_cone", "max_cond_Qp",
                 "solve_residual", "refine_steps", "time")
 """Per-iteration trace columns.  ``criterion`` is rfverify's stopping measure
-(:func:`rfverify.measures.measures`, the ``max``) of that iterate's (v, u, r) on its run's own data:
+(:func:`rfverify.model.measures.measures`, the ``max``) of that iterate's (v, u, r) on its run's own data:
 its component, without the contact-free bodies (solved apart), in the iterate's arithmetic — the
 returned answer's criterion on the whole problem is ``SolveResult.criterion``;
 ``pinfeas``, ``dinfeas``, ``mu`` are the paper's (DESIGN §4), reported beside it.
@@ -296,7 +341,7 @@ class IterationInfo:
 
 class ResultAliases(Mapping):
     """What every result (:class:`SolveResult`, :class:`rfverify.DigitsSolution`,
-    :class:`rfverify.Certificate`, :class:`rfverify.diagnosis.Diagnosis`) offers the same way
+    :class:`rfverify.Certificate`, :class:`rfverify.verify.diagnosis.Diagnosis`) offers the same way
     (docs/RESULTS.md): ``time`` is ``timings["total"]`` in seconds, ``iterations`` (Clarabel's
     name) is ``nit``, ``solve_time`` (Clarabel's) is ``time``; ``as_dict()`` is the JSON-able dict
     the CLI prints with ``--json``.
@@ -384,7 +429,7 @@ class SolveResult(Outcome, ResultAliases):
     success : bool            status is Solved
     message : str             human-readable reason (names iteration/operation/cone on errors)
     nit : int                 iterations performed
-    measures : Measures       rfverify's criterion of the returned (v, u, r) (:mod:`rfverify.measures`):
+    measures : Measures       rfverify's criterion of the returned (v, u, r) (:mod:`rfverify.model.measures`):
                               Solved means ``measures.max ≤ tol``
     pinfeas, dinfeas, mu : float   the paper's measures of the returned iterate (DESIGN §4)
     trace : dict of ndarray   per-iteration columns, see TRACE_FIELDS

@@ -14,7 +14,7 @@ the death of the caller, and ``Settings.time_limit`` kills it (``MaxTime``).
 GRFC3D_IPM works in scaled variables r_s = P⁻¹r, u_s = P u with P = diag(1, μ, μ, μr, μr) per
 contact and returns them so (the conversion back is commented out in its source); the driver
 returns v, u = P⁻¹u_s, r = P r_s.  The answer (v, u, r) — Siconos's own u, not Hᵀv + w — is judged
-by rfverify's criterion (:mod:`rfverify.measures`) exactly like Algorithm 1's and Clarabel's;
+by rfverify's criterion (:mod:`rfverify.model.measures`) exactly like Algorithm 1's and Clarabel's;
 Siconos's own verdict is kept in ``extras``: ``siconos_status`` ("Solved" when its info is 0,
 i.e. it met tol on its own scaled measure), ``siconos_info``, ``siconos_residual`` (its
 max(pinfeas, dinfeas, min(uᵀr, projection error)) in its scaled variables),
@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..measures import measures
-from ..problem import Problem
+from ..model.measures import measures
+from ..model.problem import Problem
 from .result import Settings, SolveResult, Status
 
 ENV_PREFIX = "RFVERIFY_SICONOS"

@@ -1,7 +1,7 @@
 """When Algorithm 1 stops, and with which iterate: the criterion, the stall rule, the best
 iterate, the iteration and time limits, and a user's callback.
 
-The criterion is :mod:`rfverify.measures`' (judged on what would be returned).  A stall is
+The criterion is :mod:`rfverify.model.measures`' (judged on what would be returned).  A stall is
 ``stall_iterations`` consecutive iterations in which none of the primal (velocity, dual cone),
 dual (dynamics) and gap (complementarity, primal cone) measures that is still above tol fell
 below 0.9 × its own best, counted from the first step with α ≥ 0.5 — before it, a badly
@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..algorithm import rules
+from ..algorithm.interfaces import Policy
 from .result import Status
 
 
@@ -31,6 +33,20 @@ class Verdict:
 
     status: Status
     message: str
+
+
+class PaperPolicy(Policy):
+    """What the double run's policy (:mod:`.ipm`) and its continuations in exact arithmetic
+    (:mod:`rfverify.verify.exact`) answer alike: the next step-to-boundary fraction by the paper's
+    rule, γ = 0.9 + 0.09α, and a breakdown ends the run NumericalError."""
+
+    @staticmethod
+    def next_gamma(alpha):
+        return rules.step_fraction(alpha, 0.09)
+
+    @staticmethod
+    def breakdown(message):
+        return Verdict(Status.NUMERICAL_ERROR, message)
 
 
 class Termination:

@@ -2,7 +2,7 @@
 digits (issue 30).
 
 For each problem: every method solves at ``--tol`` (``--repeat`` times alternating, median wall
-time kept), its answer is judged by rfverify's criterion (:func:`rfverify.measures.measures` in
+time kept), its answer is judged by rfverify's criterion (:func:`rfverify.model.measures.measures` in
 longdouble, never the solver's word), and then proven: :func:`rfverify.certify` bounds the error
 of each answer (v, u, r) against one extended-precision point per problem (computed once, from
 the first method's answer, and shared so the three are bounded against the same point).
@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 import rfverify
-from rfverify.measures import measures
+from rfverify.model.measures import measures
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from _results import recorded  # noqa: E402  (stamped results file, benchmarks/_results.py)

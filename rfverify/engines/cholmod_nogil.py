@@ -6,7 +6,7 @@ Two reasons not to call cvxopt's ``cholmod.symbolic``/``numeric``/``solve``:
 * they hold Python's GIL for the whole call (0.2–0.3 s per factorisation at 10⁴ contacts,
   minutes at 10⁵), so no other thread of the process runs meanwhile; a foreign call through
   ctypes releases it: the k-digit path prepares its double-double phase on the second core while
-  the double solve factors (:mod:`rfverify.digits`);
+  the double solve factors (:mod:`rfverify.verify.digits`);
 * they take their options from cvxopt's module-global ``cvxopt.cholmod.options`` (a user's
   ``{"postorder": False}`` or ``{"nmethods": 1}`` changes the ordering, hence every answer bit
   for bit), and setting them around a call makes rfverify's settings visible to the user's
@@ -82,32 +82,6 @@ _CHOLMOD_A = 0  # cholmod_solve's sys for A x = b
 _lib = None
 _checked = False
 _lock = threading.Lock()
-_waiting: list[threading.Event] = []  # set at the next GIL-free factorisation: see when_factoring
-
-
-def when_factoring(event: threading.Event) -> None:
-    """Set ``event`` when a GIL-free factorisation next starts in this process (at once if
-    this module's call is not available here): the moment other threads can run beside it."""
-    if _library() is None:
-        event.set()
-        return
-    with _lock:
-        _waiting.append(event)
-
-
-def forget(event: threading.Event) -> None:
-    """Stop waiting to set ``event`` (its owner no longer needs the signal)."""
-    with _lock:
-        if event in _waiting:
-            _waiting.remove(event)
-
-
-def _wake_waiting() -> None:
-    with _lock:
-        waiting = _waiting[:]
-        _waiting.clear()
-    for event in waiting:
-        event.set()
 
 
 def _loaded_libcholmod() -> str | None:
@@ -234,8 +208,6 @@ class Cholmod:
         A = _Sparse(n, n, values.size, indptr.ctypes.data, indices.ctypes.data, None, values.ctypes.data, None,
                     -1, _CHOLMOD_LONG, _CHOLMOD_REAL, _CHOLMOD_DOUBLE, 1, 1)
         self._numeric = False
-        if _waiting:
-            _wake_waiting()
         if not self._lib.cholmod_l_factorize(ctypes.byref(A), self._factor, self._common):
             return None
         column = int(ctypes.c_size_t.from_address(self._factor.value + ctypes.sizeof(ctypes.c_size_t)).value)

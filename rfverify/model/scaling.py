@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import InvalidProblemError
+from ..errors import InvalidProblemError
 from .problem import SPACEDIM, Problem
 
 SAFE_EXPONENT = 200
@@ -86,6 +86,12 @@ class BinaryScaling:
         y = np.ldexp(x, e)
         return y if exact_ldexp(x, y, e) else None
 
+    def back(self, name: str, x) -> np.ndarray:
+        """x·2^−e in float64 as it rounds: the one way an answer in scaled units returns to the
+        problem's (an entry rounded to a subnormal loses bits, one too large becomes ±inf)."""
+        with np.errstate(all="ignore"):
+            return np.ldexp(np.asarray(x, dtype=np.float64), -self.exponent(name))
+
     def scale_bound_back(self, name: str, bound: float, up: bool = True) -> float:
         """A bound in scaled units back in the problem's units, rounded outwards (a bound that
         underflows becomes the smallest subnormal, never 0 unless it was 0)."""
@@ -99,6 +105,22 @@ class BinaryScaling:
         if not up and math.ldexp(y, self.exponent(name)) > bound:
             y = math.nextafter(y, 0.0)
         return y
+
+
+def in_scaled_units(problem: Problem, run, unscale):
+    """The one wrapper of every entry point (:func:`rfverify.solve`,
+    :func:`rfverify.solve_to_digits`, :func:`rfverify.certify`) for data beyond float64's safe
+    range.  None when ``problem``'s data lie inside it (the caller goes on as it is: its answers
+    stay bit for bit the same); else the whole run in units scaled by exact powers of two,
+    ``run(scaled_problem, scaling)``, and its answer in the problem's units,
+    ``unscale(answer, scaled_problem, scaling)``.  ``run`` may decline by returning None (a
+    candidate that does not scale exactly): the result is then None too."""
+    scaling = binary_scaling(problem)
+    if scaling is None:
+        return None
+    scaled = scaled_problem(problem, scaling)
+    out = run(scaled, scaling)
+    return None if out is None else unscale(out, scaled, scaling)
 
 
 def exact_ldexp(x: np.ndarray, y: np.ndarray, e: int) -> bool:

@@ -1,4 +1,4 @@
-"""The arrays of a :class:`~rfverify.problem.Problem` as it checks and keeps them: any matrix
+"""The arrays of a :class:`~rfverify.model.problem.Problem` as it checks and keeps them: any matrix
 or vector given converted to float64 (CSC, duplicates summed, indices sorted; a flat vector),
 every entry checked finite (the first offending index named), and read-only copies that
 alias nothing the caller holds.
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import InvalidProblemError
+from ..errors import InvalidProblemError
 
 
 def as_csc(name: str, A) -> sp.csc_matrix:

@@ -9,7 +9,7 @@ import numpy as np
 def problem_summary(problem, *, solution_tol: float = 1e-6, max_asymmetry: float | None = None) -> dict:
     """JSON-able description of a problem (what ``rfverify info --json`` prints)."""
     from .check import check_solution
-    from .io.fclib3d import ROLLING, SOLUTION_LAYOUT, describe_symmetrised, file_layout, symmetrised
+    from ..io.fclib3d import ROLLING, SOLUTION_LAYOUT, describe_symmetrised, file_layout, symmetrised
     from .problem import DEFAULT_MAX_ASYMMETRY
 
     mu, mu_r = problem.mu, problem.mu_r

@@ -29,18 +29,21 @@ import time
 import mpmath
 import numpy as np
 
-from .errors import InvalidProblemError
-from .digits import DOUBLE_SETTINGS, ProofDriver, _start_from, extend, solve_on_face
-from .problem import SPACEDIM, Problem
-from .proof import FLOAT64_DIGITS, Point, ProofContext, validate_digits
+from ..errors import InvalidProblemError, require_time_limit
+from .digits import DOUBLE_SETTINGS, solve_on_face
+from .driver import ProofDriver
+from .extend import extend
+from .prepare import start_from
+from ..model.problem import SPACEDIM, Problem
+from ..proof import FLOAT64_DIGITS, Point, ProofContext, validate_digits
 from .certificate import Certificate, candidate_point, certificate_from_proof
-from .compilation import compile_extended_in_background
+from ..compilation import compile_extended_in_background
 
 
 def local_velocity(problem: Problem, r) -> np.ndarray:
     """u = (W + Wᵀ)/2 r + q of a local problem, rounded once to nearest from the exact value."""
-    from .proof.dyadic import Dyadic
-    from .proof.local import LocalExact
+    from ..proof.dyadic import Dyadic
+    from ..proof.local import LocalExact
 
     return LocalExact(problem).u_of(Dyadic.from_float(r)).nearest()
 
@@ -119,37 +122,37 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     """
     t0 = time.perf_counter()
     digits = validate_digits(digits)
-    if time_limit is not None and not (isinstance(time_limit, (int, float)) and time_limit > 0):
-        from .errors import InvalidArgumentError
-
-        raise InvalidArgumentError("time_limit", f"must be a number of seconds > 0, got {time_limit!r}",
-                                   fix="pass e.g. time_limit=60, or None for no limit")
-    from .solver import posed
+    require_time_limit(time_limit)
+    from ..solver import posed
 
     problem = posed(problem, as_stored)
     if point is None and hasattr(v, "point") and u is None and r is None:
         point = v.point
     v, u, r = _solution_arrays(problem, v, u, r)
-    from .scaling import binary_scaling, scaled_problem
+    from ..model.scaling import in_scaled_units
+    from .certificate import scaled_point, unscaled_certificate
 
-    scaling = binary_scaling(problem)
-    if scaling is not None:
-        from .certificate import scaled_point, unscaled_certificate
-
+    def in_scaled(scaled, scaling):
         xs = [scaling.scale(name, x) for name, x in (("v", v), ("u", u), ("r", r))]
         sp_ = scaled_point(point, scaling)
         if all(x is not None for x in xs) and (point is None or sp_ is not None):
             # Data beyond float64's safe range: proven in exactly scaled units (DESIGN §6.4).
-            cert = certify(scaled_problem(problem, scaling), *xs, digits=digits, point=sp_, cross_check=False,
-                           polish_max_iter=polish_max_iter, relative=relative, progress=progress,
-                           time_limit=time_limit)
-            cert = unscaled_certificate(cert, scaling)
-            if cross_check:
-                cert.cross_check = reference_agreement(problem, v, u, r, dps=dps)
-            cert.seconds = time.perf_counter() - t0
-            return cert
-        say_ = progress or (lambda msg: None)
-        say_("the candidate cannot be scaled exactly into float64's safe range: proven in the problem's own units")
+            return certify(scaled, *xs, digits=digits, point=sp_, cross_check=False, polish_max_iter=polish_max_iter,
+                           relative=relative, progress=progress, time_limit=time_limit)
+        (progress or (lambda msg: None))("the candidate cannot be scaled exactly into float64's safe range: "
+                                         "proven in the problem's own units")
+        return None
+
+    def unscaled(cert, scaled, scaling):
+        cert = unscaled_certificate(cert, scaling)
+        if cross_check:
+            cert.cross_check = reference_agreement(problem, v, u, r, dps=dps)
+        cert.seconds = time.perf_counter() - t0
+        return cert
+
+    cert = in_scaled_units(problem, in_scaled, unscaled)
+    if cert is not None:
+        return cert
     say = progress or (lambda msg: None)
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(u)) and np.all(np.isfinite(r))):
         return Certificate(digits, False, "not certified: the solution contains NaN or Inf",
@@ -190,9 +193,9 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
     outside) the cone boundaries, and an infeasible interior-point run shrinks its primal
     residual and μ at the same rate, so a start pushed into the cones from it never gets its
     residual below the cone margins (measured on the bundled Chute: ratio 5 at every step)."""
-    from .extended.data import ExtendedData
-    from .extended.system import choose_backend
-    from .solver import solve
+    from ..extended.data import ExtendedData
+    from ..extended.system import choose_backend
+    from ..solver import solve
 
     compile_extended_in_background()  # on a cold numba cache: the other core compiles the extended kernels
     limit = {} if deadline is None else {"time_limit": max(deadline - time.perf_counter(), 1e-3)}
@@ -202,7 +205,7 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
     driver = ProofDriver(ctx, data, digits, target=(v, u, r), progress=say, relative=relative, deadline=deadline)
     say(f"extended point: double solve {double.status} in {double.nit} iterations, then double-double "
         f"({system.name})")
-    out = extend(data, _start_from(data, double), driver, system, max_iter=max_iter, say=say)
+    out = extend(data, start_from(data, double), driver, system, max_iter=max_iter, say=say)
     face = None
     if not driver.certified and not driver.timed_out:  # no interior (a self-stress): solve on its face
         face = solve_on_face(problem, ctx, driver, digits, relative, say, deadline,

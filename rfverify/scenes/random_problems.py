@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .problem import Problem
+from ..model.problem import Problem
 
 
 def random_problem(n_bodies: int, n_contacts: int, *, seed: int = 0, mu=0.5, mu_r=0.05,
@@ -104,7 +104,7 @@ def random_problem(n_bodies: int, n_contacts: int, *, seed: int = 0, mu=0.5, mu_
     return Problem.from_arrays(
         M, H, f, w, mu_c, mur_c,
         title=title or f"random-nb-{nb}-nc-{n_contacts}-seed-{seed}",
-        description=f"rfverify.random_problems.random_problem(n_bodies={n_bodies}, "
+        description=f"rfverify.scenes.random_problems.random_problem(n_bodies={n_bodies}, "
                     f"n_contacts={n_contacts}, seed={seed}, free_bodies={free_bodies})",
     )
 
@@ -117,7 +117,7 @@ def random_local_problem(n_contacts: int, *, seed: int = 0) -> Problem:
     lifted problem, which is what it is; a local *file* with such a W is proven on its own W
     (DESIGN §6.1b), and its rounding usually makes it indefinite, so it is not certified.
     Used by ``benchmarks/bench_digits.py`` and the tests of ``method="auto"``."""
-    from .io.local_lift import LocalProblem, lift_local
+    from ..io.local_lift import LocalProblem, lift_local
 
     base = random_problem(n_contacts // 2, n_contacts, seed=seed)
     Minv_H = np.linalg.solve(base.M_sym.toarray(), base.H.toarray())

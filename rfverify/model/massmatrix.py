@@ -6,7 +6,7 @@ measure, and normwise, information; :class:`SymmetryReport`), :func:`asymmetry_e
 refusal of a matrix beyond the limit, :func:`symmetrise` is (M + Mᵀ)/2 as every solver uses
 it, and :func:`block_structure_and_definiteness` splits the symmetrised M into the connected
 components of its sparsity graph (bodies) and checks each for definiteness
-(:class:`BlockStructure`).  :meth:`rfverify.problem.Problem.from_arrays` runs them all.
+(:class:`BlockStructure`).  :meth:`rfverify.model.problem.Problem.from_arrays` runs them all.
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from .definiteness import DENSE_LIMIT, Definiteness, verify_definite
-from .errors import InvalidProblemError
+from ..errors import InvalidProblemError
 
 DENSE_BLOCK_LIMIT = DENSE_LIMIT
 """Diagonal blocks of M up to this size are verified densely (batched by size); larger blocks
-by a sparse LDLᵀ (:mod:`rfverify.definiteness`)."""
+by a sparse LDLᵀ (:mod:`rfverify.model.definiteness`)."""
 
 
 @dataclass(frozen=True)
@@ -95,7 +95,7 @@ def _round_up_2(x: float) -> str:
 
 BlockStructure = Definiteness
 """Connected components of the sparsity graph of M (bodies, for rigid-body problems) and the
-verified facts about each: :class:`rfverify.definiteness.Definiteness` (``labels``,
+verified facts about each: :class:`rfverify.model.definiteness.Definiteness` (``labels``,
 ``sizes``, ``count``, the equilibration ``exponents``, ``lam_scaled`` and ``lam_lower``)."""
 
 
@@ -128,7 +128,7 @@ def symmetry_report(M: sp.spmatrix) -> SymmetryReport:
 def block_structure_and_definiteness(M_sym: sp.csc_matrix, M_raw: sp.spmatrix | None = None) -> BlockStructure:
     """Split symmetric ``M_sym`` = (M_raw + M_rawᵀ)/2 (rounded to float64) into the connected
     components of its sparsity graph and prove each positive definite, whatever its scale:
-    :func:`rfverify.definiteness.verify_definite` (the Jacobi-equilibrated block, verified in
+    :func:`rfverify.model.definiteness.verify_definite` (the Jacobi-equilibrated block, verified in
     floating point with a-priori rounding-error bounds; an exact rational LDLᵀ for small
     blocks where that cannot decide).  ``M_raw`` None: ``M_sym`` is the data itself.
 

@@ -1,7 +1,7 @@
-"""Check of a candidate solution (v, u, r) of a :class:`~rfverify.problem.Problem`, e.g. a
+"""Check of a candidate solution (v, u, r) of a :class:`~rfverify.model.problem.Problem`, e.g. a
 file's ``/solution``: nothing a file or a solver says about its own solution is trusted.
 
-The measures are those of :mod:`rfverify.measures` (the one definition of "solved" in
+The measures are those of :mod:`rfverify.model.measures` (the one definition of "solved" in
 rfverify), in float64; see there for their definitions and scales.
 """
 

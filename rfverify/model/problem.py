@@ -15,8 +15,8 @@ vectors are stored flat (contact i occupies entries ``5i … 5i+4``).
 solvers use :attr:`Problem.M_sym` = (M + Mᵀ)/2.  Keeping the raw matrix makes a written file
 round-trip bit for bit and lets ``rfverify info`` report the asymmetry of the source data.
 
-The checks of M (symmetry, definiteness of its diagonal blocks) are :mod:`rfverify.massmatrix`,
-the conversion and finiteness checks of every array :mod:`rfverify._arrays`; their public names
+The checks of M (symmetry, definiteness of its diagonal blocks) are :mod:`rfverify.model.massmatrix`,
+the conversion and finiteness checks of every array :mod:`rfverify.model._arrays`; their public names
 are importable from here as before.
 """
 
@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._arrays import as_csc, as_vector, check_finite_sparse, check_finite_vector, freeze, freeze_sparse
-from .errors import InvalidArgumentError, InvalidProblemError
+from ..errors import InvalidArgumentError, InvalidProblemError
 from .massmatrix import (DENSE_BLOCK_LIMIT, BlockStructure, SymmetryReport, asymmetry_error,
                          block_structure_and_definiteness, check_positive_diagonal, symmetrise,
                          symmetry_report)
@@ -133,7 +133,7 @@ class Problem:
     title, description, math_info : str
         FCLIB ``info`` strings ("" when absent).
     solution : StoredSolution or None
-        ``/solution`` of the file; never trusted — see :func:`rfverify.check.check_solution`.
+        ``/solution`` of the file; never trusted — see :func:`rfverify.model.check.check_solution`.
     guesses : tuple of StoredSolution
         ``/guesses`` of the file.
     storage : dict

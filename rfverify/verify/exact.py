@@ -30,17 +30,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .algorithm import rules
-from .algorithm.interfaces import Breakdown
-from .algorithm.loop import Precision, iterate
-from .algorithm.newton import ReducedNewton
-from .extended import cones as C
-from .extended import dd
-from .extended import ipm as ext
-from .extended.data import ExtendedData
-from .extended.system import choose_backend
-from .solver.result import Status
-from .solver.termination import Termination, Verdict
+from ..algorithm import rules
+from ..algorithm.interfaces import Breakdown
+from ..algorithm.loop import Precision, iterate
+from ..algorithm.newton import ReducedNewton
+from ..extended import cones as C
+from ..extended import dd
+from ..extended import ipm as ext
+from ..extended.data import ExtendedData
+from ..extended.system import choose_backend
+from ..solver.result import Status
+from ..solver.termination import PaperPolicy, Termination, Verdict
 
 FLOOR = 1e-31
 """Relative residual to which every Newton solve of an exact step is refined (double-double's
@@ -117,7 +117,7 @@ class _ExactCones(ext.DDCones):
         return _ExactScaling(self.n3, self.nz, self.n_cones, self.e, z, s)
 
 
-class _OneStep:
+class _OneStep(PaperPolicy):
     """Policy of one exact step: γ and the σ rule given, stop at the next iterate."""
 
     def __init__(self, gamma: float, rule: str):
@@ -137,16 +137,8 @@ class _OneStep:
     def after_step(alpha):
         return None
 
-    @staticmethod
-    def next_gamma(alpha):
-        return rules.step_fraction(alpha, 0.09)
 
-    @staticmethod
-    def breakdown(message):
-        return Verdict(Status.NUMERICAL_ERROR, message)
-
-
-class _Continuation:
+class _Continuation(PaperPolicy):
     """The double run's policy in exact arithmetic: its criterion (``judge``), stall rule and
     iteration limit (:class:`Termination`, iterations counted as the double run's), its σ
     rule and γ; a deadline ends it with MaxTime."""
@@ -194,15 +186,11 @@ class _Continuation:
         self.gamma = rules.step_fraction(alpha, 0.09)
         return self.gamma
 
-    @staticmethod
-    def breakdown(message):
-        return Verdict(Status.NUMERICAL_ERROR, message)
-
 
 class ExactAlgorithm:
     """Algorithm 1 in double-double on ``problem`` (its extended data and Newton back end built
     once, :mod:`rfverify.extended`), judged as the double run with ``settings`` judges:
-    ``judge(v, r̃, z)`` (double-double vectors) returns the :class:`rfverify.measures.Measures`
+    ``judge(v, r̃, z)`` (double-double vectors) returns the :class:`rfverify.model.measures.Measures`
     of the answer that iterate would give."""
 
     def __init__(self, problem, settings, judge):
@@ -213,7 +201,7 @@ class ExactAlgorithm:
 
     def point(self, v, r_t, z) -> tuple:
         """An iterate (v (m,) — ignored for a local problem, which has no dofs here —, r̃ (nk,),
-        z (nz,), any float dtype, in the lifted layout of :func:`rfverify.lifting.lift`) as
+        z (nz,), any float dtype, in the lifted layout of :func:`rfverify.model.lifting.lift`) as
         double-double vectors, exactly."""
         v = np.zeros(0, dtype=np.longdouble) if self.local else np.asarray(v, dtype=np.longdouble)
         return tuple(ext.V(*dd.from_longdouble(np.asarray(x, dtype=np.longdouble))) for x in (v, r_t, z))

@@ -31,7 +31,7 @@ Per block, in order:
 
 A block is called *not positive definite* only on an exact proof (a non-positive pivot of 2.,
 a witness of 3.); otherwise a failure says that positive definiteness *could not be verified*
-and what was tried.  :func:`verify_definite` returns the facts; :mod:`rfverify.massmatrix`
+and what was tried.  :func:`verify_definite` returns the facts; :mod:`rfverify.model.massmatrix`
 turns a failure into the refusal of a problem, :mod:`rfverify.proof.massbounds` the facts into
 the proof's norms of M⁻¹.
 """
@@ -214,7 +214,7 @@ class Definiteness:
 def verify_definite(A_sym: sp.spmatrix, A_raw: sp.spmatrix | None = None, *, exact: bool = True) -> Definiteness:
     """Decide the positive definiteness of the exact symmetrisation (A_raw + A_rawᵀ)/2 block by
     block (module docstring).  ``A_sym`` is its float64 rounding (the matrix the solvers use:
-    one rounding per entry, as :func:`rfverify.massmatrix.symmetrise` computes it); ``A_raw``
+    one rounding per entry, as :func:`rfverify.model.massmatrix.symmetrise` computes it); ``A_raw``
     the data it came from (None: ``A_sym`` is the data, exactly symmetric).  ``exact=False``
     skips the exact rational test (step 2)."""
     A_sym = sp.csr_matrix(A_sym, dtype=np.float64)

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .proof import Point, Proof
-from .solver.result import ResultAliases, Status
+from ..proof import Point, Proof
+from ..solver.result import ResultAliases, Status
 
 
 @dataclass
@@ -132,7 +132,7 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
     quantity proven zero at the data scale is stated as "zero within e" (DESIGN §6.3), never as
     digits; the problem (:attr:`Proof.statement`) ends the first sentence, and where the stored
     M is unsymmetric a second one says how many digits of the stored equations' solution the
-    answer has.  Where ``extra["proven_at"]`` (:meth:`rfverify.digits.ProofDriver.proven_at`)
+    answer has.  Where ``extra["proven_at"]`` (:meth:`rfverify.verify.digits.ProofDriver.proven_at`)
     says the proof's point is not the last one proven, the first sentence names it."""
     req = proof.requested
     about = f" for {proof.statement}" if proof.statement else ""
@@ -195,7 +195,7 @@ def candidate_point(v, r) -> Point:
 
 
 def unscaled_proof(proof: Proof | None, scaling) -> Proof | None:
-    """A proof made in units scaled by exact powers of two (:mod:`rfverify.scaling`) with its
+    """A proof made in units scaled by exact powers of two (:mod:`rfverify.model.scaling`) with its
     per-quantity bounds, norms and scales in the problem's units (bounds rounded up, lower
     bounds down; digits and verdicts are scale-invariant).  ``terms`` stay in the scaled units
     (``terms_units`` says so)."""

@@ -24,12 +24,29 @@ Every factorisation after the first must have the first one's sparsity pattern (
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
 
 from . import cholmod_nogil
+
+_on_factoring: contextvars.ContextVar = contextvars.ContextVar("rfverify_on_factoring", default=None)
+"""The hook :func:`on_factoring` sets for the engines made inside its block (None: none)."""
+
+
+@contextlib.contextmanager
+def on_factoring(hook):
+    """Within this block (of this thread), every GIL-free engine made calls ``hook()`` once, as
+    its first numeric factorisation begins: the moment other threads can run beside it.  The
+    k-digit path starts its set-up thread so (:class:`rfverify.verify.prepare.Preparation`)."""
+    token = _on_factoring.set(hook)
+    try:
+        yield
+    finally:
+        _on_factoring.reset(token)
 
 
 class FactorEngine(Protocol):
@@ -184,6 +201,7 @@ class CholmodEngine:
         if self._chol is None:
             raise ImportError(cholmod_missing_message(what))
         self._pattern = None
+        self._on_factoring = _on_factoring.get()  # called once, at the first factorisation (on_factoring)
         self.factorisations = 0
         self.ordering = None  # "AMD" or "nested dissection or AMD, the less fill", after the analysis
 
@@ -222,6 +240,9 @@ class CholmodEngine:
             self._analyse(K)
         elif not (np.array_equal(K.indptr, self._pattern[0]) and np.array_equal(K.indices, self._pattern[1])):
             raise ValueError("CholmodEngine: the matrix's pattern differs from the first one's")
+        if self._on_factoring is not None:
+            hook, self._on_factoring = self._on_factoring, None
+            hook()
         column = self._chol.factorize(K.data)
         if column is None:
             raise MemoryError(f"CHOLMOD: the factorisation of a matrix of order {n} failed (out of memory or "
