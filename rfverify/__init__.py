@@ -72,10 +72,32 @@ def _checked(func, *, tol=False):
     return wrapper
 
 
-solve = _checked(solve, tol=True)
+def _posing(func, physical: str):
+    """``func`` with the keyword ``problem="relaxation" | "coulomb"`` (issue 51): "relaxation"
+    (default) calls ``func`` itself, unchanged; "coulomb" calls ``rfverify.coulomb.<physical>``,
+    the physical problem with De Saxcé's term, with the same arguments (DESIGN §1).  A Problem
+    passed as ``problem=`` is the problem to solve, as before."""
+
+    @_functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        kind = kwargs.get("problem")
+        if not isinstance(kind, str):
+            return func(*args, **kwargs)
+        from . import coulomb
+
+        coulomb.check_problem_kind(kwargs.pop("problem"))
+        if kind == "relaxation":
+            return func(*args, **kwargs)
+        checked = _checked(getattr(coulomb, physical), tol=physical != "certify_coulomb")
+        return checked(*args, **kwargs)
+
+    return wrapper
+
+
+solve = _posing(_checked(solve, tol=True), "solve_coulomb")
 diagnose = _checked(diagnose, tol=True)
-solve_to_digits = _checked(solve_to_digits, tol=True)
-certify = _checked(certify)
+solve_to_digits = _posing(_checked(solve_to_digits, tol=True), "coulomb_to_digits")
+certify = _posing(_checked(certify), "certify_coulomb")
 check_solution = _checked(check_solution)
 
 

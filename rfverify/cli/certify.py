@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .coulomb import add_problem_option, certify_physical
 from .argtypes import digit_count, out_path, positive_float, positive_int
 from .common import (DOCS_NOTE, exit_codes, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_equations_option,
                      add_load_options, dumps, is_hdf5_input,
@@ -52,6 +53,7 @@ def add_parser(sub) -> None:
                       help="stop the search for a proof point after S seconds and report the best proof "
                            "reached (status MaxTime when short of --digits, exit 1)")
     add_equations_option(cert)
+    add_problem_option(cert)
     add_load_options(cert)
     cert.set_defaults(func=cmd_certify, check_outputs=check_outputs)
 
@@ -95,6 +97,10 @@ def cmd_certify(args) -> int:
         raise ProblemFileError(where, "/certificate/point does not match the problem's sizes",
                                location="/certificate/point", fix="certify the solution file written for this problem")
     say = progress_printer(args)
+    if args.problem_kind == "coulomb":  # the stored point is the relaxation's: not used
+        with announcing(say):
+            return certify_physical(args, problem, sol, say,
+                                    where if args.solution or is_hdf5_input(args.problem) else None)
     with announcing(say):  # a cold cache's compilation is named as it starts
         cert = certify(problem, sol.v, sol.u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
                        dps=args.dps, relative=args.relative, progress=say, time_limit=args.time_limit)

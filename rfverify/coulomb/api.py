@@ -179,11 +179,11 @@ def _better(a: CoulombCertificate, b: CoulombCertificate) -> bool:
 
 def certify_coulomb(problem: Problem, v, u=None, r=None, *, digits: int = 10, relative: bool = False,
                     as_stored: bool | None = None, progress=None, time_limit: float | None = None,
-                    polish_max_iter: int = 60) -> CoulombCertificate:
+                    polish_max_iter: int = 60, shift=None) -> CoulombCertificate:
     """A backward-error certificate of a given answer (v (m,), u (5n,) or None for Hᵀv + w,
     r (5n,); or one result object) to the physical problem, e.g. one written by Siconos: ŝ :=
-    Φ(u), the candidate (v, u + ŝ e_N, r) proven for the convex problem with w_N + ŝ
-    (:func:`rfverify.certify`, which polishes it where it does not prove itself), and δ bounded
+    ``shift`` (n,; the solver's own, e.g. ``CoulombDigits.shift``) or by default Φ(u); the
+    candidate (v, u + ŝ e_N, r) proven for the convex problem with w_N + ŝ `rfverify.certify`, which polishes it where it does not prove itself), and δ bounded
     (:mod:`.backward`)."""
     from ..certification import _solution_arrays, certify
     from ..solver import posed
@@ -191,15 +191,25 @@ def certify_coulomb(problem: Problem, v, u=None, r=None, *, digits: int = 10, re
     t0 = time.perf_counter()
     digits = validate_digits(digits)
     problem = posed(problem, as_stored)
+    if shift is None and hasattr(v, "shift"):
+        shift = v.shift
     v, u, r = _solution_arrays(problem, v, u, r)
+    shifted = shifted_problem(problem, phi(problem, u) if shift is None else _checked_shift(problem, shift))
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(v)) and np.all(np.isfinite(r))):
         from ..errors import InvalidProblemError
 
         raise InvalidProblemError("solution", "contains NaN or Inf", fix="certify a finite solution")
-    shifted = shifted_problem(problem, phi(problem, u))
     u_inner = (Dyadic.from_float(u) + Dyadic.from_float(offsets(shifted)) - Dyadic.from_float(offsets(problem))).nearest()
     inner = certify(shifted, v, u_inner, r, digits=digits, relative=relative, progress=progress,
                     time_limit=time_limit, polish_max_iter=polish_max_iter)
     cert = coulomb_certificate(problem, shifted, inner, v, u_inner, r, digits, _scales(problem), relative, u_phys=u)
     cert.seconds = time.perf_counter() - t0
     return cert
+
+
+def _checked_shift(problem: Problem, shift) -> np.ndarray:
+    s = np.asarray(shift, dtype=np.float64).ravel()
+    if s.size != problem.n_contacts or not np.all(np.isfinite(s)):
+        raise InvalidArgumentError("shift", f"needs {problem.n_contacts} finite entries (one per contact), got {s.size}",
+                                   fix="pass the shift the answer was solved with (CoulombDigits.shift), or None")
+    return s
