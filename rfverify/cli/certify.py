@@ -21,7 +21,8 @@ arithmetic, and the bound ||v - v*||_Ms <= (sqrt(g'Ms^-1 g) + sqrt(g'Ms^-1 g + 4
 carried to the solution. The verdict names the problem it proves (with (M + Mᵀ)/2 unless
 --as-stored). A /certificate already in the solution file is checked against the /solution it
 holds and the problem it is read with (its digests of both) and the output says whether it is
-about them. Exit code 0 only when --digits are proven."""
+about them. Exit code 0 only when --digits are proven. --problem coulomb proves a backward-error
+certificate of the physical problem instead (see --problem)."""
 
 
 def add_parser(sub) -> None:

@@ -23,7 +23,8 @@ is <= --tol; 1 when the solver stopped without reaching it (the status says why)
 pinfeas, dinfeas and mu are printed beside it. A 3-D FCLIB file (/fclib_global, /fclib_local)
 is solved as its convex relaxation, exactly the rolling problem with mu_r = 0 and no rolling
 rows (DESIGN §7.2); a local problem (/fclib_local, Siconos local .dat) through its lifting to
-global form, its answer judged and proven on its own W."""
+global form, its answer judged and proven on its own W. --problem coulomb solves the physical
+problem instead (De Saxcé's term kept; see --problem)."""
 
 
 def add_parser(sub) -> None:
