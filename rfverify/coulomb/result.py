@@ -168,6 +168,7 @@ class CoulombSolution(ResultAliases):
         return {"status": str(self.status), "success": self.success, "message": self.message, "nit": self.nit,
                 "time": self.time, "problem": "coulomb", "statement": STATEMENT, "tol": self.tol,
                 "criterion": self.criterion, "fixed_point_residual": self.outer.residual,
+                "backward_error": None,  # nothing is proven without --digits: the residual above is measured
                 "outer": self.outer.as_dict(),
                 "inner_criterion": None if self.inner is None else self.inner.criterion,
                 "inner_method": None if self.inner is None else self.inner.method,
