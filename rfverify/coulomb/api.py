@@ -185,7 +185,7 @@ def certify_coulomb(problem: Problem, v, u=None, r=None, *, digits: int = 10, re
     ``shift`` (n,; the solver's own, e.g. ``CoulombDigits.shift``) or by default Φ(u); the
     candidate (v, u + ŝ e_N, r) proven for the convex problem with w_N + ŝ `rfverify.certify`, which polishes it where it does not prove itself), and δ bounded
     (:mod:`.backward`)."""
-    from ..certification import _solution_arrays, certify
+    from ..certification import certify
     from ..solver import posed
 
     t0 = time.perf_counter()
@@ -193,7 +193,7 @@ def certify_coulomb(problem: Problem, v, u=None, r=None, *, digits: int = 10, re
     problem = posed(problem, as_stored)
     if shift is None and hasattr(v, "shift"):
         shift = v.shift
-    v, u, r = _solution_arrays(problem, v, u, r)
+    v, u, r = _solution(problem, v, u, r)
     shifted = shifted_problem(problem, phi(problem, u) if shift is None else _checked_shift(problem, shift))
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(v)) and np.all(np.isfinite(r))):
         from ..errors import InvalidProblemError
@@ -213,3 +213,29 @@ def _checked_shift(problem: Problem, shift) -> np.ndarray:
         raise InvalidArgumentError("shift", f"needs {problem.n_contacts} finite entries (one per contact), got {s.size}",
                                    fix="pass the shift the answer was solved with (CoulombDigits.shift), or None")
     return s
+
+
+def _solution(problem: Problem, v, u, r):
+    """(v, u, r) as float64 vectors from arrays or one result object (``v``); u None: the file's
+    own u = Hᵀv + w (W r + q).  Sizes are checked by :func:`rfverify.certify` on the shifted
+    problem, which names the field."""
+    if u is None and r is None and hasattr(v, "v"):
+        v, u, r = v.v, getattr(v, "u", None), getattr(v, "r", None)
+    if v is None or r is None:
+        from ..errors import InvalidProblemError
+
+        raise InvalidProblemError("solution", "needs v and r", fix="pass (v, u, r) or a result object")
+    v, r = np.asarray(v, dtype=np.float64).ravel(), np.asarray(r, dtype=np.float64).ravel()
+    if r.size != 5 * problem.n_contacts or v.size != problem.n_dofs:
+        from ..errors import InvalidProblemError
+
+        raise InvalidProblemError("solution", f"has v of {v.size} and r of {r.size} entries, the problem needs "
+                                              f"{problem.n_dofs} and {5 * problem.n_contacts}",
+                                  fix="certify a solution of this problem")
+    u = physical_velocity(problem, v, r) if u is None else np.asarray(u, dtype=np.float64).ravel()
+    if u.size != r.size:
+        from ..errors import InvalidProblemError
+
+        raise InvalidProblemError("solution.u", f"has {u.size} entries, the problem needs {r.size}",
+                                  fix="certify a solution of this problem")
+    return v, u, r

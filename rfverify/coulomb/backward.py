@@ -24,8 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..problem import SPACEDIM, Problem
-from ..proof.bound import DATA_SCALE_NAMES, DATA_SCALE_NAMES_LOCAL, QuantityBound
-from ..proof.bound import _quantity as quantity_record
+from ..proof.bound import DATA_SCALE_NAMES, DATA_SCALE_NAMES_LOCAL, QuantityBound, quantity_record
 from ..proof.dyadic import Dyadic
 from .model import offsets
 

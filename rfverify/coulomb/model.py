@@ -21,12 +21,17 @@ import dataclasses
 
 import numpy as np
 
-from .._arrays import freeze
 from ..problem import SPACEDIM, LocalForm, Problem
 
 PROBLEMS = ("relaxation", "coulomb")
 """The problems a file can pose: its convex relaxation (DESIGN §1, the default) or the physical
 problem with De Saxcé's term (this package)."""
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """``a`` made read-only, as a Problem's vectors are."""
+    a.setflags(write=False)
+    return a
 
 
 def offsets(problem: Problem) -> np.ndarray:
@@ -41,11 +46,11 @@ def shifted_problem(problem: Problem, s) -> Problem:
     s = np.asarray(s, dtype=np.float64)
     w = np.array(problem.w, dtype=np.float64)
     w[0::SPACEDIM] = w[0::SPACEDIM] + s
-    out = dataclasses.replace(problem, w=freeze(w), solution=None, guesses=())
+    out = dataclasses.replace(problem, w=_frozen(w), solution=None, guesses=())
     if problem.local is not None:
         q = np.array(problem.local.q, dtype=np.float64)
         q[0::SPACEDIM] = q[0::SPACEDIM] + s
-        out = dataclasses.replace(out, local=LocalForm(W=problem.local.W, q=freeze(q),
+        out = dataclasses.replace(out, local=LocalForm(W=problem.local.W, q=_frozen(q),
                                                        significant_digits=problem.local.significant_digits))
     object.__setattr__(out, "M_sym", problem.M_sym)  # the same matrix: no second symmetrisation
     return out

@@ -619,6 +619,11 @@ def _quantity(name, e, x, scales, requested, note="", names=DATA_SCALE_NAMES, re
     return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)
 
 
+quantity_record = _quantity
+"""The public name of :func:`_quantity`, for the physical problem's certificate
+(:mod:`rfverify.coulomb.backward`), which states its own u's digits by the same rules."""
+
+
 def proven_open(u_p: Dyadic, u_radius, mu, mur, n: int) -> np.ndarray:
     """Contacts where u* ∈ int K*_i is proven (so r*_i = 0 for every solution): the whole box
     u_p ± radius lies inside.  A sufficient test in float64 with every rounding pushed against it."""
