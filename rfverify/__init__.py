@@ -30,13 +30,15 @@ _HOMES = {
     "Certificate": ".verify.certificate", "Diagnosis": ".verify.diagnosis",
     "DigitsSolution": ".verify.digits", "SolveResult": ".solver", "Settings": ".solver", "Status": ".solver",
 }
+_POSED = {"solve": "solve_coulomb", "solve_to_digits": "coulomb_to_digits", "certify": "certify_coulomb"}
+"""Entry points that also take ``problem="coulomb"``: the physical problem's function (:func:`_posing`)."""
 _CHECKED = {  # name: (module, whether tol, max_iter, method and options are checked too)
     "solve": (".solver", True), "diagnose": (".verify.diagnosis", True),
     "solve_to_digits": (".verify.digits", True), "certify": (".verify.certification", False),
     "check_solution": (".model.check", False),
 }
 _SUBPACKAGES = {"algorithm", "bench", "cli", "compilation", "data", "engines", "errors", "extended", "io", "jordan",
-                "model", "proof", "progress", "report", "scenes", "solver", "verify"}
+                "model", "proof", "progress", "report", "scenes", "solver", "verify", "coulomb"}
 
 
 def __getattr__(name: str):
@@ -45,6 +47,8 @@ def __getattr__(name: str):
     elif name in _CHECKED:
         home, tol = _CHECKED[name]
         value = _checked(getattr(_importlib.import_module(home, __name__), name), tol=tol)
+        if name in _POSED:
+            value = _posing(value, _POSED[name])
     elif name in _SUBPACKAGES:
         value = _importlib.import_module(f".{name}", __name__)
     else:
@@ -95,6 +99,28 @@ def _checked(func, *, tol=False):
                 raise InvalidArgumentError("method", f"{method!r} is not one of {', '.join(METHODS)}",
                                            fix="pass method='auto' (the default) or another listed method")
         return func(*args, **kwargs)
+
+    return wrapper
+
+
+def _posing(func, physical: str):
+    """``func`` with the keyword ``problem="relaxation" | "coulomb"`` (issue 51): "relaxation"
+    (default) calls ``func`` itself, unchanged; "coulomb" calls ``rfverify.coulomb.<physical>``,
+    the physical problem with De Saxcé's term, with the same arguments (DESIGN §1).  A Problem
+    passed as ``problem=`` is the problem to solve, as before."""
+
+    @_functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        kind = kwargs.get("problem")
+        if not isinstance(kind, str):
+            return func(*args, **kwargs)
+        from . import coulomb
+
+        coulomb.check_problem_kind(kwargs.pop("problem"))
+        if kind == "relaxation":
+            return func(*args, **kwargs)
+        checked = _checked(getattr(coulomb, physical), tol=physical != "certify_coulomb")
+        return checked(*args, **kwargs)
 
     return wrapper
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .coulomb import add_problem_option, certify_physical
 from .argtypes import digit_count, out_path, positive_float, positive_int
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, dumps, end_problem_command, exit_codes,
                      is_hdf5_input, load_problem, print_quantities, progress_printer)
@@ -19,7 +20,8 @@ arithmetic, and the bound ||v - v*||_Ms <= (sqrt(g'Ms^-1 g) + sqrt(g'Ms^-1 g + 4
 carried to the solution. The verdict names the problem it proves (with (M + Mᵀ)/2 unless
 --as-stored). A /certificate already in the solution file is checked against the /solution it
 holds and the problem it is read with (its digests of both) and the output says whether it is
-about them. Exit code 0 only when --digits are proven."""
+about them. Exit code 0 only when --digits are proven. --problem coulomb proves a backward-error
+certificate of the physical problem instead (see --problem)."""
 
 
 def add_parser(sub) -> None:
@@ -50,6 +52,7 @@ def add_parser(sub) -> None:
     cert.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
                       help="stop the search for a proof point after S seconds and report the best proof "
                            "reached (status MaxTime when short of --digits, exit 1)")
+    add_problem_option(cert)
     end_problem_command(cert, cmd_certify, check_outputs)
 
 
@@ -92,6 +95,10 @@ def cmd_certify(args) -> int:
         raise ProblemFileError(where, "/certificate/point does not match the problem's sizes",
                                location="/certificate/point", fix="certify the solution file written for this problem")
     say = progress_printer(args)
+    if args.problem_kind == "coulomb":  # the stored point is the relaxation's: not used
+        with announcing(say):
+            return certify_physical(args, problem, sol, say,
+                                    where if args.solution or is_hdf5_input(args.problem) else None)
     with announcing(say):  # a cold cache's compilation is named as it starts
         cert = certify(problem, sol.v, sol.u, sol.r, digits=args.digits, point=point, cross_check=args.cross_check,
                        dps=args.dps, relative=args.relative, progress=say, time_limit=args.time_limit)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS, PEER_METHODS
+from .coulomb import add_problem_option, solve_physical
 from .argtypes import digit_count, out_path, positive_float
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, PROGRESS_AFTER, PROGRESS_AFTER_ENV,
                      IterationProgress, add_run_limits, dumps, end_problem_command, exit_codes, is_hdf5_input,
@@ -22,7 +23,8 @@ is <= --tol; 1 when the solver stopped without reaching it (the status says why)
 pinfeas, dinfeas and mu are printed beside it. A 3-D FCLIB file (/fclib_global, /fclib_local)
 is solved as its convex relaxation, exactly the rolling problem with mu_r = 0 and no rolling
 rows (DESIGN §7.2); a local problem (/fclib_local, Siconos local .dat) through its lifting to
-global form, its answer judged and proven on its own W."""
+global form, its answer judged and proven on its own W. --problem coulomb solves the physical
+problem instead (De Saxcé's term kept; see --problem)."""
 
 
 def add_parser(sub) -> None:
@@ -87,6 +89,7 @@ def add_parser(sub) -> None:
     sol.add_argument("--no-presolve", action="store_true",
                      help="switch off the presolve reductions (cone reduction for mu = 0 / "
                           "mu_r = 0 requires them; such problems are refused)")
+    add_problem_option(sol)
     end_problem_command(sol, cmd_solve, check_outputs)
 
 
@@ -118,6 +121,9 @@ def cmd_solve(args) -> int:
             raise InvalidProblemError("mu", "has zero coefficients, which the unreduced lifting "
                                             "would divide by", fix="drop --no-presolve")
     say = progress_printer(args)
+    if args.problem_kind == "coulomb":
+        return solve_physical(args, problem, options, say,
+                              lambda v, u, r, more: _write_solution_file(args, problem, v, u, r, more=more))
     if args.digits is not None:
         return _solve_digits(args, problem, options, say, after, t_start)
     t0 = time.perf_counter()
@@ -296,9 +302,10 @@ def _interrupted(what: str) -> int:
     return 130
 
 
-def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
+def _write_solution_file(args, problem, v, u, r, certificate=None, more=None) -> None:
     """``solve --out``: the problem plus /solution, or only /solution written into the input
-    .hdf5 file itself when --out names it (everything else in that file is kept)."""
+    .hdf5 file itself when --out names it (everything else in that file is kept); ``more(fh)``
+    writes further groups in the same atomic write (``--problem coulomb``: /coulomb)."""
     from ..io import save, write_solution_in_place
     from ..io.output import check_output_file
     from ..model.problem import StoredSolution
@@ -312,6 +319,8 @@ def _write_solution_file(args, problem, v, u, r, certificate=None) -> None:
 
         def extra(fh):
             write_certificate(fh, certificate, problem)
+    if more is not None:
+        extra = more
     if target.in_place:  # the file's own layout (3 per contact for 3-D files), see io/fclib3d.py
         write_solution_in_place(target, problem.with_solution(solution).solution, extra=extra,
                                 problem=problem)

@@ -1,0 +1,151 @@
+"""The proven backward error of an answer to the physical problem (issue 51, DESIGN §1).
+
+Let ŝ be the shift the answer was solved with, exactly as applied: ŝ_i = w'_N,i − w_N,i (q for
+a local file), w' the float64 data of the shifted problem; (v*, u'*, r*) the exact solution of
+that convex problem, u* = u'* − ŝ e_N.  As Φ reads only u_T and u_R, which the shift leaves
+alone, (v*, r*) solves the physical problem *exactly* for the data with w_N + δ,
+
+    δ_i = ŝ_i − Φ_i(u*),    |δ_i| ≤ |ŝ_i − Φ_i(û)| + μ_i‖û_T − u*_T‖ + μr_i‖û_R − u*_R‖
+
+(û the returned u' of the shifted problem; the reverse triangle inequality), and the inner
+proof bounds ‖û − u'*‖∞ ≤ e_u, so ‖û_T − u*_T‖₂ ≤ √2·e_u.  The first term is evaluated from the
+float64 numbers with every operation rounded outward (``np.nextafter`` after each correctly
+rounded IEEE operation, as :mod:`rfverify.proof.bound` does), so the bound is rigorous.
+
+The physical u = Hᵀv + w of the returned v (W r + q) differs from û − ŝ e_N by an exactly
+computed amount (dyadic rationals), so its distance to u* is bounded by that plus e_u.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model.problem import SPACEDIM, Problem
+from ..proof.quantity import DATA_SCALE_NAMES, DATA_SCALE_NAMES_LOCAL, QuantityBound
+from ..proof.quantity import quantity_bound as quantity_record
+from ..proof.dyadic import Dyadic
+from .model import offsets
+
+SQRT2_UP = float(np.nextafter(math.sqrt(2.0), np.inf))
+
+
+def _up(x):
+    return np.nextafter(np.asarray(x, dtype=np.float64), np.inf)
+
+
+def _down(x):
+    return np.nextafter(np.asarray(x, dtype=np.float64), -np.inf)
+
+
+@dataclass
+class BackwardError:
+    """The proven bound on the data change δ (n,) for which the answer's exact companion
+    (v*, r*) solves the physical problem exactly (module docstring).
+
+    ``delta`` per contact, ≥ |δ_i| (rigorous, rounded up; inf where nothing is proven);
+    ``absolute`` = max_i; ``relative`` = absolute / ``scale`` (rounded up), ``scale`` the proven
+    lower bound of the data scale of u (``scale_name``); ``fixed_point_part`` max_i of the
+    bound on |ŝ_i − Φ_i(û)|, ``proof_part`` max_i of μ_i√2e_u + μr_i√2e_u; ``proven`` False when
+    the inner proof gave no finite bound on u (``note`` says why)."""
+
+    delta: np.ndarray
+    absolute: float
+    relative: float
+    scale: float
+    scale_name: str
+    fixed_point_part: float
+    proof_part: float
+    proven: bool
+    note: str = ""
+
+    def describe(self) -> str:
+        if not self.proven:
+            return f"backward error not proven ({self.note})"
+        return (f"backward error |δ| ≤ {self.absolute:.2e} (relative {self.relative:.1e} of the data scale "
+                f"{self.scale_name} = {self.scale:.2e}; fixed point {self.fixed_point_part:.1e} + inner proof "
+                f"{self.proof_part:.1e})")
+
+    def as_dict(self) -> dict:
+        return {"absolute": self.absolute, "relative": self.relative, "scale": self.scale,
+                "scale_name": self.scale_name, "fixed_point_part": self.fixed_point_part,
+                "proof_part": self.proof_part, "proven": self.proven, "note": self.note,
+                "worst_contact": int(np.argmax(self.delta)) if self.delta.size else None}
+
+
+def _norm_bounds(a, b):
+    """Lower and upper bounds of √(a² + b²), elementwise, from float64 a, b."""
+    hi = _up(np.sqrt(_up(_up(a * a) + _up(b * b))))
+    lo = _down(np.sqrt(np.maximum(_down(_down(a * a) + _down(b * b)), 0.0)))
+    return np.maximum(lo, 0.0), hi
+
+
+def phi_bounds(problem: Problem, u) -> tuple[np.ndarray, np.ndarray]:
+    """Rigorous (lower, upper) bounds of Φ_i(u) = μ_i‖u_T‖ + μr_i‖u_R‖ for a float64 u (5n,)."""
+    U = np.asarray(u, dtype=np.float64).reshape(-1, SPACEDIM)
+    mu, mur = np.asarray(problem.mu, dtype=np.float64), np.asarray(problem.mu_r, dtype=np.float64)
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        t_lo, t_hi = _norm_bounds(U[:, 1], U[:, 2])
+        r_lo, r_hi = _norm_bounds(U[:, 3], U[:, 4])
+        lo = _down(_down(mu * t_lo) + _down(mur * r_lo))
+        hi = _up(_up(mu * t_hi) + _up(mur * r_hi))
+    return np.maximum(lo, 0.0), hi
+
+
+def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scale: float,
+                   scale_name: str) -> BackwardError:
+    """The :class:`BackwardError` of the answer whose shifted u is ``u_inner`` (5n,), with
+    ``e_u`` ≥ ‖u_inner − u'*‖∞ from the inner proof and ``scale`` a proven lower bound of the
+    data scale of u."""
+    n = problem.n_contacts
+    if not (e_u >= 0 and math.isfinite(e_u)) or not np.all(np.isfinite(u_inner)):
+        inf = np.full(n, math.inf)
+        return BackwardError(inf, math.inf, math.inf, scale, scale_name, math.inf, math.inf, False,
+                             "the inner proof gives no finite bound on u")
+    a = offsets(shifted)[0::SPACEDIM]
+    b = offsets(problem)[0::SPACEDIM]
+    with np.errstate(over="ignore"):
+        s_hi, s_lo = _up(a - b), _down(a - b)  # ŝ = a − b exactly lies between
+        p_lo, p_hi = phi_bounds(problem, u_inner)
+        fixed = np.maximum(np.maximum(_up(s_hi - p_lo), _up(p_hi - s_lo)), 0.0)
+        e_vec = _up(SQRT2_UP * e_u)
+        lip = _up(_up(problem.mu * e_vec) + _up(problem.mu_r * e_vec)) if e_u > 0 else np.zeros(n)
+        delta = _up(fixed + lip)
+    absolute = float(np.max(delta, initial=0.0))
+    if scale > 0:
+        relative = float(_up(absolute / scale))
+    else:
+        relative = 0.0 if absolute == 0 else math.inf
+    proven = bool(np.all(np.isfinite(delta)))
+    return BackwardError(delta, absolute, relative, scale, scale_name, float(np.max(fixed, initial=0.0)),
+                         float(np.max(lip, initial=0.0)), proven, "" if proven else "a bound overflowed")
+
+
+def physical_u_bound(problem: Problem, shifted: Problem, u_phys, u_inner, e_u: float) -> np.ndarray:
+    """≥ |u_phys − u*| elementwise (5n,), u* = u'* − ŝ e_N the physical u of the exact companion:
+    |u_phys − (u_inner − ŝ e_N)| exactly (dyadic) plus e_u, rounded up."""
+    diff = (Dyadic.from_float(u_phys) - Dyadic.from_float(u_inner) + Dyadic.from_float(offsets(shifted))
+            - Dyadic.from_float(offsets(problem)))
+    with np.errstate(over="ignore"):
+        return _up(diff.abs_upper() + e_u)
+
+
+def physical_quantities(problem: Problem, shifted: Problem, proof, u_phys, u_inner, scales: dict,
+                        requested: int, relative: bool = False) -> dict:
+    """The inner proof's per-quantity records with u replaced by the physical u's (its bound
+    from :func:`physical_u_bound`, digits against its own proven norm or the problem's data
+    scale of u); v, Hr and r are the same vectors in both problems, their records kept."""
+    out = dict(proof.quantities)
+    q_u = proof.quantities.get("u")
+    if q_u is None:
+        return out
+    names = DATA_SCALE_NAMES_LOCAL if problem.local is not None else DATA_SCALE_NAMES
+    if not proof.valid or not math.isfinite(q_u.abs_bound):
+        out["u"] = QuantityBound("u", math.inf, float(np.max(np.abs(u_phys), initial=0.0)), 0.0, scales["u"],
+                                 names["u"], None, "relative", False, "no proof")
+        return out
+    e = physical_u_bound(problem, shifted, u_phys, u_inner, q_u.abs_bound)
+    out["u"] = quantity_record("u", e, u_phys, scales, requested, names=names, relative=relative)
+    return out

@@ -1,0 +1,231 @@
+"""Results of the physical problem: the double answer (:class:`CoulombSolution`), the
+backward-error certificate (:class:`CoulombCertificate`) and the proven path's answer
+(:class:`CoulombDigits`), each with the fields every rfverify result has (docs/RESULTS.md)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..solver.result import ResultAliases, Status
+from .backward import BackwardError
+
+STATEMENT = ("the physical problem (Coulomb friction and rolling resistance with De Saxcé's term "
+             "μ‖u_T‖ + μr‖u_R‖ added to u_N)")
+NOT_UNIQUE = ("Solutions of the physical problem need not be unique: this is a backward-error certificate "
+              "— the exact solution it names solves the physical problem exactly for data whose w_N "
+              "differs from the file's by δ, not necessarily the file's own (any other) solution")
+
+
+@dataclass
+class CoulombCertificate(ResultAliases):
+    """A backward-error certificate of an answer (v, u, r) to the physical problem.
+
+    ``backward`` (:class:`.backward.BackwardError`) bounds δ, per contact, such that the exact
+    solution (v*, u*, r*) of the convex problem shifted by ``shift`` solves the physical problem
+    exactly for the data w_N + δ; ``quantities`` the proven errors of v, u (the physical
+    u = Hᵀv + w), Hr and r against that (v*, u*, r*) (``rfverify.proof.QuantityBound``);
+    ``inner`` the :class:`rfverify.Certificate` of the shifted convex problem it rests on.
+    ``certified``: every quantity has ``requested`` digits and ``backward.relative`` ≤
+    10^-requested.  ``backward_error`` is ``backward.relative`` (the JSON's name)."""
+
+    requested: int
+    certified: bool
+    verdict: str
+    quantities: dict
+    backward: BackwardError
+    shift: np.ndarray
+    inner: object
+    seconds: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def status(self) -> Status:
+        if self.certified:
+            return Status.CERTIFIED
+        return Status.MAX_TIME if self.extra.get("time_limit") is not None else Status.NOT_CERTIFIED
+
+    @property
+    def success(self) -> bool:
+        return self.certified
+
+    @property
+    def message(self) -> str:
+        return self.verdict
+
+    @property
+    def nit(self) -> int:
+        return int(getattr(self.inner, "nit", 0) or 0)
+
+    @property
+    def timings(self) -> dict:
+        return {"total": self.seconds}
+
+    @property
+    def digits(self) -> dict:
+        return {k: q.digits for k, q in self.quantities.items() if q.mode != "information"}
+
+    @property
+    def backward_error(self) -> float:
+        return self.backward.relative
+
+    @property
+    def headline(self) -> str:
+        return self.verdict.split(". ")[0]
+
+    def __repr__(self) -> str:
+        return f"CoulombCertificate(status={self.status}, backward_error={self.backward_error:.1e},\n    {self.headline!r})"
+
+    def as_dict(self) -> dict:
+        return {"status": str(self.status), "success": self.success, "message": self.message,
+                "problem": "coulomb", "statement": STATEMENT, "requested_digits": self.requested,
+                "certified": self.certified, "verdict": self.verdict, "digits": self.digits,
+                "backward_error": self.backward_error, "backward": self.backward.as_dict(),
+                "quantities": {k: q.as_dict() for k, q in self.quantities.items()},
+                "shift_inf": float(np.max(np.abs(self.shift), initial=0.0)),
+                "inner_certificate": self.inner.as_dict() if hasattr(self.inner, "as_dict") else None,
+                "seconds": self.seconds, **self.extra}
+
+
+def coulomb_verdict(requested: int, quantities: dict, backward: BackwardError, inner_valid: bool,
+                    inner_failure: str = "") -> tuple[bool, str]:
+    """(certified, verdict): what was proven about the answer, in words."""
+    tol = 10.0 ** (-requested)
+    if not inner_valid:
+        return False, (f"not certified for {STATEMENT}: the shifted convex problem's proof failed "
+                       f"({inner_failure}). {NOT_UNIQUE}.")
+    parts = []
+    for q in quantities.values():
+        parts.append(q.short())
+    bad = [q.name for q in quantities.values() if q.mode != "information" and not q.certified]
+    digits_ok = not bad
+    be_ok = backward.proven and backward.relative <= tol
+    if digits_ok and be_ok:
+        head = f"proven to {requested} digits ({', '.join(parts)})"
+    elif digits_ok:
+        head = (f"not certified: the digits are proven ({', '.join(parts)}) but the backward error "
+                f"{backward.relative:.1e} exceeds 1e-{requested}")
+    else:
+        head = f"not proven to {requested} digits: {', '.join(bad)} short ({', '.join(parts)})"
+    text = (f"{head} against the exact solution of {STATEMENT} for data whose w_N differs from the file's by δ, "
+            f"{backward.describe()}. {NOT_UNIQUE}.")
+    return digits_ok and be_ok, text
+
+
+@dataclass
+class CoulombSolution(ResultAliases):
+    """The double answer to the physical problem (:func:`rfverify.coulomb.solve_coulomb`).
+
+    ``v`` (m,), ``u`` = Hᵀv + w of the file's own data (5n,), ``r`` (5n,); ``shift`` (n,) the
+    De Saxcé shift it was solved with; ``outer`` the :class:`.outer.OuterRun`; ``inner`` the
+    double :class:`rfverify.SolveResult` of the shifted convex problem; ``residuals`` the
+    physical conditions measured (:class:`.model.PhysicalResiduals`).  ``success``: the
+    fixed-point residual and the inner criterion are both ≤ ``tol``."""
+
+    v: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    shift: np.ndarray
+    outer: object
+    inner: object
+    residuals: object
+    tol: float
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return bool(self.outer.residual <= self.tol and self.inner is not None and self.inner.criterion <= self.tol)
+
+    @property
+    def status(self) -> Status:
+        if self.success:
+            return Status.SOLVED
+        if self.inner is None or not math.isfinite(self.outer.residual):
+            return Status.NUMERICAL_ERROR
+        if self.outer.evaluations >= self.outer.max_evaluations:
+            return Status.MAX_ITERATIONS
+        return Status.INSUFFICIENT_PROGRESS
+
+    @property
+    def message(self) -> str:
+        inner = "" if self.inner is None else f"; the last inner solve {self.inner.status}, criterion {self.inner.criterion:.1e}"
+        verb = "solved" if self.success else "not solved"
+        return (f"{STATEMENT} {verb}: fixed-point residual max|s − Φ(u)| = {self.outer.residual:.1e} of the data "
+                f"scale of u after {self.outer.evaluations} convex solves ({self.outer.method}); "
+                f"{self.outer.message}{inner}")
+
+    @property
+    def nit(self) -> int:
+        return int(sum(self.outer.inner_iterations))
+
+    @property
+    def criterion(self) -> float:
+        return max(self.outer.residual, self.inner.criterion if self.inner is not None else math.inf)
+
+    def as_dict(self) -> dict:
+        return {"status": str(self.status), "success": self.success, "message": self.message, "nit": self.nit,
+                "time": self.time, "problem": "coulomb", "statement": STATEMENT, "tol": self.tol,
+                "criterion": self.criterion, "fixed_point_residual": self.outer.residual,
+                "backward_error": None,  # nothing is proven without --digits: the residual above is measured
+                "outer": self.outer.as_dict(),
+                "inner_criterion": None if self.inner is None else self.inner.criterion,
+                "inner_method": None if self.inner is None else self.inner.method,
+                "physical_residuals": self.residuals.as_dict(), "timings": dict(self.timings)}
+
+
+@dataclass
+class CoulombDigits(ResultAliases):
+    """The proven answer to the physical problem (:func:`rfverify.coulomb.coulomb_to_digits`):
+    ``v``, ``u`` (the file's own u = Hᵀv + w), ``r`` float64; ``certificate`` the
+    :class:`CoulombCertificate`; ``outer`` the double fixed point; ``inner`` the last
+    :class:`rfverify.DigitsSolution` of the shifted convex problem; ``rounds`` one record per
+    proven round (the shift updated from each proven answer); ``timings`` seconds (``outer``,
+    ``proven``, ``total``)."""
+
+    v: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    shift: np.ndarray
+    certificate: CoulombCertificate
+    outer: object
+    inner: object
+    rounds: list = field(default_factory=list)
+    proven: object = None
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.certificate.certified
+
+    @property
+    def status(self) -> Status:
+        return self.certificate.status
+
+    @property
+    def message(self) -> str:
+        return self.certificate.verdict
+
+    @property
+    def digits(self) -> dict:
+        return self.certificate.digits
+
+    @property
+    def backward_error(self) -> float:
+        return self.certificate.backward_error
+
+    @property
+    def nit(self) -> int:
+        inner = sum(int(r.get("nit", 0)) for r in self.rounds)
+        return int(sum(self.outer.inner_iterations)) + inner
+
+    def as_dict(self) -> dict:
+        return {**self.certificate.as_dict(), "status": str(self.status), "success": self.success,
+                "nit": self.nit, "time": self.time, "outer": self.outer.as_dict(), "rounds": list(self.rounds),
+                "proven_outer": None if self.proven is None else self.proven.as_dict(),
+                "timings": dict(self.timings)}
+
+    def __repr__(self) -> str:
+        return (f"CoulombDigits(status={self.status}, backward_error={self.backward_error:.1e}, "
+                f"time={self.time:.3g} s,\n    {self.certificate.headline!r})")

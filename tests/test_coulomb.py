@@ -1,0 +1,261 @@
+"""Issue 51: the physical problem (Coulomb friction and rolling resistance with De Saxcé's term),
+solved as a fixed point of shifted convex solves and certified by a proven backward error.
+
+The recheck here is independent of rfverify's measures: the written (v, r) is read back from the
+file with h5py and judged against the physical conditions in mpmath (40 digits), from the
+problem's raw data.  The bound on δ is checked against a closed-form exact answer."""
+
+from __future__ import annotations
+
+import json
+import math
+from fractions import Fraction
+
+import h5py
+import mpmath
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings, strategies as st
+
+import rfverify
+from rfverify.cli import main
+from rfverify.coulomb import backward, certify_coulomb, model, solve_coulomb
+
+
+# ---------------------------------------------------------------- the independent recheck
+def physical_violations(problem, v, r, dps: int = 40) -> dict:
+    """The physical conditions at (v, r) in mpmath, each relative to a scale of its terms:
+    dynamics ‖(M+Mᵀ)/2 v − H r − f‖∞ / (‖|M||v|‖∞ + ‖|H||r|‖∞ + ‖f‖∞); with u = Hᵀv + w and
+    ũ = u + (μ‖u_T‖ + μr‖u_R‖)e_N: max(−u_N)⁺ / ‖u‖∞, cone max(‖r_T‖ − μr_N, ‖r_R‖ − μr r_N)⁺ / ‖r‖∞,
+    and max_i |r_iᵀũ_i| / (‖r‖∞‖ũ‖∞)."""
+    with mpmath.workdps(dps):
+        mpf = mpmath.mpf
+        m, n = problem.n_dofs, problem.n_contacts
+        vv = [mpf(float(x)) for x in v]
+        rr = [mpf(float(x)) for x in r]
+        Mc = sp.coo_matrix(problem.M)
+        Mv = [mpf(0)] * m
+        Mabs = [mpf(0)] * m
+        for i, j, x in zip(Mc.row, Mc.col, Mc.data):  # (M + Mᵀ)/2 v, from the raw stored M
+            h = mpf(float(x)) / 2
+            Mv[i] += h * vv[j]
+            Mv[j] += h * vv[i]
+            Mabs[i] += abs(h * vv[j])
+            Mabs[j] += abs(h * vv[i])
+        Hc = sp.coo_matrix(problem.H)
+        Hr = [mpf(0)] * m
+        Habs = [mpf(0)] * m
+        u = [mpf(float(x)) for x in problem.w]
+        for i, j, x in zip(Hc.row, Hc.col, Hc.data):
+            Hr[i] += mpf(float(x)) * rr[j]
+            Habs[i] += abs(mpf(float(x)) * rr[j])
+            u[j] += mpf(float(x)) * vv[i]
+        f = [mpf(float(x)) for x in problem.f]
+        dyn = max(abs(Mv[i] - Hr[i] - f[i]) for i in range(m))
+        dyn_scale = max(Mabs) + max(Habs) + max(abs(x) for x in f)
+        out = {"dynamics": float(dyn / dyn_scale)}
+        u_inf = max(abs(x) for x in u)
+        r_inf = max(abs(x) for x in rr) or mpf(1)
+        normal = cone = comp = mpf(0)
+        ut_inf = mpf(0)
+        tilde = []
+        for i in range(n):
+            ui, ri = u[5 * i:5 * i + 5], rr[5 * i:5 * i + 5]
+            mu, mur = mpf(float(problem.mu[i])), mpf(float(problem.mu_r[i]))
+            phi = mu * mpmath.sqrt(ui[1] ** 2 + ui[2] ** 2) + mur * mpmath.sqrt(ui[3] ** 2 + ui[4] ** 2)
+            t = [ui[0] + phi] + ui[1:]
+            tilde.append((t, ri))
+            ut_inf = max(ut_inf, max(abs(x) for x in t))
+            normal = max(normal, -ui[0])
+            cone = max(cone, mpmath.sqrt(ri[1] ** 2 + ri[2] ** 2) - mu * ri[0],
+                       mpmath.sqrt(ri[3] ** 2 + ri[4] ** 2) - mur * ri[0])
+        for t, ri in tilde:
+            comp = max(comp, abs(sum(a * b for a, b in zip(t, ri))))
+        out["normal"] = float(normal / u_inf) if u_inf else float(normal)
+        out["cone"] = float(cone / r_inf)
+        out["complementarity"] = float(comp / (r_inf * ut_inf)) if ut_inf else 0.0
+        return out
+
+
+def read_solution(path):
+    with h5py.File(path, "r") as fh:
+        return fh["solution/v"][()], fh["solution/r"][()]
+
+
+@pytest.fixture(scope="module")
+def chute():
+    return rfverify.load("bundled:chute")
+
+
+@pytest.fixture(scope="module")
+def chute_written(tmp_path_factory):
+    """``rfverify solve bundled:chute --problem coulomb --digits 10 --out SOL --json``: (exit code,
+    JSON, SOL path) — the issue's done-when command."""
+    path = tmp_path_factory.mktemp("coulomb") / "sol.h5"
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        code = main(["solve", "bundled:chute", "--problem", "coulomb", "--digits", "10", "--out", str(path),
+                     "--json", "--quiet"])
+    return code, json.loads(buf.getvalue()), path
+
+
+def test_chute_is_proven_with_backward_error_below_1e_10(chute_written):
+    code, out, _ = chute_written
+    assert code == 0
+    assert out["problem"] == "coulomb" and out["status"] == "Certified"
+    assert out["backward_error"] <= 1e-10
+    assert "need not be unique" in out["verdict"] and "backward-error certificate" in out["verdict"]
+    # the physical u's bound contains the inner proof's (u* = u'* − ŝ e_N: the same distance, and more)
+    assert out["quantities"]["u"]["abs_bound"] >= out["inner_certificate"]["quantities"]["u"]["abs_bound"] > 0
+
+
+def test_written_chute_answer_satisfies_the_physical_conditions_independently(chute, chute_written):
+    _, _, path = chute_written
+    v, r = read_solution(path)
+    bad = physical_violations(chute, v, r)
+    assert all(x <= 1e-10 for x in bad.values()), bad
+
+
+def test_the_relaxation_answer_fails_the_same_recheck(chute):
+    """The recheck can fail: the relaxation's answer (the shift dropped) separates at the
+    sliding speed, and its complementarity of rᵀũ is 0.2 of the scale."""
+    res = rfverify.solve(chute)
+    bad = physical_violations(chute, res.v, res.r)
+    assert bad["complementarity"] > 1e-3, bad
+
+
+def test_certify_rechecks_the_written_file_with_its_shift(chute_written, capsys):
+    _, _, path = chute_written
+    code = main(["certify", "bundled:chute", "--solution", str(path), "--problem", "coulomb", "--json", "--quiet"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["backward_error"] <= 1e-10 and out["problem"] == "coulomb"
+
+
+def test_dropping_the_shift_is_caught(chute, monkeypatch):
+    """Mutation: the shifted problem without its shift (the relaxation solved every time).  The
+    backward error then measures Φ(u) itself, and nothing is certified."""
+    monkeypatch.setattr(model.dataclasses, "replace", _keep_w(model.dataclasses.replace))
+    out = rfverify.solve_to_digits(chute, digits=6, problem="coulomb", proven_rounds=1, outer_max_iter=3)
+    assert not out.success and out.backward_error > 1e-3
+
+
+def _keep_w(replace):
+    def mutated(obj, **changes):
+        changes.pop("w", None)
+        return replace(obj, **changes)
+    return mutated
+
+
+def test_relaxation_stays_the_default_bit_for_bit(chute):
+    a, b = rfverify.solve(chute), rfverify.solve(chute, problem="relaxation")
+    for name in ("v", "u", "r"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert a.status == b.status and a.nit == b.nit
+    with pytest.raises(rfverify.InvalidArgumentError, match="problem"):
+        rfverify.solve(chute, problem="physical")
+
+
+# ---------------------------------------------------------------- one sliding block, in closed form
+def block(mu: float, fT=(1.2, 1.6), fN: float = -1.0):
+    """One body (M = I, 3 dofs = the contact's N, T1, T2 velocities) pushed into the ground with
+    |f_N| and along it with f_T: u = v, and where ‖f_T‖ > μ|f_N| it slides.  Physical solution:
+    r_N = |f_N|, u_N = 0, u_T = f_T (1 − μ|f_N|/‖f_T‖)."""
+    H = np.zeros((3, 5))
+    H[:, :3] = np.eye(3)
+    return rfverify.Problem.from_arrays(np.eye(3), H, [fN, *fT], np.zeros(5), [mu], [0.0])
+
+
+def exact_delta(problem, s_hat: float) -> float:
+    """δ = ŝ − μ‖u*_T‖ for the exact solution of the convex problem with w_N = ŝ (sliding):
+    r_N = (|f_N| + μF − ŝ)/(1 + μ²), ‖u*_T‖ = F − μ r_N, F = ‖f_T‖ (mpmath, 60 digits)."""
+    with mpmath.workdps(60):
+        mu = mpmath.mpf(float(problem.mu[0]))
+        F = mpmath.sqrt(mpmath.mpf(float(problem.f[1])) ** 2 + mpmath.mpf(float(problem.f[2])) ** 2)
+        fN = -mpmath.mpf(float(problem.f[0]))
+        s = mpmath.mpf(Fraction(s_hat).numerator) / Fraction(s_hat).denominator
+        rN = (fN + mu * F - s) / (1 + mu * mu)
+        return float(s - mu * (F - mu * rN))
+
+
+def test_sliding_block_physical_answer_is_the_closed_form():
+    p = block(0.5)
+    out = solve_coulomb(p)
+    assert out.success
+    np.testing.assert_allclose(out.r[:3], [1.0, -0.5 * 0.6, -0.5 * 0.8], atol=1e-11)
+    np.testing.assert_allclose(out.u[:3], [0.0, 1.2 * 0.75, 1.6 * 0.75], atol=1e-11)
+    relax = rfverify.solve(p)
+    assert relax.u[0] > 0.1  # the relaxation separates at the sliding speed
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e-5])
+def test_delta_bound_holds_and_is_tight_on_a_perturbed_candidate(offset):
+    """A candidate off the solution by 1e-6 along u_T (both components): the bound must cover the
+    exact δ (so dropping the √2·μ·e_u term, the √2, or the |ŝ − Φ(û)| term is caught) and stay
+    within a small factor of it (so an inflated bound is caught too)."""
+    p = block(0.5)
+    v = np.array([0.0, 0.9 + 0.6e-6, 1.2 + 0.8e-6])
+    r = np.array([1.0, -0.3, -0.4, 0.0, 0.0])
+    s_hat = float(model.phi(p, np.r_[v, 0.0, 0.0])[0]) + offset
+    cert = certify_coulomb(p, v, None, r, digits=9, shift=[s_hat])
+    true = abs(exact_delta(p, s_hat))
+    bound = float(cert.backward.delta[0])
+    assert cert.backward.proven
+    assert bound >= true, (bound, true)
+    assert bound <= 3 * true + 1e-15, (bound, true)
+
+
+@pytest.mark.parametrize("mutation", ["no_sqrt2", "no_lipschitz", "no_fixed_point"])
+def test_weakened_delta_bounds_are_caught(mutation, monkeypatch):
+    """The same check with the bound weakened three ways: each must fail it."""
+    if mutation == "no_sqrt2":
+        monkeypatch.setattr(backward, "SQRT2_UP", 1.0)
+    elif mutation == "no_lipschitz":
+        monkeypatch.setattr(backward, "SQRT2_UP", 0.0)
+    else:
+        original = backward.phi_bounds
+        monkeypatch.setattr(backward, "phi_bounds", lambda problem, u: _shifted_bounds(problem, original(problem, u)))
+    p = block(0.5)
+    v = np.array([0.0, 0.9 + 0.6e-6, 1.2 + 0.8e-6])
+    r = np.array([1.0, -0.3, -0.4, 0.0, 0.0])
+    offset = 1e-5 if mutation == "no_fixed_point" else 0.0
+    s_hat = float(model.phi(p, np.r_[v, 0.0, 0.0])[0]) + offset
+    cert = certify_coulomb(p, v, None, r, digits=9, shift=[s_hat])
+    assert float(cert.backward.delta[0]) < abs(exact_delta(p, s_hat))
+
+
+def _shifted_bounds(problem, bounds):
+    """Φ's bounds moved onto the applied shift: the |ŝ − Φ(û)| term then vanishes."""
+    lo, hi = bounds
+    return lo + 1e-5, hi + 1e-5
+
+
+@settings(max_examples=8)
+@given(mu=st.floats(0.1, 1.5), push=st.floats(1.2, 3.0), load=st.floats(0.5, 2.0))
+def test_sliding_blocks_solve_and_certify(mu, push, load):
+    """Random sliding blocks (‖f_T‖ = push·μ·|f_N|): the proven answer is the closed form, and
+    its backward error is below 1e-10."""
+    F = push * mu * load
+    p = block(mu, fT=(0.6 * F, 0.8 * F), fN=-load)
+    out = rfverify.solve_to_digits(p, digits=10, problem="coulomb")
+    assert out.success and out.backward_error <= 1e-10
+    assert abs(out.r[0] - load) <= 1e-9 * load
+    assert abs(out.u[0]) <= 1e-9 * F
+    bad = physical_violations(p, out.v, out.r)
+    assert all(x <= 1e-10 for x in bad.values()), bad
+
+
+def test_non_convergence_is_reported_with_its_residual(chute):
+    out = solve_coulomb(chute, outer_max_iter=2)
+    assert not out.success and str(out.status) == "MaxIterations"
+    assert "fixed-point residual" in out.message and math.isfinite(out.outer.residual)
+
+
+def test_cli_help_names_the_problem_option(capsys):
+    for command in ("solve", "certify"):
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        assert "--problem {relaxation,coulomb}" in capsys.readouterr().out
