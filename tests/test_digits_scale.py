@@ -92,6 +92,7 @@ def test_cholmod_engine_shifts_or_falls_back_when_float64_sees_a_singular_matrix
     answer as exact as the double-double factor's); with no shift the shifted factor fails too and
     the double-double factor takes over, for good."""
     monkeypatch.setattr(mixed_module, "SHIFT", shift)
+    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
     n = 40
     chol = CholmodMixed(sp.identity(n, format="csc") + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))
     hi, lo = singular_in_float64(chol, n)
@@ -514,6 +515,7 @@ def test_a_fallback_of_the_float64_factor_is_said_where_it_happens_and_in_the_ti
         return original(self, values)
 
     monkeypatch.setattr(CholmodMixed, "_float64_factor", fails_from_the_third)
+    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
     said = []
     out = rfverify.solve_to_digits(random_problem(20, 40, seed=3), digits=10, factor_engine="cholmod",
                                    progress=said.append)

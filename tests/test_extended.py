@@ -212,6 +212,7 @@ def test_mixed_ldl_shifts_or_falls_back_where_float64_cannot_see_the_matrix(monk
     from rfverify.extended import mixed as mixed_module
 
     monkeypatch.setattr(mixed_module, "SHIFT", shift)
+    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
     n = 40
     A = sp.identity(n, format="csc")
     mixed = MixedCholesky(A + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))

@@ -91,6 +91,11 @@ limits them near 1e-27 on the touching beds measured."""
 CG_GIVE_UP = 1e-8
 """A shifted solve whose best backward error stays above this (or above 1e-20 when the caller
 asked for 1e-29) falls back to the double-double factor, for good."""
+SHIFT_MIN_ROWS = 1000
+"""Smallest matrix on which a failed float64 factor is replaced by the shifted one with conjugate
+gradients; below it the double-double factor is cheap, and it is what held on the small
+ill-conditioned local files measured (a 3-row W = diag(1, 1, 2⁻⁴⁴) file went to NaN through the
+shifted path, whose later double-double fallback met a singular matrix)."""
 CG_MAX_STEPS = 40
 CG_PATIENCE = 5  # steps without a better backward error before the best is returned
 
@@ -186,6 +191,10 @@ class _RefinedFloat64Factor:
         self.solves += 1
         self.refinement_steps += steps
         self.cg_iterations += steps
+        if self.backward_target == math.inf and not best <= CG_GIVE_UP and best == best:
+            # unchecked: the Newton driver refines against the unreduced system and asks for a
+            # retry (checked solves) where that fails; the best iterate is its starting point
+            return self._from_stored(*best_x)
         if not best <= max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20):
             if self._fall_back(f"conjugate gradients on the shifted float64 factor stalled at backward error "
                                f"{best:.1e}") >= 0:
@@ -229,7 +238,9 @@ class _RefinedFloat64Factor:
         self.precision = "double-double"
         self.fallback_reason = reason
         self.fallback_at = self.factorisations
-        return self._timed("double-double", self._dd_factor)
+        bad = self._timed("double-double", self._dd_factor)
+        self.factored = bad < 0
+        return bad
 
     def _timed(self, precision: str, factor):
         t0 = time.perf_counter()
@@ -264,13 +275,17 @@ class _RefinedFloat64Factor:
                    np.ascontiguousarray(Axl, dtype=np.float64).copy())
         self.factorisations += 1
         if self.precision == "double-double":
-            return self._timed("double-double", self._dd_factor)
+            bad = self._timed("double-double", self._dd_factor)
+            self.factored = bad < 0
+            return bad
         if self.shifted_from is not None:  # the unshifted factor failed before: it fails again as μ falls
             return self._factor_shifted(self.shift_reason)
         failure = self._timed("float64", self._float64_factor)
         if failure:
             self.factor_counts["float64"] -= 1  # an attempt, not a factor: counted apart
             self.failed_float64 += 1
+            if self.n < SHIFT_MIN_ROWS:
+                return self._fall_back(failure)
             return self._factor_shifted(failure)
         self.factored = True
         return -1
@@ -279,6 +294,8 @@ class _RefinedFloat64Factor:
         """x = A⁻¹ b to double-double accuracy (b and x in the pattern's own order); with an
         infinite ``backward_target``, one float64 solve of the high part, unchecked."""
         if self.precision == "double-double":
+            if not self.factored:  # its double-double factorisation failed: no answer (the caller sees NaN)
+                return np.full(self.n, np.nan), np.full(self.n, np.nan)
             return self._dd_solve(bh, bl)
         if self.shifted_from is not None:
             return self._solve_shifted(bh, bl)
@@ -437,8 +454,9 @@ class CholmodMixed(_RefinedFloat64Factor):
         try:
             self._engine.factor(sp.csc_matrix((values[self._lower_map], self._lower_indices,
                                                self._lower_indptr), shape=(self.n, self.n)))
-        except ArithmeticError as exc:
-            return f"the float64 factorisation failed ({exc})"
+        except ArithmeticError as exc:  # about the float64 rounding of this matrix, not about the problem's M
+            why = str(exc).replace("not positive definite", "a non-positive pivot in its float64 rounding")
+            return f"the float64 factorisation failed ({why})"
         return ""
 
     def _float64_solve(self, rh: np.ndarray) -> np.ndarray:  # CHOLMOD's float64 solve on the residual
