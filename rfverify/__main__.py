@@ -26,7 +26,13 @@ def main():
     from rfverify.cli import main as run
 
     signal.signal(signal.SIGINT, previous)
-    sys.exit(run())
+    code = run()
+    # A Ctrl-C that lands inside an exec() of a string (dataclasses make their methods so, as
+    # modules are imported) leaves CPython's "unhandled KeyboardInterrupt" flag set even when the
+    # command catches it; `python -m` then ends by SIGINT (-2) instead of with the code returned.
+    # An exec() of a string clears the flag again.
+    exec("")
+    sys.exit(code)
 
 
 if __name__ == "__main__":

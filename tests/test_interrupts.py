@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import re
 import shutil
 import signal
 import subprocess
@@ -50,7 +51,30 @@ def test_ctrl_c_while_starting_gives_one_line_and_exit_130(how):
         seen.append((proc.returncode, err.decode()))
     interrupted = [s for s in seen if s[0] != 0]
     assert interrupted, seen  # at least one signal landed before the solve ended
-    assert all(s == (130, "rfverify solve: interrupted\n") for s in interrupted), seen
+    # Its one line: bare while starting, with what it kept once the solve has an iterate.
+    assert all(s[0] == 130 and re.fullmatch(r"rfverify solve: interrupted( \(the best iterate so far is "
+                                            r"reported above\))?\n", s[1]) for s in interrupted), seen
+
+
+def test_a_caught_ctrl_c_inside_an_exec_does_not_turn_the_exit_into_a_signal():
+    """A Ctrl-C that lands inside an exec() of a string (dataclasses build their methods so while
+    modules import) sets CPython's "unhandled KeyboardInterrupt" flag even though the command
+    catches it, and ``python -m rfverify`` then died by SIGINT instead of exiting 130 (seen in
+    CI).  The entry point clears the flag before it exits: checked here on the flag itself."""
+    script = (
+        "import ctypes, sys\n"
+        "flag = ctypes.c_int.in_dll(ctypes.pythonapi, '_Py_UnhandledKeyboardInterrupt')\n"
+        "import rfverify.cli\n"
+        "def interrupted_in_an_exec(argv=None):\n"
+        "    try:\n        exec('raise KeyboardInterrupt')\n    except KeyboardInterrupt:\n        return 130\n"
+        "rfverify.cli.main = interrupted_in_an_exec\n"
+        "from rfverify.__main__ import main\n"
+        "try:\n    main()\nexcept SystemExit as exc:\n    print(exc.code, flag.value)\n")
+    if sys.implementation.name != "cpython" or sys.version_info >= (3, 12):
+        pytest.skip("the flag is a CPython 3.11 global (3.12 keeps it in the runtime state)")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split()[-2:] == ["130", "0"], done.stdout
 
 
 def _group_alive(pgid: int) -> bool:
