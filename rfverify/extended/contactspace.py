@@ -224,6 +224,9 @@ class ContactSpace(FactoredBackend):
             if self.chol.shifted_from is not None:
                 how = (f"float64 {engine} factor, shifted from factorisation {self.chol.shifted_from} "
                        f"({self.chol.shift_reason}), solved by conjugate gradients in double-double")
+            elif self.chol.cg_from is not None:
+                how = (f"float64 {engine} factor, solved by conjugate gradients in double-double from "
+                       f"factorisation {self.chol.cg_from} ({self.chol.cg_reason})")
         reason = getattr(self.chol, "fallback_reason", "")
         if reason and getattr(self.chol, "fallback_at", None) is not None:
             reason = f"from factorisation {self.chol.fallback_at}: {reason}"

@@ -177,13 +177,16 @@ class _RefinedFloat64Factor:
         self.failed_float64 = 0
         self.shifted_from = None  # the factorisation from which the float64 factor is shifted, and why
         self.shift_reason = ""
+        self.cg_from = None  # the factorisation from which solves run conjugate gradients, and why
+        self.cg_reason = ""
         self.cg_iterations = 0
         self._A = None
 
-    def _solve_shifted(self, bh: np.ndarray, bl: np.ndarray):
-        """A solve with the shifted factor as the preconditioner of conjugate gradients against
-        the double-double matrix, to ``backward_target`` (:data:`CG_TARGET` when unchecked);
-        where it cannot get within :data:`CG_GIVE_UP` of that, the double-double factor, for good."""
+    def _solve_by_cg(self, bh: np.ndarray, bl: np.ndarray):
+        """A solve with the float64 factor (shifted, or one whose refinement stalled) as the
+        preconditioner of conjugate gradients against the double-double matrix, to
+        ``backward_target`` (:data:`CG_TARGET` when unchecked); where it cannot get within
+        :data:`CG_GIVE_UP` of that, the double-double factor, for good."""
         target = min(self.backward_target, CG_TARGET)
         best, best_x, steps = conjugate_gradients_in_double_double(
             self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target)
@@ -196,7 +199,8 @@ class _RefinedFloat64Factor:
             # retry (checked solves) where that fails; the best iterate is its starting point
             return self._from_stored(*best_x)
         if not best <= max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20):
-            if self._fall_back(f"conjugate gradients on the shifted float64 factor stalled at backward error "
+            which = "shifted " if self.shifted_from is not None else ""
+            if self._fall_back(f"conjugate gradients on the {which}float64 factor stalled at backward error "
                                f"{best:.1e}") >= 0:
                 return np.full(self.n, np.nan), np.full(self.n, np.nan)
             return self._dd_solve(bh, bl)
@@ -259,10 +263,14 @@ class _RefinedFloat64Factor:
         failed = f" and {self.failed_float64} that failed" if self.failed_float64 else ""
         out = (f"{counts['float64']} float64 factorisation{'s' if counts['float64'] != 1 else ''}{failed} "
                f"{secs['float64']:.1f} s")
+        if self.cg_from is not None:
+            out += (f", solved by conjugate gradients in double-double from factorisation {self.cg_from} "
+                    f"({self.cg_reason})")
         if self.shifted_from is not None:
-            out += (f", {counts['shifted']} shifted in float64 {secs['shifted']:.1f} s with {self.cg_iterations} "
-                    f"conjugate-gradient steps in double-double (shifted from factorisation {self.shifted_from}: "
-                    f"{self.shift_reason})")
+            out += (f", {counts['shifted']} shifted in float64 {secs['shifted']:.1f} s (shifted from factorisation "
+                    f"{self.shifted_from}: {self.shift_reason})")
+        if self.cg_iterations:
+            out += f", {self.cg_iterations} conjugate-gradient steps in double-double"
         if self.fallback_at is None:
             return out
         return (f"{out}, {counts['double-double']} in double-double {secs['double-double']:.1f} s (double-double "
@@ -297,8 +305,8 @@ class _RefinedFloat64Factor:
             if not self.factored:  # its double-double factorisation failed: no answer (the caller sees NaN)
                 return np.full(self.n, np.nan), np.full(self.n, np.nan)
             return self._dd_solve(bh, bl)
-        if self.shifted_from is not None:
-            return self._solve_shifted(bh, bl)
+        if self.shifted_from is not None or self.cg_from is not None:
+            return self._solve_by_cg(bh, bl)
         if self.backward_target == math.inf:
             x = self._float64_solve(np.ascontiguousarray(self._to_stored(bh, bl)[0], dtype=np.float64))
             self.solves += 1
@@ -311,7 +319,14 @@ class _RefinedFloat64Factor:
         self.solves += 1
         self.refinement_steps += steps
         if not best <= self.backward_target:
-            if self._fall_back(f"refinement stalled at backward error {best:.1e}") >= 0:
+            reason = f"refinement stalled at backward error {best:.1e}"
+            if self.n >= SHIFT_MIN_ROWS:
+                # the factor holds but is inexact on a few directions (a touching pile's near
+                # self-stresses): conjugate gradients remove what refinement cannot, for this
+                # and every later factorisation (μ falls: it only gets worse)
+                self.cg_from, self.cg_reason = self.factorisations, reason
+                return self._solve_by_cg(bh, bl)
+            if self._fall_back(reason) >= 0:
                 return np.full(self.n, np.nan), np.full(self.n, np.nan)
             return self._dd_solve(bh, bl)
         return self._from_stored(*best_x)
