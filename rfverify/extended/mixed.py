@@ -146,6 +146,40 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     return best, best_x, steps
 
 
+CG_RESTARTS = 4
+"""Passes of :func:`restarted_conjugate_gradients` after the first: on touching piles one pass of
+the conjugate gradients stalls near a backward error of 1e-20 (its directions lose conjugacy
+against the few outliers of the preconditioned matrix), and a pass restarted on the true
+double-double residual goes on to 1e-30 (2800-contact turned touching bed: every solve, where
+the one-pass version fell back to the double-double factor; docs/DECISIONS.md, "touching piles")."""
+
+
+def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: float, restarts: int = CG_RESTARTS):
+    """:func:`conjugate_gradients_in_double_double`, restarted up to ``restarts`` times on the
+    residual b − Ax of the best iterate so far (in double-double), each pass adding its
+    correction while that lowers the componentwise backward error.  Returns (best backward
+    error, (xh, xl), steps of all passes)."""
+    n = Ap.size - 1
+    bh = np.ascontiguousarray(bh, dtype=np.float64)
+    bl = np.ascontiguousarray(bl, dtype=np.float64)
+    best, (xh, xl), steps = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target)
+    for _ in range(restarts):
+        if not best > target:  # reached (or NaN: nothing to restart from)
+            break
+        rh, rl = np.empty(n), np.empty(n)
+        _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
+        # the correction's own pass runs until it stalls: its scale is the residual's, not b's
+        _, (dh, dl), more = conjugate_gradients_in_double_double(Ap, Ai, A, rh, rl, preconditioner, 0.0)
+        steps += more
+        yh, yl = np.empty(n), np.empty(n)
+        dd.vadd(xh, xl, dh, dl, yh, yl)
+        backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, yh, yl, np.empty(n), np.empty(n), np.zeros(n))
+        if not backward < best:
+            break
+        best, xh, xl = backward, yh, yl
+    return best, (xh, xl), steps
+
+
 class _RefinedFloat64Factor:
     """The part :class:`MixedCholesky` and :class:`CholmodMixed` share: a float64 factor whose
     solves are refined against the double-double matrix (:func:`refine_in_double_double`) to
@@ -188,7 +222,7 @@ class _RefinedFloat64Factor:
         ``backward_target`` (:data:`CG_TARGET` when unchecked); where it cannot get within
         :data:`CG_GIVE_UP` of that, the double-double factor, for good."""
         target = min(self.backward_target, CG_TARGET)
-        best, best_x, steps = conjugate_gradients_in_double_double(
+        best, best_x, steps = restarted_conjugate_gradients(
             self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target)
         self.last_backward_error, self.last_steps = best, steps
         self.solves += 1
