@@ -29,7 +29,7 @@ from rfverify.extended.system import choose_backend
 from rfverify.extended.wide_cholesky import DenseWideCholesky, SparseWideCholesky
 from rfverify.scenes.random_problems import random_problem
 
-from test_extended import singular_in_float64
+from test_extended import assert_solves_singular_blocks, factored_singular_in_float64
 from test_wide import newton_residual
 
 
@@ -91,12 +91,7 @@ def test_cholmod_engine_shifts_or_falls_back_when_float64_sees_a_singular_matrix
     float64 factor of the shifted matrix preconditions conjugate gradients in double-double (the
     answer as exact as the double-double factor's); with no shift the shifted factor fails too and
     the double-double factor takes over, for good."""
-    monkeypatch.setattr(mixed_module, "SHIFT", shift)
-    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
-    n = 40
-    chol = CholmodMixed(sp.identity(n, format="csc") + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))
-    hi, lo = singular_in_float64(chol, n)
-    assert chol.factor(hi, lo) == -1
+    chol = factored_singular_in_float64(monkeypatch, CholmodMixed, shift)
     if shift:
         assert chol.precision == "mixed" and chol.shifted_from == 1 and "CHOLMOD" in chol.shift_reason
     else:
@@ -104,12 +99,7 @@ def test_cholmod_engine_shifts_or_falls_back_when_float64_sees_a_singular_matrix
         assert "shifted by 0 ulps" in chol.fallback_reason
     for backward_target in (math.inf, 1e-29):
         chol.set_backward_target(backward_target)
-        b = np.arange(1.0, n + 1)
-        xh, xl = chol.solve(b, np.zeros(n))
-        x1 = (b[1::2] - b[0::2]) * 2.0 ** 60
-        assert np.allclose(np.asarray(dd.to_longdouble(xh, xl)[1::2], dtype=float), x1, rtol=1e-12)
-        x0 = b[0::2] - x1  # row 2k: x_2k + x_2k+1 = b_2k
-        assert np.allclose(np.asarray(dd.to_longdouble(xh, xl)[0::2], dtype=float), x0, rtol=1e-12)
+        assert_solves_singular_blocks(chol)
     assert chol.precision == ("mixed" if shift else "double-double")
     assert (chol.cg_iterations > 0) == bool(shift)
 

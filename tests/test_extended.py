@@ -203,31 +203,43 @@ def singular_in_float64(factor, n: int):
     return hi, lo
 
 
+def factored_singular_in_float64(monkeypatch, factor_class, shift: float, n: int = 40):
+    """A ``factor_class`` (a mixed factor of :mod:`rfverify.extended.mixed`) of the
+    :func:`singular_in_float64` blocks, factored with ``mixed.SHIFT = shift`` at any size: its
+    float64 factorisation fails, so ``factor`` returns -1 (asserted)."""
+    from rfverify.extended import mixed as mixed_module
+
+    monkeypatch.setattr(mixed_module, "SHIFT", shift)
+    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
+    factor = factor_class(sp.identity(n, format="csc") + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))
+    hi, lo = singular_in_float64(factor, n)
+    assert factor.factor(hi, lo) == -1
+    return factor
+
+
+def assert_solves_singular_blocks(factor, n: int = 40):
+    """``factor`` (of :func:`singular_in_float64`'s blocks) solves them exactly to double-double."""
+    b = np.arange(1.0, n + 1)
+    xh, xl = factor.solve(b, np.zeros(n))
+    x = np.asarray(dd.to_longdouble(xh, xl), dtype=float)
+    # exact solution of each block [[1,1],[1,1+δ]] x = (b0, b1): x1 = (b1 − b0)/δ, x0 = b0 − x1
+    x1 = (b[1::2] - b[0::2]) * 2.0 ** 60
+    assert np.allclose(x[1::2], x1, rtol=1e-12)
+    assert np.allclose(x[0::2], b[0::2] - x1, rtol=1e-12)
+
+
 @pytest.mark.parametrize("shift", [64.0, 0.0])
 def test_mixed_ldl_shifts_or_falls_back_where_float64_cannot_see_the_matrix(monkeypatch, shift):
     """A matrix whose float64 part is singular (its definiteness is in the low words): the
     float64 factorisation fails; the shifted one preconditions conjugate gradients in
     double-double, or (no shift: it fails too) the double-double factor is used; each says why,
     and the answer is exact to double-double either way."""
-    from rfverify.extended import mixed as mixed_module
-
-    monkeypatch.setattr(mixed_module, "SHIFT", shift)
-    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
-    n = 40
-    A = sp.identity(n, format="csc")
-    mixed = MixedCholesky(A + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))
-    hi, lo = singular_in_float64(mixed, n)
-    assert mixed.factor(hi, lo) == -1
+    mixed = factored_singular_in_float64(monkeypatch, MixedCholesky, shift)
     if shift:
         assert mixed.precision == "mixed" and mixed.shifted_from == 1 and "pivot" in mixed.shift_reason
     else:
         assert mixed.precision == "double-double" and "pivot" in mixed.fallback_reason
-    b = np.arange(1.0, n + 1)
-    xh, xl = mixed.solve(b, np.zeros(n))
-    x = dd.to_longdouble(xh, xl)
-    # exact solution of each block [[1,1],[1,1+δ]] x = (b0, b1): x1 = (b1 − b0)/δ, x0 = b0 − x1
-    x1 = (b[1::2] - b[0::2]) * 2.0 ** 60
-    assert np.allclose(np.asarray(x[1::2], dtype=float), x1, rtol=1e-12)
+    assert_solves_singular_blocks(mixed)
     assert mixed.precision == ("mixed" if shift else "double-double")
 
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..solver.result import ResultAliases, Status
+from ..verify.certificate import CertifiedResult, VerdictResult
 from .backward import BackwardError
 
 STATEMENT = ("the physical problem (Coulomb friction and rolling resistance with De Saxcé's term "
@@ -20,7 +21,7 @@ NOT_UNIQUE = ("Solutions of the physical problem need not be unique: this is a b
 
 
 @dataclass
-class CoulombCertificate(ResultAliases):
+class CoulombCertificate(VerdictResult):
     """A backward-error certificate of an answer (v, u, r) to the physical problem.
 
     ``backward`` (:class:`.backward.BackwardError`) bounds δ, per contact, such that the exact
@@ -42,20 +43,6 @@ class CoulombCertificate(ResultAliases):
     extra: dict = field(default_factory=dict)
 
     @property
-    def status(self) -> Status:
-        if self.certified:
-            return Status.CERTIFIED
-        return Status.MAX_TIME if self.extra.get("time_limit") is not None else Status.NOT_CERTIFIED
-
-    @property
-    def success(self) -> bool:
-        return self.certified
-
-    @property
-    def message(self) -> str:
-        return self.verdict
-
-    @property
     def nit(self) -> int:
         return int(getattr(self.inner, "nit", 0) or 0)
 
@@ -70,10 +57,6 @@ class CoulombCertificate(ResultAliases):
     @property
     def backward_error(self) -> float:
         return self.backward.relative
-
-    @property
-    def headline(self) -> str:
-        return self.verdict.split(". ")[0]
 
     def __repr__(self) -> str:
         return f"CoulombCertificate(status={self.status}, backward_error={self.backward_error:.1e},\n    {self.headline!r})"
@@ -176,7 +159,7 @@ class CoulombSolution(ResultAliases):
 
 
 @dataclass
-class CoulombDigits(ResultAliases):
+class CoulombDigits(CertifiedResult):
     """The proven answer to the physical problem (:func:`rfverify.coulomb.coulomb_to_digits`):
     ``v``, ``u`` (the file's own u = Hᵀv + w), ``r`` float64; ``certificate`` the
     :class:`CoulombCertificate`; ``outer`` the double fixed point; ``inner`` the last
@@ -194,18 +177,6 @@ class CoulombDigits(ResultAliases):
     rounds: list = field(default_factory=list)
     proven: object = None
     timings: dict = field(default_factory=dict)
-
-    @property
-    def success(self) -> bool:
-        return self.certificate.certified
-
-    @property
-    def status(self) -> Status:
-        return self.certificate.status
-
-    @property
-    def message(self) -> str:
-        return self.certificate.verdict
 
     @property
     def digits(self) -> dict:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import enum
 import functools
+import operator
 import sys
 import warnings
 from collections.abc import Mapping
@@ -339,6 +340,12 @@ class IterationInfo:
 
 
 
+def alias(path: str, doc: str) -> property:
+    """A read-only property that is another name for the attribute ``path`` (dotted for an
+    attribute of an attribute, ``"certificate.status"``), read when asked; ``doc`` its docstring."""
+    return property(operator.attrgetter(path), doc=doc)
+
+
 class ResultAliases(Mapping):
     """What every result (:class:`SolveResult`, :class:`rfverify.DigitsSolution`,
     :class:`rfverify.Certificate`, :class:`rfverify.verify.diagnosis.Diagnosis`) offers the same way
@@ -388,15 +395,8 @@ class ResultAliases(Mapping):
         """Wall time of the call in seconds, ``timings["total"]`` (NaN when not recorded)."""
         return float(self.timings.get("total", float("nan")))
 
-    @property
-    def iterations(self) -> int:
-        """Clarabel's name for ``nit``."""
-        return self.nit
-
-    @property
-    def solve_time(self) -> float:
-        """Clarabel's name for ``time`` (``timings["total"]``, seconds)."""
-        return self.time
+    iterations = alias("nit", "Clarabel's name for ``nit``.")
+    solve_time = alias("time", "Clarabel's name for ``time`` (``timings[\"total\"]``, seconds).")
 
 
 _COMMON_KEYS = ("status", "success", "message", "nit", "time", "timings")

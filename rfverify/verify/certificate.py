@@ -9,11 +9,45 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..proof import Point, Proof
-from ..solver.result import ResultAliases, Status
+from ..solver.result import ResultAliases, Status, alias
+
+
+class VerdictResult(ResultAliases):
+    """The fields every result has (docs/RESULTS.md), read from a certificate's ``certified``,
+    ``verdict`` and ``extra`` (its ``time_limit``): the base of :class:`Certificate` and of the
+    physical problem's :class:`rfverify.coulomb.CoulombCertificate`."""
+
+    @property
+    def status(self) -> Status:
+        """``Status.CERTIFIED``, ``NOT_CERTIFIED``, or ``MAX_TIME`` when a time limit ended the
+        search for a proof point short of the requested digits."""
+        if self.certified:
+            return Status.CERTIFIED
+        return Status.MAX_TIME if self.extra.get("time_limit") is not None else Status.NOT_CERTIFIED
+
+    success = alias("certified", "``certified`` (SciPy's name).")
+    message = alias("verdict", "The verdict: what was proven, or why not.")
+
+    @property
+    def headline(self) -> str:
+        """The verdict's first sentence: what was proven, for which problem."""
+        return self.verdict.split(". ")[0]
+
+
+class CertifiedResult(ResultAliases):
+    """``status``, ``success`` and ``message`` of an answer that carries its proof as
+    ``certificate`` (a :class:`VerdictResult`): the certificate's.  The base of
+    :class:`rfverify.DigitsSolution` and of :class:`rfverify.coulomb.CoulombDigits`."""
+
+    success = alias("certificate.certified", "The certificate's ``certified``.")
+    status = alias("certificate.status", "``Status.CERTIFIED``, ``NOT_CERTIFIED``, or ``MAX_TIME`` when "
+                   "the time limit ended the run short of the requested digits (the best proof reached "
+                   "is the certificate).")
+    message = alias("certificate.verdict", "The certificate's verdict: what was proven, or why not.")
 
 
 @dataclass
-class Certificate(ResultAliases):
+class Certificate(VerdictResult):
     """Result of :func:`certify` (and of the k-digit path).
 
     ``certified`` is True only when the proof shows at least ``requested`` digits in v, u, Hr
@@ -69,23 +103,6 @@ class Certificate(ResultAliases):
         return self.proof.quantities["r"].mode != "information"
 
     @property
-    def status(self) -> Status:
-        """``Status.CERTIFIED``, ``NOT_CERTIFIED``, or ``MAX_TIME`` when a time limit ended the
-        search for a proof point short of the requested digits."""
-        if self.certified:
-            return Status.CERTIFIED
-        return Status.MAX_TIME if self.extra.get("time_limit") is not None else Status.NOT_CERTIFIED
-
-    @property
-    def success(self) -> bool:
-        """``certified`` (SciPy's name)."""
-        return self.certified
-
-    @property
-    def message(self) -> str:
-        return self.verdict
-
-    @property
     def nit(self) -> int:
         """Iterations run to find the proof point: 0 when the given point or the candidate
         itself was proven, else the double solve's, the double-double phase's and the
@@ -97,11 +114,6 @@ class Certificate(ResultAliases):
     def timings(self) -> dict:
         """Seconds: ``total`` (= ``seconds``, the whole of :func:`certify`)."""
         return {"total": self.seconds}
-
-    @property
-    def headline(self) -> str:
-        """The verdict's first sentence: what was proven, for which problem."""
-        return self.verdict.split(". ")[0]
 
     def __repr__(self) -> str:
         return f"Certificate(status={self.status}, requested={self.requested}, nit={self.nit}, time={self.time:.3g} s,\n" \

@@ -38,9 +38,8 @@ from ..extended.workers import threads
 from ..model.scaling import in_scaled_units
 from ..model.problem import Problem
 from ..proof import Point, Proof, ProofContext, validate_digits
-from ..solver import SolveResult, Status, posed, solve
-from ..solver.result import ResultAliases
-from .certificate import Certificate, candidate_point, certificate_from_proof
+from ..solver import SolveResult, posed, solve
+from .certificate import Certificate, CertifiedResult, candidate_point, certificate_from_proof
 from .driver import ProofDriver, proof_site, proven_answer
 from .extend import Extension, extend
 from .prepare import (
@@ -52,7 +51,7 @@ from .prepare import (
 
 
 @dataclass
-class DigitsSolution(ResultAliases):
+class DigitsSolution(CertifiedResult):
     """Result of :func:`solve_to_digits`.
 
     ``v`` (m,), ``u`` (5n,), ``r`` (5n,) are float64 (the extended point rounded to nearest);
@@ -80,24 +79,9 @@ class DigitsSolution(ResultAliases):
     interrupted: bool = False  # Ctrl-C ended the path: the best proof reached is the certificate
 
     @property
-    def success(self) -> bool:
-        return self.certificate.certified
-
-    @property
-    def status(self) -> Status:
-        """``Status.CERTIFIED``, ``NOT_CERTIFIED``, or ``MAX_TIME`` when the time limit ended the
-        run short of the requested digits (the best proof reached is the certificate)."""
-        return self.certificate.status
-
-    @property
     def digits(self) -> dict:
         """Proven digits per quantity (the certificate's; None where a quantity has none)."""
         return self.certificate.digits
-
-    @property
-    def message(self) -> str:
-        """The certificate's verdict: what was proven, or why not."""
-        return self.certificate.verdict
 
     @property
     def nit(self) -> int:
