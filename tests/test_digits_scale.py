@@ -158,6 +158,80 @@ def test_a_stalled_refinement_is_finished_by_conjugate_gradients_on_the_same_flo
         chol.describe_cost()
 
 
+def _touching_gram(seed: int, stiff: int = 30, soft: int = 30, dofs: int = 40, self_stresses: int = 10):
+    """S = I + D C Cᵀ D, C small integers, D = 2⁶⁰ on the first ``stiff`` rows (1 elsewhere),
+    ``self_stresses`` of those rows integer combinations of others: a touching pile's scaled
+    contact-space matrix in miniature.  Exact in double-double ((hi, lo) dense: the stiff rows'
+    diagonal 1 lives in the low word), singular in its float64 rounding on the self-stresses."""
+    rng = np.random.default_rng(seed)
+    C = rng.integers(-3, 4, size=(stiff + soft, dofs)).astype(float)
+    for k in range(self_stresses):
+        i, j = rng.choice(np.arange(self_stresses, stiff), 2, replace=False)
+        C[k] = C[i] - 2 * C[j]
+    d = np.where(np.arange(stiff + soft) < stiff, 2.0 ** 60, 1.0)
+    hi = d[:, None] * d[None, :] * (C @ C.T)
+    lo = np.zeros_like(hi)
+    diag = np.arange(stiff + soft)
+    lo[diag[:stiff], diag[:stiff]] = 1.0
+    hi[diag[stiff:], diag[stiff:]] += 1.0
+    return hi, lo
+
+
+def _residual_of_hi_lo(hi, lo, xh, xl, b):
+    """max_i |(A x − b)_i| for A = hi + lo in 80 digits, and ‖A‖∞‖x‖∞."""
+    with mpmath.workdps(80):
+        x = [mpmath.mpf(float(h)) + mpmath.mpf(float(lo_)) for h, lo_ in zip(xh, xl)]
+        A = [[mpmath.mpf(float(a)) + mpmath.mpf(float(c)) for a, c in zip(ra, rc)] for ra, rc in zip(hi, lo)]
+        res = max(abs(mpmath.fsum(a * t for a, t in zip(row, x)) - b[i]) for i, row in enumerate(A))
+        scale = max(mpmath.fsum(abs(a) for a in row) for row in A) * max(abs(t) for t in x)
+        return float(res), float(scale)
+
+
+@pytest.mark.parametrize("seed", [3, 4, 5])
+def test_restarted_conjugate_gradients_go_on_where_one_pass_stalls(seed):
+    """Issue 47: on a touching pile's matrix (:func:`_touching_gram`), preconditioned by its shifted
+    float64 factor, one pass of the conjugate gradients stalls far above double-double accuracy
+    (checked, so that this test sees the fault it guards); restarted on the true residual they
+    reach 1e-25, checked by an independent 80-digit residual of hi + lo."""
+    hi, lo = _touching_gram(seed)
+    n = hi.shape[0]
+    chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
+    cols = np.repeat(np.arange(n), np.diff(chol.Ap))
+    chol._A = (hi[chol.Ai, cols].copy(), lo[chol.Ai, cols].copy())
+    assert chol._float64_factor() != "" and chol._float64_factor(chol._shifted_values()) == ""
+    b = np.random.default_rng(99).normal(size=n)
+    args = (chol.Ap, chol.Ai, chol._A, b, np.zeros(n), chol._float64_solve, 1e-29)
+    one, _, _ = mixed_module.conjugate_gradients_in_double_double(*args)
+    assert one > 1e-20
+    best, (xh, xl), steps = mixed_module.restarted_conjugate_gradients(*args, good_enough=1e-29)
+    assert best <= 1e-25 and steps > 0
+    res, scale = _residual_of_hi_lo(hi, lo, xh, xl, b)
+    assert res <= 1e-25 * scale
+
+
+@pytest.mark.parametrize("restarts", [mixed_module.CG_RESTARTS, 0])
+def test_a_checked_solve_on_a_touching_matrix_needs_no_double_double_factor(monkeypatch, restarts):
+    """Through the engine: the float64 factor fails, the shifted one preconditions restarted
+    conjugate gradients, and a solve checked to double-double accuracy is answered without the
+    double-double factor (with no restart, the one pass stalls and the engine falls back to it)."""
+    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
+    monkeypatch.setattr(mixed_module, "CG_RESTARTS", restarts)
+    hi, lo = _touching_gram(4)
+    n = hi.shape[0]
+    chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
+    cols = np.repeat(np.arange(n), np.diff(chol.Ap))
+    assert chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols]) == -1 and chol.shifted_from == 1
+    chol.set_backward_target(1e-29)
+    b = np.random.default_rng(99).normal(size=n)
+    xh, xl = chol.solve(b, np.zeros(n))
+    if restarts:
+        assert chol.precision == "mixed" and chol.fallback_at is None and chol.cg_iterations > 0
+        res, scale = _residual_of_hi_lo(hi, lo, xh, xl, b)
+        assert res <= 1e-20 * scale
+    else:  # (its condition, ~1e37, is beyond even the double-double factor: that answer is NaN)
+        assert chol.precision == "double-double" and "conjugate gradients on the shifted" in chol.fallback_reason
+
+
 def test_newton_solve_refined_against_the_double_double_matrix_at_an_iterate():
     """At the double solve's last iterate, the contact-space matrix factored by CHOLMOD: each
     solve reaches the double-double backward error, checked by an independent 60-digit

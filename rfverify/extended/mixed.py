@@ -154,17 +154,20 @@ double-double residual goes on to 1e-30 (2800-contact turned touching bed: every
 the one-pass version fell back to the double-double factor; docs/DECISIONS.md, "touching piles")."""
 
 
-def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: float, restarts: int = CG_RESTARTS):
-    """:func:`conjugate_gradients_in_double_double`, restarted up to ``restarts`` times on the
-    residual b − Ax of the best iterate so far (in double-double), each pass adding its
-    correction while that lowers the componentwise backward error.  Returns (best backward
-    error, (xh, xl), steps of all passes)."""
+def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: float, good_enough: float,
+                                  restarts: int | None = None):
+    """:func:`conjugate_gradients_in_double_double` to ``target``; where its best backward error
+    is still above ``good_enough``, restarted up to ``restarts`` times (:data:`CG_RESTARTS` by
+    default) on the residual b − Ax of the best iterate so far (in double-double), each pass
+    adding its correction while that lowers the componentwise backward error.  Returns (best
+    backward error, (xh, xl), steps of all passes)."""
+    restarts = CG_RESTARTS if restarts is None else restarts
     n = Ap.size - 1
     bh = np.ascontiguousarray(bh, dtype=np.float64)
     bl = np.ascontiguousarray(bl, dtype=np.float64)
     best, (xh, xl), steps = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target)
     for _ in range(restarts):
-        if not best > target:  # reached (or NaN: nothing to restart from)
+        if not best > good_enough:  # reached (or NaN: nothing to restart from)
             break
         rh, rl = np.empty(n), np.empty(n)
         _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
@@ -222,8 +225,9 @@ class _RefinedFloat64Factor:
         ``backward_target`` (:data:`CG_TARGET` when unchecked); where it cannot get within
         :data:`CG_GIVE_UP` of that, the double-double factor, for good."""
         target = min(self.backward_target, CG_TARGET)
+        good_enough = max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20)
         best, best_x, steps = restarted_conjugate_gradients(
-            self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target)
+            self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target, good_enough)
         self.last_backward_error, self.last_steps = best, steps
         self.solves += 1
         self.refinement_steps += steps
@@ -232,7 +236,7 @@ class _RefinedFloat64Factor:
             # unchecked: the Newton driver refines against the unreduced system and asks for a
             # retry (checked solves) where that fails; the best iterate is its starting point
             return self._from_stored(*best_x)
-        if not best <= max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20):
+        if not best <= good_enough:
             which = "shifted " if self.shifted_from is not None else ""
             if self._fall_back(f"conjugate gradients on the {which}float64 factor stalled at backward error "
                                f"{best:.1e}") >= 0:
