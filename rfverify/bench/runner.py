@@ -541,10 +541,15 @@ def coulomb_summary(problem: str, rec: dict, task: dict | None = None) -> dict:
     method = task.get("method", rec.get("method"))
     peer = method == "siconos"
     tol = task.get("tol", rec.get("tol"))
+    def plural(k, noun):
+        return f"{k} {noun}{'' if k == 1 else 's'}"
+
     if peer:
-        outer = f"{rec['peer_iterations']} IPM iterations" if isinstance(rec.get("peer_iterations"), int) else ""
+        ran = isinstance(rec.get("peer_iterations"), int) and rec.get("peer_status") != "NotRun"
+        outer = plural(rec["peer_iterations"], "IPM iteration") if ran else ""
     elif isinstance(rec.get("outer_evaluations"), int):
-        outer = f"{rec['outer_evaluations']} convex solves + {rec.get('proven_rounds', 0)} proven rounds"
+        outer = (f"{plural(rec['outer_evaluations'], 'convex solve')} + "
+                 f"{plural(rec.get('proven_rounds', 0), 'proven round')}")
     else:
         outer = ""
     return {"problem": problem, "method": method, "tol": tol,
