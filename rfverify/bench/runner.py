@@ -38,6 +38,7 @@ from . import records
 from .records import FAILED_STATUSES, task_stem, write_json
 from .execution import (crash_message, die_with_parent, npz_intact, outcome, problem_dir, read_record,
                         record_failure, record_path, timeout_message)
+from .coulomb import check_coulomb_methods, coulomb_summary, plan_coulomb
 from .tasks import run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
@@ -130,7 +131,7 @@ def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=Tr
     "coulomb" instead: rfverify's Coulomb path per (problem, method) and Siconos's GFC3D_IPM
     per (problem, tol) when ``siconos`` is among ``methods``, each at ``digits``."""
     if problem_kind == "coulomb":
-        return _plan_coulomb(problems, methods, tols, digits=digits, max_iter=max_iter, as_stored=as_stored,
+        return plan_coulomb(problems, methods, tols, digits=digits, max_iter=max_iter, as_stored=as_stored,
                              time_limit=time_limit)
     tasks = []
     sizes = sizes or {}
@@ -152,39 +153,6 @@ def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=Tr
         if digits and reference_max_contacts and n is not None and 0 < n <= reference_max_contacts:
             tasks.append({**base, "kind": "digits", "digits": int(digits)})
     return tasks
-
-
-def _plan_coulomb(problems, methods, tols, *, digits, max_iter, as_stored, time_limit) -> list[dict]:
-    tasks = []
-    for e in problems:
-        base = {"problem": e.key, "collection": e.collection, "path": e.path, "sha256": e.sha256,
-                "max_iter": max_iter, "kind": "coulomb", "digits": int(digits)}
-        if as_stored:
-            base["as_stored"] = True
-        if time_limit:
-            base["time_limit"] = float(time_limit)
-        for method in methods:
-            if method == "siconos":
-                tasks += [{**base, "method": method, "tol": float(tol)} for tol in tols]
-            else:
-                tasks.append({**base, "method": method})
-    return tasks
-
-
-COULOMB_DEFAULT_METHODS = ("auto",)
-"""What ``bench --problem coulomb`` runs unless told otherwise: rfverify's Coulomb path with
-the ``auto`` inner solver (add ``siconos`` for Siconos's GFC3D_IPM, certified beside it)."""
-
-
-def check_coulomb_methods(methods) -> None:
-    """``--problem coulomb`` takes the inner solvers of rfverify's path (auto and the
-    Algorithm 1 methods) and ``siconos`` (its GFC3D_IPM); a BenchInputError names the others."""
-    ok = ("auto",) + tuple(ALGORITHM1_METHODS) + ("siconos",)
-    bad = [m for m in methods if m not in ok]
-    if bad:
-        raise BenchInputError(f"--methods {','.join(bad)}: not a method of --problem coulomb (it takes rfverify's "
-                              f"inner solvers {', '.join(ok[:-1])} and siconos, Siconos's GFC3D_IPM); fix: pass "
-                              f"e.g. --methods auto,siconos")
 
 
 def is_done(run_dir: Path, task: dict, *, retry_failed: bool = False) -> bool:
@@ -391,7 +359,7 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     rfverify's Coulomb path at ``digits`` (each method of ``methods`` but ``siconos`` as its
     inner solver) and, with ``siconos`` in ``methods``, Siconos's GFC3D_IPM at each tolerance,
     its answer certified; no trajectories or digits tasks.  The result then also holds
-    ``"coulomb"``: one summary per Coulomb record (:func:`coulomb_summary`).
+    ``"coulomb"``: one summary per Coulomb record (:func:`rfverify.bench.coulomb.coulomb_summary`).
     """
     import math
 
@@ -529,35 +497,6 @@ def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit
         out["coulomb"] = [coulomb_summary(t["problem"], read_record(record_path(run_dir, t)) or {}, t)
                           for t in tasks]
     return out
-
-
-def coulomb_summary(problem: str, rec: dict, task: dict | None = None) -> dict:
-    """What a Coulomb record says, for the bench's output and the report: who answered
-    (``solver``: "rfverify (auto)" or "Siconos GFC3D_IPM"), ``certified``, the proven relative
-    ``backward_error`` (None when none was proven), the proven ``digits`` per quantity, the
-    iterations (``outer``: our convex solves + proven rounds, or GFC3D's iterations),
-    ``time`` and ``why`` (the verdict or the failure, in words)."""
-    task = task or rec
-    method = task.get("method", rec.get("method"))
-    peer = method == "siconos"
-    tol = task.get("tol", rec.get("tol"))
-    def plural(k, noun):
-        return f"{k} {noun}{'' if k == 1 else 's'}"
-
-    if peer:
-        ran = isinstance(rec.get("peer_iterations"), int) and rec.get("peer_status") != "NotRun"
-        outer = plural(rec["peer_iterations"], "IPM iteration") if ran else ""
-    elif isinstance(rec.get("outer_evaluations"), int):
-        outer = (f"{plural(rec['outer_evaluations'], 'convex solve')} + "
-                 f"{plural(rec.get('proven_rounds', 0), 'proven round')}")
-    else:
-        outer = ""
-    return {"problem": problem, "method": method, "tol": tol,
-            "solver": f"Siconos GFC3D_IPM (tol {tol:g})" if peer else f"rfverify ({method})",
-            "status": rec.get("status", "Missing"), "certified": rec.get("certified") is True,
-            "backward_error": rec.get("backward_error"), "digits": rec.get("certified_digits") or {},
-            "outer": outer, "peer_status": rec.get("peer_status"), "time": rec.get("time"),
-            "why": " ".join(str(rec.get("message") or "no record").split())}
 
 
 def _run_local(run_dir: Path, todo: list, jobs: int, time_limit: float, bar) -> int:

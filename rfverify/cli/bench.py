@@ -7,7 +7,8 @@ import re
 import shlex
 import sys
 
-from ..bench.runner import COULOMB_DEFAULT_METHODS, DEFAULT_METHODS, DEFAULT_TOLS
+from ..bench.coulomb import COULOMB_DEFAULT_METHODS
+from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
 from ..coulomb.model import PROBLEMS
 from ..solver.result import METHODS
 from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance

@@ -313,9 +313,9 @@ def diag_summary(diag: dict) -> str:
 
 
 def coulomb_rows(data: RunData) -> list:
-    """One summary per Coulomb record (:func:`rfverify.bench.runner.coulomb_summary`), in the
+    """One summary per Coulomb record (:func:`rfverify.bench.coulomb.coulomb_summary`), in the
     order problem, rfverify's answers, then the peer's by decreasing tolerance."""
-    from ..bench.runner import coulomb_summary
+    from ..bench.coulomb import coulomb_summary
 
     rows = [coulomb_summary(r["problem"], r) for r in data.coulomb]
     return sorted(rows, key=lambda s: (s["problem"], s["method"] == "siconos", -(s["tol"] or 0)))

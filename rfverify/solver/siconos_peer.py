@@ -90,6 +90,16 @@ def unavailable() -> str | None:
 
 
 # ---------------------------------------------------------------------- exchange format
+def _write_arrays(fh, matrices, vectors) -> None:
+    """CSC matrices (int64 column pointers, int64 row indices, float64 values) then float64 vectors."""
+    for A in matrices:
+        fh.write(np.ascontiguousarray(A.indptr, dtype="<i8").tobytes())
+        fh.write(np.ascontiguousarray(A.indices, dtype="<i8").tobytes())
+        fh.write(np.ascontiguousarray(A.data, dtype="<f8").tobytes())
+    for x in vectors:
+        fh.write(np.ascontiguousarray(x, dtype="<f8").tobytes())
+
+
 def write_input(path, problem: Problem, tol: float, max_iter: int) -> None:
     """The driver's input (format in driver.c): sizes, tol, M_sym and H as CSC, f, w, μ, μr."""
     M = problem.M_sym.tocsc()
@@ -100,12 +110,7 @@ def write_input(path, problem: Problem, tol: float, max_iter: int) -> None:
     with open(path, "wb") as fh:
         fh.write(b"RFVSIC01")
         fh.write(struct.pack("<5qd", m, n, M.nnz, H.nnz, int(max_iter), float(tol)))
-        for A in (M, H):
-            fh.write(np.ascontiguousarray(A.indptr, dtype="<i8").tobytes())
-            fh.write(np.ascontiguousarray(A.indices, dtype="<i8").tobytes())
-            fh.write(np.ascontiguousarray(A.data, dtype="<f8").tobytes())
-        for x in (problem.f, problem.w, problem.mu, problem.mu_r):
-            fh.write(np.ascontiguousarray(x, dtype="<f8").tobytes())
+        _write_arrays(fh, (M, H), (problem.f, problem.w, problem.mu, problem.mu_r))
 
 
 def read_output(path, m: int, n: int) -> dict:
@@ -290,12 +295,7 @@ def write_input_gfc3d(path, problem: Problem, tol: float, max_iter: int) -> None
     with open(path, "wb") as fh:
         fh.write(b"RFVGFC01")
         fh.write(struct.pack("<5qd", problem.n_dofs, n, M.nnz, H.nnz, int(max_iter), float(tol)))
-        for A in (M, H):
-            fh.write(np.ascontiguousarray(A.indptr, dtype="<i8").tobytes())
-            fh.write(np.ascontiguousarray(A.indices, dtype="<i8").tobytes())
-            fh.write(np.ascontiguousarray(A.data, dtype="<f8").tobytes())
-        for x in (problem.f, np.asarray(problem.w)[keep], problem.mu):
-            fh.write(np.ascontiguousarray(x, dtype="<f8").tobytes())
+        _write_arrays(fh, (M, H), (problem.f, np.asarray(problem.w)[keep], problem.mu))
 
 
 def read_output_gfc3d(path, m: int, n: int) -> dict:

@@ -94,29 +94,40 @@ static double wall(void) {
   return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
+/* The input's sizes, iteration limit and tolerance (after the magic), checked; dim per contact. */
+typedef struct { int64_t m, n, nnzM, nnzH, max_iter; double tol; } Head;
+
+static Head read_head(FILE *f, const char *in, int64_t dim) {
+  int64_t head[5];
+  Head h;
+  read_exact(f, head, sizeof(int64_t), 5, in);
+  read_exact(f, &h.tol, sizeof(double), 1, in);
+  h.m = head[0], h.n = head[1], h.nnzM = head[2], h.nnzH = head[3], h.max_iter = head[4];
+  if (h.m <= 0 || h.n < 0 || h.nnzM < 0 || h.nnzH < 0 || h.max_iter < 1 || !(h.tol > 0) || h.m > INT32_MAX ||
+      dim * h.n > INT32_MAX)
+    fail(2, "bad sizes, tolerance or iteration limit", in);
+  return h;
+}
+
+/* count doubles read into a new array. */
+static double *read_doubles(FILE *f, int64_t count, const char *in) {
+  double *x = xmalloc((size_t)count, sizeof(double));
+  read_exact(f, x, sizeof(double), (size_t)count, in);
+  return x;
+}
+
 /* The 3-D global Coulomb problem by GFC3D_IPM (second mode, see the header); f is past the magic. */
 static int solve_gfc3d(FILE *f, const char *in, const char *out, int verbose) {
-  int64_t head[5];
-  double tol;
-  read_exact(f, head, sizeof(int64_t), 5, in);
-  read_exact(f, &tol, sizeof(double), 1, in);
-  int64_t m = head[0], n = head[1], nnzM = head[2], nnzH = head[3], max_iter = head[4];
-  if (m <= 0 || n < 0 || nnzM < 0 || nnzH < 0 || max_iter < 1 || !(tol > 0) || m > INT32_MAX ||
-      3 * n > INT32_MAX)
-    fail(2, "bad sizes, tolerance or iteration limit", in);
-  int64_t nd = 3 * n;
-
+  Head h = read_head(f, in, 3);
+  int64_t m = h.m, n = h.n, nd = 3 * n;
   GlobalFrictionContactProblem *problem = globalFrictionContactProblem_new();
   problem->dimension = 3;
   problem->numberOfContacts = (int)n;
-  problem->M = read_csc(f, m, m, nnzM, in);
-  problem->H = read_csc(f, m, nd, nnzH, in);
-  problem->q = xmalloc((size_t)m, sizeof(double));
-  problem->b = xmalloc((size_t)nd, sizeof(double));
-  problem->mu = xmalloc((size_t)n, sizeof(double));
-  read_exact(f, problem->q, sizeof(double), (size_t)m, in);
-  read_exact(f, problem->b, sizeof(double), (size_t)nd, in);
-  read_exact(f, problem->mu, sizeof(double), (size_t)n, in);
+  problem->M = read_csc(f, m, m, h.nnzM, in);
+  problem->H = read_csc(f, m, nd, h.nnzH, in);
+  problem->q = read_doubles(f, m, in);
+  problem->b = read_doubles(f, nd, in);
+  problem->mu = read_doubles(f, n, in);
   fclose(f);
   for (int64_t c = 0; c < n; ++c) /* its change of variables P = diag(1, mu, mu) is inverted */
     if (!(problem->mu[c] > 0)) fail(2, "GFC3D_IPM needs mu > 0 on every contact", in);
@@ -128,8 +139,8 @@ static int solve_gfc3d(FILE *f, const char *in, const char *out, int verbose) {
   double *u = xmalloc((size_t)nd, sizeof(double));
   double *r = xmalloc((size_t)nd, sizeof(double));
   SolverOptions *options = solver_options_create(GFC3D_IPM);
-  options->dparam[SICONOS_DPARAM_TOL] = tol;
-  options->iparam[SICONOS_IPARAM_MAX_ITER] = (int)max_iter;
+  options->dparam[SICONOS_DPARAM_TOL] = h.tol;
+  options->iparam[SICONOS_IPARAM_MAX_ITER] = (int)h.max_iter;
   numerics_set_verbose(verbose);
 
   double t0 = wall();
@@ -163,29 +174,19 @@ int main(int argc, char **argv) {
   read_exact(f, magic, 1, 8, in);
   if (memcmp(magic, "RFVGFC01", 8) == 0) return solve_gfc3d(f, in, out, verbose);
   if (memcmp(magic, "RFVSIC01", 8) != 0) fail(2, "not an rfverify Siconos input (magic)", in);
-  int64_t head[5];
-  double tol;
-  read_exact(f, head, sizeof(int64_t), 5, in);
-  read_exact(f, &tol, sizeof(double), 1, in);
-  int64_t m = head[0], n = head[1], nnzM = head[2], nnzH = head[3], max_iter = head[4];
-  if (m <= 0 || n < 0 || nnzM < 0 || nnzH < 0 || max_iter < 1 || !(tol > 0) || m > INT32_MAX ||
-      5 * n > INT32_MAX)
-    fail(2, "bad sizes, tolerance or iteration limit", in);
-  int64_t nd = 5 * n;
+  Head h = read_head(f, in, 5);
+  int64_t m = h.m, n = h.n, nd = 5 * n, max_iter = h.max_iter;
+  double tol = h.tol;
 
   GlobalRollingFrictionContactProblem *problem = globalRollingFrictionContactProblem_new();
   problem->dimension = 5;
   problem->numberOfContacts = (int)n;
-  problem->M = read_csc(f, m, m, nnzM, in);
-  problem->H = read_csc(f, m, nd, nnzH, in);
-  problem->q = xmalloc((size_t)m, sizeof(double));
-  problem->b = xmalloc((size_t)nd, sizeof(double));
-  problem->mu = xmalloc((size_t)n, sizeof(double));
-  problem->mu_r = xmalloc((size_t)n, sizeof(double));
-  read_exact(f, problem->q, sizeof(double), (size_t)m, in);
-  read_exact(f, problem->b, sizeof(double), (size_t)nd, in);
-  read_exact(f, problem->mu, sizeof(double), (size_t)n, in);
-  read_exact(f, problem->mu_r, sizeof(double), (size_t)n, in);
+  problem->M = read_csc(f, m, m, h.nnzM, in);
+  problem->H = read_csc(f, m, nd, h.nnzH, in);
+  problem->q = read_doubles(f, m, in);
+  problem->b = read_doubles(f, nd, in);
+  problem->mu = read_doubles(f, n, in);
+  problem->mu_r = read_doubles(f, n, in);
   fclose(f);
   for (int64_t c = 0; c < n; ++c)  /* its change of variables divides by mu and mu_r */
     if (!(problem->mu[c] > 0) || !(problem->mu_r[c] > 0))
