@@ -7,7 +7,9 @@ rfverify's measures).
     PYTHONPATH=. python benchmarks/bench_coulomb.py FILE_OR_DIR... [--digits 10] [--three-d]
 
 ``--three-d`` also runs each rolling file's 3-D version (rolling rows dropped, μr = 0: the
-problem a 3-D FCLIB /fclib_global file of the same scene poses).
+problem a 3-D FCLIB /fclib_global file of the same scene poses).  ``--write-3d DIR`` only writes
+those 3-D versions as FCLIB ``/fclib_global`` files (spacedim 3) into DIR, e.g. for
+``rfverify bench DIR --problem coulomb --methods auto,siconos`` (Siconos's GFC3D_IPM is 3-D only).
 """
 
 from __future__ import annotations
@@ -106,7 +108,7 @@ def three_d(problem):
     H = sp.csc_matrix(problem.H @ sp.diags(keep))
     return rfverify.Problem.from_arrays(problem.M, H, problem.f, np.asarray(problem.w) * keep, problem.mu,
                                         np.zeros(n), title=problem.title + " (3-D)", max_asymmetry=np.inf,
-                                        provenance={"spacedim": 3})
+                                        provenance={"format": "fclib_global", "spacedim": 3})
 
 
 def files(inputs):
@@ -139,7 +141,18 @@ def main(argv=None):
     ap.add_argument("inputs", nargs="+")
     ap.add_argument("--digits", type=int, default=10)
     ap.add_argument("--three-d", action="store_true")
+    ap.add_argument("--write-3d", metavar="DIR")
     args = ap.parse_args(argv)
+    if args.write_3d:
+        out = Path(args.write_3d)
+        out.mkdir(parents=True, exist_ok=True)
+        for spec in files(args.inputs):
+            problem = rfverify.load(str(spec))
+            if problem.local is None and np.any(problem.mu_r > 0):
+                name = Path(str(spec).replace("bundled:", "bundled-")).stem
+                rfverify.save(three_d(problem), out / f"{name}-3d.hdf5")
+                print(out / f"{name}-3d.hdf5")
+        return
     with recording("bench_coulomb", argv):
         print(f"Physical problem (--problem coulomb), --digits {args.digits}. Outer columns: convex solves to a "
               "fixed-point residual of 1e-13 of the data scale of u (best residual, time); proven rounds: "

@@ -57,6 +57,8 @@ def outcome(run_dir, task) -> str:
     if rec is None:
         return "no record"
     verdict = "verified" if rec.get("solved") is True else "not verified"
+    if task["kind"] == "coulomb":
+        verdict = "certified" if rec.get("certified") is True else "not certified"
     if task["kind"] == "trajectory":
         best = rec.get("best_verified_max")
         verdict = f"best verified {best:.1e}" if isinstance(best, (int, float)) else "no verified iterate"

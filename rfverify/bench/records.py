@@ -20,12 +20,14 @@ field               kinds                   required  finished  what
 ==================  ======================  ========  ========  ==============================
 schema              all                     yes       no        :data:`FORMAT_VERSION`
 problem             all                     yes       no        ``<collection>/<name>`` key
-kind                all                     yes       no        solve, trajectory or digits
+kind                all                     yes       no        solve, trajectory, digits, coulomb
 status              all                     yes       no        outcome (Solved, Timeout, ...)
 solved              all                     yes       no        the independent recheck passed
 message             all                     no        no        the solver's or failure's words
 method, tol         solve, trajectory       yes       no        what ran
-digits              digits                  yes       no        digits asked of the path
+method              coulomb                 yes       no        inner solver, or siconos (GFC3D)
+tol                 coulomb                 no        no        the peer's own tolerance
+digits              digits, coulomb         yes       no        digits asked of the path
 time                all                     yes       yes       seconds of the task
 nit                 solve                   no        yes       iterations
 verified            solve                   yes       yes       recheck, ``{"max": ..., ...}``
@@ -34,11 +36,13 @@ min_lam2            solve                   no        yes       smallest λ2 of 
 solver_claims_...   solve                   no        yes       the solver said Solved
 iterates            trajectory              yes       yes       ``[{time, verified_max}, ...]``
 best_verified_max   trajectory              no        yes       best rechecked criterion
-certified           digits                  yes       yes       the certificate proves K digits
-certified_digits    digits                  no        yes       proven digits per quantity
+certified           digits, coulomb         yes       yes       the certificate proves K digits
+certified_digits    digits, coulomb         no        yes       proven digits per quantity
 certified_modes     digits                  no        yes       relative / absolute / information
 has_reference       digits                  no        yes       the .npz holds ``ref_v/u/r``
-time_certify        digits                  no        yes       seconds of the proof
+time_certify        digits, coulomb         no        yes       seconds of the proof
+backward_error      coulomb                 yes       yes       proven relative bound on δ, or null
+outer_evaluations   coulomb                 no        yes       convex solves of the fixed point
 ==================  ======================  ========  ========  ==============================
 
 Every record also carries ``rfverify_version``, ``task_key`` (what resume compares, see
@@ -69,7 +73,7 @@ READABLE_VERSIONS = (1, 2)
 
 VERSION_FIELD = "schema"
 
-KINDS = ("solve", "trajectory", "digits")
+KINDS = ("solve", "trajectory", "digits", "coulomb")
 
 FAILED_STATUSES = ("Timeout", "Crashed", "Error")
 """Run outcomes that ``bench --retry-failed`` runs again; their records carry no measurements."""
@@ -122,13 +126,15 @@ _RUNS = ("solve", "trajectory")
 
 FIELDS = (
     Field("problem", _ALL, True, False, lambda x: isinstance(x, str), "a string"),
-    Field("kind", _ALL, True, False, lambda x: x in KINDS, "solve, trajectory or digits"),
+    Field("kind", _ALL, True, False, lambda x: x in KINDS, "solve, trajectory, digits or coulomb"),
     Field("status", _ALL, True, False, lambda x: isinstance(x, str), "a string"),
     Field("solved", _ALL, True, False, lambda x: isinstance(x, bool), "true or false"),
     Field("message", _ALL, False, False, lambda x: isinstance(x, str), "a string"),
     Field("method", _RUNS, True, False, lambda x: isinstance(x, str), "a method name"),
     Field("tol", _RUNS, True, False, lambda x: _is_num(x) and math.isfinite(x) and x > 0, "a number > 0"),
-    Field("digits", ("digits",), True, False, _is_int, "an integer"),
+    Field("method", ("coulomb",), True, False, lambda x: isinstance(x, str), "a method name"),
+    Field("tol", ("coulomb",), False, False, lambda x: _is_num(x) and math.isfinite(x) and x > 0, "a number > 0"),
+    Field("digits", ("digits", "coulomb"), True, False, _is_int, "an integer"),
     Field("time", _ALL, True, True, _is_num, "a number"),
     Field("nit", ("solve",), False, True, lambda x: x is None or _is_int(x), "an integer"),
     Field("verified", ("solve",), True, True, lambda x: isinstance(x, dict) and _num_or_null(x.get("max")),
@@ -148,7 +154,13 @@ FIELDS = (
     Field("certified_modes", ("digits",), False, True,
           lambda x: isinstance(x, dict) and all(isinstance(v, str) for v in x.values()), "an object of strings"),
     Field("has_reference", ("digits",), False, True, lambda x: isinstance(x, bool), "true or false"),
-    Field("time_certify", ("digits",), False, True, _num_or_null, "a number or null"),
+    Field("time_certify", ("digits", "coulomb"), False, True, _num_or_null, "a number or null"),
+    Field("certified", ("coulomb",), True, True, lambda x: isinstance(x, bool), "true or false"),
+    Field("backward_error", ("coulomb",), True, True, _num_or_null, "a number or null"),
+    Field("certified_digits", ("coulomb",), False, True,
+          lambda x: x is None or (isinstance(x, dict) and all(v is None or _is_num(v) for v in x.values())),
+          "an object of numbers"),
+    Field("outer_evaluations", ("coulomb",), False, True, _is_int, "an integer"),
 )
 """The declared fields, in the order they are checked (the first problem found is reported)."""
 
@@ -166,6 +178,9 @@ def task_stem(task: dict) -> str:
         return f"{task['method']}@{tol_text(task['tol'])}"
     if task["kind"] == "trajectory":
         return f"trajectory-{task['method']}@{tol_text(task['tol'])}"
+    if task["kind"] == "coulomb":
+        at = f"@{tol_text(task['tol'])}" if task.get("tol") is not None else ""
+        return f"coulomb-{task['method']}{at}-digits{task['digits']}"
     return f"digits{task['digits']}"
 
 

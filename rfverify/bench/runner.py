@@ -38,6 +38,7 @@ from . import records
 from .records import FAILED_STATUSES, task_stem, write_json
 from .execution import (crash_message, die_with_parent, npz_intact, outcome, problem_dir, read_record,
                         record_failure, record_path, timeout_message)
+from .coulomb import check_coulomb_methods, coulomb_summary, plan_coulomb
 from .tasks import run_task, task_key, task_label
 
 PROBLEM_SUFFIXES = (".hdf5", ".h5", ".dat")
@@ -122,10 +123,16 @@ def discover_problems(inputs) -> list[ProblemEntry]:
 
 def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=True,
                digits=10, reference_max_contacts=60, sizes=None, max_iter=100, dps=30,
-               as_stored: bool = False, time_limit: float | None = None) -> list[dict]:
+               as_stored: bool = False, time_limit: float | None = None,
+               problem_kind: str = "relaxation") -> list[dict]:
     """The task list: a timed solve per (problem, method, tol), a trajectory per (problem,
     Algorithm 1 method), and the mixed-precision path per problem small enough for the
-    reference (``n ≤ reference_max_contacts``; 0 disables it)."""
+    reference (``n ≤ reference_max_contacts``; 0 disables it).  With ``problem_kind``
+    "coulomb" instead: rfverify's Coulomb path per (problem, method) and Siconos's GFC3D_IPM
+    per (problem, tol) when ``siconos`` is among ``methods``, each at ``digits``."""
+    if problem_kind == "coulomb":
+        return plan_coulomb(problems, methods, tols, digits=digits, max_iter=max_iter, as_stored=as_stored,
+                             time_limit=time_limit)
     tasks = []
     sizes = sizes or {}
     for e in problems:
@@ -325,7 +332,7 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
               trajectory_tol: float = 1e-14, trajectories: bool = True, digits: int = 10,
               reference_max_contacts: int = 60, max_iter: int = 100, quiet: bool = False,
               command: str | None = None, retry_failed: bool = False,
-              scheduler: str | None = None, as_stored: bool = False) -> dict:
+              scheduler: str | None = None, as_stored: bool = False, problem_kind: str = "relaxation") -> dict:
     """Run (or resume) a benchmark.  Returns ``{"ran", "skipped", "timeouts", "total",
     "run_dir", "counts"}`` with ``counts[(method, tol)] = (verified solved, runs)`` over the
     problems of this invocation.  ``command`` (the CLI line) is recorded in the manifest so the
@@ -347,10 +354,22 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     stored instead of (M + Mᵀ)/2 (DESIGN §6.1); a run directory holds one choice.  The peers
     (clarabel, siconos) solve (M + Mᵀ)/2 only and are refused with it when a problem's M is
     unsymmetric.
+
+    ``problem_kind`` "coulomb" runs the physical problem instead (issue 51): per problem
+    rfverify's Coulomb path at ``digits`` (each method of ``methods`` but ``siconos`` as its
+    inner solver) and, with ``siconos`` in ``methods``, Siconos's GFC3D_IPM at each tolerance,
+    its answer certified; no trajectories or digits tasks.  The result then also holds
+    ``"coulomb"``: one summary per Coulomb record (:func:`rfverify.bench.coulomb.coulomb_summary`).
     """
     import math
 
+    from ..coulomb import check_problem_kind
     from ..io import load
+
+    check_problem_kind(problem_kind)
+    coulomb = problem_kind == "coulomb"
+    if coulomb:
+        check_coulomb_methods(methods)
 
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
@@ -397,20 +416,28 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
                        trajectories=trajectories, digits=digits,
                        reference_max_contacts=reference_max_contacts,
                        sizes={k: v[0] for k, v in sizes.items()}, max_iter=max_iter, as_stored=as_stored,
-                       time_limit=time_limit)
+                       time_limit=time_limit, problem_kind=problem_kind)
     run_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(run_dir):
         return _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit,
                            trajectory_tol, digits, reference_max_contacts, quiet, command,
-                           retry_failed, scheduler, as_stored)
+                           retry_failed, scheduler, as_stored, coulomb)
 
 
 def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit, trajectory_tol,
                 digits, reference_max_contacts, quiet, command, retry_failed, scheduler,
-                as_stored: bool = False) -> dict:
+                as_stored: bool = False, coulomb: bool = False) -> dict:
     from .._version import __version__
 
     old = read_manifest(run_dir, required=False)
+    if coulomb:  # the relaxation's settings stay as they were; the Coulomb run's are kept apart
+        coulomb_settings = {"methods": list(methods), "tols": sorted({float(t) for t in tols}, reverse=True),
+                            "digits": digits, "time_limit": time_limit, "command": command}
+        methods, tols = [], []
+        trajectory_tol = old.get("trajectory_tol", trajectory_tol)
+        digits = old.get("digits", digits)
+        reference_max_contacts = old.get("reference_max_contacts", reference_max_contacts)
+        command = None
     known = {p["key"]: p for p in old.get("problems", [])}
     for e in problems:
         known[e.key] = {"key": e.key, "collection": e.collection, "spec": _portable(e, run_dir), "sha256": e.sha256,
@@ -434,6 +461,10 @@ def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit
         "command": command or old.get("command"),
         "as_stored": bool(as_stored),
     }
+    if coulomb:
+        manifest["coulomb"] = coulomb_settings
+    elif isinstance(old.get("coulomb"), dict):
+        manifest["coulomb"] = old["coulomb"]
     write_json(run_dir / "manifest.json", manifest)
 
     todo = [t for t in tasks if not is_done(run_dir, t, retry_failed=retry_failed)]
@@ -460,8 +491,12 @@ def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit
         rec = read_record(record_path(run_dir, t)) or {}
         solved, total = counts.get((t["method"], t["tol"]), (0, 0))
         counts[(t["method"], t["tol"])] = (solved + (rec.get("solved") is True), total + 1)
-    return {"ran": len(todo), "skipped": len(tasks) - len(todo), "timeouts": timeouts, "total": len(tasks),
-            "run_dir": str(run_dir), "counts": counts}
+    out = {"ran": len(todo), "skipped": len(tasks) - len(todo), "timeouts": timeouts, "total": len(tasks),
+           "run_dir": str(run_dir), "counts": counts}
+    if coulomb:
+        out["coulomb"] = [coulomb_summary(t["problem"], read_record(record_path(run_dir, t)) or {}, t)
+                          for t in tasks]
+    return out
 
 
 def _run_local(run_dir: Path, todo: list, jobs: int, time_limit: float, bar) -> int:

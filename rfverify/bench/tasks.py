@@ -12,6 +12,11 @@ Task kinds
                 its parts) and its certificate; its proven extended-precision point is saved
                 (every float64 term) and serves as the problem's reference: the report proves
                 every other saved answer's digits at it (:mod:`rfverify.report.proven`).
+``coulomb``     the physical problem (``bench --problem coulomb``, issue 51): method ``siconos``
+                runs Siconos's GFC3D_IPM at ``tol`` on a 3-D problem and certifies its answer
+                (:func:`rfverify.coulomb.certify_coulomb`); any other method is the inner solver
+                of rfverify's own path (:func:`rfverify.coulomb.coulomb_to_digits`).  Both at
+                ``digits``, both judged by the proven backward error and proven digits.
 
 Each task writes ``<stem>.npz`` (arrays) then ``<stem>.json`` (record, declared in
 :mod:`rfverify.bench.records`); the JSON is written last, atomically, so its presence means the
@@ -76,6 +81,9 @@ def task_key(task: dict) -> str:
 def task_label(task: dict) -> str:
     if task["kind"] == "digits":
         return f"{task['problem']} · {task['digits']}-digit path"
+    if task["kind"] == "coulomb":
+        who = f"Siconos GFC3D_IPM {task['tol']:g}" if task["method"] == "siconos" else f"rfverify ({task['method']})"
+        return f"{task['problem']} · coulomb, {who}, {task['digits']} digits"
     kind = "" if task["kind"] == "solve" else f"{task['kind']} "
     return f"{task['problem']} · {kind}{task['method']} {task['tol']:g}"
 
@@ -105,6 +113,8 @@ def run_task(task: dict, out_dir: str) -> None:
                 record.update(_solve(problem, task, out / f"{stem}.npz"))
             elif task["kind"] == "trajectory":
                 record.update(_trajectory(problem, task, out / f"{stem}.npz"))
+            elif task["kind"] == "coulomb":
+                record.update(_coulomb(problem, task, out / f"{stem}.npz"))
             else:
                 record.update(_digits(problem, task, out / f"{stem}.npz"))
         except Exception as exc:  # a crash is a result too: recorded with its cause
@@ -253,3 +263,67 @@ def _digits(problem, task, npz_path) -> dict:
         "reference_status": "proven extended point" if "ref_v" in arrays else None,
         "verified": verified, "solved": bool(cert.certified),
     }
+
+
+def _coulomb_fields(cert, problem, v, u, r, shift) -> dict:
+    """The record fields of a Coulomb certificate (:class:`rfverify.coulomb.CoulombCertificate`)
+    of the answer (v, u, r), with the physical conditions it meets (long double, relative to the
+    data scale of u, :func:`rfverify.coulomb.physical_residuals`)."""
+    from ..coulomb import physical_residuals
+
+    be = cert.backward
+    res = physical_residuals(problem, u, r, shift)
+    return {"certified": bool(cert.certified), "solved": bool(cert.certified),
+            "backward_error": be.relative if be.proven and math.isfinite(be.relative) else None,
+            "backward_proven": bool(be.proven),
+            "certified_digits": cert.digits, "certified_modes": {k: q.mode for k, q in cert.quantities.items()},
+            "certificate_status": str(cert.status), "verdict": cert.verdict,
+            "physical_residuals": res.as_dict()}
+
+
+def _coulomb(problem, task, npz_path) -> dict:
+    """One Coulomb task: rfverify's path, or Siconos's GFC3D_IPM certified (module docstring)."""
+    from ..coulomb import certify_coulomb, coulomb_to_digits
+
+    digits = int(task["digits"])
+    if task["method"] == "siconos":
+        return _coulomb_peer(problem, task, npz_path, digits)
+    t0 = time.perf_counter()
+    out = coulomb_to_digits(problem, digits=digits, method=task["method"], max_iter=task.get("max_iter", 100),
+                            **solver_time_limit(task, SOLVE_SHARE))
+    elapsed = time.perf_counter() - t0
+    np.savez_compressed(npz_path, v=out.v, u=out.u, r=out.r, shift=out.shift)
+    run = out.outer
+    return {"status": str(out.status), "message": out.certificate.verdict, "time": elapsed, "nit": int(out.nit),
+            **_coulomb_fields(out.certificate, problem, out.v, out.u, out.r, out.shift),
+            "outer_method": run.method, "outer_evaluations": int(run.evaluations),
+            "outer_residual": float(run.residual), "proven_rounds": len(out.rounds),
+            "time_outer": out.timings.get("outer"), "time_proven": out.timings.get("proven")}
+
+
+def _coulomb_peer(problem, task, npz_path, digits: int) -> dict:
+    """Siconos's GFC3D_IPM on the problem at ``tol``, then the backward-error certificate of its
+    (v, r) with u = Hᵀv + w and ŝ = Φ(u): what its answer is proven to be, whatever it claims."""
+    from ..coulomb import certify_coulomb
+    from ..solver.siconos_peer import solve_gfc3d
+
+    limit = task.get("time_limit")
+    t0 = time.perf_counter()
+    ans = solve_gfc3d(problem, tol=float(task["tol"]), max_iter=task.get("max_iter", 100),
+                      time_limit=None if not limit else 0.4 * float(limit))
+    t_peer = time.perf_counter() - t0
+    peer = {"peer_status": ans.status, "peer_info": ans.info, "peer_iterations": int(ans.nit),
+            "peer_residual": ans.residual, "peer_seconds": ans.seconds, "time_peer": t_peer}
+    if not ans.answered:
+        np.savez_compressed(npz_path, v=ans.v, r=ans.r)
+        status = "NotRun" if ans.status == "NotRun" else ("MaxTime" if ans.status == "MaxTime" else "PeerFailed")
+        return {"status": status, "message": ans.failure, "time": t_peer, "certified": False, "solved": False,
+                "backward_error": None, "nit": 0, **peer}
+    left = None if not limit else max(SOLVE_SHARE * float(limit) - t_peer, 1.0)
+    t1 = time.perf_counter()
+    cert = certify_coulomb(problem, ans.v, None, ans.r, digits=digits, time_limit=left)
+    t_cert = time.perf_counter() - t1
+    u = problem.H.T @ ans.v + np.asarray(problem.w)
+    np.savez_compressed(npz_path, v=ans.v, u=u, r=ans.r, u_siconos=ans.u_siconos, shift=cert.shift)
+    return {"status": str(cert.status), "message": cert.verdict, "time": t_peer + t_cert, "nit": int(ans.nit),
+            **_coulomb_fields(cert, problem, ans.v, u, ans.r, cert.shift), **peer, "time_certify": t_cert}

@@ -7,7 +7,9 @@ import re
 import shlex
 import sys
 
+from ..bench.coulomb import COULOMB_DEFAULT_METHODS
 from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
+from ..coulomb.model import PROBLEMS
 from ..solver.result import METHODS
 from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
 from .common import DOCS_NOTE, exit_codes, EXIT_OK, add_equations_option, dumps, progress_printer
@@ -28,7 +30,17 @@ rechecked (work-precision data, how far double precision gets), and the mixed-pr
 of every saved answer of every method (--reference-max-contacts limits it to smaller problems). Resumable: a finished run is reused only
 when the problem file's content, the method, tolerance, settings and rfverify version are
 unchanged (--retry-failed also redoes timed-out, crashed and failed runs); one bench at a time
-per RUN_DIR. Then run `rfverify report RUN_DIR`."""
+per RUN_DIR. Then run `rfverify report RUN_DIR`.
+
+--problem coulomb runs the physical problem instead (Coulomb friction and rolling resistance
+with De Saxce's term; see `solve --help`): per problem, rfverify's Coulomb path at --digits (its
+inner solver: each of --methods but siconos; default auto), and with siconos in --methods,
+Siconos's own 3-D Coulomb IPM, GFC3D_IPM, at each --tol on every problem it takes (3-D: mu_r = 0
+and mu > 0 on every contact; others are recorded as not run, with the reason), each of its
+answers certified by the same proven backward error (`certify --problem coulomb`). It prints,
+per answer, whether it is certified, its proven backward error and proven digits, or why not.
+The records go into the same kind of RUN_DIR (it may also hold the relaxation's runs); `rfverify
+report RUN_DIR` shows them beside the relaxation's."""
 
 
 def add_parser(sub) -> None:
@@ -42,8 +54,10 @@ def add_parser(sub) -> None:
                             "collection), 'bundled' (every bundled problem) or 'bundled:NAME'")
     bench.add_argument("--out", required=True, metavar="RUN_DIR", type=out_path,
                        help="run directory (created or resumed)")
-    bench.add_argument("--methods", type=method_list, default=list(DEFAULT_METHODS), metavar="M,M,...",
-                       help=f"comma-separated methods (default: {','.join(DEFAULT_METHODS)}; all: {','.join(METHODS)})")
+    bench.add_argument("--methods", type=method_list, default=None, metavar="M,M,...",
+                       help=f"comma-separated methods (default: {','.join(DEFAULT_METHODS)}; all: {','.join(METHODS)}; "
+                            f"with --problem coulomb: {','.join(COULOMB_DEFAULT_METHODS)}, and siconos adds "
+                            "Siconos's GFC3D_IPM)")
     bench.add_argument("--tol", type=tol_list, default=sorted(DEFAULT_TOLS, reverse=True), metavar="T,T,...",
                        help=f"comma-separated tolerances (default: {','.join(map(_short, DEFAULT_TOLS))})")
     bench.add_argument("--jobs", type=positive_int, default=None, metavar="K",
@@ -78,6 +92,11 @@ def add_parser(sub) -> None:
     bench.add_argument("--retry-failed", action="store_true",
                        help="also re-run runs recorded as Timeout, Crashed, Error or MaxTime (e.g. with a "
                             "longer --time-limit); other finished runs are reused as usual")
+    bench.add_argument("--problem", dest="problem_kind", choices=PROBLEMS, default="relaxation",
+                       help="relaxation (default): the convex relaxation, every method and tolerance as "
+                            "above; coulomb: the physical problem, rfverify's Coulomb path and, with siconos "
+                            "in --methods, Siconos's GFC3D_IPM at each --tol, each answer certified by a "
+                            "proven backward error at --digits (see the description)")
     bench.add_argument("--quiet", action="store_true", help="no progress output")
     add_equations_option(bench)
     bench.add_argument("--json", action="store_true", help="print the outcome as JSON")
@@ -101,21 +120,53 @@ def cmd_bench(args) -> int:
     from ..compilation import announcing
 
     command = "rfverify " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["bench"] else None
+    coulomb = args.problem_kind == "coulomb"
+    methods = args.methods or list(COULOMB_DEFAULT_METHODS if coulomb else DEFAULT_METHODS)
+    if coulomb and args.digits == 0:
+        from ..errors import InvalidArgumentError
+
+        raise InvalidArgumentError("--digits", "is 0, but --problem coulomb certifies every answer at --digits",
+                                   fix="pass --digits K with K >= 1 (default 10)")
     with announcing(progress_printer(args)):  # a compilation here or in a forked local task is named
-        out = run_bench(args.inputs, args.out, methods=tuple(args.methods), tols=tuple(args.tol), jobs=args.jobs,
+        out = run_bench(args.inputs, args.out, methods=tuple(methods), tols=tuple(args.tol), jobs=args.jobs,
                         time_limit=args.time_limit, trajectory_tol=args.trajectory_tol,
                         trajectories=not args.no_trajectories, digits=args.digits,
                         reference_max_contacts=NO_LIMIT if args.reference_max_contacts is None
                         else args.reference_max_contacts, max_iter=args.max_iter,
                         quiet=args.quiet, command=command, retry_failed=args.retry_failed,
-                        scheduler=args.scheduler, as_stored=args.as_stored)
+                        scheduler=args.scheduler, as_stored=args.as_stored, problem_kind=args.problem_kind)
     if args.json:
         out = dict(out, counts=[{"method": m, "tol": t, "solved": s, "total": n}
                                 for (m, t), (s, n) in out["counts"].items()])
         print(dumps(out))
+    elif coulomb:
+        print(f"bench --problem coulomb: {out['ran']} runs done, {out['skipped']} already finished, "
+              f"{out['timeouts']} timed out; records in {out['run_dir']}/runs. Next: rfverify report {out['run_dir']}")
+        for line in coulomb_lines(out["coulomb"], args.digits):
+            print(line)
     else:
         print(f"bench: {out['ran']} runs done, {out['skipped']} already finished, {out['timeouts']} timed out; "
               f"records in {out['run_dir']}/runs. Next: rfverify report {out['run_dir']}")
         for (method, tol), (solved, total) in sorted(out["counts"].items(), key=lambda kv: (kv[0][0], -kv[0][1])):
             print(f"  {method:<16} tol {tol:g}: {solved}/{total} verified solved")
     return EXIT_OK
+
+
+def coulomb_lines(summaries, digits: int) -> list[str]:
+    """``bench --problem coulomb``'s output: per problem, each answer — certified or not, its
+    proven backward error and proven digits, iterations and time — or why it has none."""
+    lines = []
+    for problem in dict.fromkeys(s["problem"] for s in summaries):
+        lines.append(f"  {problem}:")
+        for s in (x for x in summaries if x["problem"] == problem):
+            t = f", {s['time']:.2f} s" if isinstance(s["time"], (int, float)) else ""
+            it = f", {s['outer']}" if s["outer"] else ""
+            if s["backward_error"] is None:  # no answer, or no proof: the reason is the record's message
+                lines.append(f"    {s['solver']:<30} {s['status']}: {s['why'][:300]}")
+                continue
+            digs = " ".join(f"{k} {'-' if d is None else f'{d:.1f}'}" for k, d in s["digits"].items()) or "none"
+            verdict = f"certified to {digits} digits" if s["certified"] else f"not certified to {digits} digits"
+            peer = f" (GFC3D says {s['peer_status']})" if s["peer_status"] else ""
+            lines.append(f"    {s['solver']:<30} {verdict}{peer}: backward error {s['backward_error']:.1e}, "
+                         f"proven digits {digs}{it}{t}")
+    return lines

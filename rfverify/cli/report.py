@@ -19,7 +19,11 @@ how fast, where double precision breaks and what the K-digit path costs. Below: 
 refuted solver claims (grouped, each once), speed on common solved sets, Dolan–Moré profiles,
 how far double precision gets, cond(Q_p) and λ2 per iteration for one hard problem per family,
 the proven digits of every method, lockstep diagnostics (double against reference) of the worst
-cases, and every other failure with its diagnosed cause. report.html stands alone (its figures
+cases, and every other failure with its diagnosed cause. Where RUN_DIR holds runs of `bench
+--problem coulomb`, a section on the physical problem follows the first screen: per answer
+(rfverify's, and Siconos GFC3D_IPM's), certified or not, its proven backward error, proven digits,
+iterations and time, or why it has none (a RUN_DIR with those runs only gets that section
+alone). report.html stands alone (its figures
 are embedded in it, nothing beside it is needed to view it); the figures are also written as PNG
 files into RUN_DIR, where summary.md links them."""
 

@@ -10,6 +10,11 @@ trajectories) and what the k-digit path costs; then which method is fastest and 
 how far double precision gets per form, and the refuted claims, grouped — with numbers that
 are those of the tables below it (one median, one shifted geometric mean, the same sets).
 
+A run directory that holds ``bench --problem coulomb`` records also gets a section on the
+physical problem (:func:`.sections.coulomb_section`): per problem, rfverify's and Siconos
+GFC3D_IPM's answers, certified or not, their proven backward errors and proven digits, right
+after the first screen; one that holds only those gets a report of that section alone.
+
 Counts come from the bench's independent high-precision recheck of each saved solution;
 correct digits from the proven extended-precision point of each problem's k-digit path;
 per-iteration diagnostics from a lockstep run (:func:`rfverify.verify.diagnosis.diagnose`) of the
@@ -45,6 +50,8 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     dict with their paths and the success counts."""
     data = load_run(run_dir)
     out = Path(run_dir)
+    if data.coulomb and not data.solves:  # bench --problem coulomb only: its section alone
+        return _coulomb_only(data, out)
     if not any(not r.get("_placeholder") for r in data.solves):
         from ..errors import BenchInputError
 
@@ -58,6 +65,7 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     doc = Doc()
     sections.title_section(doc, data, out)
     glance_section(doc, data, out, proven, table, diags)
+    sections.coulomb_section(doc, data)
     sections.machine_section(doc, data)
     sections.robustness_section(doc, data, table)
     sections.refuted_section(doc, data)
@@ -69,11 +77,24 @@ def make_report(run_dir, *, diagnose_count: int = 3, diagnose_max_contacts: int 
     sections.lockstep_section(doc, diags, out)
     sections.failures_section(doc, data, diags)
 
+    counts = {(r["collection"], r["method"], r["tol"]): (r["solved"], r["total"]) for r in table}
+    return _write(doc, data, out, counts)
+
+
+def _write(doc: Doc, data: RunData, out: Path, counts: dict) -> dict:
     summary = out / "summary.md"
     write_text_atomic(summary, doc.markdown())
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     report = out / "report.html"
     write_text_atomic(report, doc.page(stamp))
-    counts = {(r["collection"], r["method"], r["tol"]): (r["solved"], r["total"]) for r in table}
     return {"report": str(report), "summary": str(summary), "counts": counts, "issues": list(data.issues),
-            "running": data.running}
+            "running": data.running, "coulomb": sections.coulomb_rows(data)}
+
+
+def _coulomb_only(data: RunData, out: Path) -> dict:
+    """The report of a run directory with Coulomb records and no relaxation runs."""
+    doc = Doc()
+    sections.title_section(doc, data, out)
+    sections.coulomb_section(doc, data)
+    sections.machine_section(doc, data)
+    return _write(doc, data, out, {})

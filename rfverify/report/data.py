@@ -33,6 +33,7 @@ class RunData:
     digits: dict = field(default_factory=dict)      # problem key -> record
     references: dict = field(default_factory=dict)  # problem key -> {"v","u","r"}
     issues: list = field(default_factory=list)      # one line per missing or damaged file
+    coulomb: list = field(default_factory=list)     # records of bench --problem coulomb
     absolute_v: set = field(default_factory=set)    # problems whose v* ≈ 0: no relative digits of v
     running: bool = False                           # a bench holds the run directory's lock
 
@@ -87,6 +88,8 @@ def _normalise(rec: dict) -> None:
 def _stem_task(stem: str) -> dict | None:
     """(kind, method, tol) read back from a file stem, for records that cannot be read."""
     kind = "solve"
+    if stem.startswith("coulomb-"):
+        return {"kind": "coulomb"}
     if stem.startswith("trajectory-"):
         kind, stem = "trajectory", stem[len("trajectory-"):]
     if stem.startswith("digits"):
@@ -151,6 +154,8 @@ def load_run(run_dir) -> RunData:
             data.solves.append(rec)
         elif kind == "trajectory":
             data.trajectories.append(rec)
+        elif kind == "coulomb":
+            data.coulomb.append(rec)
         else:
             data.digits[rec["problem"]] = rec
             if rec.get("has_reference") and not rec.get("_npz_damaged"):

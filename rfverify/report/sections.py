@@ -25,6 +25,11 @@ def title_section(doc: Doc, data: RunData, out: Path) -> None:
               "finished so far.")
     colls = {c: sum(p["collection"] == c for p in data.problems.values()) for c in data.collections}
     sizes = [p["n_contacts"] for p in data.problems.values()]
+    if not data.solves:
+        doc.p(f"{len(data.problems)} problems ({', '.join(f'{c}: {k}' for c, k in colls.items())}; "
+              f"{min(sizes)}–{max(sizes)} contacts); the physical problem only (`bench --problem coulomb`: "
+              "no runs of the convex relaxation in this directory).", cls="context")
+        return
     doc.p(f"{len(data.problems)} problems ({', '.join(f'{c}: {k}' for c, k in colls.items())}; "
           f"{min(sizes)}–{max(sizes)} contacts); methods {', '.join(data.methods)}; tolerances "
           f"{', '.join(f'{t:g}' for t in data.tols)}. Solved means verified: the criterion of DESIGN §4.5 "
@@ -305,3 +310,54 @@ def diag_summary(diag: dict) -> str:
     if diag.get("cause"):
         text += f"; cause: {diag['cause']}"
     return text
+
+
+def coulomb_rows(data: RunData) -> list:
+    """One summary per Coulomb record (:func:`rfverify.bench.coulomb.coulomb_summary`), in the
+    order problem, rfverify's answers, then the peer's by decreasing tolerance."""
+    from ..bench.coulomb import coulomb_summary
+
+    rows = [coulomb_summary(r["problem"], r) for r in data.coulomb]
+    return sorted(rows, key=lambda s: (s["problem"], s["method"] == "siconos", -(s["tol"] or 0)))
+
+
+def coulomb_section(doc: Doc, data: RunData) -> None:
+    """The physical problem (``bench --problem coulomb``), when the run directory holds it:
+    per answer, certified or not, its proven backward error and digits, iterations and time."""
+    rows = coulomb_rows(data)
+    if not rows:
+        return
+    settings = data.manifest.get("coulomb") if isinstance(data.manifest.get("coulomb"), dict) else {}
+    k = settings.get("digits") or next((r.get("digits") for r in data.coulomb if isinstance(r.get("digits"), int)), "K")
+    doc.h(2, "The physical problem (--problem coulomb)", anchor="coulomb")
+    ours = [r for r in rows if r["method"] != "siconos"]
+    peer = [r for r in rows if r["method"] == "siconos"]
+    answered = [r for r in peer if r["backward_error"] is not None]
+    line = (f"Coulomb friction and rolling resistance with De Saxcé's term (u_N + μ‖u_T‖ + μr‖u_R‖ in the dual "
+            f"cone), not the convex relaxation. Each answer is certified by a proven backward error: the exact "
+            f"solution it names solves the physical problem exactly for data whose w_N differs from the file's "
+            f"by δ, with |δ| ≤ the bound shown (relative to the data scale of u); physical solutions need not "
+            f"be unique. Certified = {k} proven digits and a backward error ≤ 1e-{k}; proven digits '–': the "
+            f"exact value may be 0, so it is bounded against its data scale instead (DESIGN §6.3). rfverify: "
+            f"{sum(r['certified'] for r in ours)}/{len(ours)} certified.")
+    if peer:
+        line += (f" Siconos GFC3D_IPM (its own 3-D Coulomb IPM, De Saxcé's shift updated inside its iterations; "
+                 f"its answers certified by rfverify): {len(answered)} of {len(peer)} runs answered and were "
+                 f"proven, {sum(r['certified'] for r in peer)} certified; the others are listed with the reason.")
+    doc.p(line)
+    if settings.get("command"):
+        doc.p(f"Regenerate: {settings['command']}", cls="context")
+
+    def cells(r):
+        digs = " ".join(f"{q} {'–' if d is None else f'{d:.1f}'}" for q, d in r["digits"].items())
+        be = "–" if r["backward_error"] is None else f"{r['backward_error']:.1e}"
+        verdict = "yes" if r["certified"] else ("no" if r["backward_error"] is not None else r["status"])
+        return [r["problem"], r["solver"], verdict, be, digs or "–", r["outer"] or "–", sec(r["time"])]
+
+    doc.table(["problem", "answer by", "certified", "backward error", "proven digits", "iterations", "time"],
+              [cells(r) for r in rows])
+    why = [f"{r['problem']}, {r['solver']}: {r['status']}: {short(r['why'], 200)}" for r in rows
+           if r["backward_error"] is None]
+    if why:
+        doc.p("Without a proven backward error (not run, failed, or the proof did not hold):")
+        doc.bullets(why)

@@ -26,12 +26,14 @@ Cholesky, convex case); GRFC3D_IPM needs μ > 0 and μr > 0 on every contact (it
 from __future__ import annotations
 
 import glob
+import math
 import os
 import signal
 import struct
 import subprocess
 import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +90,16 @@ def unavailable() -> str | None:
 
 
 # ---------------------------------------------------------------------- exchange format
+def _write_arrays(fh, matrices, vectors) -> None:
+    """CSC matrices (int64 column pointers, int64 row indices, float64 values) then float64 vectors."""
+    for A in matrices:
+        fh.write(np.ascontiguousarray(A.indptr, dtype="<i8").tobytes())
+        fh.write(np.ascontiguousarray(A.indices, dtype="<i8").tobytes())
+        fh.write(np.ascontiguousarray(A.data, dtype="<f8").tobytes())
+    for x in vectors:
+        fh.write(np.ascontiguousarray(x, dtype="<f8").tobytes())
+
+
 def write_input(path, problem: Problem, tol: float, max_iter: int) -> None:
     """The driver's input (format in driver.c): sizes, tol, M_sym and H as CSC, f, w, μ, μr."""
     M = problem.M_sym.tocsc()
@@ -98,12 +110,7 @@ def write_input(path, problem: Problem, tol: float, max_iter: int) -> None:
     with open(path, "wb") as fh:
         fh.write(b"RFVSIC01")
         fh.write(struct.pack("<5qd", m, n, M.nnz, H.nnz, int(max_iter), float(tol)))
-        for A in (M, H):
-            fh.write(np.ascontiguousarray(A.indptr, dtype="<i8").tobytes())
-            fh.write(np.ascontiguousarray(A.indices, dtype="<i8").tobytes())
-            fh.write(np.ascontiguousarray(A.data, dtype="<f8").tobytes())
-        for x in (problem.f, problem.w, problem.mu, problem.mu_r):
-            fh.write(np.ascontiguousarray(x, dtype="<f8").tobytes())
+        _write_arrays(fh, (M, H), (problem.f, problem.w, problem.mu, problem.mu_r))
 
 
 def read_output(path, m: int, n: int) -> dict:
@@ -143,30 +150,9 @@ def solve_siconos(problem: Problem, settings: Settings) -> SolveResult:
         inp, out = Path(tmp) / "problem.bin", Path(tmp) / "answer.bin"
         write_input(inp, problem, settings.tol, settings.max_iter)
         t_setup = time.perf_counter() - t0
-        cmd = [str(exe), str(inp), str(out)] + (["--verbose"] if settings.verbose else [])
-        try:
-            # Siconos prints to stdout: shown with verbose, else kept out of the caller's output.
-            proc = subprocess.run(cmd, stdout=None if settings.verbose else subprocess.DEVNULL,
-                                  stderr=subprocess.PIPE, timeout=settings.time_limit, check=False)
-        except subprocess.TimeoutExpired:
-            return _no_answer(problem, settings, t0, Status.MAX_TIME,
-                              f"siconos exceeded the time limit of {settings.time_limit:g} s (killed); no answer",
-                              {"siconos_status": "MaxTime"})
-        stderr = " ".join(proc.stderr.decode(errors="replace").split())[-400:]
-        if proc.returncode < 0:
-            sig = -proc.returncode
-            try:
-                name = signal.Signals(sig).name
-            except ValueError:
-                name = "unknown signal"
-            return _no_answer(problem, settings, t0, Status.NUMERICAL_ERROR,
-                              f"siconos crashed (signal {sig}) ({name}) in GRFC3D_IPM; no answer"
-                              + (f"; stderr: {stderr}" if stderr else ""),
-                              {"siconos_status": f"Crashed (signal {sig})", "siconos_signal": sig})
-        if proc.returncode != 0:
-            return _no_answer(problem, settings, t0, Status.NUMERICAL_ERROR,
-                              f"the Siconos driver failed (exit {proc.returncode}): {stderr or 'no message'}",
-                              {"siconos_status": f"DriverError (exit {proc.returncode})"})
+        failure = run_driver(exe, inp, out, settings.time_limit, settings.verbose, "GRFC3D_IPM")
+        if failure is not None:
+            return _no_answer(problem, settings, t0, *failure)
         ans = read_output(out, m, n)
     v, u, r = ans["v"], ans["u"], ans["r"]
     judged = measures(problem, v, u, r, "longdouble")
@@ -201,6 +187,34 @@ def solve_siconos(problem: Problem, settings: Settings) -> SolveResult:
     )
 
 
+def run_driver(exe, inp, out, time_limit, verbose: bool, solver: str):
+    """Run the driver on ``inp`` in a child process; None when it wrote ``out``, else
+    (Status, message, extras) of the failure: killed at ``time_limit`` (MaxTime), crashed by a
+    signal (``solver``'s unchecked zero pivot: NumericalError), or a driver error."""
+    cmd = [str(exe), str(inp), str(out)] + (["--verbose"] if verbose else [])
+    try:
+        # Siconos prints to stdout: shown with verbose, else kept out of the caller's output.
+        proc = subprocess.run(cmd, stdout=None if verbose else subprocess.DEVNULL,
+                              stderr=subprocess.PIPE, timeout=time_limit, check=False)
+    except subprocess.TimeoutExpired:
+        return (Status.MAX_TIME, f"siconos exceeded the time limit of {time_limit:g} s (killed); no answer",
+                {"siconos_status": "MaxTime"})
+    stderr = " ".join(proc.stderr.decode(errors="replace").split())[-400:]
+    if proc.returncode < 0:
+        sig = -proc.returncode
+        try:
+            name = signal.Signals(sig).name
+        except ValueError:
+            name = "unknown signal"
+        return (Status.NUMERICAL_ERROR, f"siconos crashed (signal {sig}) ({name}) in {solver}; no answer"
+                + (f"; stderr: {stderr}" if stderr else ""),
+                {"siconos_status": f"Crashed (signal {sig})", "siconos_signal": sig})
+    if proc.returncode != 0:
+        return (Status.NUMERICAL_ERROR, f"the Siconos driver failed (exit {proc.returncode}): {stderr or 'no message'}",
+                {"siconos_status": f"DriverError (exit {proc.returncode})"})
+    return None
+
+
 def _no_answer(problem: Problem, settings: Settings, t0: float, status: Status, message: str,
                extras: dict) -> SolveResult:
     """A run that returned nothing (crash, time limit, refused input): the zero point
@@ -214,3 +228,124 @@ def _no_answer(problem: Problem, settings: Settings, t0: float, status: Status, 
         dinfeas=float(judged.paper_dinfeas), mu=float(judged.paper_mu), trace={},
         timings={"total": time.perf_counter() - t0}, method="siconos", settings=settings,
         extras={"no_answer": True, **extras})
+
+
+# ---------------------------------------------------------------------- GFC3D_IPM (issue 51)
+GFC3D_SOLVER = "GFC3D_IPM"
+"""Siconos's 3-D global Coulomb interior-point solver (``numerics/src/FrictionContact/gfc3d_ipm.c``):
+with its defaults it updates De Saxcé's shift inside its iterations (``w_N ← w_N + ‖(P u)_T‖``,
+``SICONOS_FRICTION_3D_IPM_IPARAM_UPDATE_S_INTERNAL``), so it answers the physical problem."""
+
+
+@dataclass
+class Gfc3dAnswer:
+    """What GFC3D_IPM returned for a problem (:func:`solve_gfc3d`), in rfverify's layout.
+
+    ``v`` (m,); ``r`` (5n,) with its 3-D reaction in (N, T1, T2) and zero rolling parts;
+    ``u_siconos`` (5n,) its own velocity — the modified one, u + μ‖u_T‖e_N of its last iterate,
+    rolling parts Hᵀv + w; ``info`` its info (0: met ``tol`` on its own measure, -1: not run),
+    ``nit``, ``residual`` (its own), ``seconds`` (its solve alone); ``failure`` "" when it
+    answered, else why not (then v, r are zero); ``status`` "Solved" / "NotConverged (info K)"
+    / the failure's kind."""
+
+    v: np.ndarray
+    r: np.ndarray
+    u_siconos: np.ndarray
+    info: int
+    nit: int
+    residual: float
+    seconds: float
+    status: str
+    failure: str = ""
+    extras: dict = field(default_factory=dict)
+
+    @property
+    def answered(self) -> bool:
+        return not self.failure
+
+
+def _slots3(n: int) -> np.ndarray:
+    """Positions of (N, T1, T2) of each contact in the 5-per-contact layout."""
+    return (5 * np.arange(n)[:, None] + np.arange(3)[None, :]).ravel()
+
+
+def gfc3d_refusal(problem: Problem) -> str:
+    """Why GFC3D_IPM cannot take ``problem`` ("" when it can): it is a 3-D solver (μr = 0 on
+    every contact, so the rolling reaction is zero and u_R is free), and its change of variables
+    divides by μ."""
+    rolling = np.flatnonzero(problem.mu_r != 0)
+    if rolling.size:
+        return (f"a rolling problem (μr = {problem.mu_r[rolling[0]]:g} on contact {rolling[0]}, {rolling.size} such "
+                f"contacts): GFC3D_IPM solves 3-D Coulomb friction only")
+    bad = np.flatnonzero(~(problem.mu > 0))
+    if bad.size:
+        return (f"GFC3D_IPM needs μ > 0 on every contact (its change of variables divides by it); contact "
+                f"{bad[0]} has μ = {problem.mu[bad[0]]:g} ({bad.size} such contacts)")
+    return ""
+
+
+def write_input_gfc3d(path, problem: Problem, tol: float, max_iter: int) -> None:
+    """The driver's GFC3D input (format in driver.c): M_sym, the (N, T1, T2) columns of H, f, w, μ."""
+    n = problem.n_contacts
+    keep = _slots3(n)
+    M = problem.M_sym.tocsc()
+    M.sort_indices()
+    H = problem.H.tocsc()[:, keep]
+    H.sort_indices()
+    with open(path, "wb") as fh:
+        fh.write(b"RFVGFC01")
+        fh.write(struct.pack("<5qd", problem.n_dofs, n, M.nnz, H.nnz, int(max_iter), float(tol)))
+        _write_arrays(fh, (M, H), (problem.f, np.asarray(problem.w)[keep], problem.mu))
+
+
+def read_output_gfc3d(path, m: int, n: int) -> dict:
+    """The driver's GFC3D answer: info, iterations, its residual, seconds, v (m,), u, r (3n,)."""
+    raw = Path(path).read_bytes()
+    nd = 3 * n
+    size = 8 + 16 + 16 + 8 * (m + 2 * nd)
+    if len(raw) != size or raw[:8] != b"RFVGSO01":
+        raise RuntimeError(f"the Siconos driver's GFC3D output {path} is malformed ({len(raw)} bytes, expected {size})")
+    info, nit = struct.unpack_from("<2q", raw, 8)
+    residual, seconds = struct.unpack_from("<2d", raw, 24)
+    arrays = np.frombuffer(raw, dtype="<f8", offset=40).astype(np.float64)
+    return {"info": int(info), "nit": int(nit), "residual": residual, "seconds": seconds,
+            "v": arrays[:m], "u": arrays[m:m + nd], "r": arrays[m + nd:]}
+
+
+def solve_gfc3d(problem: Problem, tol: float = 1e-10, max_iter: int = 100, time_limit: float | None = None,
+                verbose: bool = False) -> Gfc3dAnswer:
+    """Run Siconos's GFC3D_IPM on the 3-D problem ``problem`` (μr = 0 everywhere: see
+    :func:`gfc3d_refusal`) in a child process, at its own tolerance ``tol`` and ``max_iter``
+    (Siconos's defaults besides: De Saxcé's shift updated internally, 2×2 NT-scaled system, no
+    rescaling).  A crash, the time limit or a refusal is an answer with ``failure`` set, never
+    an exception; RuntimeError only when no driver is found."""
+    exe = driver_path()
+    if exe is None:
+        raise RuntimeError(unavailable())
+    m, n = problem.n_dofs, problem.n_contacts
+    zero_v, zero_r = np.zeros(m), np.zeros(5 * n)
+
+    def failed(status: str, message: str, extras=None) -> Gfc3dAnswer:
+        return Gfc3dAnswer(zero_v, zero_r, np.full(5 * n, np.nan), -1, 0, math.nan, math.nan, status, message,
+                           dict(extras or {}))
+
+    refusal = gfc3d_refusal(problem)
+    if refusal:
+        return failed("NotRun", refusal)
+    with tempfile.TemporaryDirectory(prefix="rfverify-gfc3d-") as tmp:
+        inp, out = Path(tmp) / "problem.bin", Path(tmp) / "answer.bin"
+        write_input_gfc3d(inp, problem, tol, max_iter)
+        failure = run_driver(exe, inp, out, time_limit, verbose, GFC3D_SOLVER)
+        if failure is not None:
+            status, message, extras = failure
+            return failed(extras.get("siconos_status", str(status)), message, extras)
+        ans = read_output_gfc3d(out, m, n)
+    keep = _slots3(n)
+    r = zero_r.copy()
+    r[keep] = ans["r"]
+    u = problem.H.T @ ans["v"] + np.asarray(problem.w)  # rolling parts: free when μr = 0
+    u[keep] = ans["u"]
+    info = ans["info"]
+    status = "Solved" if info == 0 else f"NotConverged (info {info})"
+    return Gfc3dAnswer(ans["v"], r, u, info, ans["nit"], float(ans["residual"]), float(ans["seconds"]), status,
+                       extras={"driver": str(exe)})

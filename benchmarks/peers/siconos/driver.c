@@ -1,4 +1,4 @@
-/* rfverify's driver of Siconos GRFC3D_IPM (issue 30): read a problem in rfverify's binary exchange
+/* rfverify's driver of Siconos GRFC3D_IPM (issue 30) and GFC3D_IPM (issue 51): read a problem in rfverify's binary exchange
  * format, call global_rolling_friction_3d_driver with GRFC3D_IPM at a given tolerance and iteration
  * limit, and write the answer in the original variables.
  *
@@ -14,6 +14,15 @@
  *   double v[m], u[5n], r[5n] (original variables: u = P^-1 u_s, r = P r_s with
  *   P = diag(1, mu, mu, mu_r, mu_r) per contact), u_s[5n], r_s[5n] (as GRFC3D_IPM returned them).
  *
+ * Second mode (issue 51), chosen by the input's magic: the 3-D global Coulomb problem, solved by
+ * gfc3d_driver with GFC3D_IPM (Siconos's defaults: De Saxce's shift updated inside the iterations,
+ * SICONOS_FRICTION_3D_IPM_IPARAM_UPDATE_S_INTERNAL) at a given tolerance and iteration limit.
+ * IN:  char[8] "RFVGFC01"; int64 m, n, nnz(M), nnz(H), max_iter; double tol;
+ *   M (m x m, CSC), H (m x 3n, CSC) as above; double f[m], w[3n], mu[n].
+ * OUT: char[8] "RFVGSO01"; int64 info, iterations; double residual (Siconos's own), seconds;
+ *   double v[m], u[3n], r[3n] as GFC3D_IPM returned them (it converts back to the original
+ *   variables itself; u is its modified velocity u + mu|u_T| e_N of its last iterate).
+ *
  * The matrices are handed over directly, not through Siconos's FCLIB reader (see README.md beside).
  * Test-only: with RFVERIFY_SICONOS_FAULT=sigsegv in the environment the driver raises SIGSEGV
  * after reading its input, so that tests can check that a crash is recorded as a failure.
@@ -28,11 +37,13 @@
 #include <time.h>
 
 #include "CSparseMatrix.h"
+#include "GlobalFrictionContactProblem.h"
 #include "GlobalRollingFrictionContactProblem.h"
 #include "NonSmoothDrivers.h"
 #include "NumericsMatrix.h"
 #include "NumericsVerbose.h"
 #include "SolverOptions.h"
+#include "fc3d_short_names.h"
 #include "rolling_friction_3d_short_names.h"
 
 static void fail(int code, const char *what, const char *path) {
@@ -83,6 +94,74 @@ static double wall(void) {
   return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
+/* The input's sizes, iteration limit and tolerance (after the magic), checked; dim per contact. */
+typedef struct { int64_t m, n, nnzM, nnzH, max_iter; double tol; } Head;
+
+static Head read_head(FILE *f, const char *in, int64_t dim) {
+  int64_t head[5];
+  Head h;
+  read_exact(f, head, sizeof(int64_t), 5, in);
+  read_exact(f, &h.tol, sizeof(double), 1, in);
+  h.m = head[0], h.n = head[1], h.nnzM = head[2], h.nnzH = head[3], h.max_iter = head[4];
+  if (h.m <= 0 || h.n < 0 || h.nnzM < 0 || h.nnzH < 0 || h.max_iter < 1 || !(h.tol > 0) || h.m > INT32_MAX ||
+      dim * h.n > INT32_MAX)
+    fail(2, "bad sizes, tolerance or iteration limit", in);
+  return h;
+}
+
+/* count doubles read into a new array. */
+static double *read_doubles(FILE *f, int64_t count, const char *in) {
+  double *x = xmalloc((size_t)count, sizeof(double));
+  read_exact(f, x, sizeof(double), (size_t)count, in);
+  return x;
+}
+
+/* The 3-D global Coulomb problem by GFC3D_IPM (second mode, see the header); f is past the magic. */
+static int solve_gfc3d(FILE *f, const char *in, const char *out, int verbose) {
+  Head h = read_head(f, in, 3);
+  int64_t m = h.m, n = h.n, nd = 3 * n;
+  GlobalFrictionContactProblem *problem = globalFrictionContactProblem_new();
+  problem->dimension = 3;
+  problem->numberOfContacts = (int)n;
+  problem->M = read_csc(f, m, m, h.nnzM, in);
+  problem->H = read_csc(f, m, nd, h.nnzH, in);
+  problem->q = read_doubles(f, m, in);
+  problem->b = read_doubles(f, nd, in);
+  problem->mu = read_doubles(f, n, in);
+  fclose(f);
+  for (int64_t c = 0; c < n; ++c) /* its change of variables P = diag(1, mu, mu) is inverted */
+    if (!(problem->mu[c] > 0)) fail(2, "GFC3D_IPM needs mu > 0 on every contact", in);
+
+  const char *fault = getenv("RFVERIFY_SICONOS_FAULT");
+  if (fault && strcmp(fault, "sigsegv") == 0) raise(SIGSEGV); /* test-only, see the header */
+
+  double *v = xmalloc((size_t)m, sizeof(double));
+  double *u = xmalloc((size_t)nd, sizeof(double));
+  double *r = xmalloc((size_t)nd, sizeof(double));
+  SolverOptions *options = solver_options_create(GFC3D_IPM);
+  options->dparam[SICONOS_DPARAM_TOL] = h.tol;
+  options->iparam[SICONOS_IPARAM_MAX_ITER] = (int)h.max_iter;
+  numerics_set_verbose(verbose);
+
+  double t0 = wall();
+  int info = gfc3d_driver(problem, r, u, v, options);
+  double seconds = wall() - t0;
+  fflush(stdout);
+
+  int64_t tail[2] = {info, options->iparam[SICONOS_IPARAM_ITER_DONE]};
+  double meta[2] = {options->dparam[SICONOS_DPARAM_RESIDU], seconds};
+  FILE *o = fopen(out, "wb");
+  if (!o) fail(3, "cannot open output", out);
+  write_exact(o, "RFVGSO01", 1, 8, out);
+  write_exact(o, tail, sizeof(int64_t), 2, out);
+  write_exact(o, meta, sizeof(double), 2, out);
+  write_exact(o, v, sizeof(double), (size_t)m, out);
+  write_exact(o, u, sizeof(double), (size_t)nd, out);
+  write_exact(o, r, sizeof(double), (size_t)nd, out);
+  if (fclose(o) != 0) fail(3, "cannot write output", out);
+  return 0;
+}
+
 int main(int argc, char **argv) {
   if (argc < 3 || argc > 4 || (argc == 4 && strcmp(argv[3], "--verbose") != 0))
     fail(2, "usage: rfverify-siconos-driver IN OUT [--verbose]", NULL);
@@ -93,30 +172,21 @@ int main(int argc, char **argv) {
   if (!f) fail(2, "cannot open input", in);
   char magic[8];
   read_exact(f, magic, 1, 8, in);
+  if (memcmp(magic, "RFVGFC01", 8) == 0) return solve_gfc3d(f, in, out, verbose);
   if (memcmp(magic, "RFVSIC01", 8) != 0) fail(2, "not an rfverify Siconos input (magic)", in);
-  int64_t head[5];
-  double tol;
-  read_exact(f, head, sizeof(int64_t), 5, in);
-  read_exact(f, &tol, sizeof(double), 1, in);
-  int64_t m = head[0], n = head[1], nnzM = head[2], nnzH = head[3], max_iter = head[4];
-  if (m <= 0 || n < 0 || nnzM < 0 || nnzH < 0 || max_iter < 1 || !(tol > 0) || m > INT32_MAX ||
-      5 * n > INT32_MAX)
-    fail(2, "bad sizes, tolerance or iteration limit", in);
-  int64_t nd = 5 * n;
+  Head h = read_head(f, in, 5);
+  int64_t m = h.m, n = h.n, nd = 5 * n, max_iter = h.max_iter;
+  double tol = h.tol;
 
   GlobalRollingFrictionContactProblem *problem = globalRollingFrictionContactProblem_new();
   problem->dimension = 5;
   problem->numberOfContacts = (int)n;
-  problem->M = read_csc(f, m, m, nnzM, in);
-  problem->H = read_csc(f, m, nd, nnzH, in);
-  problem->q = xmalloc((size_t)m, sizeof(double));
-  problem->b = xmalloc((size_t)nd, sizeof(double));
-  problem->mu = xmalloc((size_t)n, sizeof(double));
-  problem->mu_r = xmalloc((size_t)n, sizeof(double));
-  read_exact(f, problem->q, sizeof(double), (size_t)m, in);
-  read_exact(f, problem->b, sizeof(double), (size_t)nd, in);
-  read_exact(f, problem->mu, sizeof(double), (size_t)n, in);
-  read_exact(f, problem->mu_r, sizeof(double), (size_t)n, in);
+  problem->M = read_csc(f, m, m, h.nnzM, in);
+  problem->H = read_csc(f, m, nd, h.nnzH, in);
+  problem->q = read_doubles(f, m, in);
+  problem->b = read_doubles(f, nd, in);
+  problem->mu = read_doubles(f, n, in);
+  problem->mu_r = read_doubles(f, n, in);
   fclose(f);
   for (int64_t c = 0; c < n; ++c)  /* its change of variables divides by mu and mu_r */
     if (!(problem->mu[c] > 0) || !(problem->mu_r[c] > 0))
