@@ -100,33 +100,46 @@ def _write_arrays(fh, matrices, vectors) -> None:
         fh.write(np.ascontiguousarray(x, dtype="<f8").tobytes())
 
 
-def write_input(path, problem: Problem, tol: float, max_iter: int) -> None:
-    """The driver's input (format in driver.c): sizes, tol, M_sym and H as CSC, f, w, μ, μr."""
+def _write_exchange(path, magic: bytes, problem: Problem, H, tol: float, max_iter: int, vectors) -> None:
+    """One input of the driver (format in driver.c): magic, sizes, tol, M_sym and H as CSC, then
+    ``vectors`` as float64."""
     M = problem.M_sym.tocsc()
     M.sort_indices()
-    H = problem.H.tocsc()
     H.sort_indices()
-    m, n = problem.n_dofs, problem.n_contacts
     with open(path, "wb") as fh:
-        fh.write(b"RFVSIC01")
-        fh.write(struct.pack("<5qd", m, n, M.nnz, H.nnz, int(max_iter), float(tol)))
-        _write_arrays(fh, (M, H), (problem.f, problem.w, problem.mu, problem.mu_r))
+        fh.write(magic)
+        fh.write(struct.pack("<5qd", problem.n_dofs, problem.n_contacts, M.nnz, H.nnz, int(max_iter), float(tol)))
+        _write_arrays(fh, (M, H), vectors)
+
+
+def write_input(path, problem: Problem, tol: float, max_iter: int) -> None:
+    """The driver's input (format in driver.c): sizes, tol, M_sym and H as CSC, f, w, μ, μr."""
+    _write_exchange(path, b"RFVSIC01", problem, problem.H.tocsc(), tol, max_iter,
+                    (problem.f, problem.w, problem.mu, problem.mu_r))
+
+
+def _read_exchange(path, magic: bytes, n_meta: int, lengths) -> tuple:
+    """One answer of the driver: (info, iterations, the ``n_meta`` doubles, the arrays of
+    ``lengths``), its size and magic checked."""
+    raw = Path(path).read_bytes()
+    head = 8 + 16 + 8 * n_meta
+    size = head + 8 * int(sum(lengths))
+    if len(raw) != size or raw[:8] != magic:
+        raise RuntimeError(f"the Siconos driver's output {path} is malformed ({len(raw)} bytes, expected {size})")
+    info, nit = struct.unpack_from("<2q", raw, 8)
+    meta = struct.unpack_from(f"<{n_meta}d", raw, 24)
+    arrays = np.frombuffer(raw, dtype="<f8", offset=head).astype(np.float64)
+    bounds = np.cumsum([0, *lengths])
+    return int(info), int(nit), meta, [arrays[bounds[k]:bounds[k + 1]] for k in range(len(lengths))]
 
 
 def read_output(path, m: int, n: int) -> dict:
     """The driver's answer: info, iterations, its residual, projection error, seconds, and
     v (m,), u, r (5n,) in the original variables, u_s, r_s (5n,) as GRFC3D_IPM returned them."""
-    raw = Path(path).read_bytes()
     nd = 5 * n
-    size = 8 + 16 + 24 + 8 * (m + 4 * nd)
-    if len(raw) != size or raw[:8] != b"RFVSOL01":
-        raise RuntimeError(f"the Siconos driver's output {path} is malformed ({len(raw)} bytes, expected {size})")
-    info, nit = struct.unpack_from("<2q", raw, 8)
-    residual, projerr, seconds = struct.unpack_from("<3d", raw, 24)
-    arrays = np.frombuffer(raw, dtype="<f8", offset=48).astype(np.float64)
-    bounds = np.cumsum([0, m, nd, nd, nd, nd])
-    v, u, r, u_s, r_s = (arrays[bounds[k]:bounds[k + 1]] for k in range(5))
-    return {"info": int(info), "nit": int(nit), "residual": residual, "projerr": projerr, "seconds": seconds,
+    info, nit, (residual, projerr, seconds), (v, u, r, u_s, r_s) = _read_exchange(
+        path, b"RFVSOL01", 3, (m, nd, nd, nd, nd))
+    return {"info": info, "nit": nit, "residual": residual, "projerr": projerr, "seconds": seconds,
             "v": v, "u": u, "r": r, "u_s": u_s, "r_s": r_s}
 
 
@@ -286,30 +299,16 @@ def gfc3d_refusal(problem: Problem) -> str:
 
 def write_input_gfc3d(path, problem: Problem, tol: float, max_iter: int) -> None:
     """The driver's GFC3D input (format in driver.c): M_sym, the (N, T1, T2) columns of H, f, w, μ."""
-    n = problem.n_contacts
-    keep = _slots3(n)
-    M = problem.M_sym.tocsc()
-    M.sort_indices()
-    H = problem.H.tocsc()[:, keep]
-    H.sort_indices()
-    with open(path, "wb") as fh:
-        fh.write(b"RFVGFC01")
-        fh.write(struct.pack("<5qd", problem.n_dofs, n, M.nnz, H.nnz, int(max_iter), float(tol)))
-        _write_arrays(fh, (M, H), (problem.f, np.asarray(problem.w)[keep], problem.mu))
+    keep = _slots3(problem.n_contacts)
+    _write_exchange(path, b"RFVGFC01", problem, problem.H.tocsc()[:, keep], tol, max_iter,
+                    (problem.f, np.asarray(problem.w)[keep], problem.mu))
 
 
 def read_output_gfc3d(path, m: int, n: int) -> dict:
     """The driver's GFC3D answer: info, iterations, its residual, seconds, v (m,), u, r (3n,)."""
-    raw = Path(path).read_bytes()
     nd = 3 * n
-    size = 8 + 16 + 16 + 8 * (m + 2 * nd)
-    if len(raw) != size or raw[:8] != b"RFVGSO01":
-        raise RuntimeError(f"the Siconos driver's GFC3D output {path} is malformed ({len(raw)} bytes, expected {size})")
-    info, nit = struct.unpack_from("<2q", raw, 8)
-    residual, seconds = struct.unpack_from("<2d", raw, 24)
-    arrays = np.frombuffer(raw, dtype="<f8", offset=40).astype(np.float64)
-    return {"info": int(info), "nit": int(nit), "residual": residual, "seconds": seconds,
-            "v": arrays[:m], "u": arrays[m:m + nd], "r": arrays[m + nd:]}
+    info, nit, (residual, seconds), (v, u, r) = _read_exchange(path, b"RFVGSO01", 2, (m, nd, nd))
+    return {"info": info, "nit": nit, "residual": residual, "seconds": seconds, "v": v, "u": u, "r": r}
 
 
 def solve_gfc3d(problem: Problem, tol: float = 1e-10, max_iter: int = 100, time_limit: float | None = None,

@@ -116,49 +116,72 @@ static double *read_doubles(FILE *f, int64_t count, const char *in) {
   return x;
 }
 
+/* The fields both problem types share, read in the input's order (M, H, f, w, mu); a macro
+ * because GlobalFrictionContactProblem and GlobalRollingFrictionContactProblem are two structs. */
+#define READ_SHARED_FIELDS(problem, f, h, dim, in)                   \
+  do {                                                              \
+    (problem)->dimension = (dim);                                   \
+    (problem)->numberOfContacts = (int)(h).n;                       \
+    (problem)->M = read_csc((f), (h).m, (h).m, (h).nnzM, (in));     \
+    (problem)->H = read_csc((f), (h).m, (dim) * (h).n, (h).nnzH, (in)); \
+    (problem)->q = read_doubles((f), (h).m, (in));                  \
+    (problem)->b = read_doubles((f), (dim) * (h).n, (in));          \
+    (problem)->mu = read_doubles((f), (h).n, (in));                 \
+  } while (0)
+
+/* Test-only (see the header): a crash after the input is read. */
+static void maybe_fault(void) {
+  const char *fault = getenv("RFVERIFY_SICONOS_FAULT");
+  if (fault && strcmp(fault, "sigsegv") == 0) raise(SIGSEGV);
+}
+
+/* The solver's options: Siconos's defaults besides tol and max_iter. */
+static SolverOptions *options_for(int solver, Head h, int verbose) {
+  SolverOptions *options = solver_options_create(solver);
+  options->dparam[SICONOS_DPARAM_TOL] = h.tol;
+  options->iparam[SICONOS_IPARAM_MAX_ITER] = (int)h.max_iter;
+  numerics_set_verbose(verbose);
+  return options;
+}
+
+/* OUT: magic, info and iterations, nmeta doubles, then each array of its length. */
+static void write_answer(const char *out, const char *magic, int info, SolverOptions *options, const double *meta,
+                         size_t nmeta, double *const *arrays, const int64_t *lengths, int count) {
+  int64_t tail[2] = {info, options->iparam[SICONOS_IPARAM_ITER_DONE]};
+  FILE *o = fopen(out, "wb");
+  if (!o) fail(3, "cannot open output", out);
+  write_exact(o, magic, 1, 8, out);
+  write_exact(o, tail, sizeof(int64_t), 2, out);
+  write_exact(o, meta, sizeof(double), nmeta, out);
+  for (int k = 0; k < count; ++k) write_exact(o, arrays[k], sizeof(double), (size_t)lengths[k], out);
+  if (fclose(o) != 0) fail(3, "cannot write output", out);
+}
+
 /* The 3-D global Coulomb problem by GFC3D_IPM (second mode, see the header); f is past the magic. */
 static int solve_gfc3d(FILE *f, const char *in, const char *out, int verbose) {
   Head h = read_head(f, in, 3);
   int64_t m = h.m, n = h.n, nd = 3 * n;
   GlobalFrictionContactProblem *problem = globalFrictionContactProblem_new();
-  problem->dimension = 3;
-  problem->numberOfContacts = (int)n;
-  problem->M = read_csc(f, m, m, h.nnzM, in);
-  problem->H = read_csc(f, m, nd, h.nnzH, in);
-  problem->q = read_doubles(f, m, in);
-  problem->b = read_doubles(f, nd, in);
-  problem->mu = read_doubles(f, n, in);
+  READ_SHARED_FIELDS(problem, f, h, 3, in);
   fclose(f);
   for (int64_t c = 0; c < n; ++c) /* its change of variables P = diag(1, mu, mu) is inverted */
     if (!(problem->mu[c] > 0)) fail(2, "GFC3D_IPM needs mu > 0 on every contact", in);
-
-  const char *fault = getenv("RFVERIFY_SICONOS_FAULT");
-  if (fault && strcmp(fault, "sigsegv") == 0) raise(SIGSEGV); /* test-only, see the header */
+  maybe_fault();
 
   double *v = xmalloc((size_t)m, sizeof(double));
   double *u = xmalloc((size_t)nd, sizeof(double));
   double *r = xmalloc((size_t)nd, sizeof(double));
-  SolverOptions *options = solver_options_create(GFC3D_IPM);
-  options->dparam[SICONOS_DPARAM_TOL] = h.tol;
-  options->iparam[SICONOS_IPARAM_MAX_ITER] = (int)h.max_iter;
-  numerics_set_verbose(verbose);
+  SolverOptions *options = options_for(GFC3D_IPM, h, verbose);
 
   double t0 = wall();
   int info = gfc3d_driver(problem, r, u, v, options);
   double seconds = wall() - t0;
   fflush(stdout);
 
-  int64_t tail[2] = {info, options->iparam[SICONOS_IPARAM_ITER_DONE]};
   double meta[2] = {options->dparam[SICONOS_DPARAM_RESIDU], seconds};
-  FILE *o = fopen(out, "wb");
-  if (!o) fail(3, "cannot open output", out);
-  write_exact(o, "RFVGSO01", 1, 8, out);
-  write_exact(o, tail, sizeof(int64_t), 2, out);
-  write_exact(o, meta, sizeof(double), 2, out);
-  write_exact(o, v, sizeof(double), (size_t)m, out);
-  write_exact(o, u, sizeof(double), (size_t)nd, out);
-  write_exact(o, r, sizeof(double), (size_t)nd, out);
-  if (fclose(o) != 0) fail(3, "cannot write output", out);
+  double *const arrays[3] = {v, u, r};
+  const int64_t lengths[3] = {m, nd, nd};
+  write_answer(out, "RFVGSO01", info, options, meta, 2, arrays, lengths, 3);
   return 0;
 }
 
@@ -175,34 +198,21 @@ int main(int argc, char **argv) {
   if (memcmp(magic, "RFVGFC01", 8) == 0) return solve_gfc3d(f, in, out, verbose);
   if (memcmp(magic, "RFVSIC01", 8) != 0) fail(2, "not an rfverify Siconos input (magic)", in);
   Head h = read_head(f, in, 5);
-  int64_t m = h.m, n = h.n, nd = 5 * n, max_iter = h.max_iter;
-  double tol = h.tol;
+  int64_t m = h.m, n = h.n, nd = 5 * n;
 
   GlobalRollingFrictionContactProblem *problem = globalRollingFrictionContactProblem_new();
-  problem->dimension = 5;
-  problem->numberOfContacts = (int)n;
-  problem->M = read_csc(f, m, m, h.nnzM, in);
-  problem->H = read_csc(f, m, nd, h.nnzH, in);
-  problem->q = read_doubles(f, m, in);
-  problem->b = read_doubles(f, nd, in);
-  problem->mu = read_doubles(f, n, in);
+  READ_SHARED_FIELDS(problem, f, h, 5, in);
   problem->mu_r = read_doubles(f, n, in);
   fclose(f);
   for (int64_t c = 0; c < n; ++c)  /* its change of variables divides by mu and mu_r */
     if (!(problem->mu[c] > 0) || !(problem->mu_r[c] > 0))
       fail(2, "GRFC3D_IPM needs mu > 0 and mu_r > 0 on every contact", in);
-
-  const char *fault = getenv("RFVERIFY_SICONOS_FAULT");
-  if (fault && strcmp(fault, "sigsegv") == 0) raise(SIGSEGV); /* test-only, see the header */
+  maybe_fault();
 
   double *v = xmalloc((size_t)m, sizeof(double));
   double *u_s = xmalloc((size_t)nd, sizeof(double));
   double *r_s = xmalloc((size_t)nd, sizeof(double));
-
-  SolverOptions *options = solver_options_create(GRFC3D_IPM);
-  options->dparam[SICONOS_DPARAM_TOL] = tol;
-  options->iparam[SICONOS_IPARAM_MAX_ITER] = (int)max_iter;
-  numerics_set_verbose(verbose);
+  SolverOptions *options = options_for(GRFC3D_IPM, h, verbose);
 
   /* Siconos prints its log on stdout; the answer goes to OUT only. */
   double t0 = wall();
@@ -210,7 +220,6 @@ int main(int argc, char **argv) {
   double seconds = wall() - t0;
   fflush(stdout);
 
-  int64_t tail[2] = {info, options->iparam[SICONOS_IPARAM_ITER_DONE]};
   /* after the solve GRFC3D_IPM leaves its projection error in solverData (one double) */
   double projerr = options->solverData ? *(double *)options->solverData : -1.0;
   double meta[3] = {options->dparam[SICONOS_DPARAM_RESIDU], projerr, seconds};
@@ -224,16 +233,8 @@ int main(int argc, char **argv) {
     r[k] = r_s[k] * p;
   }
 
-  FILE *o = fopen(out, "wb");
-  if (!o) fail(3, "cannot open output", out);
-  write_exact(o, "RFVSOL01", 1, 8, out);
-  write_exact(o, tail, sizeof(int64_t), 2, out);
-  write_exact(o, meta, sizeof(double), 3, out);
-  write_exact(o, v, sizeof(double), (size_t)m, out);
-  write_exact(o, u, sizeof(double), (size_t)nd, out);
-  write_exact(o, r, sizeof(double), (size_t)nd, out);
-  write_exact(o, u_s, sizeof(double), (size_t)nd, out);
-  write_exact(o, r_s, sizeof(double), (size_t)nd, out);
-  if (fclose(o) != 0) fail(3, "cannot write output", out);
+  double *const arrays[5] = {v, u, r, u_s, r_s};
+  const int64_t lengths[5] = {m, nd, nd, nd, nd};
+  write_answer(out, "RFVSOL01", info, options, meta, 3, arrays, lengths, 5);
   return 0;
 }
