@@ -259,3 +259,51 @@ def test_cli_help_names_the_problem_option(capsys):
         with pytest.raises(SystemExit):
             main([command, "--help"])
         assert "--problem {relaxation,coulomb}" in capsys.readouterr().out
+
+
+def test_a_start_at_the_fixed_point_needs_one_evaluation(chute):
+    """``start`` is used: from the shift of a converged answer (an array, or the result itself),
+    the outer iteration is at its fixed point on its first evaluation, where from 0 it takes
+    many; the JSON and the result say where it started."""
+    first = solve_coulomb(chute)
+    assert first.success and first.outer.evaluations > 3 and not first.outer.started
+    for start in (first.shift, first):
+        again = rfverify.solve(chute, problem="coulomb", start=start)
+        assert again.success and again.outer.evaluations == 1 and again.outer.started
+        assert again.as_dict()["outer"]["start"] == "given shift"
+    assert first.as_dict()["outer"]["start"] == "zero"
+
+
+@pytest.mark.parametrize("bad, words", [(np.zeros(3), "needs 4 finite entries"),
+                                        (np.array([0.0, np.nan, 0.0, 0.0]), "with NaN or Inf"),
+                                        (np.array([0.0, -1e-3, 0.0, 0.0]), "negative shift on contact 1")])
+def test_a_bad_start_is_refused_by_name(chute, bad, words):
+    with pytest.raises(rfverify.InvalidArgumentError, match=words) as err:
+        rfverify.solve(chute, problem="coulomb", start=bad)
+    assert err.value.argument == "start"
+
+
+def test_cli_start_from_a_solution_file(chute_written, tmp_path, capsys):
+    """``solve --problem coulomb --start SOL.h5``: the shift stored with the answer (far fewer
+    evaluations, proven again; one without --digits, whose fixed point is the double one); a file of another problem, one without a /solution, and --start
+    without --problem coulomb are one line and exit 2."""
+    _, first, path = chute_written
+    code = main(["solve", "bundled:chute", "--problem", "coulomb", "--digits", "10", "--start", str(path),
+                 "--json", "--quiet"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["status"] == "Certified" and out["backward_error"] <= 1e-10
+    # the stored shift is the proven answer's: the double fixed point is a few 1e-9 away from it
+    assert out["outer"]["start"] == "given shift" and first["outer"]["start"] == "zero"
+    assert out["outer"]["evaluations"] < first["outer"]["evaluations"] / 2, (out["outer"], first["outer"])
+    code = main(["solve", "bundled:chute", "--problem", "coulomb", "--start", str(path), "--quiet"])
+    assert code == 0 and "from the --start shift" in capsys.readouterr().out
+    bare = tmp_path / "bare.h5"
+    import dataclasses
+
+    rfverify.save(dataclasses.replace(rfverify.load("bundled:chute"), solution=None), bare)
+    for argv, words in ((["--problem", "coulomb", "--start", str(bare)], "has no /solution"),
+                        (["--start", str(path)], "--start: is for the physical problem only"),
+                        (["--problem", "coulomb", "--start", "bundled:sphere"], "holds a different problem")):
+        code = main(["solve", "bundled:chute", *argv, "--quiet"])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1 and words in err, err

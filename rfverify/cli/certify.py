@@ -7,7 +7,7 @@ import numpy as np
 from .coulomb import add_problem_option, certify_physical
 from .argtypes import digit_count, out_path, positive_float, positive_int
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, dumps, end_problem_command, exit_codes,
-                     is_hdf5_input, load_problem, print_quantities, progress_printer)
+                     is_hdf5_input, load_problem, print_quantities, progress_printer, require_same_problem)
 
 HELP = "prove how many digits of a solution are right (a rigorous error bound)"
 
@@ -75,7 +75,7 @@ def cmd_certify(args) -> int:
     point = stored = None
     if args.solution:
         other = load(args.solution, max_asymmetry=np.inf)
-        _require_same_problem(problem, other, args.solution)
+        require_same_problem(problem, other, args.solution)
         sol = other.solution
         where = args.solution
         point = read_point(_resolve(args.solution))
@@ -168,20 +168,6 @@ def _resolve(spec):
     from ..io import resolve_path
 
     return resolve_path(spec)
-
-
-def _require_same_problem(problem, other, path):
-    """A solution is only certified against the problem it was computed for."""
-    from ..errors import InvalidProblemError
-
-    same = (problem.M.shape == other.M.shape and problem.H.shape == other.H.shape
-            and all(np.array_equal(getattr(problem, k), getattr(other, k)) for k in ("f", "w", "mu", "mu_r"))
-            and (problem.M != other.M).nnz == 0 and (problem.H != other.H).nnz == 0)
-    if not same:
-        raise InvalidProblemError(
-            "solution", f"{path} holds a different problem (m = {other.n_dofs}, n = {other.n_contacts} "
-                        f"vs m = {problem.n_dofs}, n = {problem.n_contacts}, or different data)",
-            fix="pass the solution file written for this problem (rfverify solve ... --out)")
 
 
 def _write_certificate(args, problem, sol, u, cert):

@@ -205,3 +205,19 @@ def is_hdf5_input(spec) -> bool:
             return fh.read(8) == b"\x89HDF\r\n\x1a\n"
     except (OSError, RfverifyError):
         return False
+
+
+def require_same_problem(problem, other, path):
+    """A solution is only certified against the problem it was computed for."""
+    import numpy as np
+
+    from ..errors import InvalidProblemError
+
+    same = (problem.M.shape == other.M.shape and problem.H.shape == other.H.shape
+            and all(np.array_equal(getattr(problem, k), getattr(other, k)) for k in ("f", "w", "mu", "mu_r"))
+            and (problem.M != other.M).nnz == 0 and (problem.H != other.H).nnz == 0)
+    if not same:
+        raise InvalidProblemError(
+            "solution", f"{path} holds a different problem (m = {other.n_dofs}, n = {other.n_contacts} "
+                        f"vs m = {problem.n_dofs}, n = {problem.n_contacts}, or different data)",
+            fix="pass the solution file written for this problem (rfverify solve ... --out)")

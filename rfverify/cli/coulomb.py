@@ -27,9 +27,54 @@ def add_problem_option(p) -> None:
                    help=PROBLEM_OPTION_HELP)
 
 
+START_OPTION_HELP = (
+    "with --problem coulomb: start the fixed point on the shift from the answer in SOL.h5 (an FCLIB "
+    "file of this same problem with /solution, e.g. written by Siconos or by 'rfverify solve --out'): "
+    "its stored /coulomb/shift if it has one, else mu|u_T| + mu_r|u_R| of its u (default: start from 0, "
+    "the relaxation's answer). The physical problem's solutions need not be unique, and from 0 the "
+    "iteration can stall where no fixed point is near; the answer is proven all the same, whatever "
+    "the start")
+
+
+def add_start_option(p) -> None:
+    """``solve --start SOL.h5`` (dest ``start``)."""
+    p.add_argument("--start", metavar="SOL.h5", default=None, help=START_OPTION_HELP)
+
+
+def start_from_file(args, problem):
+    """The first shift of ``solve --problem coulomb --start SOL.h5``: the file's /coulomb/shift,
+    else Φ of its u (Hᵀv + w where it stores no u); None without --start.  The file must hold
+    this problem and a /solution with v and r (r for a local file)."""
+    import numpy as np
+
+    from ..coulomb.model import phi, physical_velocity
+    from ..coulomb.storage import read_shift
+    from ..errors import ProblemFileError
+    from ..io import load, resolve_path
+    from .common import require_same_problem
+
+    if args.start is None:
+        return None
+    other = load(args.start, max_asymmetry=np.inf)
+    require_same_problem(problem, other, args.start)
+    sol = other.solution
+    if sol is None or sol.r is None or (sol.v is None and problem.local is None):
+        raise ProblemFileError(args.start, "has no /solution with v and r to start from",
+                               fix="pass a solution file of this problem (rfverify solve ... --out SOL.h5)")
+    shift = read_shift(resolve_path(args.start), problem.n_contacts)
+    if shift is None:
+        u = sol.u if sol.u is not None else physical_velocity(problem, sol.v, sol.r)
+        shift = phi(problem, u)
+    if not (np.all(np.isfinite(shift)) and np.all(shift >= 0)):
+        raise ProblemFileError(args.start, "gives a shift with NaN, Inf or negative entries",
+                               location="/solution" if sol.u is None else "/coulomb/shift or /solution/u",
+                               fix="pass a finite solution of this problem")
+    return shift
+
+
 def _print_outer(out) -> None:
     run = out.outer
-    print(f"fixed point ({run.method}): residual {run.residual:.1e} of the data scale of u after {run.evaluations} "
+    print(f"fixed point ({run.method}{', from the --start shift' if run.started else ''}): residual {run.residual:.1e} of the data scale of u after {run.evaluations} "
           f"convex solves ({sum(run.inner_iterations)} iterations); {run.message}")
 
 
@@ -41,7 +86,7 @@ def solve_physical(args, problem, options: dict, say, write) -> int:
 
     t0 = time.perf_counter()
     common = dict(method=args.method, tol=args.tol, max_iter=args.max_iter, progress=say,
-                  time_limit=args.time_limit, **options)
+                  time_limit=args.time_limit, start=start_from_file(args, problem), **options)
     if args.digits is not None:
         out = coulomb_to_digits(problem, digits=args.digits, relative=args.relative, **common)
     else:

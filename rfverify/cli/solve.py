@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS, PEER_METHODS
-from .coulomb import add_problem_option, solve_physical
+from .coulomb import add_problem_option, add_start_option, solve_physical
 from .argtypes import digit_count, out_path, positive_float
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, PROGRESS_AFTER, PROGRESS_AFTER_ENV,
                      IterationProgress, add_run_limits, dumps, end_problem_command, exit_codes, is_hdf5_input,
@@ -90,6 +90,7 @@ def add_parser(sub) -> None:
                      help="switch off the presolve reductions (cone reduction for mu = 0 / "
                           "mu_r = 0 requires them; such problems are refused)")
     add_problem_option(sol)
+    add_start_option(sol)
     end_problem_command(sol, cmd_solve, check_outputs)
 
 
@@ -121,6 +122,11 @@ def cmd_solve(args) -> int:
             raise InvalidProblemError("mu", "has zero coefficients, which the unreduced lifting "
                                             "would divide by", fix="drop --no-presolve")
     say = progress_printer(args)
+    if args.start is not None and args.problem_kind != "coulomb":
+        from ..errors import InvalidArgumentError
+
+        raise InvalidArgumentError("--start", "is for the physical problem only (the relaxation's solver has no "
+                                              "warm start)", fix="add --problem coulomb, or drop --start")
     if args.problem_kind == "coulomb":
         return solve_physical(args, problem, options, say,
                               lambda v, u, r, more: _write_solution_file(args, problem, v, u, r, more=more))

@@ -53,13 +53,16 @@ def _deadline(time_limit):
 def solve_coulomb(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: int = 100, *,
                   outer: str = "anderson", outer_tol: float | None = None, outer_max_iter: int = 100,
                   as_stored: bool | None = None, progress=None, time_limit: float | None = None,
-                  **options) -> CoulombSolution:
+                  start=None, **options) -> CoulombSolution:
     """Solve the physical problem (De Saxcé's term kept) in double: the outer iteration on the
     shift (:func:`.outer.fixed_point`, ``outer`` "anderson" or "picard") over double solves of
     the shifted convex problem (``method``, ``max_iter``, ``options``: :func:`rfverify.solve`'s,
     each to ``max(tol·1e-2, 1e-13)``).  Solved when the fixed-point residual max|s − Φ(u)|
     relative to the data scale of u and the last inner criterion are both ≤ ``tol``;
-    ``outer_tol`` (default ``tol``/10) stops the outer loop.  ``u`` is the file's own Hᵀv + w."""
+    ``outer_tol`` (default ``tol``/10) stops the outer loop.  ``u`` is the file's own Hᵀv + w.
+    ``start``: the shift (n,) the outer iteration starts from (:func:`start_shift`; default 0, the
+    relaxation's answer) — e.g. that of another solver's answer, where the iteration from 0 stalls
+    in a basin with no fixed point (docs/DECISIONS.md, "The physical problem")."""
     from ..solver import posed
 
     t0 = time.perf_counter()
@@ -67,7 +70,8 @@ def solve_coulomb(problem: Problem, method: str = "auto", tol: float = 1e-10, ma
     problem = posed(problem, as_stored, method)
     run = fixed_point(problem, method=method, max_iter=max_iter, outer=outer,
                       outer_tol=tol / 10 if outer_tol is None else outer_tol, outer_max_iter=outer_max_iter,
-                      inner_tol=_inner_tol(tol), progress=progress, deadline=deadline, **options)
+                      inner_tol=_inner_tol(tol), progress=progress, deadline=deadline,
+                      start=start_shift(problem, start), **options)
     inner = run.inner
     if inner is None:
         n5 = 5 * problem.n_contacts
@@ -115,14 +119,15 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
                       max_iter: int = 100, *, outer: str = "anderson", outer_tol: float = OUTER_TOL,
                       outer_max_iter: int = 100, proven_rounds: int = PROVEN_ROUNDS, relative: bool = False,
                       as_stored: bool | None = None, progress=None, time_limit: float | None = None,
-                      **options) -> CoulombDigits:
+                      start=None, **options) -> CoulombDigits:
     """Solve the physical problem with a proven backward error (issue 51): the double fixed
     point on the shift (:func:`solve_coulomb`'s, to ``outer_tol``), then the proven k-digit path
     (:func:`rfverify.solve_to_digits`, ``digits``) on the convex problem with w_N + ŝ, and the
     bound on δ (:mod:`.backward`).  Where that bound is above 10^-digits of the data scale of u,
     ŝ ← Φ(û) of the proven answer and the path runs again (``proven_rounds`` in all).  Certified
     when v, u, Hr (and r where unique) have ``digits`` proven digits against the exact solution
-    of the physical problem with data w_N + δ and the relative bound on δ is ≤ 10^-digits."""
+    of the physical problem with data w_N + δ and the relative bound on δ is ≤ 10^-digits.
+    ``start``: as :func:`solve_coulomb`'s."""
     from ..verify.digits import solve_to_digits
     from ..solver import posed
 
@@ -133,7 +138,7 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
     say = progress or (lambda msg: None)
     run = fixed_point(problem, method=method, max_iter=max_iter, outer=outer, outer_tol=outer_tol,
                       outer_max_iter=outer_max_iter, inner_tol=_inner_tol(tol), progress=progress,
-                      deadline=deadline, **options)
+                      deadline=deadline, start=start_shift(problem, start), **options)
     say(f"fixed point ({run.method}): residual {run.residual:.1e} after {run.evaluations} convex solves; {run.message}")
     t_outer = time.perf_counter() - t0
     scales = _scales(problem)
@@ -207,10 +212,26 @@ def certify_coulomb(problem: Problem, v, u=None, r=None, *, digits: int = 10, re
     return cert
 
 
-def _checked_shift(problem: Problem, shift) -> np.ndarray:
+def start_shift(problem: Problem, start) -> np.ndarray | None:
+    """The outer iteration's first shift from ``start``: None (0, the relaxation's answer); an
+    array of n finite entries ≥ 0 (one per contact, in the data's units of velocity); or a result
+    with a ``shift`` (a :class:`CoulombSolution` or :class:`CoulombDigits` of this problem)."""
+    if start is None:
+        return None
+    s = _checked_shift(problem, getattr(start, "shift", start), "start")
+    if np.any(s < 0):
+        k = int(np.argmin(s))
+        raise InvalidArgumentError("start", f"has a negative shift on contact {k} ({s[k]:.3g}): a shift "
+                                            "mu|u_T| + mu_r|u_R| is never negative",
+                                   fix="pass the shift of an answer of this problem (e.g. Φ of its u), or None")
+    return s
+
+
+def _checked_shift(problem: Problem, shift, name: str = "shift") -> np.ndarray:
     s = np.asarray(shift, dtype=np.float64).ravel()
     if s.size != problem.n_contacts or not np.all(np.isfinite(s)):
-        raise InvalidArgumentError("shift", f"needs {problem.n_contacts} finite entries (one per contact), got {s.size}",
+        raise InvalidArgumentError(name, f"needs {problem.n_contacts} finite entries (one per contact), got "
+                                         f"{s.size}{'' if np.all(np.isfinite(s)) else ' with NaN or Inf'}",
                                    fix="pass the shift the answer was solved with (CoulombDigits.shift), or None")
     return s
 

@@ -51,7 +51,8 @@ class OuterRun:
     applied to the data (``shifted`` is that problem), ``inner`` its double solve, ``residuals``
     the relative fixed-point residual of every evaluation, ``inner_iterations`` and
     ``inner_status`` per evaluation, ``converged`` (best residual ≤ ``outer_tol``), ``message``
-    (why it stopped), ``method``, ``seconds``, ``scale`` (the data scale of u used)."""
+    (why it stopped), ``method``, ``seconds``, ``scale`` (the data scale of u used), ``started``
+    (True when it started from a given shift, not from 0)."""
 
     shift: np.ndarray
     shifted: Problem
@@ -66,6 +67,7 @@ class OuterRun:
     scale: float = 0.0
     best: int = 0
     max_evaluations: int = 0
+    started: bool = False  # from a given shift (``start``), not from 0
 
     @property
     def residual(self) -> float:
@@ -80,7 +82,8 @@ class OuterRun:
         return {"method": self.method, "evaluations": self.evaluations, "converged": self.converged,
                 "residual": self.residual, "residuals": list(self.residuals),
                 "inner_iterations": list(self.inner_iterations), "inner_status": list(self.inner_status),
-                "message": self.message, "seconds": self.seconds, "scale": self.scale}
+                "message": self.message, "seconds": self.seconds, "scale": self.scale,
+                "start": "given shift" if self.started else "zero"}
 
 
 def check_outer(outer: str) -> str:
@@ -141,7 +144,8 @@ def fixed_point(problem: Problem, *, method: str = "auto", max_iter: int = 100, 
     den = scale if scale > 0 else 1.0
     x = np.zeros(problem.n_contacts) if start is None else np.maximum(np.asarray(start, dtype=np.float64), 0.0)
     acc = Anderson(memory) if outer == "anderson" else None
-    run = OuterRun(shift=x, shifted=problem, inner=None, method=outer, scale=scale, max_evaluations=outer_max_iter)
+    run = OuterRun(shift=x, shifted=problem, inner=None, method=outer, scale=scale, max_evaluations=outer_max_iter,
+                   started=start is not None)
     best_res, since = math.inf, 0
     for k in range(outer_max_iter):
         shifted = shifted_problem(problem, x)
