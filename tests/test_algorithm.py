@@ -200,3 +200,36 @@ def test_a_stop_verdict_ends_the_run_before_any_scaling():
     out = loop.iterate(loop.Precision(_Space(np.float64), Cones(), None), _Policy([("Stopped", "enough")]),
                        _start(), n_contacts=1, n_cones=1, clock_origin=0.0)
     assert out.verdict == ("Stopped", "enough") and out.k == 0
+
+
+@pytest.mark.parametrize("steps_up", [0, 1, 2, 3])
+def test_a_newton_solve_is_solved_again_after_each_step_up_of_its_back_end(monkeypatch, steps_up):
+    """ReducedNewton.solve asks the back end again after each retry that did not settle — the
+    contact-space form has two steps up (checked solves, then the double-double factor) — and
+    stops at RETRIES, or as soon as a solve settles or the back end has nothing more."""
+    from rfverify.algorithm.interfaces import ReducedBackend
+    from rfverify.algorithm.newton import RETRIES, ReducedNewton
+
+    class Ladder(ReducedBackend):
+        name = "ladder"
+
+        def __init__(self):
+            self.asked = 0
+
+        def retry_solve(self, residual):
+            self.asked += 1
+            return self.asked <= steps_up
+
+    back = Ladder()
+    newton = ReducedNewton(None, back, refine_max=3, floor=1e-30, inf=abs, enough=1e-8)
+    calls = []
+
+    def refined(self, a, b, c, enough):
+        calls.append(enough)
+        return 0.0, 0.0, 0.0, 1, 10.0 ** -len(calls), False  # never settles
+
+    monkeypatch.setattr(ReducedNewton, "_refined", refined)
+    d = newton.solve(1.0, 1.0, 1.0, "corrector")
+    assert len(calls) == 1 + min(steps_up, RETRIES)
+    assert back.asked == min(steps_up + 1, RETRIES)
+    assert d.residual == 10.0 ** -len(calls) and d.steps == len(calls)

@@ -85,7 +85,7 @@ def test_cholmod_engine_solves_to_double_double_accuracy_like_the_ldl_engine(see
     assert np.max(np.abs(d * (out[0] - out[1]))) <= 1e-14 * np.max(np.abs(d * out[1]))
 
 
-@pytest.mark.parametrize("shift", [mixed_module.SHIFT, 0.0])
+@pytest.mark.parametrize("shift", [mixed_module.SHIFTS[-1], 0.0])
 def test_cholmod_engine_shifts_or_falls_back_when_float64_sees_a_singular_matrix(monkeypatch, shift):
     """[[1, 1], [1, 1 + 2⁻⁶⁰]] blocks: the float64 part is singular, the exact matrix SPD.  The
     float64 factor of the shifted matrix preconditions conjugate gradients in double-double (the
@@ -96,7 +96,7 @@ def test_cholmod_engine_shifts_or_falls_back_when_float64_sees_a_singular_matrix
         assert chol.precision == "mixed" and chol.shifted_from == 1 and "CHOLMOD" in chol.shift_reason
     else:
         assert chol.precision == "double-double" and "CHOLMOD" in chol.fallback_reason
-        assert "shifted by 0 ulps" in chol.fallback_reason
+        assert "shifted by 0 to 0 ulps" in chol.fallback_reason
     for backward_target in (math.inf, 1e-29):
         chol.set_backward_target(backward_target)
         assert_solves_singular_blocks(chol)
@@ -198,7 +198,7 @@ def test_restarted_conjugate_gradients_go_on_where_one_pass_stalls(seed):
     chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
     cols = np.repeat(np.arange(n), np.diff(chol.Ap))
     chol._A = (hi[chol.Ai, cols].copy(), lo[chol.Ai, cols].copy())
-    assert chol._float64_factor() != "" and chol._float64_factor(chol._shifted_values()) == ""
+    assert chol._float64_factor() != "" and chol._float64_factor(chol._shifted_values(64.0)) == ""
     b = np.random.default_rng(99).normal(size=n)
     args = (chol.Ap, chol.Ai, chol._A, b, np.zeros(n), chol._float64_solve, 1e-29)
     one, _, _ = mixed_module.conjugate_gradients_in_double_double(*args)
@@ -209,6 +209,32 @@ def test_restarted_conjugate_gradients_go_on_where_one_pass_stalls(seed):
     assert res <= 1e-25 * scale
 
 
+def test_the_conjugate_gradients_wait_out_a_plateau_of_the_backward_error():
+    """The componentwise backward error of the conjugate gradients stalls for many steps and then
+    falls where the preconditioned matrix has a spread of outliers (ten eigenvalues from 1 to
+    1e-12 beside fifty at 1, the identity as preconditioner).  With the patience of 5 steps
+    measured first it stops at ~1e-11; the default (:data:`CG_PATIENCE`, 20) waits the plateau
+    out to 1e-20 — as on the 9675-contact turned touching bed, where every shift then reached
+    1e-20 (docs/DECISIONS.md, "touching piles").  Checked by an 80-digit residual."""
+    rng = np.random.default_rng(0)
+    n, k = 60, 10
+    lam = np.concatenate([np.ones(n - k), np.logspace(0, -12, k)])
+    Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    A = (Q * lam) @ Q.T
+    A = (A + A.T) / 2
+    U = sp.triu(sp.csc_matrix(A)).tocsc()
+    U.sort_indices()
+    b = rng.normal(size=n)
+    args = (U.indptr.astype(np.int64), U.indices.astype(np.int64), (U.data.copy(), np.zeros(U.nnz)),
+            b, np.zeros(n), lambda r: r, 1e-29)
+    short, _, _ = mixed_module.conjugate_gradients_in_double_double(*args, patience=5)
+    assert short > 1e-14
+    best, (xh, xl), steps = mixed_module.conjugate_gradients_in_double_double(*args)
+    assert best <= 1e-20 and steps > 25
+    res, scale = _residual_of_hi_lo(A, np.zeros_like(A), xh, xl, b)
+    assert res <= 1e-20 * scale
+
+
 @pytest.mark.parametrize("restarts", [mixed_module.CG_RESTARTS, 0])
 def test_a_checked_solve_on_a_touching_matrix_needs_no_double_double_factor(monkeypatch, restarts):
     """Through the engine: the float64 factor fails, the shifted one preconditions restarted
@@ -216,6 +242,7 @@ def test_a_checked_solve_on_a_touching_matrix_needs_no_double_double_factor(monk
     double-double factor (with no restart, the one pass stalls and the engine falls back to it)."""
     monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
     monkeypatch.setattr(mixed_module, "CG_RESTARTS", restarts)
+    monkeypatch.setattr(mixed_module, "SHIFTS", (64.0,))  # one shift: the ladder is the next test's
     hi, lo = _touching_gram(4)
     n = hi.shape[0]
     chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
@@ -230,6 +257,81 @@ def test_a_checked_solve_on_a_touching_matrix_needs_no_double_double_factor(monk
         assert res <= 1e-20 * scale
     else:  # (its condition, ~1e37, is beyond even the double-double factor: that answer is NaN)
         assert chol.precision == "double-double" and "conjugate gradients on the shifted" in chol.fallback_reason
+
+
+def test_a_stalled_shift_is_followed_by_the_next_before_the_double_double_factor(monkeypatch):
+    """Where the conjugate gradients stall on one shifted factor, the next shift of
+    :data:`SHIFTS` is factored and tried, and the double-double factor comes only after the last:
+    on the touching matrix in miniature (seed 4), one pass stalls at ~2e-16 on 64 ulps and
+    reaches 1e-20 on 16 (checked by an 80-digit residual); the time line names both shifts."""
+    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
+    monkeypatch.setattr(mixed_module, "CG_RESTARTS", 0)
+    monkeypatch.setattr(mixed_module, "SHIFTS", (64.0, 16.0))
+    hi, lo = _touching_gram(4)
+    n = hi.shape[0]
+    chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
+    cols = np.repeat(np.arange(n), np.diff(chol.Ap))
+    assert chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols]) == -1 and chol.shift_at == 0
+    chol.set_backward_target(1e-29)
+    b = np.random.default_rng(99).normal(size=n)
+    xh, xl = chol.solve(b, np.zeros(n))
+    assert chol.precision == "mixed" and chol.fallback_at is None
+    assert chol.shift_at == 1 and chol.shifts_used == {64.0, 16.0}
+    res, scale = _residual_of_hi_lo(hi, lo, xh, xl, b)
+    assert res <= 1e-20 * scale
+    assert "(by 16, 64 ulps; shifted from factorisation 1" in chol.describe_cost()
+    monkeypatch.setattr(mixed_module, "SHIFTS", (64.0, 16.0, 4.0))
+    assert chol.escalate("the Newton solve refined only to relative residual 1.0e-10")
+    assert chol.precision == "mixed" and chol.shift_at == 2 and 4.0 in chol.shifts_used
+    assert chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols]) == -1 and chol.shift_at == 0  # each starts at the first
+
+
+def test_a_checked_solve_short_of_double_double_is_judged_by_the_newton_driver(monkeypatch):
+    """Under a driver that refines each Newton solve itself (``judged_by_caller``, set by
+    :meth:`ContactSpace.retry_solve`), a checked conjugate-gradient solve that stalls short of
+    1e-20 is returned as it is — its 80-digit residual is that of its best iterate, far better
+    than float64's — and the double-double factor comes only when the driver escalates; the
+    time line says which.  Not judged by a caller, the same solve falls back at once (the test
+    above)."""
+    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
+    monkeypatch.setattr(mixed_module, "CG_RESTARTS", 0)
+    monkeypatch.setattr(mixed_module, "SHIFTS", (64.0,))  # one shift: no other to try first
+    hi, lo = _touching_gram(4)
+    n = hi.shape[0]
+    chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
+    cols = np.repeat(np.arange(n), np.diff(chol.Ap))
+    assert chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols]) == -1 and chol.shifted_from == 1
+    chol.set_backward_target(1e-29)
+    chol.judged_by_caller = True
+    b = np.random.default_rng(99).normal(size=n)
+    xh, xl = chol.solve(b, np.zeros(n))
+    assert chol.precision == "mixed" and chol.fallback_at is None
+    assert chol.cg_short == 1 and 1e-20 < chol.cg_short_worst <= mixed_module.CG_GIVE_UP
+    res, scale = _residual_of_hi_lo(hi, lo, xh, xl, b)
+    assert res <= 10 * chol.last_backward_error * scale
+    assert "1 checked solve short of 1e-20" in chol.describe_cost()
+    assert chol.escalate("the Newton solve refined only to relative residual 1.0e-10")
+    assert chol.precision == "double-double" and chol.fallback_at == 1
+    assert "1 conjugate-gradient solve short of 1e-20" in chol.fallback_reason
+    assert "double-double from factorisation 1: the Newton solve refined only" in chol.describe_cost()
+    assert not chol.escalate("again")  # nothing further up
+
+
+def test_the_contact_space_escalates_only_from_checked_conjugate_gradient_solves(monkeypatch):
+    """ContactSpace.retry_solve: the first call makes solves checked (and judged by the driver);
+    a second one escalates to the double-double factor only where those solves ran conjugate
+    gradients — a plain refined float64 factor falls back on its own and has nothing to escalate."""
+    from rfverify.extended.contactspace import STRICT_AFTER
+
+    back = choose_backend(ExtendedData(random_problem(8, 14, seed=1)))
+    assert back.retry_solve(STRICT_AFTER * 10) and back.chol.judged_by_caller
+    assert not back.retry_solve(1.0) and back.chol.precision == "mixed"
+    back.chol.cg_from, back.chol.cg_reason = 0, "refinement stalled at backward error 1.0e-16"
+    monkeypatch.setattr(type(back.chol), "_dd_factor", lambda self: -1)
+    monkeypatch.setattr(mixed_module, "SHIFTS", ())  # no shifted factor to try first (the test above has one)
+    assert not back.retry_solve(STRICT_AFTER / 10)  # settled enough: nothing changes
+    assert back.retry_solve(1.0) and back.chol.precision == "double-double"
+    assert "the Newton solve refined only to relative residual 1.0e+00" in back.chol.fallback_reason
 
 
 def test_newton_solve_refined_against_the_double_double_matrix_at_an_iterate():
@@ -613,7 +715,7 @@ def test_a_fallback_of_the_float64_factor_is_said_where_it_happens_and_in_the_ti
     assert out.success, out.message
     changed = [m for m in said if "factorisation changed" in m]
     now = ("double-double factor (from factorisation 3: the float64 factorisation failed (forced by the test); "
-           "shifted by 64 ulps: the float64 factorisation failed (forced by the test))" if shifted_fails else
+           "shifted by 1 to 64 ulps: the float64 factorisation failed (forced by the test))" if shifted_fails else
            "float64 CHOLMOD factor, shifted from factorisation 3 (the float64 factorisation failed (forced by "
            "the test)), solved by conjugate gradients in double-double")
     assert len(changed) == 1 and now in changed[0], said

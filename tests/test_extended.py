@@ -205,11 +205,11 @@ def singular_in_float64(factor, n: int):
 
 def factored_singular_in_float64(monkeypatch, factor_class, shift: float, n: int = 40):
     """A ``factor_class`` (a mixed factor of :mod:`rfverify.extended.mixed`) of the
-    :func:`singular_in_float64` blocks, factored with ``mixed.SHIFT = shift`` at any size: its
+    :func:`singular_in_float64` blocks, factored with ``mixed.SHIFTS = (shift,)`` at any size: its
     float64 factorisation fails, so ``factor`` returns -1 (asserted)."""
     from rfverify.extended import mixed as mixed_module
 
-    monkeypatch.setattr(mixed_module, "SHIFT", shift)
+    monkeypatch.setattr(mixed_module, "SHIFTS", (shift,))
     monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
     factor = factor_class(sp.identity(n, format="csc") + sp.csc_matrix(np.eye(n, k=1) + np.eye(n, k=-1)))
     hi, lo = singular_in_float64(factor, n)

@@ -21,6 +21,11 @@ second-order term of the corrector's right-hand side, and the corrector is solve
 :data:`NEWTON_ENOUGH` for whatever right-hand side it gets.  Same iterations, steps and proven
 digits as with 1e-8 on the beds measured, 16% fewer float64 solves (docs/DECISIONS.md)."""
 
+RETRIES = 2
+"""Times a Newton system is solved again after the back end made its solves more accurate: the
+contact-space form has two steps up (checked solves, then the double-double factor where its
+checked conjugate-gradient solves are not enough; :meth:`rfverify.extended.contactspace.ContactSpace.retry_solve`)."""
+
 
 class ReducedNewton:
     """:class:`~.interfaces.Newton` for a ``space`` whose ``backend`` solves
@@ -111,7 +116,9 @@ class ReducedNewton:
     def solve(self, a, b, c, phase: str) -> Direction:
         enough = self.predictor_enough if phase == "predictor" else self.enough
         dv, dr, dz, steps, res, settled = self._refined(a, b, c, enough)
-        if not settled and self.backend.retry_solve(res):
+        for _ in range(RETRIES):
+            if settled or not self.backend.retry_solve(res):
+                break
             # the back end made its solves more accurate: solve this system again
             dv, dr, dz, more, res, settled = self._refined(a, b, c, enough)
             steps += more

@@ -438,13 +438,23 @@ class ContactSpace(FactoredBackend):
         system stopped at relative residual ``residual``: above :data:`STRICT_AFTER` (a float64
         factor too inaccurate for one-step solves), every solve from now on — this one again
         included — is refined to double-double accuracy (and falls back to a double-double
-        factor where that stalls).  True when that changed anything."""
+        factor where that stalls).  Asked again where those checked solves ran by conjugate
+        gradients and the Newton solve still stalls above it: the double-double factor from now
+        on (:meth:`.mixed._RefinedFloat64Factor.escalate`); until then a checked conjugate-gradient
+        solve short of 1e-20 is used as it is, since this driver's own refinement judges it.
+        True when anything changed."""
         chol = self.chol
-        if residual <= STRICT_AFTER or not getattr(chol, "backward_target", 0.0) > 1e-29:
+        if residual <= STRICT_AFTER or not isinstance(chol, (CholmodMixed, MixedCholesky)):
             return False
-        chol.set_backward_target(1e-29)
-        self.tightened_at = self.factorisations
-        return True
+        if chol.backward_target > 1e-29:
+            chol.set_backward_target(1e-29)
+            chol.judged_by_caller = True  # this driver judges every solve: see escalate below
+            self.tightened_at = self.factorisations
+            return True
+        # checked solves by conjugate gradients that still leave the Newton system unrefined:
+        # the double-double factor (a checked solve by refinement falls back on its own)
+        return chol.escalate(f"the Newton solve refined only to relative residual {residual:.1e} "
+                             "with checked conjugate-gradient solves")
 
     def prepare(self) -> None:
         """What the first :meth:`update` does that needs no iterate — M factored in

@@ -77,31 +77,42 @@ def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int, stop_at: 
     return best, best_x, steps
 
 
-SHIFT = 64.0
-"""Ulps of each diagonal entry by which a float64 factor that failed is shifted: enough to cover
-the rounding of a Cholesky factorisation (a few ulps of the entries per row), small enough that
-only rows of the size eps⁻¹ and above move by more than a relative 1e-14.  The conjugate
-gradients then meet the shift only on the near-null space of the huge block, a few directions:
-on a 2800-contact touching bed, 3 to 7 where the stiff rows' singular values fall below 1e-6 of
-the largest, and solves to 1e-25 in about 7 steps (docs/DECISIONS.md, "touching piles")."""
+SHIFTS = (1.0, 4.0, 16.0, 64.0)
+"""Ulps of each diagonal entry by which a float64 factor that failed is shifted, tried in turn:
+the smallest whose float64 factorisation succeeds preconditions the conjugate gradients, and
+where they stall on it the next one is factored and tried, before the double-double factor.  A
+shift covers the rounding of a Cholesky factorisation (a few ulps of the entries per row) and
+moves only rows of the size eps⁻¹ and above by more than a relative 1e-14; the conjugate
+gradients meet it on the near-null space of the huge block.  With a patience of 5 steps, which
+shift served varied by matrix and not monotonically (the factorisation where the 9675-contact
+turned touching bed fell back with 64 ulps: 1, 2 and 4 ulps reached 1e-30, 8 reached 7e-21,
+16–4096 stalled at 1e-9 to 1e-8); with :data:`CG_PATIENCE` = 20 every shift from 2 to 64 reached
+1e-20 there, and 1 ulp is the smallest that still factors (docs/DECISIONS.md, "touching piles")."""
 CG_TARGET = 1e-27
 """Componentwise backward error at which the conjugate gradients stop when the caller refines
 each solve itself (an unchecked float64 solve otherwise): double-double's matrix-vector product
 limits them near 1e-27 on the touching beds measured."""
 CG_GIVE_UP = 1e-8
-"""A shifted solve whose best backward error stays above this (or above 1e-20 when the caller
-asked for 1e-29) falls back to the double-double factor, for good."""
+"""A conjugate-gradient solve whose best backward error stays above this (or above 1e-20 when the
+caller asked for 1e-29 and does not judge it: :attr:`_RefinedFloat64Factor.judged_by_caller`)
+moves to the next shift of :data:`SHIFTS`, and after the last to the double-double factor, for
+good."""
 SHIFT_MIN_ROWS = 1000
 """Smallest matrix on which a failed float64 factor is replaced by the shifted one with conjugate
 gradients; below it the double-double factor is cheap, and it is what held on the small
 ill-conditioned local files measured (a 3-row W = diag(1, 1, 2⁻⁴⁴) file went to NaN through the
 shifted path, whose later double-double fallback met a singular matrix)."""
-CG_MAX_STEPS = 40
-CG_PATIENCE = 5  # steps without a better backward error before the best is returned
+CG_MAX_STEPS = 100
+CG_PATIENCE = 20
+"""Steps without a better backward error before a pass of the conjugate gradients returns its
+best.  Their componentwise backward error can stall for many steps and then fall (a spread of
+outliers in the preconditioned matrix): with 5, every shift stalled near 1e-9 at the 9675-contact
+bed's 10th factorisation; with 20 each reached 1e-20 in 66–175 steps, and the whole path took
+381 s instead of 697 s (docs/DECISIONS.md, "touching piles")."""
 
 
 def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target: float,
-                                         max_steps: int = CG_MAX_STEPS, patience: int = CG_PATIENCE):
+                                         max_steps: int | None = None, patience: int | None = None):
     """A x = b (A symmetric positive definite: values (high, low) of its upper triangle in CSC)
     by conjugate gradients with residuals, products and iterates in double-double and a float64
     ``preconditioner`` (``preconditioner(r)`` ≈ P⁻¹r, P a float64 factor of a shifted A).  The
@@ -110,6 +121,8 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     b − Ax in double-double and its componentwise backward error; stops at ``target``, after
     ``patience`` steps without a better one, or after ``max_steps``.  Returns (best backward
     error, (xh, xl) of the best iterate, steps)."""
+    max_steps = CG_MAX_STEPS if max_steps is None else max_steps
+    patience = CG_PATIENCE if patience is None else patience
     n = Ap.size - 1
     bh = np.ascontiguousarray(bh, dtype=np.float64)
     bl = np.ascontiguousarray(bl, dtype=np.float64)
@@ -214,9 +227,14 @@ class _RefinedFloat64Factor:
         self.failed_float64 = 0
         self.shifted_from = None  # the factorisation from which the float64 factor is shifted, and why
         self.shift_reason = ""
+        self.shift_at = None  # the index in SHIFTS of the shifted factor in use, and every shift used
+        self.shifts_used = set()
         self.cg_from = None  # the factorisation from which solves run conjugate gradients, and why
         self.cg_reason = ""
         self.cg_iterations = 0
+        self.judged_by_caller = False  # a checked CG solve short of 1e-20 is returned, the caller judges it
+        self.cg_short = 0  # such solves, and the worst backward error among them
+        self.cg_short_worst = 0.0
         self._A = None
 
     def _solve_by_cg(self, bh: np.ndarray, bl: np.ndarray):
@@ -236,13 +254,43 @@ class _RefinedFloat64Factor:
             # unchecked: the Newton driver refines against the unreduced system and asks for a
             # retry (checked solves) where that fails; the best iterate is its starting point
             return self._from_stored(*best_x)
+        if not best <= good_enough and self.judged_by_caller and best <= CG_GIVE_UP:
+            # the Newton driver refines against the unreduced system and calls escalate() where
+            # that still stalls: the double-double factor only where the direction needs it
+            self.cg_short += 1
+            self.cg_short_worst = max(self.cg_short_worst, best)
+            return self._from_stored(*best_x)
         if not best <= good_enough:
             which = "shifted " if self.shifted_from is not None else ""
-            if self._fall_back(f"conjugate gradients on the {which}float64 factor stalled at backward error "
-                               f"{best:.1e}") >= 0:
+            reason = f"conjugate gradients on the {which}float64 factor stalled at backward error {best:.1e}"
+            following = 0 if self.shift_at is None else self.shift_at + 1
+            if following < len(SHIFTS):  # another shift is cheap beside the double-double factor
+                self._factor_shifted(reason, following)
+            else:
+                self._fall_back(reason)
+            if self.precision == "mixed":
+                return self._solve_by_cg(bh, bl)
+            if not self.factored:  # the double-double factorisation failed too: no answer (NaN)
                 return np.full(self.n, np.nan), np.full(self.n, np.nan)
             return self._dd_solve(bh, bl)
         return self._from_stored(*best_x)
+
+    def escalate(self, reason: str) -> bool:
+        """The caller's refinement stalled with this factor's checked conjugate-gradient solves:
+        the next shift of :data:`SHIFTS` if one is left, else the double-double factor from now on,
+        for good (``reason`` says why).  True when that changed anything (False where no conjugate
+        gradients ran, or already in double-double)."""
+        if self.precision != "mixed" or (self.cg_from is None and self.shifted_from is None):
+            return False
+        if self.cg_short:
+            reason += (f" ({self.cg_short} conjugate-gradient solve{'s' if self.cg_short != 1 else ''} short of "
+                       f"1e-20, worst {self.cg_short_worst:.1e})")
+        following = 0 if self.shift_at is None else self.shift_at + 1
+        if following < len(SHIFTS):
+            self._factor_shifted(reason, following)
+        else:
+            self._fall_back(reason)
+        return True
 
     def set_backward_target(self, backward_target: float) -> None:
         """Solves are refined to a componentwise backward error ≤ ``backward_target`` (1e-29:
@@ -251,8 +299,8 @@ class _RefinedFloat64Factor:
         self.backward_target = float(backward_target)
         self.stop_at = self.backward_target / 100
 
-    def _shifted_values(self) -> np.ndarray:
-        """The high part with each diagonal entry raised by :data:`SHIFT` ulps of itself: a
+    def _shifted_values(self, shift: float) -> np.ndarray:
+        """The high part with each diagonal entry raised by ``shift`` ulps of itself: a
         float64 rounding of A moves A's eigenvalues by about eps·max A_ii, which on the near-null
         space of a huge block swamps the O(1) ones (docs/DECISIONS.md, "touching piles"); a
         relative shift keeps rows of moderate size almost as they were."""
@@ -261,18 +309,24 @@ class _RefinedFloat64Factor:
             self._diagonal = np.flatnonzero(self.Ai == cols)
         values = self._A[0].copy()
         d = values[self._diagonal]
-        values[self._diagonal] = d + SHIFT * np.finfo(np.float64).eps * np.maximum(d, 0.0)
+        values[self._diagonal] = d + shift * np.finfo(np.float64).eps * np.maximum(d, 0.0)
         return values
 
-    def _factor_shifted(self, reason: str) -> int:
-        """After a float64 factorisation failed: the shifted matrix in float64, its solves by
-        conjugate gradients (:func:`conjugate_gradients_in_double_double`); the double-double
-        factor where that fails too."""
-        failure = self._timed("shifted", lambda: self._float64_factor(self._shifted_values()))
+    def _factor_shifted(self, reason: str, first: int = 0) -> int:
+        """The matrix shifted by each of :data:`SHIFTS` from index ``first`` in turn, factored in
+        float64 until one succeeds; its solves by conjugate gradients
+        (:func:`restarted_conjugate_gradients`).  The double-double factor where none does."""
+        failure = ""
+        for at in range(first, len(SHIFTS)):
+            failure = self._timed("shifted", lambda: self._float64_factor(self._shifted_values(SHIFTS[at])))
+            if not failure:
+                break
         if failure:
-            return self._fall_back(f"{reason}; shifted by {SHIFT:g} ulps: {failure}")
+            return self._fall_back(f"{reason}; shifted by {SHIFTS[first]:g} to {SHIFTS[-1]:g} ulps: {failure}")
         if self.shifted_from is None:
             self.shifted_from, self.shift_reason = self.factorisations, reason
+        self.shift_at = at
+        self.shifts_used.add(SHIFTS[at])
         self.factored = True
         return -1
 
@@ -305,10 +359,15 @@ class _RefinedFloat64Factor:
             out += (f", solved by conjugate gradients in double-double from factorisation {self.cg_from} "
                     f"({self.cg_reason})")
         if self.shifted_from is not None:
-            out += (f", {counts['shifted']} shifted in float64 {secs['shifted']:.1f} s (shifted from factorisation "
-                    f"{self.shifted_from}: {self.shift_reason})")
+            by = ", ".join(f"{x:g}" for x in sorted(self.shifts_used))
+            out += (f", {counts['shifted']} shifted in float64 {secs['shifted']:.1f} s (by {by} "
+                    f"ulp{'' if self.shifts_used == {1.0} else 's'}; shifted from "
+                    f"factorisation {self.shifted_from}: {self.shift_reason})")
         if self.cg_iterations:
             out += f", {self.cg_iterations} conjugate-gradient steps in double-double"
+        if self.cg_short and self.fallback_at is None:
+            out += (f" ({self.cg_short} checked solve{'s' if self.cg_short != 1 else ''} short of 1e-20, "
+                    f"worst {self.cg_short_worst:.1e}, accepted by the Newton refinement)")
         if self.fallback_at is None:
             return out
         return (f"{out}, {counts['double-double']} in double-double {secs['double-double']:.1f} s (double-double "
