@@ -23,8 +23,9 @@ digits as with 1e-8 on the beds measured, 16% fewer float64 solves (docs/DECISIO
 
 RETRIES = 2
 """Times a Newton system is solved again after the back end made its solves more accurate: the
-contact-space form has two steps up (checked solves, then the double-double factor where its
-checked conjugate-gradient solves are not enough; :meth:`rfverify.extended.contactspace.ContactSpace.retry_solve`)."""
+contact-space form steps up to checked solves, then, where its checked conjugate-gradient solves
+are not enough, to the next shifted factor or the double-double factor
+(:meth:`rfverify.extended.contactspace.ContactSpace.retry_solve`)."""
 
 
 class ReducedNewton:

@@ -439,8 +439,9 @@ class ContactSpace(FactoredBackend):
         factor too inaccurate for one-step solves), every solve from now on — this one again
         included — is refined to double-double accuracy (and falls back to a double-double
         factor where that stalls).  Asked again where those checked solves ran by conjugate
-        gradients and the Newton solve still stalls above it: the double-double factor from now
-        on (:meth:`.mixed._RefinedFloat64Factor.escalate`); until then a checked conjugate-gradient
+        gradients and the Newton solve still stalls above it: the next shifted float64 factor, or
+        after the last the double-double factor from now on
+        (:meth:`.mixed._RefinedFloat64Factor.escalate`); until then a checked conjugate-gradient
         solve short of 1e-20 is used as it is, since this driver's own refinement judges it.
         True when anything changed."""
         chol = self.chol
@@ -451,8 +452,8 @@ class ContactSpace(FactoredBackend):
             chol.judged_by_caller = True  # this driver judges every solve: see escalate below
             self.tightened_at = self.factorisations
             return True
-        # checked solves by conjugate gradients that still leave the Newton system unrefined:
-        # the double-double factor (a checked solve by refinement falls back on its own)
+        # checked solves by conjugate gradients that still leave the Newton system unrefined: the
+        # next shift, else the double-double factor (a checked solve by refinement falls back on its own)
         return chol.escalate(f"the Newton solve refined only to relative residual {residual:.1e} "
                              "with checked conjugate-gradient solves")
 

@@ -240,8 +240,10 @@ class _RefinedFloat64Factor:
     def _solve_by_cg(self, bh: np.ndarray, bl: np.ndarray):
         """A solve with the float64 factor (shifted, or one whose refinement stalled) as the
         preconditioner of conjugate gradients against the double-double matrix, to
-        ``backward_target`` (:data:`CG_TARGET` when unchecked); where it cannot get within
-        :data:`CG_GIVE_UP` of that, the double-double factor, for good."""
+        ``backward_target`` (:data:`CG_TARGET` when unchecked).  Where it misses what the solve
+        accepts (:data:`CG_GIVE_UP`; 1e-20 for a checked solve that no caller judges), the next
+        shift of :data:`SHIFTS` is factored and the solve tried again, and after the last the
+        double-double factor, for good."""
         target = min(self.backward_target, CG_TARGET)
         good_enough = max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20)
         best, best_x, steps = restarted_conjugate_gradients(
