@@ -235,19 +235,33 @@ def test_the_conjugate_gradients_wait_out_a_plateau_of_the_backward_error():
     assert res <= 1e-20 * scale
 
 
+def _touching_engine(monkeypatch, restarts: int, shifts: tuple):
+    """The touching matrix in miniature (:func:`_touching_gram`, seed 4) factored by
+    :class:`CholmodMixed` from any size, with ``restarts`` CG restarts and the shift ladder
+    ``shifts``; its float64 factor fails, the shifted one holds (``factor`` returns -1, asserted).
+    Returns (hi, lo, chol, refactor) where ``refactor()`` factors the same values again."""
+    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
+    monkeypatch.setattr(mixed_module, "CG_RESTARTS", restarts)
+    monkeypatch.setattr(mixed_module, "SHIFTS", shifts)
+    hi, lo = _touching_gram(4)
+    n = hi.shape[0]
+    chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
+    cols = np.repeat(np.arange(n), np.diff(chol.Ap))
+
+    def refactor():
+        return chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols])
+
+    assert refactor() == -1 and chol.shifted_from == 1
+    return hi, lo, chol, refactor
+
+
 @pytest.mark.parametrize("restarts", [mixed_module.CG_RESTARTS, 0])
 def test_a_checked_solve_on_a_touching_matrix_needs_no_double_double_factor(monkeypatch, restarts):
     """Through the engine: the float64 factor fails, the shifted one preconditions restarted
     conjugate gradients, and a solve checked to double-double accuracy is answered without the
     double-double factor (with no restart, the one pass stalls and the engine falls back to it)."""
-    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
-    monkeypatch.setattr(mixed_module, "CG_RESTARTS", restarts)
-    monkeypatch.setattr(mixed_module, "SHIFTS", (64.0,))  # one shift: the ladder is the next test's
-    hi, lo = _touching_gram(4)
+    hi, lo, chol, _ = _touching_engine(monkeypatch, restarts, (64.0,))  # one shift: the ladder is the next test's
     n = hi.shape[0]
-    chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
-    cols = np.repeat(np.arange(n), np.diff(chol.Ap))
-    assert chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols]) == -1 and chol.shifted_from == 1
     chol.set_backward_target(1e-29)
     b = np.random.default_rng(99).normal(size=n)
     xh, xl = chol.solve(b, np.zeros(n))
@@ -264,14 +278,9 @@ def test_a_stalled_shift_is_followed_by_the_next_before_the_double_double_factor
     :data:`SHIFTS` is factored and tried, and the double-double factor comes only after the last:
     on the touching matrix in miniature (seed 4), one pass stalls at ~2e-16 on 64 ulps and
     reaches 1e-20 on 16 (checked by an 80-digit residual); the time line names both shifts."""
-    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
-    monkeypatch.setattr(mixed_module, "CG_RESTARTS", 0)
-    monkeypatch.setattr(mixed_module, "SHIFTS", (64.0, 16.0))
-    hi, lo = _touching_gram(4)
+    hi, lo, chol, refactor = _touching_engine(monkeypatch, 0, (64.0, 16.0))
     n = hi.shape[0]
-    chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
-    cols = np.repeat(np.arange(n), np.diff(chol.Ap))
-    assert chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols]) == -1 and chol.shift_at == 0
+    assert chol.shift_at == 0
     chol.set_backward_target(1e-29)
     b = np.random.default_rng(99).normal(size=n)
     xh, xl = chol.solve(b, np.zeros(n))
@@ -283,7 +292,7 @@ def test_a_stalled_shift_is_followed_by_the_next_before_the_double_double_factor
     monkeypatch.setattr(mixed_module, "SHIFTS", (64.0, 16.0, 4.0))
     assert chol.escalate("the Newton solve refined only to relative residual 1.0e-10")
     assert chol.precision == "mixed" and chol.shift_at == 2 and 4.0 in chol.shifts_used
-    assert chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols]) == -1 and chol.shift_at == 0  # each starts at the first
+    assert refactor() == -1 and chol.shift_at == 0  # each starts at the first
 
 
 def test_a_checked_solve_short_of_double_double_is_judged_by_the_newton_driver(monkeypatch):
@@ -293,14 +302,8 @@ def test_a_checked_solve_short_of_double_double_is_judged_by_the_newton_driver(m
     than float64's — and the double-double factor comes only when the driver escalates; the
     time line says which.  Not judged by a caller, the same solve falls back at once (the test
     above)."""
-    monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
-    monkeypatch.setattr(mixed_module, "CG_RESTARTS", 0)
-    monkeypatch.setattr(mixed_module, "SHIFTS", (64.0,))  # one shift: no other to try first
-    hi, lo = _touching_gram(4)
+    hi, lo, chol, _ = _touching_engine(monkeypatch, 0, (64.0,))  # one shift: no other to try first
     n = hi.shape[0]
-    chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
-    cols = np.repeat(np.arange(n), np.diff(chol.Ap))
-    assert chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols]) == -1 and chol.shifted_from == 1
     chol.set_backward_target(1e-29)
     chol.judged_by_caller = True
     b = np.random.default_rng(99).normal(size=n)
