@@ -307,3 +307,64 @@ def test_cli_start_from_a_solution_file(chute_written, tmp_path, capsys):
         code = main(["solve", "bundled:chute", *argv, "--quiet"])
         err = capsys.readouterr().err.strip()
         assert code == 2 and len(err.splitlines()) == 1 and words in err, err
+
+
+HARD = __import__("pathlib").Path(__file__).parent / "data" / "hard"
+
+
+@pytest.fixture(scope="module")
+def chute181():
+    return rfverify.load(str(HARD / "Chute-ndof-900-nc-181-1-3d.hdf5"))
+
+
+def test_friction_continuation_finds_the_fixed_point_the_iteration_from_zero_misses(chute181):
+    """From s = 0 the 181-contact Chute's iteration lands where a sliding contact's Φ grows faster
+    than its shift (no fixed point there) and stalls; walking μ up from the frictionless problem
+    reaches one.  Its answer meets the physical conditions in an mp recheck."""
+    alone = solve_coulomb(chute181, continuation=False)
+    assert not alone.success and alone.outer.residual > 1e-6 and not alone.outer.stages
+    out = solve_coulomb(chute181)
+    assert out.success and out.outer.residual <= 1e-11, out.message
+    stages = out.outer.stages
+    assert stages[0]["friction"] == 1.0 and not stages[0]["converged"]
+    assert stages[-1]["friction"] == 1.0 and stages[-1]["converged"]
+    assert all(0 < st["friction"] < 1 and st["converged"] for st in stages[1:-1]) and len(stages) > 2
+    assert out.outer.total_evaluations == sum(st["evaluations"] for st in stages) > out.outer.evaluations
+    assert "friction continuation" in out.message
+    d = out.as_dict()["outer"]
+    assert d["total_evaluations"] == out.outer.total_evaluations and len(d["stages"]) == len(stages)
+    bad = physical_violations(chute181, out.v, out.r, dps=30)
+    assert all(x <= 1e-9 for x in bad.values()), bad
+
+
+def test_friction_scaled_changes_mu_and_mu_r_only(chute):
+    half = model.friction_scaled(chute, 0.5)
+    assert np.array_equal(half.mu, chute.mu * 0.5) and np.array_equal(half.mu_r, chute.mu_r * 0.5)
+    assert half.w is chute.w and half.f is chute.f and half.M is chute.M and half.H is chute.H
+    assert model.friction_scaled(chute, 1.0) is chute
+
+
+def test_the_proven_rounds_wait_for_a_slow_secant_model():
+    """The 101-contact MassRatio's proven rounds fall slowly at first (1.9e-8, 1.1e-9, 9.5e-10,
+    1.1e-9, 8.8e-10, then 2.5e-10 …): they are certified below 1e-10, and its written answer
+    rechecks."""
+    problem = rfverify.load(str(HARD / "MassRatio-ndof-240-nc-101-1-3d.hdf5"))
+    out = rfverify.solve_to_digits(problem, 10, problem="coulomb")
+    assert out.certificate.certified and out.backward_error <= 1e-10, out.certificate.verdict
+    assert len(out.rounds) > 5
+    bad = physical_violations(problem, out.v, out.r, dps=30)
+    assert all(x <= 1e-10 for x in bad.values()), bad
+
+
+def test_an_inner_solver_that_refuses_the_problem_is_not_a_fixed_point(chute):
+    """An inner solve with status InvalidInput (e.g. Siconos's GRFC3D on a 3-D file) has no u to
+    iterate on: the run says so and its status is InvalidInput, never a residual of 0."""
+    from rfverify.coulomb.outer import find_shift
+    from rfverify.solver.result import Status
+
+    class Refused:
+        status, message, nit, u = Status.INVALID_INPUT, "this solver takes no such problem", 0, None
+
+    run = find_shift(chute, evaluate=lambda shifted: (Refused(), np.zeros(5 * chute.n_contacts)))
+    assert run.refused and run.inner is None and not run.converged and run.residual == math.inf
+    assert "refused the shifted problem: this solver takes no such problem" in run.message and not run.stages

@@ -296,7 +296,7 @@ def _coulomb(problem, task, npz_path) -> dict:
     run = out.outer
     return {"status": str(out.status), "message": out.certificate.verdict, "time": elapsed, "nit": int(out.nit),
             **_coulomb_fields(out.certificate, problem, out.v, out.u, out.r, out.shift),
-            "outer_method": run.method, "outer_evaluations": int(run.evaluations),
+            "outer_method": run.method, "outer_evaluations": int(run.total_evaluations),
             "outer_residual": float(run.residual), "proven_rounds": len(out.rounds),
             "time_outer": out.timings.get("outer"), "time_proven": out.timings.get("proven")}
 

@@ -74,8 +74,8 @@ def start_from_file(args, problem):
 
 def _print_outer(out) -> None:
     run = out.outer
-    print(f"fixed point ({run.method}{', from the --start shift' if run.started else ''}): residual {run.residual:.1e} of the data scale of u after {run.evaluations} "
-          f"convex solves ({sum(run.inner_iterations)} iterations); {run.message}")
+    print(f"fixed point ({run.method}{', from the --start shift' if run.started else ''}): residual {run.residual:.1e} of the data scale of u after {run.total_evaluations} "
+          f"convex solves ({run.total_inner_iterations} iterations); {run.message}")
 
 
 def solve_physical(args, problem, options: dict, say, write) -> int:

@@ -19,14 +19,19 @@ from ..proof.quantity import DATA_SCALE_NAMES, DATA_SCALE_NAMES_LOCAL
 from ..proof.dyadic import Dyadic
 from .backward import backward_bound, physical_quantities
 from .model import PROBLEMS, offsets, phi, physical_residuals, physical_velocity, shifted_problem
-from .outer import OUTER_TOL, fixed_point
+from .outer import OUTER_TOL, find_shift, fixed_point
 from .result import CoulombCertificate, CoulombDigits, CoulombSolution, coulomb_verdict
 
-PROVEN_ROUNDS = 8
+PROVEN_ROUNDS = 12
 """Proven rounds at most: the outer iteration continued with proven answers (the double ones
 are accurate to the double solves' forward error only: on the chute |Φ(û_double) − Φ(û)| is
 1.8e-9 where the double fixed-point residual is 4e-14), until the backward error is below
 10^-digits."""
+PROVEN_STALL = 4
+"""Proven rounds without a 10% gain on the best backward error before the rounds stop.  A
+generated 101-contact MassRatio needs 9 rounds (1.9e-8, 1.1e-9, 9.5e-10, 1.1e-9, 8.8e-10, 2.5e-10,
+…, 4.4e-11) — Anderson's secant model needs a few rounds where Φ grows faster than s — and
+with 2 it stopped at the fifth (8.8e-10, not certified)."""
 
 
 def check_problem_kind(kind) -> str:
@@ -53,7 +58,7 @@ def _deadline(time_limit):
 def solve_coulomb(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: int = 100, *,
                   outer: str = "anderson", outer_tol: float | None = None, outer_max_iter: int = 100,
                   as_stored: bool | None = None, progress=None, time_limit: float | None = None,
-                  start=None, **options) -> CoulombSolution:
+                  start=None, continuation: bool = True, **options) -> CoulombSolution:
     """Solve the physical problem (De Saxcé's term kept) in double: the outer iteration on the
     shift (:func:`.outer.fixed_point`, ``outer`` "anderson" or "picard") over double solves of
     the shifted convex problem (``method``, ``max_iter``, ``options``: :func:`rfverify.solve`'s,
@@ -62,16 +67,18 @@ def solve_coulomb(problem: Problem, method: str = "auto", tol: float = 1e-10, ma
     ``outer_tol`` (default ``tol``/10) stops the outer loop.  ``u`` is the file's own Hᵀv + w.
     ``start``: the shift (n,) the outer iteration starts from (:func:`start_shift`; default 0, the
     relaxation's answer) — e.g. that of another solver's answer, where the iteration from 0 stalls
-    in a basin with no fixed point (docs/DECISIONS.md, "The physical problem")."""
+    in a basin with no fixed point (docs/DECISIONS.md, "The physical problem").
+    ``continuation``: where the iteration does not converge, follow the solution from the
+    frictionless problem with μ and μr scaled up to theirs (:func:`.outer.find_shift`; default on)."""
     from ..solver import posed
 
     t0 = time.perf_counter()
     deadline = _deadline(time_limit)
     problem = posed(problem, as_stored, method)
-    run = fixed_point(problem, method=method, max_iter=max_iter, outer=outer,
-                      outer_tol=tol / 10 if outer_tol is None else outer_tol, outer_max_iter=outer_max_iter,
-                      inner_tol=_inner_tol(tol), progress=progress, deadline=deadline,
-                      start=start_shift(problem, start), **options)
+    run = find_shift(problem, method=method, max_iter=max_iter, outer=outer,
+                     outer_tol=tol / 10 if outer_tol is None else outer_tol, outer_max_iter=outer_max_iter,
+                     inner_tol=_inner_tol(tol), progress=progress, deadline=deadline,
+                     start=start_shift(problem, start), continuation=continuation, **options)
     inner = run.inner
     if inner is None:
         n5 = 5 * problem.n_contacts
@@ -119,7 +126,7 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
                       max_iter: int = 100, *, outer: str = "anderson", outer_tol: float = OUTER_TOL,
                       outer_max_iter: int = 100, proven_rounds: int = PROVEN_ROUNDS, relative: bool = False,
                       as_stored: bool | None = None, progress=None, time_limit: float | None = None,
-                      start=None, **options) -> CoulombDigits:
+                      start=None, continuation: bool = True, **options) -> CoulombDigits:
     """Solve the physical problem with a proven backward error (issue 51): the double fixed
     point on the shift (:func:`solve_coulomb`'s, to ``outer_tol``), then the proven k-digit path
     (:func:`rfverify.solve_to_digits`, ``digits``) on the convex problem with w_N + ŝ, and the
@@ -127,7 +134,7 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
     ŝ ← Φ(û) of the proven answer and the path runs again (``proven_rounds`` in all).  Certified
     when v, u, Hr (and r where unique) have ``digits`` proven digits against the exact solution
     of the physical problem with data w_N + δ and the relative bound on δ is ≤ 10^-digits.
-    ``start``: as :func:`solve_coulomb`'s."""
+    ``start`` and ``continuation``: as :func:`solve_coulomb`'s."""
     from ..verify.digits import solve_to_digits
     from ..solver import posed
 
@@ -136,10 +143,11 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
     deadline = _deadline(time_limit)
     problem = posed(problem, as_stored, method)
     say = progress or (lambda msg: None)
-    run = fixed_point(problem, method=method, max_iter=max_iter, outer=outer, outer_tol=outer_tol,
-                      outer_max_iter=outer_max_iter, inner_tol=_inner_tol(tol), progress=progress,
-                      deadline=deadline, start=start_shift(problem, start), **options)
-    say(f"fixed point ({run.method}): residual {run.residual:.1e} after {run.evaluations} convex solves; {run.message}")
+    run = find_shift(problem, method=method, max_iter=max_iter, outer=outer, outer_tol=outer_tol,
+                     outer_max_iter=outer_max_iter, inner_tol=_inner_tol(tol), progress=progress,
+                     deadline=deadline, start=start_shift(problem, start), continuation=continuation, **options)
+    say(f"fixed point ({run.method}): residual {run.residual:.1e} after {run.total_evaluations} convex solves; "
+        f"{run.message}")
     t_outer = time.perf_counter() - t0
     scales = _scales(problem)
     rounds, certs = [], []
@@ -162,7 +170,7 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
         return cert.certified or not cert.backward.proven or sol.timed_out or sol.interrupted
 
     proven = fixed_point(problem, outer=outer, outer_tol=0.0, outer_max_iter=max(1, proven_rounds), start=run.shift,
-                         deadline=deadline, evaluate=evaluate, done=done, label="proven round", stall=2)
+                         deadline=deadline, evaluate=evaluate, done=done, label="proven round", stall=PROVEN_STALL)
     cert, sol = certs[0]
     for c, s_ in certs[1:]:
         if _better(c, cert):

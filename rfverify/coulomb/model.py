@@ -56,6 +56,19 @@ def shifted_problem(problem: Problem, s) -> Problem:
     return out
 
 
+def friction_scaled(problem: Problem, factor: float) -> Problem:
+    """``problem`` with μ and μr multiplied by ``factor`` (0 < factor ≤ 1), every other datum its
+    own: the homotopy the friction continuation walks (:func:`.outer.find_shift`).  At 1 the
+    problem itself."""
+    if factor == 1.0:
+        return problem
+    mu = _frozen(np.asarray(problem.mu, dtype=np.float64) * factor)
+    mu_r = _frozen(np.asarray(problem.mu_r, dtype=np.float64) * factor)
+    out = dataclasses.replace(problem, mu=mu, mu_r=mu_r, solution=None, guesses=())
+    object.__setattr__(out, "M_sym", problem.M_sym)
+    return out
+
+
 def applied_shift(problem: Problem, shifted: Problem) -> np.ndarray:
     """The shift ``shifted`` carries, w'_N − w_N (q for a local file), in long double: exact
     where long double has 11 more bits than float64 and the exponents are close, which the

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import InvalidArgumentError
 from ..model.problem import Problem
-from .model import applied_shift, phi, shifted_problem, u_scale
+from .model import applied_shift, friction_scaled, phi, shifted_problem, u_scale
 
 OUTER_METHODS = ("anderson", "picard")
 
@@ -68,6 +68,9 @@ class OuterRun:
     best: int = 0
     max_evaluations: int = 0
     started: bool = False  # from a given shift (``start``), not from 0
+    timed_out: bool = False  # stopped by ``deadline``
+    refused: bool = False  # an inner solve refused the shifted problem (status InvalidInput)
+    stages: list = field(default_factory=list)  # the friction continuation's, when it ran (find_shift)
 
     @property
     def residual(self) -> float:
@@ -76,14 +79,26 @@ class OuterRun:
 
     @property
     def evaluations(self) -> int:
+        """Evaluations of the map for the problem itself: those of the run returned."""
         return len(self.residuals)
+
+    @property
+    def total_evaluations(self) -> int:
+        """Every convex solve the search made, the continuation's stages included."""
+        return sum(st["evaluations"] for st in self.stages) if self.stages else self.evaluations
+
+    @property
+    def total_inner_iterations(self) -> int:
+        """Interior-point iterations of every convex solve the search made."""
+        return sum(st["inner_iterations"] for st in self.stages) if self.stages else int(sum(self.inner_iterations))
 
     def as_dict(self) -> dict:
         return {"method": self.method, "evaluations": self.evaluations, "converged": self.converged,
                 "residual": self.residual, "residuals": list(self.residuals),
                 "inner_iterations": list(self.inner_iterations), "inner_status": list(self.inner_status),
                 "message": self.message, "seconds": self.seconds, "scale": self.scale,
-                "start": "given shift" if self.started else "zero"}
+                "start": "given shift" if self.started else "zero",
+                "total_evaluations": self.total_evaluations, "stages": [dict(st) for st in self.stages]}
 
 
 def check_outer(outer: str) -> str:
@@ -151,6 +166,10 @@ def fixed_point(problem: Problem, *, method: str = "auto", max_iter: int = 100, 
         shifted = shifted_problem(problem, x)
         s = applied_shift(problem, shifted)
         inner, u_inner = evaluate(shifted)
+        if str(getattr(inner, "status", "")) == "InvalidInput":  # refused: no u to iterate on
+            run.message = f"the inner solve refused the shifted problem: {inner.message}"
+            run.refused = True
+            break
         g = phi(problem, u_inner)
         res = float(np.max(np.abs(g - s), initial=0.0)) / den
         run.residuals.append(res)
@@ -182,6 +201,7 @@ def fixed_point(problem: Problem, *, method: str = "auto", max_iter: int = 100, 
             break
         if deadline is not None and time.perf_counter() > deadline:
             run.message = f"time limit reached after {k + 1} evaluations (best residual {best_res:.2e})"
+            run.timed_out = True
             break
         x = g if acc is None else acc.next(s, g)
         x = np.maximum(x, 0.0)  # Φ ≥ 0: a fixed point has s ≥ 0
@@ -189,3 +209,67 @@ def fixed_point(problem: Problem, *, method: str = "auto", max_iter: int = 100, 
         run.message = f"{outer_max_iter} evaluations without reaching {outer_tol:.0e} (best {best_res:.2e})"
     run.seconds = time.perf_counter() - t0
     return run
+
+
+STAGE_TOL = 1e-9
+"""Relative fixed-point residual at which a stage of the friction continuation (μ, μr scaled by
+λ < 1) is done: the next stage only needs a start in its basin, not the last digits."""
+
+MAX_STAGES = 12
+"""Stages of the friction continuation at most (each at most ``outer_max_iter`` evaluations)."""
+
+SMALLEST_STEP = 1 / 32
+"""The continuation gives up when a stage fails with a step in λ below this."""
+
+
+def find_shift(problem: Problem, *, continuation: bool = True, start=None, progress=None,
+               deadline: float | None = None, outer_tol: float = OUTER_TOL, **options) -> OuterRun:
+    """:func:`fixed_point` from ``start``; where it does not converge, the friction continuation
+    (``continuation``, default on): the same iteration on the problem with μ and μr scaled by λ
+    (:func:`.model.friction_scaled`), λ = 0.5, 0.75, 1 (adaptive: a stage that fails halves the
+    step and is tried again from the last λ reached), each stage started from the last one's
+    shift times the ratio of the λs (Φ is linear in μ at fixed u), λ < 1 to
+    :data:`STAGE_TOL`, λ = 1 to ``outer_tol``.  At λ → 0 the problem is frictionless, s = 0 is its
+    fixed point, and the map contracts; the continuation follows that branch.  It exists for
+    problems where the iteration from 0 lands on a branch with no fixed point (a generated
+    181-contact Chute: a sliding contact whose Φ grows by 1.057 per unit of its own shift;
+    docs/DECISIONS.md, "The physical problem").  Returns the better run on the problem itself
+    (converged first, then the smaller residual); ``stages`` records every stage."""
+    say = progress or (lambda msg: None)
+    first = fixed_point(problem, start=start, progress=progress, deadline=deadline, outer_tol=outer_tol, **options)
+    if first.converged or not continuation or first.inner is None or first.timed_out or first.refused:
+        return first
+    stages = [_stage(1.0, first, "from the given shift" if first.started else "from 0")]
+    say(f"the fixed point from {'the given shift' if first.started else '0'} stopped at residual "
+        f"{first.residual:.1e}: friction continuation (μ and μr scaled by λ, up to 1)")
+    best, lam, shift, step = first, 0.0, None, 0.5
+    while len(stages) < MAX_STAGES + 1 and step >= SMALLEST_STEP:
+        trial = min(1.0, lam + step)
+        begin = None if shift is None else shift * (trial / lam)
+        run = fixed_point(friction_scaled(problem, trial), start=begin, deadline=deadline,
+                          outer_tol=outer_tol if trial == 1.0 else max(outer_tol, STAGE_TOL),
+                          label=f"continuation λ={trial:.4g}", progress=progress, **options)
+        stages.append(_stage(trial, run, f"from λ={lam:.4g}"))
+        if trial == 1.0 and run.inner is not None and (run.converged or run.residual < best.residual):
+            best = run
+        if run.timed_out or run.inner is None or run.refused or (trial == 1.0 and run.converged):
+            break
+        if run.converged:
+            lam, shift = trial, run.shift
+        else:
+            step /= 2
+    best.stages = stages
+    if best is not first:
+        best.message = (f"friction continuation ({len(stages) - 1} stages after the iteration "
+                        f"{stages[0]['from']} stopped at {first.residual:.1e}): {best.message}")
+    elif not first.converged:
+        best.message = (f"{first.message}; the friction continuation ({len(stages) - 1} stages) reached λ = "
+                        f"{lam:.4g} and no better residual on the problem itself")
+    best.seconds = sum(st["seconds"] for st in stages)
+    return best
+
+
+def _stage(friction: float, run: OuterRun, origin: str) -> dict:
+    return {"friction": friction, "from": origin, "evaluations": run.evaluations,
+            "inner_iterations": int(sum(run.inner_iterations)), "residual": run.residual,
+            "converged": run.converged, "seconds": run.seconds, "message": run.message}

@@ -125,6 +125,8 @@ class CoulombSolution(ResultAliases):
     def status(self) -> Status:
         if self.success:
             return Status.SOLVED
+        if getattr(self.outer, "refused", False):
+            return Status.INVALID_INPUT
         if self.inner is None or not math.isfinite(self.outer.residual):
             return Status.NUMERICAL_ERROR
         if self.outer.evaluations >= self.outer.max_evaluations:
@@ -136,12 +138,12 @@ class CoulombSolution(ResultAliases):
         inner = "" if self.inner is None else f"; the last inner solve {self.inner.status}, criterion {self.inner.criterion:.1e}"
         verb = "solved" if self.success else "not solved"
         return (f"{STATEMENT} {verb}: fixed-point residual max|s − Φ(u)| = {self.outer.residual:.1e} of the data "
-                f"scale of u after {self.outer.evaluations} convex solves ({self.outer.method}); "
+                f"scale of u after {self.outer.total_evaluations} convex solves ({self.outer.method}); "
                 f"{self.outer.message}{inner}")
 
     @property
     def nit(self) -> int:
-        return int(sum(self.outer.inner_iterations))
+        return int(self.outer.total_inner_iterations)
 
     @property
     def criterion(self) -> float:
@@ -189,7 +191,7 @@ class CoulombDigits(CertifiedResult):
     @property
     def nit(self) -> int:
         inner = sum(int(r.get("nit", 0)) for r in self.rounds)
-        return int(sum(self.outer.inner_iterations)) + inner
+        return int(self.outer.total_inner_iterations) + inner
 
     def as_dict(self) -> dict:
         return {**self.certificate.as_dict(), "status": str(self.status), "success": self.success,
