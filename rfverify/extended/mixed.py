@@ -2,7 +2,7 @@
 
 A float64 factor of a symmetric positive definite matrix given in double-double is the
 "oracle" of an iterative refinement with double-double residuals (as in SoPlex's iterative
-refinement, :func:`refine_in_double_double`): :class:`MixedCholesky` with QDLDL's LDLᵀ,
+refinement, :func:`.krylov.refine_in_double_double`): :class:`MixedCholesky` with QDLDL's LDLᵀ,
 :class:`CholmodMixed` with CHOLMOD (cvxopt's wheel, a dependency) — the
 float64 engines of :mod:`rfverify.engines.factor`, the ones the double solver's forms use.
 Both fall back, for good, to the double-double :class:`.ldl.DDCholesky` where the float64
@@ -14,68 +14,12 @@ from __future__ import annotations
 import math
 import time
 
-import numba
 import numpy as np
 import scipy.sparse as sp
 
-from . import dd
 from ..engines.factor import CholmodEngine, QDLDLEngine
+from .krylov import refine_in_double_double, restarted_conjugate_gradients
 from .ldl import DDCholesky, symbolic_ldl, symmetric_pattern, upper_csc, upper_positions
-
-
-@numba.njit(cache=True, nogil=True)
-def _symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl, ax):
-    """r = b − A x in double-double, A symmetric given by its upper triangle in CSC; returns
-    the componentwise backward error max_i |r_i| / (|A||x| + |b|)_i (Oettli–Prager), which,
-    unlike a normwise one, does not let the large rows of a badly scaled matrix hide the
-    error in the small ones.  ax: zero work array (n,)."""
-    for i in range(n):
-        rh[i] = bh[i]
-        rl[i] = bl[i]
-    for j in range(n):
-        for p in range(Ap[j], Ap[j + 1]):
-            i = Ai[p]
-            rh[i], rl[i] = dd.fms_acc(rh[i], rl[i], Axh[p], Axl[p], xh[j], xl[j])
-            ax[i] += abs(Axh[p] * xh[j])
-            if i != j:
-                rh[j], rl[j] = dd.fms_acc(rh[j], rl[j], Axh[p], Axl[p], xh[i], xl[i])
-                ax[j] += abs(Axh[p] * xh[i])
-    worst = 0.0
-    for i in range(n):
-        den = ax[i] + abs(bh[i])
-        if den > 0.0:
-            e = abs(rh[i]) / den
-            if not e <= worst:  # NaN propagates
-                worst = e
-    return worst
-
-
-def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int, stop_at: float = 1e-31):
-    """Iterative refinement of A x = b to double-double accuracy with a float64 ``oracle``
-    (``oracle(r)`` ≈ A⁻¹r in float64: a factor of A rounded to double), as in SoPlex's
-    iterative refinement.  ``A`` = (high, low) values of the upper triangle in CSC (``Ap``,
-    ``Ai``); b = (bh, bl).  Stops at a componentwise backward error below ``stop_at``, after
-    ``max_steps``, or when a step does not halve it (stalled or NaN: the best iterate is kept).
-    Returns (best backward error, (xh, xl), steps taken)."""
-    n = Ap.size - 1
-    pbh = np.ascontiguousarray(bh, dtype=np.float64)
-    pbl = np.ascontiguousarray(bl, dtype=np.float64)
-    rh, rl = pbh.copy(), pbl.copy()
-    best, best_x = math.inf, (np.zeros(n), np.zeros(n))
-    steps = 0
-    for steps in range(1, max_steps + 1):
-        d = oracle(rh)
-        nh, nl = np.empty(n), np.empty(n)
-        dd.vadd(best_x[0], best_x[1], d, np.zeros(n), nh, nl)
-        backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], pbh, pbl, nh, nl, rh, rl, np.zeros(n))
-        if not backward < 0.5 * best:  # stalled (or NaN): keep the best solution
-            best = min(best, backward) if backward == backward else best
-            break
-        best, best_x = backward, (nh, nl)
-        if backward < stop_at:
-            break
-    return best, best_x, steps
-
 
 SHIFTS = (1.0, 4.0, 16.0, 64.0)
 """Ulps of each diagonal entry by which a float64 factor that failed is shifted, tried in turn:
@@ -86,7 +30,7 @@ moves only rows of the size eps⁻¹ and above by more than a relative 1e-14; th
 gradients meet it on the near-null space of the huge block.  With a patience of 5 steps, which
 shift served varied by matrix and not monotonically (the factorisation where the 9675-contact
 turned touching bed fell back with 64 ulps: 1, 2 and 4 ulps reached 1e-30, 8 reached 7e-21,
-16–4096 stalled at 1e-9 to 1e-8); with :data:`CG_PATIENCE` = 20 every shift from 2 to 64 reached
+16–4096 stalled at 1e-9 to 1e-8); with :data:`.krylov.CG_PATIENCE` = 20 every shift from 2 to 64 reached
 1e-20 there, and 1 ulp is the smallest that still factors (docs/DECISIONS.md, "touching piles")."""
 CG_TARGET = 1e-27
 """Componentwise backward error at which the conjugate gradients stop when the caller refines
@@ -102,100 +46,6 @@ SHIFT_MIN_ROWS = 1000
 gradients; below it the double-double factor is cheap, and it is what held on the small
 ill-conditioned local files measured (a 3-row W = diag(1, 1, 2⁻⁴⁴) file went to NaN through the
 shifted path, whose later double-double fallback met a singular matrix)."""
-CG_MAX_STEPS = 100
-CG_PATIENCE = 20
-"""Steps without a better backward error before a pass of the conjugate gradients returns its
-best.  Their componentwise backward error can stall for many steps and then fall (a spread of
-outliers in the preconditioned matrix): with 5, every shift stalled near 1e-9 at the 9675-contact
-bed's 10th factorisation; with 20 each reached 1e-20 in 66–175 steps, and the whole path took
-381 s instead of 697 s (docs/DECISIONS.md, "touching piles")."""
-
-
-def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target: float,
-                                         max_steps: int | None = None, patience: int | None = None):
-    """A x = b (A symmetric positive definite: values (high, low) of its upper triangle in CSC)
-    by conjugate gradients with residuals, products and iterates in double-double and a float64
-    ``preconditioner`` (``preconditioner(r)`` ≈ P⁻¹r, P a float64 factor of a shifted A).  The
-    Polak–Ribière β keeps it convergent when the preconditioner is applied inexactly (a float64
-    solve of a rounded residual: "flexible" CG, Notay 2000).  Each step takes the true residual
-    b − Ax in double-double and its componentwise backward error; stops at ``target``, after
-    ``patience`` steps without a better one, or after ``max_steps``.  Returns (best backward
-    error, (xh, xl) of the best iterate, steps)."""
-    max_steps = CG_MAX_STEPS if max_steps is None else max_steps
-    patience = CG_PATIENCE if patience is None else patience
-    n = Ap.size - 1
-    bh = np.ascontiguousarray(bh, dtype=np.float64)
-    bl = np.ascontiguousarray(bl, dtype=np.float64)
-    zero = np.zeros(n)
-    xh, xl = np.zeros(n), np.zeros(n)
-    rh, rl = bh.copy(), bl.copy()
-    backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
-    best, best_x, since, steps = backward, (xh.copy(), xl.copy()), 0, 0
-    z = preconditioner(rh.copy())
-    ph, pl = z.copy(), np.zeros(n)
-    rz = dd.vdot(rh, rl, z, zero)[0]
-    qh, ql = np.empty(n), np.empty(n)
-    for steps in range(1, max_steps + 1):
-        _symmetric_residual(n, Ap, Ai, A[0], A[1], zero, zero, ph, pl, qh, ql, np.zeros(n))  # q = −A p
-        pq = -dd.vdot(ph, pl, qh, ql)[0]
-        if not (pq > 0.0 and math.isfinite(rz)):
-            break
-        dd.vaxpy(rz / pq, 0.0, ph, pl, xh, xl)
-        r_old = rh.copy()
-        backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
-        if backward < best:
-            best, best_x, since = backward, (xh.copy(), xl.copy()), 0
-        else:
-            since += 1
-        if best <= target or since >= patience or not backward == backward:
-            break
-        z = preconditioner(rh.copy())
-        rz_new = dd.vdot(rh, rl, z, zero)[0]
-        beta = (rz_new - float(np.dot(r_old, z))) / rz
-        rz = rz_new
-        sh, sl = np.empty(n), np.empty(n)
-        dd.vscale(beta, 0.0, ph, pl, sh, sl)
-        dd.vadd(z, zero, sh, sl, ph, pl)
-    return best, best_x, steps
-
-
-CG_RESTARTS = 4
-"""Passes of :func:`restarted_conjugate_gradients` after the first: on touching piles one pass of
-the conjugate gradients stalls near a backward error of 1e-20 (its directions lose conjugacy
-against the few outliers of the preconditioned matrix), and a pass restarted on the true
-double-double residual goes on to 1e-30 (2800-contact turned touching bed: every solve, where
-the one-pass version fell back to the double-double factor; docs/DECISIONS.md, "touching piles")."""
-
-
-def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: float, good_enough: float,
-                                  restarts: int | None = None):
-    """:func:`conjugate_gradients_in_double_double` to ``target``; where its best backward error
-    is still above ``good_enough``, restarted up to ``restarts`` times (:data:`CG_RESTARTS` by
-    default) on the residual b − Ax of the best iterate so far (in double-double), each pass
-    adding its correction while that lowers the componentwise backward error.  Returns (best
-    backward error, (xh, xl), steps of all passes)."""
-    restarts = CG_RESTARTS if restarts is None else restarts
-    n = Ap.size - 1
-    bh = np.ascontiguousarray(bh, dtype=np.float64)
-    bl = np.ascontiguousarray(bl, dtype=np.float64)
-    best, (xh, xl), steps = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target)
-    for _ in range(restarts):
-        if not best > good_enough:  # reached (or NaN: nothing to restart from)
-            break
-        rh, rl = np.empty(n), np.empty(n)
-        _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
-        # the correction's own pass runs until it stalls: its scale is the residual's, not b's
-        _, (dh, dl), more = conjugate_gradients_in_double_double(Ap, Ai, A, rh, rl, preconditioner, 0.0)
-        steps += more
-        yh, yl = np.empty(n), np.empty(n)
-        dd.vadd(xh, xl, dh, dl, yh, yl)
-        backward = _symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, yh, yl, np.empty(n), np.empty(n), np.zeros(n))
-        if not backward < best:
-            break
-        best, xh, xl = backward, yh, yl
-    return best, (xh, xl), steps
-
-
 class _RefinedFloat64Factor:
     """The part :class:`MixedCholesky` and :class:`CholmodMixed` share: a float64 factor whose
     solves are refined against the double-double matrix (:func:`refine_in_double_double`) to
@@ -317,7 +167,7 @@ class _RefinedFloat64Factor:
     def _factor_shifted(self, reason: str, first: int = 0) -> int:
         """The matrix shifted by each of :data:`SHIFTS` from index ``first`` in turn, factored in
         float64 until one succeeds; its solves by conjugate gradients
-        (:func:`restarted_conjugate_gradients`).  The double-double factor where none does."""
+        (:func:`.krylov.restarted_conjugate_gradients`).  The double-double factor where none does."""
         failure = ""
         for at in range(first, len(SHIFTS)):
             failure = self._timed("shifted", lambda: self._float64_factor(self._shifted_values(SHIFTS[at])))

@@ -1,0 +1,229 @@
+"""Krylov solves in double-double with a float64 preconditioner: the residual and product
+kernels, iterative refinement (:func:`refine_in_double_double`) and the conjugate gradients
+(:func:`conjugate_gradients_in_double_double`, :func:`restarted_conjugate_gradients`) that
+:mod:`.mixed`'s float64 factors use where refinement alone stalls.  A matrix is its upper
+triangle in CSC with values (high, low) in double-double."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from . import dd
+
+
+@numba.njit(cache=True, nogil=True)
+def symmetric_residual(n, Ap, Ai, Axh, Axl, bh, bl, xh, xl, rh, rl, ax):
+    """r = b − A x in double-double, A symmetric given by its upper triangle in CSC; returns
+    the componentwise backward error max_i |r_i| / (|A||x| + |b|)_i (Oettli–Prager), which,
+    unlike a normwise one, does not let the large rows of a badly scaled matrix hide the
+    error in the small ones.  ax: zero work array (n,)."""
+    for i in range(n):
+        rh[i] = bh[i]
+        rl[i] = bl[i]
+    for j in range(n):
+        for p in range(Ap[j], Ap[j + 1]):
+            i = Ai[p]
+            rh[i], rl[i] = dd.fms_acc(rh[i], rl[i], Axh[p], Axl[p], xh[j], xl[j])
+            ax[i] += abs(Axh[p] * xh[j])
+            if i != j:
+                rh[j], rl[j] = dd.fms_acc(rh[j], rl[j], Axh[p], Axl[p], xh[i], xl[i])
+                ax[j] += abs(Axh[p] * xh[i])
+    worst = 0.0
+    for i in range(n):
+        den = ax[i] + abs(bh[i])
+        if den > 0.0:
+            e = abs(rh[i]) / den
+            if not e <= worst:  # NaN propagates
+                worst = e
+    return worst
+
+
+@numba.njit(cache=True, nogil=True)
+def symmetric_product(n, Ap, Ai, Axh, Axl, ph, pl, qh, ql, xh, ax, ap):
+    """q = A p in double-double (A symmetric, its upper triangle in CSC), with, in the same pass
+    over A, ax = |A||x| and ap = |A||p| in float64 (x: an iterate's high part): one read of the
+    matrix per conjugate-gradient step instead of two."""
+    for i in range(n):
+        qh[i] = 0.0
+        ql[i] = 0.0
+        ax[i] = 0.0
+        ap[i] = 0.0
+    for j in range(n):
+        for k in range(Ap[j], Ap[j + 1]):
+            i = Ai[k]
+            a = abs(Axh[k])
+            qh[i], ql[i] = dd.fma_acc(qh[i], ql[i], Axh[k], Axl[k], ph[j], pl[j])
+            ax[i] += a * abs(xh[j])
+            ap[i] += a * abs(ph[j])
+            if i != j:
+                qh[j], ql[j] = dd.fma_acc(qh[j], ql[j], Axh[k], Axl[k], ph[i], pl[i])
+                ax[j] += a * abs(xh[i])
+                ap[j] += a * abs(ph[i])
+
+
+@numba.njit(cache=True, nogil=True)
+def updated_backward(rh, bh, ax, ap, alpha):
+    """max_i |r_i| / (ax_i + |α| ap_i + |b_i|): the componentwise backward error of x + αp with
+    |A||x + αp| replaced by its bound |A||x| + |α||A||p| (so never above the true one by more than
+    that bound's slack, which vanishes as the steps shrink)."""
+    worst = 0.0
+    a = abs(alpha)
+    for i in range(rh.size):
+        den = ax[i] + a * ap[i] + abs(bh[i])
+        if den > 0.0:
+            e = abs(rh[i]) / den
+            if not e <= worst:  # NaN propagates
+                worst = e
+    return worst
+
+
+def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int, stop_at: float = 1e-31):
+    """Iterative refinement of A x = b to double-double accuracy with a float64 ``oracle``
+    (``oracle(r)`` ≈ A⁻¹r in float64: a factor of A rounded to double), as in SoPlex's
+    iterative refinement.  ``A`` = (high, low) values of the upper triangle in CSC (``Ap``,
+    ``Ai``); b = (bh, bl).  Stops at a componentwise backward error below ``stop_at``, after
+    ``max_steps``, or when a step does not halve it (stalled or NaN: the best iterate is kept).
+    Returns (best backward error, (xh, xl), steps taken)."""
+    n = Ap.size - 1
+    pbh = np.ascontiguousarray(bh, dtype=np.float64)
+    pbl = np.ascontiguousarray(bl, dtype=np.float64)
+    rh, rl = pbh.copy(), pbl.copy()
+    best, best_x = math.inf, (np.zeros(n), np.zeros(n))
+    steps = 0
+    for steps in range(1, max_steps + 1):
+        d = oracle(rh)
+        nh, nl = np.empty(n), np.empty(n)
+        dd.vadd(best_x[0], best_x[1], d, np.zeros(n), nh, nl)
+        backward = symmetric_residual(n, Ap, Ai, A[0], A[1], pbh, pbl, nh, nl, rh, rl, np.zeros(n))
+        if not backward < 0.5 * best:  # stalled (or NaN): keep the best solution
+            best = min(best, backward) if backward == backward else best
+            break
+        best, best_x = backward, (nh, nl)
+        if backward < stop_at:
+            break
+    return best, best_x, steps
+
+
+CG_REPLACE_ABOVE = 1e6
+"""A conjugate-gradient step whose update r − αAp is this many times larger than the residual it
+leaves (that many digits cancelled, from a direction in the near-null space of a huge block)
+replaces the updated residual by the true one (residual replacement, van der Vorst and Ye 2000)."""
+CG_MAX_STEPS = 100
+CG_PATIENCE = 20
+"""Steps without a better backward error before a pass of the conjugate gradients returns its
+best.  Their componentwise backward error can stall for many steps and then fall (a spread of
+outliers in the preconditioned matrix): with 5, every shift stalled near 1e-9 at the 9675-contact
+bed's 10th factorisation; with 20 each reached 1e-20 in 66–175 steps, and the whole path took
+381 s instead of 697 s (docs/DECISIONS.md, "touching piles")."""
+
+
+def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target: float,
+                                         max_steps: int | None = None, patience: int | None = None):
+    """A x = b (A symmetric positive definite: values (high, low) of its upper triangle in CSC)
+    by conjugate gradients with residuals, products and iterates in double-double and a float64
+    ``preconditioner`` (``preconditioner(r)`` ≈ P⁻¹r, P a float64 factor of a shifted A).  The
+    Polak–Ribière β keeps it convergent when the preconditioner is applied inexactly (a float64
+    solve of a rounded residual: "flexible" CG, Notay 2000).  Each step takes the true residual
+    b − Ax in double-double, updated as r − αAp from the product the step computes anyway (the
+    updated and the recomputed residual differ by the rounding of x + αp, ~1e-32 of |A||x| per
+    step), and its componentwise backward error against the bound |A||x| + |α||A||p| of |A||x + αp|
+    from the same pass; stops at ``target``, after ``patience`` steps without a better one, or
+    after ``max_steps``.  The best iterate's residual and backward error are then recomputed
+    from A, x and b: what it returns is that.  Returns (best backward error, (xh, xl) of the
+    best iterate, steps)."""
+    max_steps = CG_MAX_STEPS if max_steps is None else max_steps
+    patience = CG_PATIENCE if patience is None else patience
+    n = Ap.size - 1
+    bh = np.ascontiguousarray(bh, dtype=np.float64)
+    bl = np.ascontiguousarray(bl, dtype=np.float64)
+    zero = np.zeros(n)
+    xh, xl = np.zeros(n), np.zeros(n)
+    rh, rl = bh.copy(), bl.copy()
+    backward = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
+    best, best_x, since, steps = backward, (xh.copy(), xl.copy()), 0, 0
+    z = preconditioner(rh.copy())
+    ph, pl = z.copy(), np.zeros(n)
+    rz = dd.vdot(rh, rl, z, zero)[0]
+    qh, ql, ax, ap = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    fresh = True  # p is the preconditioned true residual: a breakdown now is final
+    for steps in range(1, max_steps + 1):
+        symmetric_product(n, Ap, Ai, A[0], A[1], ph, pl, qh, ql, xh, ax, ap)  # q = A p
+        pq = dd.vdot(ph, pl, qh, ql)[0]
+        if not (pq > 0.0 and math.isfinite(rz)):
+            if fresh:
+                break
+            # pᵀAp ≤ 0 on a positive definite A: the recurrences lost it; restart from the best
+            # iterate's true residual
+            xh, xl = best_x[0].copy(), best_x[1].copy()
+            symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
+            z = preconditioner(rh.copy())
+            ph, pl = z.copy(), np.zeros(n)
+            rz, fresh = dd.vdot(rh, rl, z, zero)[0], True
+            continue
+        fresh = False
+        alpha = rz / pq
+        dd.vaxpy(alpha, 0.0, ph, pl, xh, xl)
+        r_old = rh.copy()
+        dd.vaxpy(-alpha, 0.0, qh, ql, rh, rl)
+        if abs(alpha) * np.max(np.abs(qh)) > CG_REPLACE_ABOVE * np.max(np.abs(rh)):
+            # the update cancelled too many digits to be trusted: the true residual instead
+            backward = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
+        else:
+            backward = updated_backward(rh, bh, ax, ap, alpha)
+        if backward < best:
+            best, best_x, since = backward, (xh.copy(), xl.copy()), 0
+        else:
+            since += 1
+        if best <= target or since >= patience or not backward == backward:
+            break
+        z = preconditioner(rh.copy())
+        rz_new = dd.vdot(rh, rl, z, zero)[0]
+        beta = (rz_new - float(np.dot(r_old, z))) / rz
+        rz = rz_new
+        sh, sl = np.empty(n), np.empty(n)
+        dd.vscale(beta, 0.0, ph, pl, sh, sl)
+        dd.vadd(z, zero, sh, sl, ph, pl)
+    if steps:
+        best = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, best_x[0], best_x[1], np.empty(n), np.empty(n),
+                                   np.zeros(n))
+    return best, best_x, steps
+
+
+CG_RESTARTS = 4
+"""Passes of :func:`restarted_conjugate_gradients` after the first: on touching piles one pass of
+the conjugate gradients stalls near a backward error of 1e-20 (its directions lose conjugacy
+against the few outliers of the preconditioned matrix), and a pass restarted on the true
+double-double residual goes on to 1e-30 (2800-contact turned touching bed: every solve, where
+the one-pass version fell back to the double-double factor; docs/DECISIONS.md, "touching piles")."""
+
+
+def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: float, good_enough: float,
+                                  restarts: int | None = None):
+    """:func:`conjugate_gradients_in_double_double` to ``target``; where its best backward error
+    is still above ``good_enough``, restarted up to ``restarts`` times (:data:`CG_RESTARTS` by
+    default) on the residual b − Ax of the best iterate so far (in double-double), each pass
+    adding its correction while that lowers the componentwise backward error.  Returns (best
+    backward error, (xh, xl), steps of all passes)."""
+    restarts = CG_RESTARTS if restarts is None else restarts
+    n = Ap.size - 1
+    bh = np.ascontiguousarray(bh, dtype=np.float64)
+    bl = np.ascontiguousarray(bl, dtype=np.float64)
+    best, (xh, xl), steps = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target)
+    for _ in range(restarts):
+        if not best > good_enough:  # reached (or NaN: nothing to restart from)
+            break
+        rh, rl = np.empty(n), np.empty(n)
+        symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
+        # the correction's own pass runs until it stalls: its scale is the residual's, not b's
+        _, (dh, dl), more = conjugate_gradients_in_double_double(Ap, Ai, A, rh, rl, preconditioner, 0.0)
+        steps += more
+        yh, yl = np.empty(n), np.empty(n)
+        dd.vadd(xh, xl, dh, dl, yh, yl)
+        backward = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, yh, yl, np.empty(n), np.empty(n), np.zeros(n))
+        if not backward < best:
+            break
+        best, xh, xl = backward, yh, yl
+    return best, (xh, xl), steps
