@@ -68,7 +68,7 @@ def solve_coulomb(problem: Problem, method: str = "auto", tol: float = 1e-10, ma
     ``start``: the shift (n,) the outer iteration starts from (:func:`start_shift`; default 0, the
     relaxation's answer) — e.g. that of another solver's answer, where the iteration from 0 stalls
     in a basin with no fixed point (docs/DECISIONS.md, "The physical problem").
-    ``continuation``: where the iteration does not converge, follow the solution from the
+    ``continuation``: where the iteration stops above a residual of 1e-8, follow the solution from the
     frictionless problem with μ and μr scaled up to theirs (:func:`.outer.find_shift`; default on)."""
     from ..solver import posed
 
