@@ -242,11 +242,12 @@ class _peer_notice:
 
 
 def _stored_hint(problem) -> str:
-    """Where the stored M is unsymmetric and the symmetrised equations were solved: how to solve
-    the stored ones."""
+    """Where the stored M (W of a local file) is unsymmetric and the symmetrised equations were
+    solved: how to solve the stored ones."""
     if problem.matrix_is_symmetric or problem.equations == "stored":
         return ""
-    return " (M as stored is unsymmetric and its equations have another solution: --as-stored solves them)"
+    X = "W" if problem.local is not None else "M"
+    return f" ({X} as stored is unsymmetric and its equations have another solution: --as-stored solves them)"
 
 
 def _solve_digits(args, problem, options, say, after, t_start) -> int:

@@ -2,8 +2,8 @@
 form, as both local file formats need it: a Siconos local ``.dat`` file (:mod:`.siconos_dat`)
 and an FCLIB ``/fclib_local`` group (:mod:`.fclib3d`).
 
-:func:`factor_delassus` factors W = HᵀH (dense symmetric eigendecomposition, the numerical rank
-kept) and reports what it did (:class:`LiftReport`); :func:`lift_local` builds the global
+:func:`factor_delassus` factors W = HᵀH (symmetric eigendecompositions of W's connected blocks,
+the numerical rank kept) and reports what it did (:class:`LiftReport`); :func:`lift_local` builds the global
 :class:`~rfverify.model.problem.Problem` M = I, H, f = 0, w = q.  The lifting is a solver device: the
 extended phase and the proof work on the file's own W (``Problem.local``, DESIGN §6.1b).
 """
@@ -21,7 +21,8 @@ from ..model.problem import DEFAULT_MAX_ASYMMETRY, Problem, SymmetryReport, asym
 _TINY = np.finfo(float).tiny
 
 LOCAL_DENSE_LIMIT = 10000
-"""Largest W (rows) of a local problem: lifting it takes a dense eigendecomposition."""
+"""Largest W (rows) of a local problem: the lifting holds W as a dense array (and factors each
+connected block of it densely)."""
 
 
 @dataclass(frozen=True)
@@ -64,9 +65,10 @@ def lift_local(local: LocalProblem, *, rank_tol: float | None = None,
                max_asymmetry: float = DEFAULT_MAX_ASYMMETRY):
     """Lift a local problem (W, q) to global form: M = I_m, H = Λ^{1/2}Vᵀ (m×5n), f = 0, w = q.
 
-    W is symmetrised and factored as W = V Λ Vᵀ (dense symmetric eigendecomposition, fine for
-    the few-thousand-row local problems Siconos prints).  Eigenvalues ≤ 100·eps·5n·‖W‖₂ (the
-    eigensolver's rounding) are dropped (W is often singular; m = the numerical rank), so
+    W is symmetrised and factored as W = V Λ Vᵀ (a dense symmetric eigendecomposition of each
+    connected block of W, so H is as sparse as W's blocks: fine for the few-thousand-row local
+    problems Siconos prints; one connected pile of them gives a dense H).  Eigenvalues
+    ≤ 100·eps·5n·‖W‖₂ (the eigensolver's rounding) are dropped (W is often singular; m = the numerical rank), so
     HᵀH = W up to rounding, and u = HᵀH r + q ≈ W r + q.  The lifting is a *solver device*:
     the extended phase and the proof work on the file's W itself (``Problem.local``,
     DESIGN §6.1b), never on HᵀH.
@@ -150,8 +152,8 @@ def factor_delassus(W, *, significant_digits: int | None = None, rank_tol: float
     # eigensolver's norms.
     exp = int(np.frexp(big)[1])
     Ws = 0.5 * (np.ldexp(W, -exp) + np.ldexp(W.T, -exp))
-    lam, V = np.linalg.eigh(Ws)
-    norm_s = float(max(abs(lam[0]), abs(lam[-1])))
+    lam, vecs, rows, cols, abs_norm_s = _blockwise_eigh(Ws, abs_norm=bool(significant_digits) and rank_tol is None)
+    norm_s = float(np.max(np.abs(lam)))
     norm = float(np.ldexp(norm_s, exp))
     # Two thresholds: an eigenvalue below −psd_tol·‖W‖ is refused (not PSD even allowing for the
     # print precision); eigenvalues above keep_tol·‖W‖ are kept.  The printed numbers are the
@@ -159,24 +161,64 @@ def factor_delassus(W, *, significant_digits: int | None = None, rank_tol: float
     keep_tol = 100 * np.finfo(float).eps * dim if rank_tol is None else rank_tol
     if rank_tol is None:
         if significant_digits:
-            abs_norm_s = float(np.linalg.norm(np.abs(Ws), 2))
             rank_tol = 0.5 * 10.0 ** (1 - significant_digits) * abs_norm_s / max(norm_s, _TINY)
         else:
             rank_tol = keep_tol
     if norm_s == 0.0:
         raise InvalidProblemError("W", "is zero to working precision",
                                   fix="a local problem needs a non-zero Delassus matrix")
-    if lam[0] < -rank_tol * norm_s:
+    lowest = float(lam.min())
+    if lowest < -rank_tol * norm_s:
         raise InvalidProblemError(
-            "W", f"is not positive semidefinite: eigenvalue {np.ldexp(lam[0], exp):.3e} < -{rank_tol:.1e}·‖W‖ "
+            "W", f"is not positive semidefinite: eigenvalue {np.ldexp(lowest, exp):.3e} < -{rank_tol:.1e}·‖W‖ "
                  f"(‖W‖ = {norm:.3e})",
             fix="a Delassus matrix W = H M⁻¹ Hᵀ is PSD; check the data or pass a larger rank_tol")
     keep = lam > keep_tol * norm_s
-    lam = np.ldexp(lam, exp)
-    H = (V[:, keep] * np.sqrt(lam[keep])).T  # m × dim
+    kept = np.flatnonzero(keep)
+    scale = np.sqrt(np.ldexp(lam[kept], exp))
+    # Row k of H is sqrt(λ_k)·v_kᵀ, nonzero only on its block's columns.
+    entry = np.isin(rows, kept)
+    new_row = np.searchsorted(kept, rows[entry])
+    H = sp.csr_matrix((vecs[entry] * scale[new_row], (new_row, cols[entry])), shape=(kept.size, dim))
     m = H.shape[0]
-    report = LiftReport(rank=int(m), dropped=int(dim - m), min_eigenvalue=float(lam[0]),
-                        max_eigenvalue=float(lam[-1]), rank_tol=float(keep_tol),
+    report = LiftReport(rank=int(m), dropped=int(dim - m), min_eigenvalue=float(np.ldexp(lowest, exp)),
+                        max_eigenvalue=float(np.ldexp(lam.max(), exp)), rank_tol=float(keep_tol),
                         asymmetry=asymmetry, asymmetry_normwise=normwise,
                         asymmetry_at=None if at is None else list(at))
     return H, report
+
+
+def _blockwise_eigh(Ws: np.ndarray, *, abs_norm: bool = False):
+    """Eigenpairs of the symmetric ``Ws`` (dim × dim) block by block: the connected components of
+    its sparsity graph, each a dense ``eigh`` (components of one size in one stacked call).  A
+    Delassus matrix couples only contacts that share a body (Siconos's local files of separate
+    piles have dozens of components), so the factor stays as sparse as W's blocks, and the same
+    eigenpairs as one dense ``eigh`` of the whole (the matrix is block diagonal up to a
+    permutation).  Returns (λ, entries, eigenpair index, column) with λ (dim,) and the
+    eigenvector entries as coordinates: entry e belongs to eigenpair ``rows[e]`` at column
+    ``cols[e]``, and ‖|Ws|‖₂ (the largest over the blocks) where ``abs_norm``, else None."""
+    from scipy.sparse.csgraph import connected_components
+
+    dim = Ws.shape[0]
+    _, label = connected_components(sp.csr_matrix(Ws != 0), directed=False)
+    order = np.argsort(label, kind="stable")
+    size = np.bincount(label)
+    lam, vecs, rows, cols = [], [], [], []
+    first, norm_abs = 0, 0.0
+    members = np.split(order, np.cumsum(size)[:-1])  # each component's rows, in label order
+    for s in np.unique(size):
+        group = np.array([idx for idx in members if idx.size == s])  # (count, s)
+        blocks = Ws[group[:, :, None], group[:, None, :]]  # (count, s, s)
+        w, V = np.linalg.eigh(blocks)  # V[c, :, j]: eigenvector j of block c
+        if abs_norm:
+            norm_abs = max(norm_abs, float(np.abs(np.linalg.eigvalsh(np.abs(blocks))).max()))
+        count = group.shape[0]
+        pair = first + np.arange(count * s).reshape(count, s)  # eigenpair index of (c, j)
+        lam.append(w.ravel())
+        vecs.append(V.transpose(0, 2, 1).ravel())  # (c, j, i) order: eigenvector j's entries
+        rows.append(np.repeat(pair.ravel(), s))
+        cols.append(np.repeat(group, s, axis=0).ravel())
+        first += count * s
+    assert first == dim
+    return (np.concatenate(lam), np.concatenate(vecs), np.concatenate(rows).astype(np.int64),
+            np.concatenate(cols).astype(np.int64), norm_abs if abs_norm else None)

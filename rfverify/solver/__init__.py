@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import numpy as np
@@ -10,7 +11,7 @@ import scipy.sparse as sp
 
 from ..compilation import compile_seconds
 from ..model.lifting import KIND_NAMES
-from ..model.measures import Arithmetic, MeasureData, data_scales_from_arrays, measures
+from ..model.measures import Arithmetic, MeasureData, data_scales, data_scales_from_arrays, measures
 from ..model.problem import SPACEDIM, Problem
 from .cones import ProductCone
 from .presolve import presolve
@@ -328,6 +329,10 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
     r_t = np.zeros(lp.nk, dtype=np.longdouble)
     z = np.zeros(lp.nz, dtype=np.longdouble)
     runs = []
+    judges = [component_judge(problem, lp, dofs, rows, settings) for dofs, rows, *_ in groups]
+    share = complementarity_share(problem, judges)
+    for judge in judges:
+        judge.share = share
     for index, (dofs, rows, zidx, cone_ids, n_c) in enumerate(groups):
         n3_c = int(np.sum(cone_ids < lp.n3))
         cones = ProductCone(n3_c, cone_ids.size - n3_c, compiled=settings.compiled_kernels)
@@ -340,7 +345,7 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
 
         out = ipm.run(M[dofs][:, dofs].tocsc(), problem.f[dofs], lp.H_t[rows][:, dofs].tocsr(),
                       lp.w_t[rows], lp.J[rows][:, zidx].tocsr(), cones, n_c, method, settings,
-                      judge=component_judge(problem, lp, dofs, rows, settings), describe_cone=describe,
+                      judge=judges[index], describe_cone=describe,
                       keep_iterates=keep_iterates, callback=callback, component=index, t0=t0,
                       printer=printer, M_eq=problem.M[dofs][:, dofs].tocsc() if problem.as_stored else None)
         v[dofs] = out.v
@@ -455,11 +460,15 @@ _SEVERITY = [Status.SOLVED, Status.ALMOST_SOLVED, Status.MAX_ITERATIONS, Status.
              Status.INSUFFICIENT_PROGRESS, Status.NUMERICAL_ERROR]
 
 
-def component_judge(problem, lp, dofs, rows, settings):
+def component_judge(problem, lp, dofs, rows, settings, share: float = 1.0):
     """``judge(v, r̃)`` for one independent component: the measures of
     :mod:`rfverify.model.measures` on the component's data in the original variables (u = Hᵀv + w,
-    r = P r̃, as returned: in float64), evaluated in the solver's residual precision.  With ∞-norm measures, every component
-    meeting tol implies the whole problem does (numerators are maxima, denominators grow)."""
+    r = P r̃, as returned: in float64), evaluated in the solver's residual precision.  Every
+    ∞-norm measure of the whole problem is at most the largest of its components' (numerators
+    are maxima, denominators grow); the complementarity |rᵀu|/E is not — its numerator sums
+    over the components — so a component's is multiplied by ``share`` = ΣE_c/E
+    (:func:`complementarity_share`): every component meeting tol then implies the whole problem
+    does.  ``judge.energy`` is the component's E_c."""
     contacts = np.unique(lp.keep[rows] // SPACEDIM)
     cols = (SPACEDIM * contacts[:, None] + np.arange(SPACEDIM)).ravel()
     M_c = problem.M_eq[dofs][:, dofs].tocsc()
@@ -484,6 +493,21 @@ def component_judge(problem, lp, dofs, rows, settings):
         v64 = np.asarray(v, dtype=np.float64)
         r = np.zeros(cols.size)
         r[local] = scale * np.asarray(r_t, dtype=np.float64)
-        return data[dtype].measures(v64, HT64 @ v64 + w_c, r)
+        out = data[dtype].measures(v64, HT64 @ v64 + w_c, r)
+        return out if judge.share == 1.0 else dataclasses.replace(out, complementarity=out.complementarity * judge.share)
 
+    judge.energy = scales.energy
+    judge.share = float(share)
     return judge
+
+
+def complementarity_share(problem: Problem, judges) -> float:
+    """ΣE_c / E (at least 1) for the components' judges: E_c each one's energy scale, E the whole
+    problem's.  E ≤ ΣE_c (fᵀM⁻¹f adds over the components; ‖w‖²/max W̃_kk is at most the
+    largest component's), so a component held to |r_cᵀu_c| ≤ tol·E_c/share gives
+    Σ|r_cᵀu_c| ≤ tol·E."""
+    if len(judges) < 2:
+        return 1.0
+    whole = data_scales(problem).energy
+    total = float(sum(j.energy for j in judges))
+    return max(1.0, total / whole) if whole > 0 and math.isfinite(total) else 1.0
