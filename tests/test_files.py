@@ -197,12 +197,12 @@ def test_other_fclib_kind_is_refused(tmp_path):
 
 
 @pytest.mark.parametrize("mutate, expect", [
-    (lambda t: t.replace("5\n1\n0", "3\n1\n0", 1), "dimension d = 3"),
+    (lambda t: t.replace("5\n1\n0", "3\n1\n0", 1), r"W is 5×5, expected 3×3 \(3nc × 3nc\)"),  # d = 3: FC3D
     (lambda t: "\n".join(t.splitlines()[:-1]), "short"),
     (lambda t: t + "\n1.0\n", "unexpected numbers"),
     (lambda t: t.replace("5\t5", "5\t4", 1), "dense header"),
     (lambda t: t.replace("1.000000000000000000000000e+00", "1.0x", 1), "not a number"),
-    (lambda t: t.replace("5\n1\n0", "5\n1\n1", 1), "sparse-block"),
+    (lambda t: t.replace("5\n1\n0", "5\n1\n1", 1), "expected the number of blocks of first matrix"),
 ])
 def test_broken_dat_files(real_data, tmp_path, mutate, expect):
     text = (real_data / "RFC3D_sphere_1.dat").read_text()

@@ -35,7 +35,7 @@ def exit_codes(success: str, failure: str | None = None, extra: str = "") -> str
     return "Exit codes: " + "; ".join(codes) + (f"; {extra}" if extra else "") + "."
 
 PROBLEM_HELP = ("problem file: FCLIB .hdf5 (fclib_global_rolling, fclib_global, fclib_local) or Siconos "
-                ".dat (a local problem is solved through its lifting to global form and proven on its own "
+                ".dat (RFC3D/GRFC3D rolling, FC3D/GFC3D 3-D Coulomb; a local problem is solved through its lifting to global form and proven on its own "
                 "W), or bundled:NAME for a problem shipped with rfverify "
                 "(bundled:chute, bundled:chute-dat, bundled:sphere, bundled:cube, "
                 "bundled:sphere-from-global)")

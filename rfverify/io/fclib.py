@@ -141,7 +141,7 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
         Matrix storage; a dict may give one per matrix (``{"M": "csc", "H": "triplet"}``;
         ``{"W": ...}`` for a local problem).
         Defaults to the format the problem was read in (``"csc"`` for problems built in memory;
-        ``"dense"`` sources are written as ``"csc"``).
+        ``"dense"`` and Siconos ``"sparse-block"`` sources are written as ``"csc"``).
     extra : callable, optional
         ``extra(h5py_file)`` writes more groups (a ``/certificate``) into the temporary file
         before it is renamed into place, so the whole file appears at once.
@@ -168,7 +168,7 @@ def write_fclib(problem: Problem, path, *, storage: dict | str | None = None,
     for name in (("W",) if layout == LOCAL else ("M", "H")):
         fmt = storage.get(name) if isinstance(storage, dict) else storage
         fmt = fmt or problem.storage.get(name, "csc")
-        if fmt == "dense":
+        if fmt in ("dense", "sparse-block"):  # a .dat file's storages, which FCLIB does not have
             fmt = "csc"
         if fmt not in STORAGE_FORMATS:
             raise InvalidArgumentError("storage", f"for {name}: {fmt!r} is not one of {STORAGE_FORMATS}",

@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError, InvalidProblemError, ProblemFileError
-from ..model.problem import SPACEDIM, Problem, StoredSolution, make_local_form
+from ..model.problem import DEFAULT_MAX_ASYMMETRY, SPACEDIM, Problem, StoredSolution, make_local_form
 from ._hdf5 import (check_mass_declaration, h5py_module, matrix_meta, member, read_guesses, read_info, read_matrix,
                     read_scalar_int,
                     read_solution, read_vector, write_matrix, write_solution_arrays)
@@ -203,7 +203,7 @@ def read_group(fh, root: str, path, max_asymmetry: float, ignored: list) -> Prob
     return _read_local(fh, g, path, max_asymmetry, ignored)
 
 
-def _provenance(root: str, ignored: list) -> dict:
+def provenance_3d(root: str, ignored: list) -> dict:
     prov = {"format": root, "spacedim": FILE_SPACEDIM, "relaxation": RELAXATION, "mu_r": MU_R,
             "embedding": EMBEDDING}
     if ignored:
@@ -285,10 +285,20 @@ def _read_global(fh, g, path, max_asymmetry, ignored) -> Problem:
     H3, H_fmt = read_matrix(H_meta, path)
     title, description, math_info = read_info(g, path)
     solution, guesses = _read_solutions(fh, path, m=m, n=n, local_H=None)
-    problem = Problem.from_arrays(
-        M, embed_columns(H3), f, embed(w, n), mu, np.zeros(n), title=title, description=description,
-        math_info=math_info, solution=solution, guesses=guesses, storage={"M": M_fmt, "H": H_fmt},
-        max_asymmetry=max_asymmetry, source=str(path), provenance=_provenance(GLOBAL, ignored))
+    return global_3d_problem(M, H3, f, w, mu, title=title, description=description, math_info=math_info,
+                             solution=solution, guesses=guesses, storage={"M": M_fmt, "H": H_fmt},
+                             max_asymmetry=max_asymmetry, source=str(path), provenance=provenance_3d(GLOBAL, ignored))
+
+
+def global_3d_problem(M, H3, f, w3, mu, *, provenance: dict, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY,
+                      **fields) -> Problem:
+    """The rolling-layout :class:`Problem` of a 3-D global Coulomb problem M v = H r + f,
+    u = Hᵀv + w (H m × 3n, w 3n: N, T1, T2 per contact): zero rolling columns, μr = 0.
+    ``provenance`` (as :func:`_provenance` makes it) says so; ``fields`` go to
+    :meth:`Problem.from_arrays` (title, source, storage, ...)."""
+    n = np.asarray(mu).size
+    problem = Problem.from_arrays(M, embed_columns(H3), f, embed(w3, n), mu, np.zeros(n),
+                                  max_asymmetry=max_asymmetry, provenance=provenance, **fields)
     problem.provenance["symmetrised"] = symmetrised(problem)
     return problem
 
@@ -323,24 +333,36 @@ def _read_local(fh, g, path, max_asymmetry, ignored) -> Problem:
     title, description, math_info = read_info(g, path)
     check_finite("q", q)
     check_finite("mu", mu)
-    H3, report = factor_delassus(W.toarray(), rank_tol=None, max_asymmetry=max_asymmetry)
+    return local_3d_problem(W, q, mu, W_fmt, provenance=provenance_3d(LOCAL, ignored), max_asymmetry=max_asymmetry,
+                            solutions=lambda H: _read_solutions(fh, path, m=H.shape[0], n=n, local_H=H),
+                            title=title, description=description, math_info=math_info, source=str(path))
+
+
+def local_3d_problem(W, q, mu, W_fmt: str, *, provenance: dict, max_asymmetry: float = DEFAULT_MAX_ASYMMETRY,
+                     significant_digits: int | None = None, solutions=None, **fields) -> Problem:
+    """The rolling-layout :class:`Problem` of a 3-D local Coulomb problem u = W r + q (W 3n × 3n,
+    sparse or dense; q 3n): lifted (:func:`factor_delassus`: M = I, W = HᵀH, f = 0, w = q) with
+    zero rolling columns, μr = 0, the raw W and q kept (``native``, to write them back) and the
+    file's own W for the extended phase and the proof (``local``).  ``solutions(H)`` gives the
+    file's (solution, guesses) for the lifted H; ``fields`` go to :meth:`Problem.from_arrays`."""
+    n = np.asarray(mu).size
+    H3, report = factor_delassus(sp.csc_matrix(W).toarray(), significant_digits=significant_digits,
+                                 rank_tol=None, max_asymmetry=max_asymmetry)
     H = embed_columns(sp.csc_matrix(H3))
     m = H.shape[0]
-    solution, guesses = _read_solutions(fh, path, m=m, n=n, local_H=H)
-    prov = _provenance(LOCAL, ignored)
-    prov["lifted"] = {"method": LIFTING, "W_size": int(W_meta["m"]), **dataclasses.asdict(report)}
+    solution, guesses = (None, []) if solutions is None else solutions(H)
+    provenance["lifted"] = {"method": LIFTING, "W_size": int(W.shape[0]), **dataclasses.asdict(report)}
     problem = Problem.from_arrays(
-        sp.identity(m, format="csc"), H, np.zeros(m), embed(q, n), mu, np.zeros(n), title=title,
-        description=description, math_info=math_info, solution=solution, guesses=guesses,
-        storage={"W": W_fmt}, max_asymmetry=max_asymmetry, source=str(path), provenance=prov)
+        sp.identity(m, format="csc"), H, np.zeros(m), embed(q, n), mu, np.zeros(n), solution=solution,
+        guesses=guesses, storage={"W": W_fmt}, max_asymmetry=max_asymmetry, provenance=provenance, **fields)
     problem.provenance["symmetrised"] = symmetrised(problem)
     Wf = sp.csc_matrix(W, copy=True)
     for arr in (Wf.data, Wf.indices, Wf.indptr):
         arr.setflags(write=False)
-    qf = q.copy()
+    qf = np.array(q, dtype=np.float64)
     qf.setflags(write=False)
     return dataclasses.replace(problem, native=LocalData(W=Wf, q=qf, storage=W_fmt),
-                               local=make_local_form(embed_square(W), embed(q, n)))
+                               local=make_local_form(embed_square(W), embed(q, n), significant_digits))
 
 
 def _read_solutions(fh, path, *, m: int, n: int, local_H):
@@ -426,7 +448,7 @@ def convert_for_file(layout: str, solution: StoredSolution) -> dict:
 __all__ = ["GLOBAL", "LOCAL", "ROLLING", "FILE_SPACEDIM", "LocalData", "embed", "extract",
            "embed_columns", "extract_columns", "file_layout", "solution_datasets", "convert_for_file",
            "detect_layout", "solution_attributes", "symmetrised", "describe_symmetrised", "read_group",
-           "write_group"]
+           "write_group", "global_3d_problem", "local_3d_problem", "provenance_3d"]
 
 
 def write_info_and_solutions(fh, g, problem, write_solution) -> None:

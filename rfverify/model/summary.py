@@ -23,7 +23,7 @@ def problem_summary(problem, *, solution_tol: float = 1e-6, max_asymmetry: float
         "title": problem.title,
         "description": problem.description.strip(),
         "source": problem.source,
-        "format": problem.provenance.get("format", "fclib-hdf5"),
+        "format": "siconos-dat" if "read_from" in problem.provenance else problem.provenance.get("format", "fclib-hdf5"),
         "storage": dict(problem.storage),
         "m": problem.n_dofs,
         "n": problem.n_contacts,
@@ -60,11 +60,15 @@ def problem_summary(problem, *, solution_tol: float = 1e-6, max_asymmetry: float
         summary["spacedim"] = pv["spacedim"]
         summary["internal_spacedim"] = problem.spacedim
         summary["file"] = {k: pv[k] for k in ("format", "spacedim", "relaxation", "mu_r", "embedding")}
+        if "read_from" in pv:  # a Siconos 3-D .dat file, read as the FCLIB group of its kind
+            summary["file"]["read_from"] = pv["read_from"]
         summary["file"]["solution_layout"] = SOLUTION_LAYOUT[layout]
         if "lifted" in pv:
             summary["file"]["lifted"] = pv["lifted"]
     if problem.provenance.get("ignored_groups"):
         summary["ignored_groups"] = list(problem.provenance["ignored_groups"])
+    if problem.provenance.get("ignored"):
+        summary["ignored_lines"] = list(problem.provenance["ignored"])
     if "significant_digits" in problem.provenance:
         summary["significant_digits"] = problem.provenance["significant_digits"]
     if "lift" in problem.provenance:
@@ -92,7 +96,8 @@ def format_summary(s: dict) -> str:
         + ", ".join(f"{k} {v}" for k, v in s["storage"].items()) + ")")
     fl = s.get("file")
     if fl:
-        add(f"file       3-D Coulomb friction (/{fl['format']}, spacedim {fl['spacedim']}, 3 per contact): "
+        origin = f"{fl['read_from']} .dat, d = 3" if fl.get("read_from") else f"/{fl['format']}, spacedim {fl['spacedim']}"
+        add(f"file       3-D Coulomb friction ({origin}, 3 per contact): "
             f"solved as its convex relaxation (De Saxcé term dropped), embedded in the rolling "
             f"layout with mu_r = 0 and zero rolling rows")
         add(f"           solutions are written back as {fl['solution_layout'].split(': ', 1)[1]}")
@@ -106,6 +111,8 @@ def format_summary(s: dict) -> str:
     if s.get("ignored_groups"):
         add(f"ignored    {', '.join(s['ignored_groups'])}: the file holds several problem groups; "
             f"read the first of /fclib_global_rolling, /fclib_global, /fclib_local")
+    for note in s.get("ignored_lines", []):
+        add(f"ignored    {note}")
     if s.get("significant_digits"):
         add(f"precision  matrices printed with {s['significant_digits']} significant digits")
     if s.get("lifted_from_local"):
