@@ -29,6 +29,7 @@ _HOMES = {
     "Problem": ".model.problem", "StoredSolution": ".model.problem", "SolutionCheck": ".model.check",
     "Certificate": ".verify.certificate", "Diagnosis": ".verify.diagnosis",
     "DigitsSolution": ".verify.digits", "SolveResult": ".solver", "Settings": ".solver", "Status": ".solver",
+    "shift_to_psd": ".proof.psd_shift",
 }
 _POSED = {"solve": "solve_coulomb", "solve_to_digits": "coulomb_to_digits", "certify": "certify_coulomb"}
 """Entry points that also take ``problem="coulomb"``: the physical problem's function (:func:`_posing`)."""
@@ -130,6 +131,6 @@ __all__ = [
     "SolutionCheck", "RfverifyError", "InvalidProblemError", "ProblemFileError",
     "InvalidArgumentError", "OutputPathError",
     "ConeDomainError", "DataWarning", "__version__", "solve", "SolveResult", "Settings", "Status",
-    "certify",
+    "certify", "shift_to_psd",
     "solve_to_digits", "DigitsSolution", "diagnose", "Diagnosis", "Certificate",
 ]

@@ -7,7 +7,8 @@ import numpy as np
 from .coulomb import add_problem_option, certify_physical
 from .argtypes import digit_count, out_path, positive_float, positive_int
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, dumps, end_problem_command, exit_codes,
-                     is_hdf5_input, load_problem, print_quantities, progress_printer, require_same_problem)
+                     is_hdf5_input, load_problem, print_quantities, progress_printer, require_same_problem,
+                     same_problem)
 
 HELP = "prove how many digits of a solution are right (a rigorous error bound)"
 
@@ -75,8 +76,16 @@ def cmd_certify(args) -> int:
     point = stored = None
     if args.solution:
         other = load(args.solution, max_asymmetry=np.inf)
-        require_same_problem(problem, other, args.solution)
         sol = other.solution
+        if "psd_shift" in problem.provenance and not same_problem(problem, other):
+            # an FCLIB local file's solution file holds the file's W (its v is W's lifting's); a
+            # .dat file's holds the lifting of W + D itself, the case above
+            from ..proof.psd_shift import relifted
+
+            require_same_problem(load(args.problem, max_asymmetry=np.inf), other, args.solution)
+            sol = relifted(sol, problem.H)
+        else:
+            require_same_problem(problem, other, args.solution)
         where = args.solution
         point = read_point(_resolve(args.solution))
         stored = read_stored_certificate(_resolve(args.solution), problem)

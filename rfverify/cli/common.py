@@ -70,22 +70,36 @@ def add_run_limits(p: argparse.ArgumentParser, *, tol_help: str, max_iter_help: 
     p.add_argument("--max-iter", type=positive_int, default=100, metavar="K", help=max_iter_help)
 
 
+PSD_SHIFT_HELP = ("for a local file whose W is not positive semidefinite as stored (rounding in Siconos's "
+                  "W = H M⁻¹ Hᵀ; nothing about such a file can be proven): solve and prove W + D instead, D ≥ 0 "
+                  "diagonal (the smallest power of two, from about 4·|λmin(W)|, that a verified test proves "
+                  "enough; refused above 1e-8·‖W‖). Every claim then names W + D, and a solution (u, r) of it "
+                  "solves the file's W exactly for q + D r: a backward error, which --problem coulomb adds to "
+                  "its bound. Nothing changes for a W that is PSD as stored")
+
+
 def end_problem_command(p: argparse.ArgumentParser, func, check_outputs) -> None:
     """What a command that poses a problem's equations ends with (solve, certify): ``--as-stored``,
-    the load options, and the functions that check its outputs and run it."""
+    ``--psd-shift``, the load options, and the functions that check its outputs and run it."""
     add_equations_option(p)
+    p.add_argument("--psd-shift", action="store_true", help=PSD_SHIFT_HELP)
     add_load_options(p)
     p.set_defaults(func=func, check_outputs=check_outputs)
 
 
 def load_problem(args):
-    """The PROBLEM argument loaded with the load options, posing the equations ``--as-stored``
-    asks for (where the command has that option)."""
+    """The PROBLEM argument loaded with the load options, its W shifted where ``--psd-shift`` asks
+    (:func:`rfverify.proof.psd_shift.shift_to_psd`), posing the equations ``--as-stored`` asks for
+    (where the command has those options)."""
     from ..io import load
     from ..model.problem import DEFAULT_MAX_ASYMMETRY
 
     limit = DEFAULT_MAX_ASYMMETRY if args.max_asymmetry is None else args.max_asymmetry
     problem = load(args.problem, max_asymmetry=limit)
+    if getattr(args, "psd_shift", False):
+        from ..proof.psd_shift import shift_to_psd
+
+        problem = shift_to_psd(problem)
     if getattr(args, "as_stored", False):
         from ..solver import posed
 
@@ -207,16 +221,20 @@ def is_hdf5_input(spec) -> bool:
         return False
 
 
-def require_same_problem(problem, other, path):
-    """A solution is only certified against the problem it was computed for."""
+def same_problem(problem, other) -> bool:
+    """True when the two problems have the same M, H, f, w, mu and mu_r, exactly."""
     import numpy as np
 
-    from ..errors import InvalidProblemError
-
-    same = (problem.M.shape == other.M.shape and problem.H.shape == other.H.shape
+    return (problem.M.shape == other.M.shape and problem.H.shape == other.H.shape
             and all(np.array_equal(getattr(problem, k), getattr(other, k)) for k in ("f", "w", "mu", "mu_r"))
             and (problem.M != other.M).nnz == 0 and (problem.H != other.H).nnz == 0)
-    if not same:
+
+
+def require_same_problem(problem, other, path):
+    """A solution is only certified against the problem it was computed for."""
+    from ..errors import InvalidProblemError
+
+    if not same_problem(problem, other):
         raise InvalidProblemError(
             "solution", f"{path} holds a different problem (m = {other.n_dofs}, n = {other.n_contacts} "
                         f"vs m = {problem.n_dofs}, n = {problem.n_contacts}, or different data)",

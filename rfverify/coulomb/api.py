@@ -107,7 +107,8 @@ def coulomb_certificate(problem: Problem, shifted: Problem, inner_cert, v, u_inn
     proof = inner_cert.proof
     valid = proof is not None and proof.valid
     e_u = proof.quantities["u"].abs_bound if valid else math.inf
-    be = backward_bound(problem, shifted, u_inner, e_u, scale_dict["u"], scale_name)
+    be = backward_bound(problem, shifted, u_inner, e_u, scale_dict["u"], scale_name,
+                        **_psd_terms(problem, proof if valid else None, r))
     if valid:
         quantities = physical_quantities(problem, shifted, proof, u_phys, u_inner, scale_dict, digits, relative)
     else:
@@ -180,6 +181,21 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
                          rounds=rounds, proven=proven,
                          timings={"outer": t_outer, "proven": time.perf_counter() - t0 - t_outer,
                                   "total": time.perf_counter() - t0})
+
+
+def _psd_terms(problem: Problem, proof, r) -> dict:
+    """``diag_shift`` and ``r_upper`` of :func:`.backward.backward_bound` where the local W was
+    shifted (``--psd-shift``): max_k D_kk and ‖r*_i‖∞ ≤ ‖r̂_i‖∞ + the proof's bound on r (inf
+    where the proof bounds no r)."""
+    shift = problem.provenance.get("psd_shift")
+    if not shift:
+        return {}
+    q_r = None if proof is None else proof.quantities.get("r")
+    e_r = q_r.abs_bound if q_r is not None else math.inf  # an "information" r may still be bounded
+    if not math.isfinite(e_r):  # (nan too: no bound)
+        return {"diag_shift": float(shift["largest_change"]), "r_upper": None}
+    R = np.abs(np.asarray(r, dtype=np.float64)).reshape(-1, 5).max(axis=1)
+    return {"diag_shift": float(shift["largest_change"]), "r_upper": np.nextafter(R + e_r, math.inf)}
 
 
 def _better(a: CoulombCertificate, b: CoulombCertificate) -> bool:

@@ -60,18 +60,22 @@ class BackwardError:
     proof_part: float
     proven: bool
     note: str = ""
+    psd_part: float = 0.0
+    """max_i of D_max·‖r*_i‖∞ where the local W was shifted to W + D (``--psd-shift``): the solution
+    of W + D with data q solves the file's W with q + D r*, so that change is part of δ; else 0."""
 
     def describe(self) -> str:
         if not self.proven:
             return f"backward error not proven ({self.note})"
+        psd = f" + W's diagonal shift D r* {self.psd_part:.1e}" if self.psd_part else ""
         return (f"backward error |δ| ≤ {self.absolute:.2e} (relative {self.relative:.1e} of the data scale "
                 f"{self.scale_name} = {self.scale:.2e}; fixed point {self.fixed_point_part:.1e} + inner proof "
-                f"{self.proof_part:.1e})")
+                f"{self.proof_part:.1e}{psd})")
 
     def as_dict(self) -> dict:
         return {"absolute": self.absolute, "relative": self.relative, "scale": self.scale,
                 "scale_name": self.scale_name, "fixed_point_part": self.fixed_point_part,
-                "proof_part": self.proof_part, "proven": self.proven, "note": self.note,
+                "proof_part": self.proof_part, "psd_part": self.psd_part, "proven": self.proven, "note": self.note,
                 "worst_contact": int(np.argmax(self.delta)) if self.delta.size else None}
 
 
@@ -95,10 +99,11 @@ def phi_bounds(problem: Problem, u) -> tuple[np.ndarray, np.ndarray]:
 
 
 def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scale: float,
-                   scale_name: str) -> BackwardError:
+                   scale_name: str, *, diag_shift: float = 0.0, r_upper=None) -> BackwardError:
     """The :class:`BackwardError` of the answer whose shifted u is ``u_inner`` (5n,), with
     ``e_u`` ≥ ‖u_inner − u'*‖∞ from the inner proof and ``scale`` a proven lower bound of the
-    data scale of u."""
+    data scale of u.  ``diag_shift`` ≥ max_k D_kk where the local W was shifted to W + D, with
+    ``r_upper`` (n,) ≥ ‖r*_i‖∞ per contact: each contact's data change then also holds D r*_i."""
     n = problem.n_contacts
     if not (e_u >= 0 and math.isfinite(e_u)) or not np.all(np.isfinite(u_inner)):
         inf = np.full(n, math.inf)
@@ -113,6 +118,10 @@ def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scal
         e_vec = _up(SQRT2_UP * e_u)
         lip = _up(_up(problem.mu * e_vec) + _up(problem.mu_r * e_vec)) if e_u > 0 else np.zeros(n)
         delta = _up(fixed + lip)
+        psd = np.zeros(n)
+        if diag_shift:
+            psd = np.full(n, math.inf) if r_upper is None else _up(diag_shift * np.asarray(r_upper, dtype=np.float64))
+            delta = _up(delta + psd)
     absolute = float(np.max(delta, initial=0.0))
     if scale > 0:
         relative = float(_up(absolute / scale))
@@ -120,7 +129,8 @@ def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scal
         relative = 0.0 if absolute == 0 else math.inf
     proven = bool(np.all(np.isfinite(delta)))
     return BackwardError(delta, absolute, relative, scale, scale_name, float(np.max(fixed, initial=0.0)),
-                         float(np.max(lip, initial=0.0)), proven, "" if proven else "a bound overflowed")
+                         float(np.max(lip, initial=0.0)), proven, "" if proven else "a bound overflowed (or r* is "
+                         "not bounded where W was shifted)", psd_part=float(np.max(psd, initial=0.0)))
 
 
 def physical_u_bound(problem: Problem, shifted: Problem, u_phys, u_inner, e_u: float) -> np.ndarray:

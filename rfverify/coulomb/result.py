@@ -16,8 +16,8 @@ from .backward import BackwardError
 STATEMENT = ("the physical problem (Coulomb friction and rolling resistance with De Saxcé's term "
              "μ‖u_T‖ + μr‖u_R‖ added to u_N)")
 NOT_UNIQUE = ("Solutions of the physical problem need not be unique: this is a backward-error certificate "
-              "— the exact solution it names solves the physical problem exactly for data whose w_N "
-              "differs from the file's by δ, not necessarily the file's own (any other) solution")
+              "— the exact solution it names solves the physical problem exactly for data that differ from "
+              "the file's by δ, not necessarily the file's own (any other) solution")
 
 
 @dataclass
@@ -92,8 +92,10 @@ def coulomb_verdict(requested: int, quantities: dict, backward: BackwardError, i
                 f"{backward.relative:.1e} exceeds 1e-{requested}")
     else:
         head = f"not proven to {requested} digits: {', '.join(bad)} short ({', '.join(parts)})"
-    text = (f"{head} against the exact solution of {STATEMENT} for data whose w_N differs from the file's by δ, "
-            f"{backward.describe()}. {NOT_UNIQUE}.")
+    data = ("for the file's W and data q differing from the file's by δ e_N + D r* (D the diagonal added to W, "
+            "which as stored is not positive semidefinite)" if backward.psd_part
+            else "for data whose w_N differs from the file's by δ")
+    text = f"{head} against the exact solution of {STATEMENT} {data}, {backward.describe()}. {NOT_UNIQUE}."
     return digits_ok and be_ok, text
 
 

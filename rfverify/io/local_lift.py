@@ -188,6 +188,14 @@ def factor_delassus(W, *, significant_digits: int | None = None, rank_tol: float
     return H, report
 
 
+def eigenvalue_range(W) -> tuple[float, float]:
+    """(smallest, largest) eigenvalue of (W + Wᵀ)/2 (W square, dense or sparse), computed in
+    float64 block by block (:func:`_blockwise_eigh`): an estimate, not a bound."""
+    W = np.asarray(sp.csr_matrix(W).toarray() if sp.issparse(W) else W, dtype=np.float64)
+    lam = _blockwise_eigh(0.5 * (W + W.T))[0]
+    return float(lam.min(initial=0.0)), float(lam.max(initial=0.0))
+
+
 def _blockwise_eigh(Ws: np.ndarray, *, abs_norm: bool = False):
     """Eigenpairs of the symmetric ``Ws`` (dim × dim) block by block: the connected components of
     its sparsity graph, each a dense ``eigh`` (components of one size in one stacked call).  A

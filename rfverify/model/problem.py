@@ -102,6 +102,11 @@ def make_local_form(W, q, significant_digits: int | None = None) -> LocalForm:
     return LocalForm(W=freeze_sparse(Wc), q=freeze(qf), significant_digits=significant_digits)
 
 
+PSD_SHIFT_MARK = "D ≥ 0 diagonal"
+"""How a statement names the diagonal D added to a local W that is not PSD as stored
+(:func:`rfverify.proof.psd_shift.shift_to_psd`); a verdict that finds it calls the matrix W + D."""
+
+
 @dataclass(frozen=True)
 class StoredSolution:
     """A solution (or guess) stored in a problem file: v (m,), u (5n,), r (5n,); any may be None."""
@@ -359,14 +364,19 @@ class Problem:
         """The problem every claim about this object is about, in a few words (DESIGN §1, §6.4):
         always the convex relaxation; for a 3-D file, with μr = 0 and De Saxcé's term dropped
         (so not the Coulomb solution); where the stored matrix is unsymmetric, which matrix the
-        equations use."""
+        equations use; where a local W was shifted to be provable (``--psd-shift``), by how much."""
         X = "W" if self.local is not None else "M"
         text = "the convex relaxation"
         if self.provenance.get("spacedim") == 3:
             text += " of the 3-D problem (μr = 0, De Saxcé's term dropped: not the Coulomb solution)"
+        shift = self.provenance.get("psd_shift")
+        why = (f" ({PSD_SHIFT_MARK}, ≤ {shift['largest_change']:.2e} = {shift['relative']:.1e}·‖W‖, added because "
+               "W as stored is not positive semidefinite)") if shift else ""
         if not self.matrix_is_symmetric:
-            text += (f" with {X} as stored (unsymmetric)" if self.equations == "stored"
-                     else f" with ({X} + {X}ᵀ)/2")
+            text += (f" with {X}{' + D' if shift else ''} as stored (unsymmetric){why}" if self.equations == "stored"
+                     else f" with ({X} + {X}ᵀ)/2{' + D' if shift else ''}{why}")
+        elif shift:
+            text += f" with W + D{why}"
         return text
 
     @cached_property

@@ -64,6 +64,10 @@ THEOREM_LOCAL = ("Local problem u = Wr + q with W = (W+W^T)/2 positive semidefin
                  "r bounded through verified lambda_min of W on the contacts that may carry load (DESIGN 6.1b).")
 
 
+PSD_SHIFT_FIX = ("; --psd-shift (Python rfverify.shift_to_psd) proves W + D instead, D ≥ 0 a small diagonal: a "
+                 "backward error of D r on q")
+
+
 @dataclass
 class LocalFacts:
     """What is proven about W once per problem: ``psd`` (True: W ⪰ 0 proven), ``why`` (the
@@ -146,13 +150,14 @@ def prove_psd(W: sp.spmatrix) -> LocalFacts:
         idx = np.asarray(fb.dofs)
         if idx.size > EXACT_PSD_ROWS:
             return LocalFacts(False, f"W is not proven positive semidefinite: a block of {idx.size} rows "
-                                     f"({fb.reason}); the exact test is limited to {EXACT_PSD_ROWS} rows", "", diag)
+                                     f"({fb.reason}); the exact test is limited to {EXACT_PSD_ROWS} rows"
+                                     f"{PSD_SHIFT_FIX}", "", diag)
         verdict = exact_psd(A_raw[idx][:, idx])
         if verdict == "indefinite":
             return LocalFacts(False, f"W = (W + Wᵀ)/2 as stored is not positive semidefinite (exact rational "
                                      f"LDLᵀ of its block of rows {rows[idx][:6].tolist()}"
                                      f"{'…' if idx.size > 6 else ''} has a negative pivot): the local problem "
-                                     "of the file is not convex", "", diag)
+                                     f"of the file is not convex{PSD_SHIFT_FIX}", "", diag)
     return LocalFacts(True, "", "(W + Wᵀ)/2 ⪰ 0 proven: verified floating point on its definite blocks, exact "
                                 "rational LDLᵀ on the others", diag)
 
@@ -248,9 +253,11 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         e_r = upper_sum((Dyadic.from_float(r) - point_r).abs_upper(), np.full(r.size, delta))
         note, r_terms = (f"unique: W definite (verified λmin ≥ {ex.facts.lam_lower:.2e}); u = Wr + q raised into "
                          f"K* by ‖e‖₂ ≤ {e_norm:.1e}"), {}
+    info_only = r_terms.pop(R_INFORMATION_ONLY, False)
     terms.update(r_terms)
-    if e_r is None:
-        q["r"] = QuantityBound("r", math.nan, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
+    if e_r is None or info_only:
+        bound = math.nan if e_r is None else float(np.max(e_r, initial=0.0))
+        q["r"] = QuantityBound("r", bound, float(np.max(np.abs(r), initial=0.0)), 0.0, scales["r"],
                                DATA_SCALE_NAMES_LOCAL["r"], None, "information", False, note)
     else:
         q["r"] = quantity_bound("r", e_r, r, scales, requested, note=note, names=DATA_SCALE_NAMES_LOCAL,
@@ -310,6 +317,25 @@ def _shift_into_dual_cone(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic)
     return u_shift, float(up(np.sqrt(float(up(np.sum(up(tau * tau)) * (1 + 2.0 ** -40))))))
 
 
+R_INFORMATION_ONLY = "r_information_only"
+"""A key of ``_local_r_bound``'s terms: r is bounded but claimed as information only."""
+
+
+def _unique_only_by_the_shift(problem, A) -> str:
+    """Where W was shifted to W + D (``--psd-shift``) and W itself is not proven definite on the
+    possibly loaded contacts (A is W + D there), r* of W + D is unique only through D: its
+    digits would be about the shift, not the file, so r is information (the reason, else "").
+    Either answer is sound (every bound is W + D's); this only decides what is claimed."""
+    shift = problem.provenance.get("psd_shift")
+    if not shift:
+        return ""
+    A0 = sp.csr_matrix(A) - shift["largest_change"] * sp.identity(A.shape[0], format="csr")
+    if verify_mass_matrix(A0).proven:
+        return ""
+    return ("W before its diagonal shift D is not proven definite on the possibly loaded contacts: r* of W + D is "
+            "unique only through D, so r is no quantity of the file; u is")
+
+
 def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyadic, eps: float, r):
     n = problem.n_contacts
     mu, mur = problem.mu, problem.mu_r
@@ -334,6 +360,7 @@ def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyad
     rO = Dyadic(r_O, point_r.exp)
     t = sqrt_upper(max(ex.quad(rO), Fraction(0)))
     radius = 0.0 if eps == 0 and t == 0 else float(up(eps + t))
+    only_by_shift = _unique_only_by_the_shift(problem, A)
     lam = mass.lam_lower[mass.labels]  # per column of the loaded set
     d_r = (Dyadic.from_float(r[cols]) - point_r[cols]).abs_upper()
     # |d_j| ≤ √((W_b⁻¹)_jj)·‖W_b^½ d_b‖ (Cauchy–Schwarz), never more than ‖d_b‖₂ ≤ ‖W_b^½ d_b‖/√λmin(W_b)
@@ -343,4 +370,7 @@ def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyad
     terms.update({"lam_min_W_S_lower": float(np.min(lam)), "W_norm_r_open": t})
     note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), W definite on the other {S.size} "
             f"(verified λmin ≥ {float(np.min(lam)):.2e})")
+    if only_by_shift:  # a bound on W + D's r* (the backward error needs it), but no claim
+        terms[R_INFORMATION_ONLY] = True
+        note = f"{only_by_shift} (W + D's r* is bounded: {note})"
     return e, note, terms

@@ -74,7 +74,9 @@ class QuantityBound:
         or zero within a bound — else None."""
         n = self.name
         if self.mode == "information":
-            return f"{n} not unique", f"{n}: not unique ({self.note}); error bound not available"
+            bound = (f"|error| ≤ {self.abs_bound:.2e}, claimed for no digits" if math.isfinite(self.abs_bound)
+                     else "error bound not available")
+            return f"{n} not unique", f"{n}: not unique ({self.note}); {bound}"
         if self.mode == "absolute" and self.zero_within == 0:
             return f"{n} exactly 0", f"{n}: exactly 0 (the candidate is the solution: error bound 0)"
         if self.mode == "absolute":

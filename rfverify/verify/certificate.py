@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..model.problem import PSD_SHIFT_MARK
 from ..proof import Point, Proof
 from ..solver.result import ResultAliases, Status, alias
 
@@ -178,7 +179,7 @@ def stored_sentence(proof: Proof) -> str:
     st = proof.stored_equations
     if st is None:
         return ""
-    X = "W" if proof.local else "M"
+    X = ("W + D" if PSD_SHIFT_MARK in proof.statement else "W") if proof.local else "M"
     if not st.valid:
         return f". For {X} as stored (unsymmetric) nothing is proven: {st.failure}"
     if st.certified:
