@@ -90,6 +90,13 @@ def test_more_than_rounding_is_refused(tmp_path, capsys):
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1 and "more than rounding" in err
 
 
+def test_info_points_to_the_option_only_where_an_eigenvalue_is_negative(capsys):
+    code, out, _ = run(capsys, "info", "bundled:cube")
+    assert code == 0 and "W may not be positive semidefinite as stored" in out and "--psd-shift" in out
+    code, out, _ = run(capsys, "info", "bundled:sphere")
+    assert code == 0 and "--psd-shift" not in out
+
+
 def test_cli_names_the_fix_then_proves_w_plus_d(capsys):
     code, out, _ = run(capsys, "solve", "bundled:cube", "--digits", "10", "--quiet")
     assert code == 1 and "--psd-shift" in out

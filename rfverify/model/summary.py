@@ -84,6 +84,14 @@ def problem_summary(problem, *, solution_tol: float = 1e-6, max_asymmetry: float
     return summary
 
 
+def _negative_eigenvalue_note(lf: dict, add) -> None:
+    """Where the lifting saw a negative eigenvalue: W may not be PSD as stored (a float64
+    eigenvalue proves nothing either way), and what to do if a proof refuses it."""
+    if lf["min_eigenvalue"] < 0:
+        add("           W may not be positive semidefinite as stored (that eigenvalue is negative in "
+            "floating point); where solve --digits or certify refuses it, --psd-shift proves W + D instead")
+
+
 def format_summary(s: dict) -> str:
     """The text ``rfverify info`` prints for a :func:`problem_summary`."""
     lines = []
@@ -108,6 +116,7 @@ def format_summary(s: dict) -> str:
                 f"≤ {lf['rank_tol']:.1e}·‖W‖ dropped (smallest {lf['min_eigenvalue']:.2e})")
             add("           v of the lifted problem is not a quantity of the file (a stored "
                 "solution's v is recovered as v = H r)")
+            _negative_eigenvalue_note(lf, add)
     if s.get("ignored_groups"):
         add(f"ignored    {', '.join(s['ignored_groups'])}: the file holds several problem groups; "
             f"read the first of /fclib_global_rolling, /fclib_global, /fclib_local")
@@ -119,6 +128,7 @@ def format_summary(s: dict) -> str:
         lf = s["lifted_from_local"]
         add(f"lifted     local problem W = HᵀH: rank {lf['rank']}, {lf['dropped']} eigenvalue(s) "
             f"≤ {lf['rank_tol']:.1e}·‖W‖ dropped (smallest {lf['min_eigenvalue']:.2e})")
+        _negative_eigenvalue_note(lf, add)
     per = (f"3n = {3 * s['n']} in the file, 5n = {5 * s['n']} in the rolling layout" if fl
            else f"5n = {5 * s['n']}")
     add(f"sizes      m = {s['m']} dofs, n = {s['n']} contacts ({per}), "
