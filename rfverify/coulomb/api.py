@@ -18,7 +18,7 @@ from ..proof import ProofContext, validate_digits
 from ..proof.quantity import DATA_SCALE_NAMES, DATA_SCALE_NAMES_LOCAL
 from ..proof.dyadic import Dyadic
 from .backward import backward_bound, physical_quantities
-from .model import PROBLEMS, offsets, phi, physical_residuals, physical_velocity, shifted_problem
+from .model import PROBLEMS, offsets, phi, physical_of_inner, physical_residuals, physical_velocity, shifted_problem
 from .outer import OUTER_TOL, find_shift, fixed_point
 from .result import CoulombCertificate, CoulombDigits, CoulombSolution, coulomb_verdict
 
@@ -157,12 +157,13 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
         left = None if deadline is None else max(deadline - time.perf_counter(), 1e-3)
         sol = solve_to_digits(shifted, digits, method, tol, max_iter, relative=relative, progress=progress,
                               time_limit=left, **options)
+        u_phys = physical_of_inner(problem, shifted, sol.u)
         cert = coulomb_certificate(problem, shifted, sol.certificate, sol.v, sol.u, sol.r, digits, scales, relative,
-                                   extra={"proven_round": len(rounds)})
+                                   u_phys=u_phys, extra={"proven_round": len(rounds)})
         rounds.append({"round": len(rounds), "nit": sol.nit, "inner_status": str(sol.status),
                        "backward_error": cert.backward_error, "fixed_point_part": cert.backward.fixed_point_part,
                        "certified": cert.certified, "seconds": sol.time})
-        certs.append((cert, sol))
+        certs.append((cert, sol, u_phys))
         say(f"proven round {len(rounds) - 1}: {cert.backward.describe()}; inner {sol.status}")
         return sol, sol.u
 
@@ -172,11 +173,10 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
 
     proven = fixed_point(problem, outer=outer, outer_tol=0.0, outer_max_iter=max(1, proven_rounds), start=run.shift,
                          deadline=deadline, evaluate=evaluate, done=done, label="proven round", stall=PROVEN_STALL)
-    cert, sol = certs[0]
-    for c, s_ in certs[1:]:
+    cert, sol, u = certs[0]
+    for c, s_, u_ in certs[1:]:
         if _better(c, cert):
-            cert, sol = c, s_
-    u = physical_velocity(problem, sol.v, sol.r)
+            cert, sol, u = c, s_, u_
     return CoulombDigits(v=sol.v, u=u, r=sol.r, shift=cert.shift, certificate=cert, outer=run, inner=sol,
                          rounds=rounds, proven=proven,
                          timings={"outer": t_outer, "proven": time.perf_counter() - t0 - t_outer,

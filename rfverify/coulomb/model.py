@@ -39,6 +39,16 @@ def offsets(problem: Problem) -> np.ndarray:
     return np.asarray(problem.local.q if problem.local is not None else problem.w, dtype=np.float64)
 
 
+def physical_of_inner(problem: Problem, shifted: Problem, u_inner) -> np.ndarray:
+    """The physical u of an inner answer: u_inner − ŝ e_N exactly (ŝ = w'_N − w_N), rounded once
+    to float64 (5n,).  Closer to u* than :func:`physical_velocity` of the rounded r or v, whose
+    rounding W·(r − r̂) is of order u·‖W‖‖r‖ where u itself may be many orders smaller."""
+    from ..proof.dyadic import Dyadic
+
+    return (Dyadic.from_float(u_inner) - Dyadic.from_float(offsets(shifted))
+            + Dyadic.from_float(offsets(problem))).nearest()
+
+
 def shifted_problem(problem: Problem, s) -> Problem:
     """``problem`` with w_N + s (and q_N + s for a local file), each sum rounded once to float64;
     every other datum, the equations posed and the provenance are the problem's own.  The

@@ -66,6 +66,16 @@ def gamma(k: int) -> float:
     return 2.0 * k * U / (1.0 - 2.0 * k * U)
 
 
+U_LONG = float(np.finfo(np.longdouble).eps) / 2
+"""Unit roundoff of numpy's long double (2⁻⁶⁴ on x86, = U where it is a double)."""
+HAS_LONG_DOUBLE = U_LONG <= U * 2.0 ** -8
+
+
+def gamma_long(k: int) -> float:
+    """γ_k for long-double arithmetic, rounded up generously (a float64 bound)."""
+    return 2.0 * k * U_LONG / (1.0 - 2.0 * k * U_LONG)
+
+
 def inflate(x, k: int):
     """x (≥ 0, computed with k roundings) times 1 + 8(k+4)u: a rigorous upper bound."""
     return np.nextafter(np.asarray(x, dtype=np.float64) * (1.0 + 8.0 * (k + 4) * U), np.inf)
@@ -291,13 +301,20 @@ def dense_lambda_lower(A: np.ndarray):
     lmin = lam[:, 0]
     eye = np.eye(s)
 
-    def lower_bound(tau):
+    def lower_bound(tau, extended=False):
         # A = τI + GGᵀ + E exactly for any τ and G (GGᵀ ⪰ 0), so λmin(A) ≥ τ − ‖E‖₂ whatever τ is.
         d = np.sqrt(np.maximum(lam - tau[:, None], 0.0))
         G = V * d[:, None, :]
-        F = (A - tau[:, None, None] * eye) - G @ np.swapaxes(G, 1, 2)
         absG = np.abs(G)
-        B = np.abs(F) + gamma(s + 4) * (absG @ np.swapaxes(absG, 1, 2) + np.abs(A) + np.abs(tau)[:, None, None] * eye) \
+        if extended:  # E evaluated in long double: its a-priori rounding bound shrinks by U / U_LONG
+            GL = G.astype(np.longdouble)
+            FL = (A.astype(np.longdouble) - tau.astype(np.longdouble)[:, None, None] * eye) - GL @ np.swapaxes(GL, 1, 2)
+            F, g = FL.astype(np.float64), gamma_long(s + 4)
+            absF = inflate(np.abs(F), 1)  # the conversion to float64 is one more rounding
+        else:
+            F, g = (A - tau[:, None, None] * eye) - G @ np.swapaxes(G, 1, 2), gamma(s + 4)
+            absF = np.abs(F)
+        B = absF + g * (absG @ np.swapaxes(absG, 1, 2) + np.abs(A) + np.abs(tau)[:, None, None] * eye) \
             + 2 * U * np.abs(A) + (s + 4) * ETA
         B = inflate(B, s + 6)
         normE = inflate(np.maximum(B.sum(axis=1).max(axis=1), B.sum(axis=2).max(axis=1)), s + 2)
@@ -309,6 +326,15 @@ def dense_lambda_lower(A: np.ndarray):
     lam_half, normE_half = lower_bound(lmin * 0.5)
     lam_lower = np.fmax(lam_near, lam_half)
     normE = np.where(lam_near >= lam_half, normE, normE_half)
+    # A nearly singular block (a rank-deficient W plus a tiny diagonal, --psd-shift) has λmin
+    # below float64's a-priori bound γ·‖|G||G|ᵀ‖ ≈ s²u·max A_kk: evaluate its residual again in
+    # long double, where the platform has one (x86: 64-bit significand), which leaves |E| itself.
+    retry = finite & ~(lam_lower > 0) & (lmin > 0)
+    if HAS_LONG_DOUBLE and retry.any():
+        lam_x, normE_x = lower_bound(lmin * (1 - 2.0 ** -20), extended=True)
+        better = retry & (lam_x > np.nan_to_num(lam_lower, nan=-np.inf))
+        lam_lower = np.where(better, lam_x, lam_lower)
+        normE = np.where(better, normE_x, normE)
     lam_lower = np.where(finite, lam_lower, np.nan)
     return lam_lower, np.where(finite, lmin, np.nan), np.where(finite, normE, np.nan)
 

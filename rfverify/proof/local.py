@@ -49,7 +49,7 @@ import scipy.sparse as sp
 from ..model.definiteness import exact_ldlt
 from ..model.problem import SPACEDIM, LocalForm, Problem
 from .bound import Proof, cone_violations, cones_failure, eps_M_upper, invalid_proof
-from .quantity import DATA_SCALE_NAMES_LOCAL, QuantityBound, quantity_bound, up, up_times, validate_digits
+from .quantity import DATA_SCALE_NAMES_LOCAL, QuantityBound, down, quantity_bound, up, up_times, validate_digits
 from .reactions import proven_open
 from .dyadic import Dyadic, DyadicCSR, fraction_upper_float, sqrt_upper
 from .massbounds import MassBounds, inflate, upper_sum, verify_mass_matrix
@@ -234,6 +234,15 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         eps = float(up(math.sqrt(float(up(gap_up + float(up(e_norm * delta)))))))
         terms = {"eps_W": eps, "gap_rTu": gap_up, "dual_shift_2norm": e_norm, "r_dist_2norm_upper": delta,
                  "lam_min_W_lower": lam}
+    if ex.facts.lam_lower > 0:
+        refined = _active_set_refinement(problem, ex, u_p, point_r, sqrtW, eps,
+                                         delta if shifted is not None else None, shifted)
+        if refined is not None and refined[0] < eps:
+            eps, x_delta, refined_terms = refined
+            terms.update({**refined_terms, "eps_W": eps})
+            if shifted is not None:
+                delta = min(delta, x_delta)
+                terms["r_dist_2norm_upper"] = delta
     e_u = upper_sum((Dyadic.from_float(u) - u_p).abs_upper(), up_times(sqrtW, eps))
     terms.update({"max_sqrt_W_kk": float(np.max(sqrtW, initial=0.0)), "W_psd": ex.facts.how})
     u_note = ""
@@ -253,6 +262,10 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         e_r = upper_sum((Dyadic.from_float(r) - point_r).abs_upper(), np.full(r.size, delta))
         note, r_terms = (f"unique: W definite (verified λmin ≥ {ex.facts.lam_lower:.2e}); u = Wr + q raised into "
                          f"K* by ‖e‖₂ ≤ {e_norm:.1e}"), {}
+        rows = ex.facts.nonzero_rows
+        only_by_shift = _unique_only_by_the_shift(problem, sp.csr_matrix(ex.local.W)[rows][:, rows])
+        if only_by_shift:  # bounded (the backward error needs it), but no claim about the file
+            note, r_terms = f"{only_by_shift} (W + D's r* is bounded: {note})", {R_INFORMATION_ONLY: True}
     info_only = r_terms.pop(R_INFORMATION_ONLY, False)
     terms.update(r_terms)
     if e_r is None or info_only:
@@ -315,6 +328,77 @@ def _shift_into_dual_cone(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic)
     if bad_dual.size:
         return None
     return u_shift, float(up(np.sqrt(float(up(np.sum(up(tau * tau)) * (1 + 2.0 ** -40))))))
+
+
+def _kept_components(problem) -> np.ndarray:
+    """(n, 5) mask of the components K does not force to 0 (N; T where μ > 0; R where μr > 0)."""
+    n = problem.n_contacts
+    kept = np.zeros((n, SPACEDIM), dtype=bool)
+    kept[:, 0] = True
+    kept[:, 1:3] = (problem.mu > 0)[:, None]
+    kept[:, 3:5] = (problem.mu_r > 0)[:, None]
+    return kept
+
+
+def _active_set_refinement(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic, sqrtW, eps: float, delta,
+                           shifted):
+    """A second, linear bound on ‖d‖_W (d = r_p − r*) where W is definite (λ > 0) on every
+    component r may use, from the contacts the first bound classifies (module docstring), or None.
+
+    O: contacts proven open (u* ∈ int K*_i, so r*_i = 0); S: contacts whose ball r_p,i ± δ₁ lies
+    in the relative interior of K_i (δ₁ ≥ ‖d‖₂, the first bound), so u*_i = 0 on K_i's span C
+    (r* − t·u*_C ∈ K for small t, and (r* − t·u*_C)ᵀu* = −t‖u*_C‖² ≥ 0); R: the rest.  Then
+    dᵀWd = dᵀ(u_p − u*) ≤ ‖d_S‖₂‖u_p,S,C‖₂ + r_Oᵀu_p,O + r_Rᵀu'_R + ‖d‖₂‖e‖₂ (u' = u_p + e ∈ K*
+    the point raised into K*, e = 0 when it is there), and ‖d‖₂ ≤ x/√λ with x = ‖d‖_W, so
+    x² ≤ a·x + c with a = (‖u_p,S,C‖₂ + ‖e‖₂)/√λ, c = r_Oᵀu_p,O + r_Rᵀu'_R: x ≤ (a + √(a² + 4c⁺))/2.
+    No cone test on u_p,S or u_p,O is needed.  Where the point's u_p on its stuck contacts is at
+    the rounding level of an extended-precision solve (1e-32), this is ~√λ-times that, where the
+    first bound, √(rᵀu), is only its square root.  Returns (x, x/√λ, terms)."""
+    facts = ex.facts
+    n = problem.n_contacts
+    if n == 0 or facts.nonzero_rows is None:
+        return None
+    kept = _kept_components(problem)
+    in_F = np.zeros(SPACEDIM * n, dtype=bool)
+    in_F[facts.nonzero_rows] = True
+    if not np.all(in_F[kept.ravel()]):
+        return None
+    _, bad_primal = cone_violations(ex, u_p, point_r)
+    if bad_primal.size:
+        return None
+    lam = float(np.nextafter(facts.lam_lower * (1 - 4 * 2.0 ** -53), 0))
+    root = float(np.nextafter(math.sqrt(lam) * (1 - 4 * 2.0 ** -53), 0))
+    mu, mur = problem.mu, problem.mu_r
+    open_ = proven_open(u_p, up_times(sqrtW, eps), mu, mur, n)
+    if delta is None:  # ‖d‖₂ ≤ ‖d‖_W/√λ ≤ ε/√λ
+        delta = float(up(eps / root))
+    lo, hi = point_r.lower().reshape(n, SPACEDIM), point_r.upper().reshape(n, SPACEDIM)
+    mag = np.maximum(np.abs(lo), np.abs(hi))
+    rN = down(lo[:, 0] - delta)
+    nT, nR = up(up(np.hypot(mag[:, 1], mag[:, 2])) + delta), up(up(np.hypot(mag[:, 3], mag[:, 4])) + delta)
+    inside_T = (mu == 0) | (down(down(mu * rN) * (1 - 4 * 2.0 ** -53)) > nT)
+    inside_R = (mur == 0) | (down(down(mur * rN) * (1 - 4 * 2.0 ** -53)) > nR)
+    stuck = (rN > 0) & inside_T & inside_R & ~open_
+    if not stuck.any():
+        return None
+    comp = np.repeat(np.arange(n), SPACEDIM)
+    S_cols = np.flatnonzero(stuck[comp] & kept.ravel())
+    u_S = u_p[S_cols].abs_upper()
+    uS_norm = float(up(np.sqrt(float(inflate(np.sum(up(u_S * u_S)), u_S.size)))))
+    rest = np.flatnonzero(~stuck[comp])
+    open_cols = np.flatnonzero(open_[comp])
+    u_rest = u_p if shifted is None else shifted[0]
+    c = point_r[open_cols].dot(u_p[open_cols]) if open_cols.size else Fraction(0)
+    R_cols = np.setdiff1d(rest, open_cols)
+    if R_cols.size:
+        c += point_r[R_cols].dot(u_rest[R_cols])
+    e_norm = 0.0 if shifted is None else shifted[1]
+    a = float(up(float(up(uS_norm + e_norm)) / root))
+    c_up = fraction_upper_float(max(c, Fraction(0)))
+    x = float(up(float(up(a + float(up(math.sqrt(float(up(float(up(a * a)) + float(up(4 * c_up))))))))) / 2))
+    return x, float(up(x / root)), {"active_set_stuck": int(stuck.sum()), "active_set_open": int(open_.sum()),
+                                    "active_set_rest": int(n - stuck.sum() - open_.sum()),
+                                    "eps_W_first": eps}
 
 
 R_INFORMATION_ONLY = "r_information_only"

@@ -6,7 +6,7 @@ leaves (W + Wᵀ)/2 slightly indefinite: the 286-contact Capsules file of Sicono
 an eigenvalue −4e-15 of ‖W‖ = 13, FCLIB's 48-contact Boxes Stack a 2×2 minor of −2.5e-19.  The
 problem of the file is then not convex, and nothing about it can be proven.  Its nearest
 provable neighbour is W' = W + D with D = diag(ε) on the rows with a nonzero diagonal (ε the
-smallest power of two, from about 4·|λmin|, whose W' the verified test of
+smallest power of two, from about 4·|λmin| up by factors of 2, whose W' the verified test of
 :func:`rfverify.proof.local.prove_psd` proves PSD), and every claim is then about W' — named
 so in the problem's statement.  A solution (u*, r*) of W' is exactly a solution of the file's
 own W for the data q + D r*: the shift is a backward error of at most max_k D_kk · ‖r*‖∞ on q,
@@ -32,8 +32,8 @@ from .massbounds import verify_mass_matrix
 MAX_RELATIVE = 1e-8
 """Largest shift accepted, relative to ‖W‖: an indefiniteness above it is not rounding."""
 
-MAX_TRIES = 12
-"""Shifts tried at most (each 4× the last) before refusing."""
+MAX_TRIES = 40
+"""Shifts tried at most (each 2× the last) before refusing."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,10 +84,10 @@ def shift_to_psd(problem: Problem) -> Problem:
     lam_min, lam_max = eigenvalue_range(W)
     norm = max(lam_max, abs(lam_min))
     rows = np.flatnonzero(W.diagonal() != 0)
-    # From a few times the estimated λmin up, ×4 each try: the verified test proves λmin > 0 only
-    # above its own rounding bound (about block rows·eps·‖W‖), which the tries reach.
-    start = max(4.0 * abs(min(lam_min, 0.0)), 4.0 * np.finfo(float).eps * norm * min(rows.size, 64),
-                np.finfo(float).tiny)
+    # From a few times the estimated λmin up, ×2 each try (D r* is a backward error: no more of it
+    # than a factor 2 beyond need): the verified test proves λmin > 0 only above its own rounding
+    # bound (residual and a-priori terms, a few hundred ulps of ‖W‖ on a nearly singular W).
+    start = max(4.0 * abs(min(lam_min, 0.0)), 16.0 * np.finfo(float).eps * norm, np.finfo(float).tiny)
     eps = math.ldexp(1.0, math.frexp(start)[1])  # the power of two at or above the start
     for _ in range(MAX_TRIES):
         if eps > MAX_RELATIVE * norm:
@@ -97,7 +97,7 @@ def shift_to_psd(problem: Problem) -> Problem:
         if verify_mass_matrix(shifted[rows][:, rows]).proven and (facts := prove_psd(shifted)).psd:
             return _with_shift(problem, shifted, PsdShift(eps, _largest_change(W, shifted, rows), lam_min, norm,
                                                           int(rows.size), facts.how))
-        eps *= 4.0
+        eps *= 2.0
     raise InvalidProblemError(
         "W", f"is not positive semidefinite as stored (smallest eigenvalue ≈ {lam_min:.2e} of ‖W‖ ≈ {norm:.2e}), "
              f"and no diagonal shift up to {MAX_RELATIVE:.0e}·‖W‖ is proven to make it so: more than rounding",
