@@ -199,13 +199,16 @@ def _touching_cg_args(seed):
     return hi, lo, b, (chol.Ap, chol.Ai, chol._A, b, np.zeros(n), chol._float64_solve, 1e-29)
 
 
-@pytest.mark.parametrize("seed", [5, 8])
-def test_restarted_conjugate_gradients_go_on_where_one_pass_stalls(seed):
+@pytest.mark.parametrize("seed", [3, 5])
+def test_restarted_conjugate_gradients_go_on_where_one_pass_stalls(seed, monkeypatch):
     """Issue 47: on a touching pile's matrix (:func:`_touching_gram`), preconditioned by its shifted
-    float64 factor, one pass of the conjugate gradients can stall above double-double accuracy
-    (seeds 5 and 8 of 3–11: 1.4e-15 and 2.3e-26; checked, so that this test sees the fault it
-    guards); restarted on the true residual they reach 1e-29, checked by an independent 80-digit
-    residual of hi + lo."""
+    float64 factor, one pass of the conjugate gradients can stop above double-double accuracy;
+    restarted on the true residual they reach 1e-29, checked by an independent 80-digit residual
+    of hi + lo.  Where a pass stalls by itself depends on the machine's float64 factor (seeds 5
+    and 8 stalled on the machine of the first measurement, none of 0–39 on an AMD EPYC with the
+    same packages), so the pass is cut short here the same way everywhere: 5 steps a pass
+    (checked, so that this test sees the fault it guards)."""
+    monkeypatch.setattr(krylov, "CG_MAX_STEPS", 5)
     hi, lo, b, args = _touching_cg_args(seed)
     one, _, _ = krylov.conjugate_gradients_in_double_double(*args)
     assert one > 1e-26
@@ -215,13 +218,14 @@ def test_restarted_conjugate_gradients_go_on_where_one_pass_stalls(seed):
     assert res <= 1e-28 * scale
 
 
-@pytest.mark.parametrize("seed", [3, 4, 6, 7])
+@pytest.mark.parametrize("seed", [3, 5, 6, 7])
 def test_one_pass_of_the_conjugate_gradients_survives_a_lost_recurrence(seed, monkeypatch):
     """One pass updates its residual by r − αAp (one product per step).  On the touching matrix in
     miniature a direction from the near-null space of its huge block cancels most digits of
     that update and pᵀAp comes out ≤ 0: the pass restarts from its best iterate's true residual
     and goes on to 1e-28 (checked by an 80-digit residual).  Stopping there instead, as a pass
-    did before, leaves 1e-17 to 1e-23 on these seeds."""
+    did before, leaves 1e-16 to 1e-19 on these seeds (measured on an AMD EPYC; 1e-17 to 1e-23
+    on seeds 3, 4, 6, 7 where first measured — seed 4 is left out: there it costs little)."""
     hi, lo, b, args = _touching_cg_args(seed)
     best, (xh, xl), steps = krylov.conjugate_gradients_in_double_double(*args)
     assert best <= 1e-28, best
@@ -255,11 +259,14 @@ def test_the_conjugate_gradients_wait_out_a_plateau_of_the_backward_error():
     assert res <= 1e-20 * scale
 
 
-def _touching_engine(monkeypatch, restarts: int, shifts: tuple):
+def _touching_engine(monkeypatch, restarts: int, shifts: tuple, stall_on: tuple = ()):
     """The touching matrix in miniature (:func:`_touching_gram`, seed 5) factored by
     :class:`CholmodMixed` from any size, with ``restarts`` CG restarts and the shift ladder
     ``shifts``; its float64 factor fails, the shifted one holds (``factor`` returns -1, asserted).
-    Returns (hi, lo, chol, refactor) where ``refactor()`` factors the same values again."""
+    On the shifts in ``stall_on`` every pass of the conjugate gradients is cut short (3 steps:
+    a stall at ~1e-15 on any machine, where a natural stall depends on the float64 factor's
+    rounding).  Returns (hi, lo, chol, refactor) where ``refactor()`` factors the same values
+    again."""
     monkeypatch.setattr(mixed_module, "SHIFT_MIN_ROWS", 0)
     monkeypatch.setattr(krylov, "CG_RESTARTS", restarts)
     monkeypatch.setattr(mixed_module, "SHIFTS", shifts)
@@ -267,6 +274,17 @@ def _touching_engine(monkeypatch, restarts: int, shifts: tuple):
     n = hi.shape[0]
     chol = CholmodMixed(sp.csc_matrix(np.ones((n, n))))
     cols = np.repeat(np.arange(n), np.diff(chol.Ap))
+    real = mixed_module.restarted_conjugate_gradients
+
+    def stalling(*args, **kwargs):
+        shift = None if chol.shift_at is None else mixed_module.SHIFTS[chol.shift_at]
+        if shift not in stall_on:
+            return real(*args, **kwargs)
+        with pytest.MonkeyPatch.context() as m:
+            m.setattr(krylov, "CG_MAX_STEPS", 3)
+            return real(*args, **kwargs)
+
+    monkeypatch.setattr(mixed_module, "restarted_conjugate_gradients", stalling)
 
     def refactor():
         return chol.factor(hi[chol.Ai, cols], lo[chol.Ai, cols])
@@ -279,7 +297,9 @@ def _touching_engine(monkeypatch, restarts: int, shifts: tuple):
 def test_a_checked_solve_on_a_touching_matrix_needs_no_double_double_factor(monkeypatch, restarts):
     """Through the engine: the float64 factor fails, the shifted one preconditions restarted
     conjugate gradients, and a solve checked to double-double accuracy is answered without the
-    double-double factor (with no restart, the one pass stalls and the engine falls back to it)."""
+    double-double factor (with no restart, the one pass stalls and the engine falls back to it).
+    Every pass is cut at 5 steps, a stall on any machine (see the test of restarted passes)."""
+    monkeypatch.setattr(krylov, "CG_MAX_STEPS", 5)
     hi, lo, chol, _ = _touching_engine(monkeypatch, restarts, (64.0,))  # one shift: the ladder is the next test's
     n = hi.shape[0]
     chol.set_backward_target(1e-29)
@@ -296,9 +316,10 @@ def test_a_checked_solve_on_a_touching_matrix_needs_no_double_double_factor(monk
 def test_a_stalled_shift_is_followed_by_the_next_before_the_double_double_factor(monkeypatch):
     """Where the conjugate gradients stall on one shifted factor, the next shift of
     :data:`SHIFTS` is factored and tried, and the double-double factor comes only after the last:
-    on the touching matrix in miniature (seed 5), one pass stalls at ~1e-15 on 64 ulps and
-    reaches 1e-29 on 4 (checked by an 80-digit residual); the time line names both shifts."""
-    hi, lo, chol, refactor = _touching_engine(monkeypatch, 0, (64.0, 4.0))
+    on the touching matrix in miniature (seed 5), a pass on 64 ulps stalls at ~1e-15 (cut short,
+    :func:`_touching_engine`) and one on 4 reaches 1e-29 (checked by an 80-digit residual); the
+    time line names both shifts."""
+    hi, lo, chol, refactor = _touching_engine(monkeypatch, 0, (64.0, 4.0), stall_on=(64.0,))
     n = hi.shape[0]
     assert chol.shift_at == 0
     chol.set_backward_target(1e-29)
@@ -322,7 +343,7 @@ def test_a_checked_solve_short_of_double_double_is_judged_by_the_newton_driver(m
     than float64's — and the double-double factor comes only when the driver escalates; the
     time line says which.  Not judged by a caller, the same solve falls back at once (the test
     above)."""
-    hi, lo, chol, _ = _touching_engine(monkeypatch, 0, (64.0,))  # one shift: no other to try first
+    hi, lo, chol, _ = _touching_engine(monkeypatch, 0, (64.0,), stall_on=(64.0,))  # one shift: no other to try
     n = hi.shape[0]
     chol.set_backward_target(1e-29)
     chol.judged_by_caller = True

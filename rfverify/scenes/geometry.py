@@ -116,6 +116,10 @@ def capsule_mass_properties(radius, half_length, density):
     # parallel-axis theorem through its own centre of mass (3r/8 from the face).
     i_perp = (m_cyl * (H ** 2 / 12 + r ** 2 / 4)
               + 2 * m_hemi * (2.0 / 5.0 * r ** 2 + H ** 2 / 4 + 3.0 * H * r / 8))
+    # A sphere (half_length 0) is isotropic exactly: the two formulas round differently, and
+    # whether they agree then depended on the last bit of m_hemi (r³ comes from libm's or numpy's
+    # SIMD pow, which differ between machines), so a sphere's M was diagonal on one and not on another.
+    i_perp = np.where(hl == 0, i_axis, i_perp)
     inertia = np.stack((i_perp, i_perp, i_axis), axis=-1)
     return mass, inertia
 
