@@ -8,8 +8,11 @@ rechecked against the file's own W and q in 40-digit arithmetic.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
+import io
+import json
 from pathlib import Path
 
 import h5py
@@ -118,7 +121,8 @@ def _file_W_q_mu(path):
     with h5py.File(path, "r") as f:
         g = f["fclib_local/W"]
         n3 = int(g["n"][0])
-        W = sp.csr_matrix(sp.csc_matrix((g["x"][:], g["i"][:], g["p"][:]), shape=(n3, n3)))
+        assert int(g["nz"][0]) == -2  # FCLIB: nz = −2 is CSR (p row pointers, i column indices)
+        W = sp.csr_matrix((g["x"][:], g["i"][:], g["p"][:]), shape=(n3, n3))
         return W, f["fclib_local/vectors/q"][:], f["fclib_local/vectors/mu"][:]
 
 
@@ -134,9 +138,15 @@ def test_boxes_stack_at_rest_is_certified_for_the_physical_problem_and_rechecked
     from rfverify.cli import main
 
     out = tmp_path / "boxes.h5"
-    code = main(["solve", str(BOXES), "--psd-shift", "--problem", "coulomb", "--digits", "10", "--out", str(out)])
+    with contextlib.redirect_stdout(io.StringIO()) as printed:
+        code = main(["solve", str(BOXES), "--psd-shift", "--problem", "coulomb", "--digits", "10", "--out", str(out),
+                     "--json", "--quiet"])
     assert code == 0
+    verdict = json.loads(printed.getvalue())["verdict"]
+    assert ") with (W + Wᵀ)/2 for data q differing from the file's by δ e_N + D r*" in verdict
+    assert "r not unique" in verdict
     W, q, mu = _file_W_q_mu(BOXES)
+    WT = W.T.tocsr()
     with h5py.File(out, "r") as f:
         r, u_file = f["solution/r"][:], f["solution/u"][:]
     scale = float(np.max(np.abs(q)))
@@ -144,8 +154,9 @@ def test_boxes_stack_at_rest_is_certified_for_the_physical_problem_and_rechecked
     with mpmath.workdps(40):
         R = [mpmath.mpf(float(x)) for x in r]
         for i in range(W.shape[0] // 3):
-            u = [mpmath.mpf(float(q[k])) + mpmath.fsum(mpmath.mpf(float(W.data[j])) * R[W.indices[j]]
-                                                       for j in range(W.indptr[k], W.indptr[k + 1]))
+            # u = (W + Wᵀ)/2 r + q, the equations the verdict names (W is unsymmetric by 2e-16)
+            u = [mpmath.mpf(float(q[k])) + mpmath.fsum(mpmath.mpf(float(A.data[j])) * R[A.indices[j]] / 2
+                                                       for A in (W, WT) for j in range(A.indptr[k], A.indptr[k + 1]))
                  for k in range(3 * i, 3 * i + 3)]
             rN, rT = R[3 * i], mpmath.sqrt(R[3 * i + 1] ** 2 + R[3 * i + 2] ** 2)
             assert rT <= mu[i] * rN  # r ∈ K exactly

@@ -109,6 +109,8 @@ def test_chute_is_proven_with_backward_error_below_1e_10(chute_written):
     assert out["problem"] == "coulomb" and out["status"] == "Certified"
     assert out["backward_error"] <= 1e-10
     assert "need not be unique" in out["verdict"] and "backward-error certificate" in out["verdict"]
+    # the chute's M is unsymmetric (in blocks no contact touches): the verdict names the equations proven
+    assert "physical problem (Coulomb" in out["verdict"] and ") with (M + Mᵀ)/2 for data" in out["verdict"]
     # the physical u's bound contains the inner proof's (u* = u'* − ŝ e_N: the same distance, and more)
     assert out["quantities"]["u"]["abs_bound"] >= out["inner_certificate"]["quantities"]["u"]["abs_bound"] > 0
 

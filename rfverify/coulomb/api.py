@@ -20,7 +20,7 @@ from ..proof.dyadic import Dyadic
 from .backward import backward_bound, physical_quantities
 from .model import PROBLEMS, offsets, phi, physical_of_inner, physical_residuals, physical_velocity, shifted_problem
 from .outer import OUTER_TOL, find_shift, fixed_point
-from .result import CoulombCertificate, CoulombDigits, CoulombSolution, coulomb_verdict
+from .result import CoulombCertificate, CoulombDigits, CoulombSolution, coulomb_verdict, posed_matrix
 
 PROVEN_ROUNDS = 12
 """Proven rounds at most: the outer iteration continued with proven answers (the double ones
@@ -114,7 +114,7 @@ def coulomb_certificate(problem: Problem, shifted: Problem, inner_cert, v, u_inn
     else:
         quantities = {}
     failure = "" if valid else (proof.failure if proof is not None else inner_cert.verdict)
-    certified, verdict = coulomb_verdict(digits, quantities, be, valid, failure)
+    certified, verdict = coulomb_verdict(digits, quantities, be, valid, failure, posed_matrix(problem))
     s = np.asarray((Dyadic.from_float(offsets(shifted)) - Dyadic.from_float(offsets(problem))).nearest()[0::5])
     extra = dict(extra or {})
     if getattr(inner_cert, "extra", {}).get("time_limit") is not None and not certified:

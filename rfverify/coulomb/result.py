@@ -72,12 +72,22 @@ class CoulombCertificate(VerdictResult):
                 "seconds": self.seconds, **self.extra}
 
 
+def posed_matrix(problem) -> str:
+    """" with (W + Wᵀ)/2" (or M, or "as stored (unsymmetric)") where the file's matrix is
+    unsymmetric, naming the equations the answer is proven for; "" where it is symmetric."""
+    if problem.matrix_is_symmetric:
+        return ""
+    X = "W" if problem.local is not None else "M"
+    return f" with {X} as stored (unsymmetric)" if problem.equations == "stored" else f" with ({X} + {X}ᵀ)/2"
+
+
 def coulomb_verdict(requested: int, quantities: dict, backward: BackwardError, inner_valid: bool,
-                    inner_failure: str = "") -> tuple[bool, str]:
-    """(certified, verdict): what was proven about the answer, in words."""
+                    inner_failure: str = "", posed: str = "") -> tuple[bool, str]:
+    """(certified, verdict): what was proven about the answer, in words; ``posed`` names the
+    matrix of the equations where the file's is unsymmetric (:func:`posed_matrix`)."""
     tol = 10.0 ** (-requested)
     if not inner_valid:
-        return False, (f"not certified for {STATEMENT}: the shifted convex problem's proof failed "
+        return False, (f"not certified for {STATEMENT}{posed}: the shifted convex problem's proof failed "
                        f"({inner_failure}). {NOT_UNIQUE}.")
     parts = []
     for q in quantities.values():
@@ -92,10 +102,11 @@ def coulomb_verdict(requested: int, quantities: dict, backward: BackwardError, i
                 f"{backward.relative:.1e} exceeds 1e-{requested}")
     else:
         head = f"not proven to {requested} digits: {', '.join(bad)} short ({', '.join(parts)})"
-    data = ("for the file's W and data q differing from the file's by δ e_N + D r* (D the diagonal added to W, "
-            "which as stored is not positive semidefinite)" if backward.psd_part
+    whose = "" if posed else "the file's W and "
+    data = (f"for {whose}data q differing from the file's by δ e_N + D r* (D the "
+            "diagonal added to W, which as stored is not positive semidefinite)" if backward.psd_part
             else "for data whose w_N differs from the file's by δ")
-    text = f"{head} against the exact solution of {STATEMENT} {data}, {backward.describe()}. {NOT_UNIQUE}."
+    text = f"{head} against the exact solution of {STATEMENT}{posed} {data}, {backward.describe()}. {NOT_UNIQUE}."
     return digits_ok and be_ok, text
 
 
