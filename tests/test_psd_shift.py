@@ -142,3 +142,23 @@ def test_the_coulomb_backward_error_counts_d_r_and_a_dropped_term_is_caught(monk
     monkeypatch.setattr(api, "_psd_terms", lambda *a: {})  # the mutation: D r* left out
     weak = rfverify.solve_to_digits(shifted, digits=10, problem="coulomb").certificate.backward
     assert weak.psd_part == 0 and weak.absolute < be.absolute
+
+
+def test_bench_loads_every_problem_as_its_options_say_and_keeps_one_choice_per_run(tmp_path, capsys):
+    """``bench --psd-shift --max-asymmetry X``: the runs solve W + D (their records' statement
+    says so), a global problem in the same run is left as it is, the manifest keeps the choice,
+    and the same run directory refuses runs loaded otherwise (exit 2, the fix named)."""
+    run = tmp_path / "run"
+    common = ["--methods", "jqinv", "--tol", "1e-8", "--digits", "0", "--no-trajectories", "--out", str(run),
+              "--quiet"]
+    assert main(["bench", "bundled:cube", "bundled:chute", "--psd-shift", "--max-asymmetry", "0.5", *common]) == 0
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["load_options"] == {"psd_shift": True, "max_asymmetry": 0.5}
+    records = [json.loads(p.read_text()) for p in (run / "runs").rglob("*.json")]
+    statements = {r["problem"]: r["problem_statement"] for r in records}
+    cube = next(s for k, s in statements.items() if "cube" in k)
+    chute = next(s for k, s in statements.items() if "hute" in k)
+    assert "+ D" in cube and "+ D" not in chute
+    capsys.readouterr()
+    assert main(["bench", "bundled:cube", *common]) == 2
+    assert "--psd-shift" in capsys.readouterr().err

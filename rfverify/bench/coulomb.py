@@ -8,7 +8,7 @@ from ..errors import BenchInputError
 from ..solver.result import ALGORITHM1_METHODS
 
 
-def plan_coulomb(problems, methods, tols, *, digits, max_iter, as_stored, time_limit) -> list[dict]:
+def plan_coulomb(problems, methods, tols, *, digits, max_iter, as_stored, time_limit, load_options=None) -> list[dict]:
     """Coulomb tasks: rfverify's path per (problem, method), GFC3D_IPM per (problem, tol)."""
     tasks = []
     for e in problems:
@@ -16,6 +16,8 @@ def plan_coulomb(problems, methods, tols, *, digits, max_iter, as_stored, time_l
                 "max_iter": max_iter, "kind": "coulomb", "digits": int(digits)}
         if as_stored:
             base["as_stored"] = True
+        if load_options:
+            base["load"] = dict(load_options)
         if time_limit:
             base["time_limit"] = float(time_limit)
         for method in methods:

@@ -124,7 +124,7 @@ def discover_problems(inputs) -> list[ProblemEntry]:
 def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=True,
                digits=10, reference_max_contacts=60, sizes=None, max_iter=100, dps=30,
                as_stored: bool = False, time_limit: float | None = None,
-               problem_kind: str = "relaxation") -> list[dict]:
+               problem_kind: str = "relaxation", load_options: dict | None = None) -> list[dict]:
     """The task list: a timed solve per (problem, method, tol), a trajectory per (problem,
     Algorithm 1 method), and the mixed-precision path per problem small enough for the
     reference (``n ≤ reference_max_contacts``; 0 disables it).  With ``problem_kind``
@@ -132,7 +132,7 @@ def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=Tr
     per (problem, tol) when ``siconos`` is among ``methods``, each at ``digits``."""
     if problem_kind == "coulomb":
         return plan_coulomb(problems, methods, tols, digits=digits, max_iter=max_iter, as_stored=as_stored,
-                             time_limit=time_limit)
+                            time_limit=time_limit, load_options=load_options)
     tasks = []
     sizes = sizes or {}
     for e in problems:
@@ -140,6 +140,8 @@ def plan_tasks(problems, methods, tols, *, trajectory_tol=1e-14, trajectories=Tr
                 "max_iter": max_iter, "dps": dps}
         if as_stored:
             base["as_stored"] = True
+        if load_options:
+            base["load"] = dict(load_options)
         if time_limit:  # not part of the task key: the same task with more time is the same task
             base["time_limit"] = float(time_limit)
         for method in methods:
@@ -332,7 +334,8 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
               trajectory_tol: float = 1e-14, trajectories: bool = True, digits: int = 10,
               reference_max_contacts: int = 60, max_iter: int = 100, quiet: bool = False,
               command: str | None = None, retry_failed: bool = False,
-              scheduler: str | None = None, as_stored: bool = False, problem_kind: str = "relaxation") -> dict:
+              scheduler: str | None = None, as_stored: bool = False, problem_kind: str = "relaxation",
+              load_options: dict | None = None) -> dict:
     """Run (or resume) a benchmark.  Returns ``{"ran", "skipped", "timeouts", "total",
     "run_dir", "counts"}`` with ``counts[(method, tol)] = (verified solved, runs)`` over the
     problems of this invocation.  ``command`` (the CLI line) is recorded in the manifest so the
@@ -355,6 +358,10 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     (clarabel, siconos) solve (M + Mᵀ)/2 only and are refused with it when a problem's M is
     unsymmetric.
 
+    ``load_options`` (``{"max_asymmetry": X, "psd_shift": True}``, either may be left out) load
+    every problem as ``solve --max-asymmetry X --psd-shift`` does (:func:`.tasks.load_for_bench`);
+    a run directory holds one choice, kept in its manifest, which the report loads with too.
+
     ``problem_kind`` "coulomb" runs the physical problem instead (issue 51): per problem
     rfverify's Coulomb path at ``digits`` (each method of ``methods`` but ``siconos`` as its
     inner solver) and, with ``siconos`` in ``methods``, Siconos's GFC3D_IPM at each tolerance,
@@ -364,7 +371,7 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     import math
 
     from ..coulomb import check_problem_kind
-    from ..io import load
+    from .tasks import load_for_bench
 
     check_problem_kind(problem_kind)
     coulomb = problem_kind == "coulomb"
@@ -401,7 +408,7 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     # Validate every problem up front (a bad file is an input error, not 15 failed runs).
     sizes = {}
     for e in problems:
-        p = load(e.path)
+        p = load_for_bench(e.path, load_options)
         sizes[e.key] = (p.n_contacts, p.n_dofs)
         peers = [m for m in methods if m in ("clarabel", "siconos")]
         if as_stored and peers and not p.matrix_is_symmetric:
@@ -412,21 +419,26 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
         raise BenchInputError(f"{run_dir}: its runs were made {'with' if old.get('as_stored') else 'without'} "
                               f"--as-stored; fix: give another --out for runs "
                               f"{'with' if as_stored else 'without'} it")
+    load_options = {k: v for k, v in (load_options or {}).items() if v not in (None, False)}
+    if old and (old.get("load_options") or {}) != load_options:
+        raise BenchInputError(f"{run_dir}: its problems were loaded with {old.get('load_options') or 'the defaults'}, "
+                              f"not {load_options or 'the defaults'} (--max-asymmetry, --psd-shift); fix: give "
+                              "another --out for runs loaded otherwise")
     tasks = plan_tasks(problems, methods, sorted(tols, reverse=True), trajectory_tol=trajectory_tol,
                        trajectories=trajectories, digits=digits,
                        reference_max_contacts=reference_max_contacts,
                        sizes={k: v[0] for k, v in sizes.items()}, max_iter=max_iter, as_stored=as_stored,
-                       time_limit=time_limit, problem_kind=problem_kind)
+                       time_limit=time_limit, problem_kind=problem_kind, load_options=load_options)
     run_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(run_dir):
         return _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit,
                            trajectory_tol, digits, reference_max_contacts, quiet, command,
-                           retry_failed, scheduler, as_stored, coulomb)
+                           retry_failed, scheduler, as_stored, coulomb, load_options)
 
 
 def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit, trajectory_tol,
                 digits, reference_max_contacts, quiet, command, retry_failed, scheduler,
-                as_stored: bool = False, coulomb: bool = False) -> dict:
+                as_stored: bool = False, coulomb: bool = False, load_options: dict | None = None) -> dict:
     from .._version import __version__
 
     old = read_manifest(run_dir, required=False)
@@ -460,6 +472,7 @@ def _run_locked(run_dir, problems, sizes, tasks, methods, tols, jobs, time_limit
         "machine": _machine(), "scheduler": scheduler,
         "command": command or old.get("command"),
         "as_stored": bool(as_stored),
+        "load_options": dict(load_options or {}),
     }
     if coulomb:
         manifest["coulomb"] = coulomb_settings

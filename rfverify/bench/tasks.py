@@ -52,6 +52,25 @@ def solver_time_limit(task: dict, share: float) -> dict:
     return {} if not limit else {"time_limit": share * float(limit)}
 
 
+def load_for_bench(path, options: dict | None):
+    """The problem at ``path`` as a bench run loads it: ``options`` (the run's ``load``, from
+    ``bench --max-asymmetry X --psd-shift``) may hold ``max_asymmetry`` (the limit of the
+    loader's refusal; default its own) and ``psd_shift`` (True: a local W that is not PSD as
+    stored is proven as W + D, :func:`rfverify.shift_to_psd`; a global problem, which has no W,
+    is left as it is, so that one run may hold both)."""
+    from ..io import load
+    from ..model.problem import DEFAULT_MAX_ASYMMETRY
+
+    options = options or {}
+    limit = options.get("max_asymmetry")
+    problem = load(path, max_asymmetry=DEFAULT_MAX_ASYMMETRY if limit is None else float(limit))
+    if options.get("psd_shift") and problem.local is not None:
+        from ..proof.psd_shift import shift_to_psd
+
+        problem = shift_to_psd(problem)
+    return problem
+
+
 def task_key(task: dict) -> str:
     """Hash of everything that determines a task's result: the problem file's content, the
     kind, method, tolerance, iteration limit, recheck precision, digits, every solver setting
@@ -71,6 +90,8 @@ def task_key(task: dict) -> str:
             "settings": settings}
     if task.get("as_stored"):  # only then: the keys of default runs are unchanged
         what["as_stored"] = True
+    if task.get("load"):  # likewise: a problem loaded otherwise (--max-asymmetry, --psd-shift) is another task
+        what["load"] = task["load"]
     if task.get("method") == "siconos":  # a rebuilt peer (other sources, patches, driver) re-runs its tasks
         from ..solver.siconos_peer import build_id
 
@@ -103,9 +124,7 @@ def run_task(task: dict, out_dir: str) -> None:
         # A worker's stderr is the bench's: warnings go into the record instead.
         warnings.simplefilter("always")
         try:
-            from ..io import load
-
-            problem = load(task["path"])
+            problem = load_for_bench(task["path"], task.get("load"))
             if task.get("as_stored"):  # the stored, unsymmetric M: solved, rechecked and proven as such
                 problem = problem.stored_equations()
             record.update(n_contacts=problem.n_contacts, n_dofs=problem.n_dofs, problem_statement=problem.statement)

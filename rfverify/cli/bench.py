@@ -12,7 +12,8 @@ from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
 from ..coulomb.model import PROBLEMS
 from ..solver.result import METHODS
 from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
-from .common import DOCS_NOTE, exit_codes, EXIT_OK, add_equations_option, dumps, progress_printer
+from .common import (DOCS_NOTE, EXIT_OK, PSD_SHIFT_HELP, add_equations_option, add_load_options, dumps, exit_codes,
+                     progress_printer)
 
 NO_LIMIT = 10**9
 """--reference-max-contacts when not given: every problem gets the --digits path."""
@@ -99,6 +100,9 @@ def add_parser(sub) -> None:
                             "proven backward error at --digits (see the description)")
     bench.add_argument("--quiet", action="store_true", help="no progress output")
     add_equations_option(bench)
+    bench.add_argument("--psd-shift", action="store_true", help=PSD_SHIFT_HELP + "; applied to every local problem of the run, global ones "
+                                                          "are left as they are")
+    add_load_options(bench)
     bench.add_argument("--json", action="store_true", help="print the outcome as JSON")
     bench.set_defaults(func=cmd_bench, check_outputs=check_outputs)
 
@@ -134,7 +138,8 @@ def cmd_bench(args) -> int:
                         reference_max_contacts=NO_LIMIT if args.reference_max_contacts is None
                         else args.reference_max_contacts, max_iter=args.max_iter,
                         quiet=args.quiet, command=command, retry_failed=args.retry_failed,
-                        scheduler=args.scheduler, as_stored=args.as_stored, problem_kind=args.problem_kind)
+                        scheduler=args.scheduler, as_stored=args.as_stored, problem_kind=args.problem_kind,
+                        load_options={"max_asymmetry": args.max_asymmetry, "psd_shift": args.psd_shift})
     if args.json:
         out = dict(out, counts=[{"method": m, "tol": t, "solved": s, "total": n}
                                 for (m, t), (s, n) in out["counts"].items()])

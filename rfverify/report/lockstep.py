@@ -168,7 +168,7 @@ def diagnose_worst(data: RunData, count, max_contacts, dps, quiet) -> list:
     ``RUN_DIR/diagnostics/`` under the problem's content, the digits, the rfverify version and
     the cache layout."""
     from ..bench.runner import resolve_spec
-    from ..io import load
+    from ..bench.tasks import load_for_bench
     from ..progress import Progress
 
     chosen = worst_cases(data, count, max_contacts)
@@ -195,7 +195,8 @@ def diagnose_worst(data: RunData, count, max_contacts, dps, quiet) -> list:
             if isinstance(cached, dict) and all(cached.get(k) == v for k, v in ident.items()):
                 diag = cached
         if diag is None:
-            problem = load(resolve_spec(data.problems[key]["spec"], data.run_dir))
+            problem = load_for_bench(resolve_spec(data.problems[key]["spec"], data.run_dir),
+                                     data.manifest.get("load_options"))
             with warnings.catch_warnings(record=True):
                 warnings.simplefilter("always")  # the double run's warnings: not for stderr
                 diag = diagnose_as_run(problem, method, tol, max_iter=max_iter, dps=dps, kind=kind,

@@ -74,7 +74,7 @@ def prove_runs(data, quiet: bool = True) -> dict:
     Returns {"n_proven": answers with proven digits, "n_runs": answers, "seconds": proof time,
     "no_point": problems without a proven point}."""
     from ..bench.runner import resolve_spec
-    from ..io import load
+    from ..bench.tasks import load_for_bench
     from ..progress import Progress
     from ..proof import ProofContext
 
@@ -111,7 +111,8 @@ def prove_runs(data, quiet: bool = True) -> dict:
             hit = cached.get(stem)
             if not (isinstance(hit, dict) and hit.get("task_key") == rec.get("task_key")):
                 if ctx is None:
-                    problem = load(resolve_spec(data.problems[key]["spec"], data.run_dir))
+                    problem = load_for_bench(resolve_spec(data.problems[key]["spec"], data.run_dir),
+                                     data.manifest.get("load_options"))
                     ctx = ProofContext(problem)
                 hit = _prove_one(ctx, point, rec["_npz"], k)
                 hit["task_key"] = rec.get("task_key")
