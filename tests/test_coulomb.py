@@ -370,3 +370,25 @@ def test_an_inner_solver_that_refuses_the_problem_is_not_a_fixed_point(chute):
     run = find_shift(chute, evaluate=lambda shifted: (Refused(), np.zeros(5 * chute.n_contacts)))
     assert run.refused and run.inner is None and not run.converged and run.residual == math.inf
     assert "refused the shifted problem: this solver takes no such problem" in run.message and not run.stages
+
+
+@pytest.mark.parametrize("u_normal, u_tangent, zeroed", [(1e-3, 0.0, True), (2.0 ** -20 - 1e-12, 0.0, False),
+                                                         (5e-4, 0.0, True), (1e-3, 1.0, False)])
+def test_a_contact_proven_open_and_apart_carries_no_backward_error(chute, u_normal, u_tangent, zeroed):
+    """δ_i = 0 only where û_i ± e_u lies in int K*_i (so r*_i = 0) and the physical u*_N =
+    u'*_N − ŝ_i ≥ 0 is proven: with ŝ_0 = 2⁻²⁰ and e_u = 1e-12, û_N = 2⁻²⁰ − 1e-12 leaves the
+    physical normal velocity possibly negative (not zeroed), 5e-4 and 1e-3 do not; with u_T = 1
+    the box is not inside K*_0 (r*_0 may be loaded: not zeroed).  The fixed point there is far
+    off (|Φ_0 − ŝ_0| ≥ 1e-6), so a zeroed δ_0 is visible."""
+    n = chute.n_contacts
+    s = np.zeros(n)
+    s[0] = 2.0 ** -20
+    shifted = model.shifted_problem(chute, s)
+    u = np.zeros(5 * n)
+    u[0::5] = 1.0  # every contact far inside K*: open, its physical u_N = 1 − ŝ ≥ 0
+    u[0], u[1] = u_normal, u_tangent  # contact 0 (u_T = 0: Φ_0(û) = 0 and |ŝ_0 − Φ_0| = 2⁻²⁰)
+    be = backward.backward_bound(chute, shifted, u, 1e-12, 1.0, "scale")
+    assert be.delta[1:].max() == 0 and be.open_contacts == n - 1 + zeroed
+    assert (be.delta[0] == 0) == zeroed
+    if not zeroed:
+        assert be.delta[0] >= 2.0 ** -20 - 1e-12

@@ -12,6 +12,13 @@ proof bounds ‖û − u'*‖∞ ≤ e_u, so ‖û_T − u*_T‖₂ ≤ √2·e_
 float64 numbers with every operation rounded outward (``np.nextafter`` after each correctly
 rounded IEEE operation, as :mod:`rfverify.proof.bound` does), so the bound is rigorous.
 
+On a contact proven *open* δ_i = 0 is taken instead: where the box û_i ± e_u lies inside
+int K*_i, every solution has r*_i = 0 (complementarity with u'*_i interior), and where moreover
+u*_N,i = u'*_N,i − ŝ_i ≥ 0 is proven, contact i meets the physical conditions (r_i ∈ K,
+u_N + Φ_i ≥ Φ_i, i.e. ũ_i ∈ K*, and r_iᵀũ_i = 0) for the file's own data, whatever ŝ_i is.  A
+slowly drifting shift on a contact that carries nothing (a sphere in flight beside a pile whose
+Φ changes with the others' shifts) is then no backward error at all.
+
 The physical u = Hᵀv + w of the returned v (W r + q) differs from û − ŝ e_N by an exactly
 computed amount (dyadic rationals), so its distance to u* is bounded by that plus e_u.
 """
@@ -63,19 +70,25 @@ class BackwardError:
     psd_part: float = 0.0
     """max_i of D_max·‖r*_i‖∞ where the local W was shifted to W + D (``--psd-shift``): the solution
     of W + D with data q solves the file's W with q + D r*, so that change is part of δ; else 0."""
+    open_contacts: int = 0
+    """Contacts proven open with u*_N ≥ 0, where δ_i = 0 (module docstring); the parts above are
+    maxima over the others."""
 
     def describe(self) -> str:
         if not self.proven:
             return f"backward error not proven ({self.note})"
         psd = f" + W's diagonal shift D r* {self.psd_part:.1e}" if self.psd_part else ""
+        opened = (f"; δ = 0 on {self.open_contacts} contact(s) proven open, where the shift is immaterial"
+                  if self.open_contacts else "")
         return (f"backward error |δ| ≤ {self.absolute:.2e} (relative {self.relative:.1e} of the data scale "
                 f"{self.scale_name} = {self.scale:.2e}; fixed point {self.fixed_point_part:.1e} + inner proof "
-                f"{self.proof_part:.1e}{psd})")
+                f"{self.proof_part:.1e}{psd}{opened})")
 
     def as_dict(self) -> dict:
         return {"absolute": self.absolute, "relative": self.relative, "scale": self.scale,
                 "scale_name": self.scale_name, "fixed_point_part": self.fixed_point_part,
-                "proof_part": self.proof_part, "psd_part": self.psd_part, "proven": self.proven, "note": self.note,
+                "proof_part": self.proof_part, "psd_part": self.psd_part, "open_contacts": self.open_contacts,
+                "proven": self.proven, "note": self.note,
                 "worst_contact": int(np.argmax(self.delta)) if self.delta.size else None}
 
 
@@ -122,6 +135,8 @@ def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scal
         if diag_shift:
             psd = np.full(n, math.inf) if r_upper is None else _up(diag_shift * np.asarray(r_upper, dtype=np.float64))
             delta = _up(delta + psd)
+        opened = proven_open_and_apart(problem, u_inner, e_u, s_hi)
+        fixed, lip, psd, delta = (np.where(opened, 0.0, x) for x in (fixed, lip, psd, delta))
     absolute = float(np.max(delta, initial=0.0))
     if scale > 0:
         relative = float(_up(absolute / scale))
@@ -130,7 +145,21 @@ def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scal
     proven = bool(np.all(np.isfinite(delta)))
     return BackwardError(delta, absolute, relative, scale, scale_name, float(np.max(fixed, initial=0.0)),
                          float(np.max(lip, initial=0.0)), proven, "" if proven else "a bound overflowed (or r* is "
-                         "not bounded where W was shifted)", psd_part=float(np.max(psd, initial=0.0)))
+                         "not bounded where W was shifted)", psd_part=float(np.max(psd, initial=0.0)),
+                         open_contacts=int(opened.sum()))
+
+
+def proven_open_and_apart(problem: Problem, u_inner, e_u: float, s_hi) -> np.ndarray:
+    """(n,) True where the box û_i ± e_u lies in int K*_i (so r*_i = 0 for every solution of the
+    shifted problem) and u*_N,i = u'*_N,i − ŝ_i ≥ 0 (ŝ_i ≤ ``s_hi``): every rounding against it."""
+    U = np.asarray(u_inner, dtype=np.float64).reshape(-1, SPACEDIM)
+    e2 = _up(SQRT2_UP * e_u)
+    with np.errstate(over="ignore", invalid="ignore"):
+        t_hi = _up(_up(np.hypot(np.abs(U[:, 1]), np.abs(U[:, 2]))) + e2)
+        r_hi = _up(_up(np.hypot(np.abs(U[:, 3]), np.abs(U[:, 4]))) + e2)
+        need = _up(_up(_up(problem.mu * t_hi) + _up(problem.mu_r * r_hi)) * (1 + 4 * 2.0 ** -53))
+        normal = _down(U[:, 0] - e_u)
+        return (normal > need) & (_down(normal - s_hi) >= 0)
 
 
 def physical_u_bound(problem: Problem, shifted: Problem, u_phys, u_inner, e_u: float) -> np.ndarray:
