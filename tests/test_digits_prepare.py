@@ -190,13 +190,19 @@ def test_the_gate_skips_a_granular_beds_double_answer_and_its_proof_would_not_ce
 
 
 def test_the_double_answers_proof_stands_where_no_iterate_beats_it():
-    """The extended phase gets no iteration: the double answer, proven at the end, is the answer."""
+    """The extended phase gets no iteration: its start (the double answer, r moved into the cone
+    where it is not) is proven beside the double answer, and the double answer is the answer
+    unless that start's proof scores strictly higher.  (Which one wins depends on the last bits of
+    the double solve: on seed 3 the double answer on one machine, the start on another.)"""
     problem = generate("GranularBed", count=1, seed=3, size=125)[0]
     out = rfverify.solve_to_digits(problem, digits=10, extended_max_iter=0, wide_tail=False)
     posed = rfverify.solver.posed(problem, None, "auto")
     _, own = _gate_and_proof(posed, out.double.v, out.double.r)
-    assert out.certificate.proof.summary() == own.summary()
-    assert np.array_equal(out.point.v_hi, out.double.v) and np.array_equal(out.point.r_hi, out.double.r)
+    is_double = np.array_equal(out.point.v_hi, out.double.v) and np.array_equal(out.point.r_hi, out.double.r)
+    if is_double:
+        assert out.certificate.proof.summary() == own.summary()
+    else:
+        assert DR.ProofDriver.score(out.certificate.proof) > DR.ProofDriver.score(own)
 
 
 def test_on_a_tie_the_double_answers_proof_is_the_one_reported(monkeypatch):

@@ -358,9 +358,8 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     (clarabel, siconos) solve (M + Mᵀ)/2 only and are refused with it when a problem's M is
     unsymmetric.
 
-    ``load_options`` (``{"max_asymmetry": X, "psd_shift": True}``, either may be left out) load
-    every problem as ``solve --max-asymmetry X --psd-shift`` does (:func:`.tasks.load_for_bench`);
-    a run directory holds one choice, kept in its manifest, which the report loads with too.
+    ``load_options`` ``{"max_asymmetry": X, "psd_shift": True}`` load every problem as ``solve``
+    does (:func:`.tasks.load_for_bench`); one choice per run directory, kept in its manifest.
 
     ``problem_kind`` "coulomb" runs the physical problem instead (issue 51): per problem
     rfverify's Coulomb path at ``digits`` (each method of ``methods`` but ``siconos`` as its
@@ -371,7 +370,7 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
     import math
 
     from ..coulomb import check_problem_kind
-    from .tasks import load_for_bench
+    from .tasks import check_one_choice, load_for_bench
 
     check_problem_kind(problem_kind)
     coulomb = problem_kind == "coulomb"
@@ -415,15 +414,7 @@ def run_bench(inputs, out_dir, *, methods=DEFAULT_METHODS,
             raise BenchInputError(f"--as-stored: {e.key} has an unsymmetric M, and {', '.join(peers)} "
                                   f"{'solve' if len(peers) > 1 else 'solves'} (M + Mᵀ)/2 only; fix: leave them out of --methods, or drop --as-stored")
     old = read_manifest(run_dir, required=False) if run_dir.is_dir() else {}
-    if old and bool(old.get("as_stored", False)) != bool(as_stored):
-        raise BenchInputError(f"{run_dir}: its runs were made {'with' if old.get('as_stored') else 'without'} "
-                              f"--as-stored; fix: give another --out for runs "
-                              f"{'with' if as_stored else 'without'} it")
-    load_options = {k: v for k, v in (load_options or {}).items() if v not in (None, False)}
-    if old and (old.get("load_options") or {}) != load_options:
-        raise BenchInputError(f"{run_dir}: its problems were loaded with {old.get('load_options') or 'the defaults'}, "
-                              f"not {load_options or 'the defaults'} (--max-asymmetry, --psd-shift); fix: give "
-                              "another --out for runs loaded otherwise")
+    load_options = check_one_choice(run_dir, old, as_stored, load_options)
     tasks = plan_tasks(problems, methods, sorted(tols, reverse=True), trajectory_tol=trajectory_tol,
                        trajectories=trajectories, digits=digits,
                        reference_max_contacts=reference_max_contacts,

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import BenchInputError
 from ..io.output import dumps
 from .records import FORMAT_VERSION, new_record, task_stem, tol_text, write_json
 from .verify import HighPrecisionChecker
@@ -69,6 +70,22 @@ def load_for_bench(path, options: dict | None):
 
         problem = shift_to_psd(problem)
     return problem
+
+
+def check_one_choice(run_dir, old: dict, as_stored: bool, load_options: dict | None) -> dict:
+    """The run's load options without their defaults; a BenchInputError where the run directory's
+    manifest ``old`` was made with another choice of ``--as-stored`` or of the load options (one
+    run directory, one way of posing its problems)."""
+    if old and bool(old.get("as_stored", False)) != bool(as_stored):
+        raise BenchInputError(f"{run_dir}: its runs were made {'with' if old.get('as_stored') else 'without'} "
+                              f"--as-stored; fix: give another --out for runs "
+                              f"{'with' if as_stored else 'without'} it")
+    load_options = {k: v for k, v in (load_options or {}).items() if v not in (None, False)}
+    if old and (old.get("load_options") or {}) != load_options:
+        raise BenchInputError(f"{run_dir}: its problems were loaded with {old.get('load_options') or 'the defaults'}, "
+                              f"not {load_options or 'the defaults'} (--max-asymmetry, --psd-shift); fix: give "
+                              "another --out for runs loaded otherwise")
+    return load_options
 
 
 def task_key(task: dict) -> str:
