@@ -28,6 +28,13 @@ e = u' − (W r + q) give dᵀWd ≤ rᵀu' − dᵀe, hence ‖d‖₂ ≤ δ :
 and ‖d‖²_W ≤ ε² := rᵀu' + ‖e‖δ; then |u_k − u*_k| ≤ √(W_kk) ε for u = W r + q, and
 |r_k − r*_k| ≤ δ.
 
+A second, linear bound (:func:`_active_set_refinement`) where W is definite with λ > 0 on every
+component r may use: on contacts proven open r*_i = 0, on contacts whose ball r_p,i ± ‖d‖₂ lies in
+the relative interior of K_i u*_i = 0 on K_i's span, so dᵀWd = dᵀ(u_p − u*) is at most
+‖d‖₂·‖u_p on the stuck contacts‖ plus the rest's rᵀu — with ‖d‖₂ ≤ ‖d‖_W/√λ a quadratic
+inequality in ‖d‖_W, linear in the stuck contacts' u instead of √(rᵀu).  A pile at rest, whose
+u* is far below its data scale, gets its relative digits of u this way.
+
 Hypothesis check.  W ⪰ 0 is needed; it is proven by the verified floating-point bounds of
 :mod:`.massbounds` (W definite on its nonzero rows) or, for blocks up to
 :data:`EXACT_PSD_ROWS` rows where that fails (W singular: a rank-deficient Delassus matrix),
@@ -61,7 +68,9 @@ the bundled cube; the cost grows like rows³ with rationals of growing size)."""
 
 THEOREM_LOCAL = ("Local problem u = Wr + q with W = (W+W^T)/2 positive semidefinite as stored: for any r in K "
                  "with u = Wr + q in K* (exact), ||r - r*||_W^2 <= r^T u; |u_k - u*_k| <= sqrt(W_kk) ||r - r*||_W; "
-                 "r bounded through verified lambda_min of W on the contacts that may carry load (DESIGN 6.1b).")
+                 "r bounded through verified lambda_min of W on the contacts that may carry load (DESIGN 6.1b); where W "
+                 "is definite, ||r - r*||_W^2 <= ||d_S|| ||u_S|| + r_O^T u_O + r_R^T u_R on stuck (S), open (O) and other "
+                 "(R) contacts, a bound linear in u_S.")
 
 
 PSD_SHIFT_FIX = ("; --psd-shift (Python rfverify.shift_to_psd) proves W + D instead, D ≥ 0 a small diagonal: a "
