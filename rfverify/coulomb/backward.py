@@ -77,11 +77,12 @@ class BackwardError:
     def describe(self) -> str:
         if not self.proven:
             return f"backward error not proven ({self.note})"
-        psd = f" + W's diagonal shift D r* {self.psd_part:.1e}" if self.psd_part else ""
+        psd = f", W's diagonal shift D r* {self.psd_part:.1e}" if self.psd_part else ""
         opened = (f"; δ = 0 on {self.open_contacts} contact(s) proven open, where the shift is immaterial"
                   if self.open_contacts else "")
         return (f"backward error |δ| ≤ {self.absolute:.2e} (relative {self.relative:.1e} of the data scale "
-                f"{self.scale_name} = {self.scale:.2e}; fixed point {self.fixed_point_part:.1e} + inner proof "
+                f"{self.scale_name} = {self.scale:.2e}; largest parts over the contacts: fixed point "
+                f"{self.fixed_point_part:.1e}, inner proof "
                 f"{self.proof_part:.1e}{psd}{opened})")
 
     def as_dict(self) -> dict:
