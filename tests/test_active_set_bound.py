@@ -165,3 +165,33 @@ def test_boxes_stack_at_rest_is_certified_for_the_physical_problem_and_rechecked
             worst = max(worst, float(max(-u[0], 0)), float(comp),
                         *(float(abs(u[k] - mpmath.mpf(float(u_file[3 * i + k])))) for k in range(3)))
     assert worst <= 1e-10 * scale, worst / scale
+
+
+@pytest.mark.skipif(not D.HAS_LONG_DOUBLE, reason="numpy's long double is a double on this platform")
+def test_the_long_double_residual_is_within_its_a_priori_rounding_bound():
+    """The retry's error model, checked against exact rationals: the long-double residual
+    F = (A − τI) − GGᵀ of :func:`dense_lambda_lower` differs from the exact one by at most
+    γ_{s+4}(|G||G|ᵀ + |A| + τI) with γ of long double's unit roundoff — the platform's long
+    double rounds as finfo says (a long double of fewer bits than claimed fails here)."""
+    from fractions import Fraction
+
+    rng = np.random.default_rng(3)
+    s = 12
+    G0 = rng.normal(size=(s, 5))
+    A = G0 @ G0.T + 1e-12 * np.eye(s)
+    A = 0.5 * (A + A.T)
+    lam, V = np.linalg.eigh(A)
+    tau = lam[0] * (1 - 2.0 ** -20)
+    G = V * np.sqrt(np.maximum(lam - tau, 0.0))[None, :]
+    GL = G.astype(np.longdouble)
+    FL = (A.astype(np.longdouble) - np.longdouble(tau) * np.eye(s)) - GL @ GL.T
+    bound = D.gamma_long(s + 4) * (np.abs(G) @ np.abs(G).T + np.abs(A) + abs(tau) * np.eye(s))
+    worst = 0.0
+    for i in range(s):
+        for j in range(s):
+            exact = (Fraction(float(A[i, j])) - (Fraction(tau) if i == j else 0)
+                     - sum(Fraction(float(G[i, k])) * Fraction(float(G[j, k])) for k in range(s)))
+            err = abs(Fraction(*FL[i, j].as_integer_ratio()) - exact)  # a long double converts exactly
+            assert err <= Fraction(float(bound[i, j])), (i, j, float(err), bound[i, j])
+            worst = max(worst, float(err) / bound[i, j]) if bound[i, j] > 0 else worst
+    assert worst > 1e-6  # the check is not vacuous: rounding of this size occurs
