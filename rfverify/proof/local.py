@@ -294,16 +294,7 @@ def _skew_gain(problem, ex: LocalExact):
     """‖row k of (W − Wᵀ)/2‖₂ / √λmin(W_s) per row (an upper bound), or None when λmin(W_s) is not
     proven positive on every component r may use (then ‖r − r*‖₂ is not bounded by ‖·‖_{W_s})."""
     facts = ex.facts
-    if not facts.lam_lower > 0 or facts.nonzero_rows is None:
-        return None
-    n = problem.n_contacts
-    kept = np.zeros((n, SPACEDIM), dtype=bool)
-    kept[:, 0] = True
-    kept[:, 1:3] = (problem.mu > 0)[:, None]
-    kept[:, 3:5] = (problem.mu_r > 0)[:, None]
-    in_F = np.zeros(SPACEDIM * n, dtype=bool)
-    in_F[facts.nonzero_rows] = True
-    if not np.all(in_F[kept.ravel()]):
+    if not _definite_where_r_may_be(problem, facts):
         return None
     root = float(np.nextafter(np.sqrt(facts.lam_lower) * (1 - 4 * 2.0 ** -53), 0))
     return up(ex.skew_row_norms_upper() / root)
@@ -315,17 +306,9 @@ def _shift_into_dual_cone(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic)
     facts = ex.facts
     n = problem.n_contacts
     _, bad_primal = cone_violations(ex, u_p, point_r)
-    if bad_primal.size or not facts.lam_lower > 0 or facts.nonzero_rows is None:
+    if bad_primal.size or not _definite_where_r_may_be(problem, facts):
         return None
     mu, mur = problem.mu, problem.mu_r
-    kept = np.zeros((n, SPACEDIM), dtype=bool)
-    kept[:, 0] = True
-    kept[:, 1:3] = (mu > 0)[:, None]
-    kept[:, 3:5] = (mur > 0)[:, None]
-    in_F = np.zeros(SPACEDIM * n, dtype=bool)
-    in_F[facts.nonzero_rows] = True
-    if not np.all(in_F[kept.ravel()]):
-        return None
     mag = np.maximum(np.abs(u_p.lower()), np.abs(u_p.upper())).reshape(n, SPACEDIM)
     need = inflate(mu * up(np.hypot(mag[:, 1], mag[:, 2])) + mur * up(np.hypot(mag[:, 3], mag[:, 4])), 6)
     tau = np.maximum(up(need - u_p.lower().reshape(n, SPACEDIM)[:, 0]), 0.0)
@@ -349,6 +332,16 @@ def _kept_components(problem) -> np.ndarray:
     return kept
 
 
+def _definite_where_r_may_be(problem, facts: LocalFacts) -> bool:
+    """W is proven definite (λmin ≥ ``facts.lam_lower`` > 0) on every component r may use: each
+    component K does not force to 0 is a row with a nonzero diagonal, so ‖d‖₂ ≤ ‖d‖_W/√λ."""
+    if not facts.lam_lower > 0 or facts.nonzero_rows is None:
+        return False
+    in_F = np.zeros(SPACEDIM * problem.n_contacts, dtype=bool)
+    in_F[facts.nonzero_rows] = True
+    return bool(np.all(in_F[_kept_components(problem).ravel()]))
+
+
 def _active_set_refinement(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic, sqrtW, eps: float, delta,
                            shifted):
     """A second, linear bound on ‖d‖_W (d = r_p − r*) where W is definite (λ > 0) on every
@@ -365,13 +358,9 @@ def _active_set_refinement(problem, ex: LocalExact, u_p: Dyadic, point_r: Dyadic
     first bound, √(rᵀu), is only its square root.  Returns (x, x/√λ, terms)."""
     facts = ex.facts
     n = problem.n_contacts
-    if n == 0 or facts.nonzero_rows is None:
+    if n == 0 or not _definite_where_r_may_be(problem, facts):
         return None
     kept = _kept_components(problem)
-    in_F = np.zeros(SPACEDIM * n, dtype=bool)
-    in_F[facts.nonzero_rows] = True
-    if not np.all(in_F[kept.ravel()]):
-        return None
     _, bad_primal = cone_violations(ex, u_p, point_r)
     if bad_primal.size:
         return None
