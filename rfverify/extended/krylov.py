@@ -107,6 +107,92 @@ def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int, stop_at: 
     return best, best_x, steps
 
 
+RECYCLE_BYTES = 256 * 2**20
+"""Memory for the search directions one factor keeps for its later solves (:class:`RecycledDirections`:
+each direction and its product, n float64 each).  On the 9675-contact turned touching bed (n = 48375)
+a factor's solves made up to 224 directions, 173 MB; keeping all of them took 956 conjugate-gradient
+steps where none took 2193, and keeping the last 100 took 1526 (docs/DECISIONS.md, "touching piles")."""
+RECYCLE_DROP = 1e-8
+"""Eigenvalues of the recycled directions' Gram matrix WᵀAW (columns scaled to unit A-norm) below
+this fraction of the largest are dropped from its pseudo-inverse: directions that are nearly
+dependent, since each solve's Krylov space overlaps the last ones'."""
+
+
+class RecycledDirections:
+    """Search directions p and their products Ap (float64: the high parts) from earlier conjugate-
+    gradient solves with one matrix A and one preconditioner M, kept to deflate the later ones
+    (Krylov subspace recycling, as in deflated CG, Saad, Yeung, Erhel and Guyomarc'h 2000): the
+    directions CG spent its steps finding — a touching pile's near self-stresses, where the
+    shifted float64 factor is poor — are projected out once instead of found again.
+
+    Speed only: the preconditioner it makes is float64 and approximate, the solve's residual and
+    backward error are still double-double and recomputed from A, x and b.  Keeps the first
+    ``max_bytes`` worth (the earliest directions are the ones the preconditioner misses most);
+    :meth:`clear` when A or M changes."""
+
+    def __init__(self, n: int, max_bytes: int | None = None):
+        self.n = n
+        budget = RECYCLE_BYTES if max_bytes is None else max_bytes
+        self.capacity = int(budget // (16 * max(n, 1)))
+        self.deflated = 0  # passes that ran deflated (statistics)
+        self.clear()
+
+    def clear(self) -> None:
+        self._W = np.empty((self.n, 0), order="F")
+        self._AW = np.empty((self.n, 0), order="F")
+        self.count = 0
+        self._space = None
+
+    @property
+    def room(self) -> int:
+        return self.capacity - self.count
+
+    def add(self, directions: list) -> None:
+        """Keep (p, Ap) pairs (float64 arrays of length n) while there is room."""
+        take = directions[:max(self.room, 0)]
+        if not take:
+            return
+        if self.count + len(take) > self._W.shape[1]:  # grow in chunks: columns stay contiguous
+            size = min(self.capacity, max(self.count + len(take), 2 * self._W.shape[1], 32))
+            for name in ("_W", "_AW"):
+                grown = np.empty((self.n, size), order="F")
+                grown[:, :self.count] = getattr(self, name)[:, :self.count]
+                setattr(self, name, grown)
+        for p, q in take:
+            self._W[:, self.count] = p
+            self._AW[:, self.count] = q
+            self.count += 1
+        self._space = None
+
+    def _build(self):
+        if self._space is None:
+            W, AW = self._W[:, :self.count], self._AW[:, :self.count]
+            scale = np.sqrt(np.abs(np.einsum("ij,ij->j", W, AW)))
+            scale[~(scale > 0)] = 1.0
+            W, AW = W / scale, AW / scale
+            E = W.T @ AW
+            lam, V = np.linalg.eigh((E + E.T) / 2)
+            keep = lam > RECYCLE_DROP * lam.max(initial=0.0)
+            self._space = (W, AW, (V[:, keep] / lam[keep]) @ V[:, keep].T)
+        return self._space
+
+    def preconditioner(self, inner):
+        """The balancing preconditioner Q r + (I − QA) M⁻¹ (I − AQ) r, Q = W (WᵀAW)⁺ Wᵀ, of the
+        recycled directions W around ``inner`` (r ↦ M⁻¹r); ``inner`` itself while none are kept.
+        Symmetric where M is, so the conjugate gradients keep their recurrences."""
+        if not self.count:
+            return inner
+        W, AW, Ei = self._build()
+        self.deflated += 1
+
+        def apply(r):
+            c = Ei @ (W.T @ r)
+            z = inner(r - AW @ c)
+            return z - W @ (Ei @ (AW.T @ z)) + W @ c
+
+        return apply
+
+
 CG_REPLACE_ABOVE = 1e9
 """A conjugate-gradient step whose update r − αAp is this many times larger than the residual it
 leaves (that many digits cancelled, from a direction in the near-null space of a huge block)
@@ -124,7 +210,8 @@ bed's 10th factorisation; with 20 each reached 1e-20 in 66–175 steps, and the 
 
 
 def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target: float,
-                                         max_steps: int | None = None, patience: int | None = None):
+                                         max_steps: int | None = None, patience: int | None = None,
+                                         recycled: RecycledDirections | None = None):
     """A x = b (A symmetric positive definite: values (high, low) of its upper triangle in CSC)
     by conjugate gradients with residuals, products and iterates in double-double and a float64
     ``preconditioner`` (``preconditioner(r)`` ≈ P⁻¹r, P a float64 factor of a shifted A).  The
@@ -136,7 +223,12 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     from the same pass; stops at ``target``, after ``patience`` steps without a better one, or
     after ``max_steps``.  The best iterate's residual and backward error are then recomputed
     from A, x and b: what it returns is that.  Returns (best backward error, (xh, xl) of the
-    best iterate, steps)."""
+    best iterate, steps).  With ``recycled``, the directions of earlier solves with the same A and
+    preconditioner deflate this one (:class:`RecycledDirections`), and this solve's are added to
+    them at its end."""
+    kept = [] if recycled is not None and recycled.room > 0 else None
+    if recycled is not None:
+        preconditioner = recycled.preconditioner(preconditioner)
     max_steps = CG_MAX_STEPS if max_steps is None else max_steps
     patience = CG_PATIENCE if patience is None else patience
     n = Ap.size - 1
@@ -167,6 +259,8 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
             rz, fresh = dd.vdot(rh, rl, z, zero)[0], True
             continue
         fresh = False
+        if kept is not None and len(kept) < recycled.room:
+            kept.append((ph.copy(), qh.copy()))
         alpha = rz / pq
         dd.vaxpy(alpha, 0.0, ph, pl, xh, xl)
         r_old = rh.copy()
@@ -192,6 +286,8 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     if steps:
         best = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, best_x[0], best_x[1], np.empty(n), np.empty(n),
                                    np.zeros(n))
+    if kept:
+        recycled.add(kept)
     return best, best_x, steps
 
 
@@ -204,24 +300,27 @@ the one-pass version fell back to the double-double factor; docs/DECISIONS.md, "
 
 
 def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: float, good_enough: float,
-                                  restarts: int | None = None):
+                                  restarts: int | None = None, recycled: RecycledDirections | None = None):
     """:func:`conjugate_gradients_in_double_double` to ``target``; where its best backward error
     is still above ``good_enough``, restarted up to ``restarts`` times (:data:`CG_RESTARTS` by
     default) on the residual b − Ax of the best iterate so far (in double-double), each pass
-    adding its correction while that lowers the componentwise backward error.  Returns (best
-    backward error, (xh, xl), steps of all passes)."""
+    adding its correction while that lowers the componentwise backward error; every pass is
+    deflated by, and adds to, ``recycled``.  Returns (best backward error, (xh, xl), steps of all
+    passes)."""
     restarts = CG_RESTARTS if restarts is None else restarts
     n = Ap.size - 1
     bh = np.ascontiguousarray(bh, dtype=np.float64)
     bl = np.ascontiguousarray(bl, dtype=np.float64)
-    best, (xh, xl), steps = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target)
+    best, (xh, xl), steps = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target,
+                                                                 recycled=recycled)
     for _ in range(restarts):
         if not best > good_enough:  # reached (or NaN: nothing to restart from)
             break
         rh, rl = np.empty(n), np.empty(n)
         symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
         # the correction's own pass runs until it stalls: its scale is the residual's, not b's
-        _, (dh, dl), more = conjugate_gradients_in_double_double(Ap, Ai, A, rh, rl, preconditioner, 0.0)
+        _, (dh, dl), more = conjugate_gradients_in_double_double(Ap, Ai, A, rh, rl, preconditioner, 0.0,
+                                                                 recycled=recycled)
         steps += more
         yh, yl = np.empty(n), np.empty(n)
         dd.vadd(xh, xl, dh, dl, yh, yl)

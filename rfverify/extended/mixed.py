@@ -18,7 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..engines.factor import CholmodEngine, QDLDLEngine
-from .krylov import refine_in_double_double, restarted_conjugate_gradients
+from .krylov import RecycledDirections, refine_in_double_double, restarted_conjugate_gradients
 from .ldl import DDCholesky, symbolic_ldl, symmetric_pattern, upper_csc, upper_positions
 
 SHIFTS = (1.0, 4.0, 16.0, 64.0)
@@ -85,6 +85,10 @@ class _RefinedFloat64Factor:
         self.judged_by_caller = False  # a checked CG solve short of 1e-20 is returned, the caller judges it
         self.cg_short = 0  # such solves, and the worst backward error among them
         self.cg_short_worst = 0.0
+        self.recycled_most = 0  # the most directions one factor's solves recycled
+        self._recycled = None  # RecycledDirections of the current matrix and float64 factor
+        self._recycling_off = False  # True where they failed this factor (until the next one)
+        self.recycling_dropped = 0  # factors whose recycled directions failed a solve
         self._A = None
 
     def _solve_by_cg(self, bh: np.ndarray, bl: np.ndarray):
@@ -96,8 +100,22 @@ class _RefinedFloat64Factor:
         double-double factor, for good."""
         target = min(self.backward_target, CG_TARGET)
         good_enough = max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20)
+        if self._recycled is None:
+            self._recycled = RecycledDirections(self.n)
+        args = (self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target, good_enough)
+        passes = self._recycled.deflated
         best, best_x, steps = restarted_conjugate_gradients(
-            self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target, good_enough)
+            *args, recycled=None if self._recycling_off else self._recycled)
+        self.recycled_most = max(self.recycled_most, self._recycled.count)
+        if not best <= good_enough and self._recycled.deflated > passes:
+            # the recycled directions' Gram matrix is float64 and can be poor where A's entries
+            # reach eps⁻²: the solve again without them, and no more of them for this factor
+            self._recycling_off, self.recycling_dropped = True, self.recycling_dropped + 1
+            self._recycled.clear()
+            again, again_x, more = restarted_conjugate_gradients(*args)
+            steps += more
+            if again < best or not best == best:
+                best, best_x = again, again_x
         self.last_backward_error, self.last_steps = best, steps
         self.solves += 1
         self.refinement_steps += steps
@@ -191,6 +209,9 @@ class _RefinedFloat64Factor:
         return bad
 
     def _timed(self, precision: str, factor):
+        if self._recycled is not None:  # a new factor: directions found with the old one no longer fit
+            self._recycled.clear()
+        self._recycling_off = False
         t0 = time.perf_counter()
         try:
             return factor()
@@ -217,6 +238,13 @@ class _RefinedFloat64Factor:
                     f"factorisation {self.shifted_from}: {self.shift_reason})")
         if self.cg_iterations:
             out += f", {self.cg_iterations} conjugate-gradient steps in double-double"
+            if self.recycled_most:
+                out += (f" (deflated by up to {self.recycled_most} directions recycled from earlier solves "
+                        "with the same factor")
+                if self.recycling_dropped:
+                    out += f"; dropped where they failed a solve, {self.recycling_dropped} time"
+                    out += "s" if self.recycling_dropped != 1 else ""
+                out += ")"
         if self.cg_short and self.fallback_at is None:
             out += (f" ({self.cg_short} checked solve{'s' if self.cg_short != 1 else ''} short of 1e-20, "
                     f"worst {self.cg_short_worst:.1e}, accepted by the Newton refinement)")
