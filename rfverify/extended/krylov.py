@@ -107,7 +107,7 @@ def refine_in_double_double(Ap, Ai, A, bh, bl, oracle, max_steps: int, stop_at: 
     return best, best_x, steps
 
 
-RECYCLE_BYTES = 256 * 2**20
+RECYCLE_BYTES = 128 * 2**20
 """Memory for the search directions one factor keeps for its later solves (:class:`RecycledDirections`:
 each direction and its product, n float64 each).  On the 9675-contact turned touching bed (n = 48375)
 a factor's solves made up to 224 directions, 173 MB; keeping all of them took 956 conjugate-gradient
@@ -140,40 +140,50 @@ class RecycledDirections:
     def clear(self) -> None:
         self._W = np.empty((self.n, 0), order="F")
         self._AW = np.empty((self.n, 0), order="F")
-        self.count = 0
+        self.count = 0  # directions in use
+        self.staged = 0  # directions of the solve under way, kept after it (:meth:`commit`)
         self._space = None
 
     @property
     def room(self) -> int:
-        return self.capacity - self.count
+        return self.capacity - self.count - self.staged
+
+    def stage(self, p: np.ndarray, q: np.ndarray) -> None:
+        """Keep the direction p and its product q = Ap (float64, length n) if there is room; it
+        deflates the solves after the current one (:meth:`commit`), whose deflation stays fixed."""
+        if self.room <= 0:
+            return
+        if self._W.shape[1] < self.capacity:  # untouched pages of np.empty cost no memory
+            self._W = np.empty((self.n, self.capacity), order="F")
+            self._AW = np.empty((self.n, self.capacity), order="F")
+        self._W[:, self.count + self.staged] = p
+        self._AW[:, self.count + self.staged] = q
+        self.staged += 1
+
+    def commit(self) -> None:
+        """The staged directions join those in use."""
+        if self.staged:
+            self.count += self.staged
+            self.staged = 0
+            self._space = None
 
     def add(self, directions: list) -> None:
         """Keep (p, Ap) pairs (float64 arrays of length n) while there is room."""
-        take = directions[:max(self.room, 0)]
-        if not take:
-            return
-        if self.count + len(take) > self._W.shape[1]:  # grow in chunks: columns stay contiguous
-            size = min(self.capacity, max(self.count + len(take), 2 * self._W.shape[1], 32))
-            for name in ("_W", "_AW"):
-                grown = np.empty((self.n, size), order="F")
-                grown[:, :self.count] = getattr(self, name)[:, :self.count]
-                setattr(self, name, grown)
-        for p, q in take:
-            self._W[:, self.count] = p
-            self._AW[:, self.count] = q
-            self.count += 1
-        self._space = None
+        for p, q in directions:
+            self.stage(p, q)
+        self.commit()
 
     def _build(self):
         if self._space is None:
             W, AW = self._W[:, :self.count], self._AW[:, :self.count]
-            scale = np.sqrt(np.abs(np.einsum("ij,ij->j", W, AW)))
-            scale[~(scale > 0)] = 1.0
-            W, AW = W / scale, AW / scale
             E = W.T @ AW
-            lam, V = np.linalg.eigh((E + E.T) / 2)
+            # columns scaled to unit A-norm, so that the cut-off compares directions, not their lengths
+            scale = np.sqrt(np.abs(np.diag(E)))
+            scale[~(scale > 0)] = 1.0
+            lam, V = np.linalg.eigh((E + E.T) / 2 / np.outer(scale, scale))
             keep = lam > RECYCLE_DROP * lam.max(initial=0.0)
-            self._space = (W, AW, (V[:, keep] / lam[keep]) @ V[:, keep].T)
+            V = V[:, keep] / scale[:, None]
+            self._space = (W, AW, (V / lam[keep]) @ V.T)
         return self._space
 
     def preconditioner(self, inner):
@@ -226,7 +236,6 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     best iterate, steps).  With ``recycled``, the directions of earlier solves with the same A and
     preconditioner deflate this one (:class:`RecycledDirections`), and this solve's are added to
     them at its end."""
-    kept = [] if recycled is not None and recycled.room > 0 else None
     if recycled is not None:
         preconditioner = recycled.preconditioner(preconditioner)
     max_steps = CG_MAX_STEPS if max_steps is None else max_steps
@@ -259,8 +268,8 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
             rz, fresh = dd.vdot(rh, rl, z, zero)[0], True
             continue
         fresh = False
-        if kept is not None and len(kept) < recycled.room:
-            kept.append((ph.copy(), qh.copy()))
+        if recycled is not None:
+            recycled.stage(ph, qh)
         alpha = rz / pq
         dd.vaxpy(alpha, 0.0, ph, pl, xh, xl)
         r_old = rh.copy()
@@ -286,8 +295,8 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     if steps:
         best = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, best_x[0], best_x[1], np.empty(n), np.empty(n),
                                    np.zeros(n))
-    if kept:
-        recycled.add(kept)
+    if recycled is not None:
+        recycled.commit()
     return best, best_x, steps
 
 
