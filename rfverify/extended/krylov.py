@@ -1,7 +1,8 @@
 """Krylov solves in double-double with a float64 preconditioner: the residual and product
 kernels, iterative refinement (:func:`refine_in_double_double`) and the conjugate gradients
 (:func:`conjugate_gradients_in_double_double`, :func:`restarted_conjugate_gradients`) that
-:mod:`.mixed`'s float64 factors use where refinement alone stalls.  A matrix is its upper
+:mod:`.mixed`'s float64 factors use where refinement alone stalls, deflated by the directions of
+the earlier solves with the same factor (:class:`RecycledDirections`).  A matrix is its upper
 triangle in CSC with values (high, low) in double-double."""
 
 from __future__ import annotations

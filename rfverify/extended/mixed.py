@@ -97,7 +97,9 @@ class _RefinedFloat64Factor:
         ``backward_target`` (:data:`CG_TARGET` when unchecked).  Where it misses what the solve
         accepts (:data:`CG_GIVE_UP`; 1e-20 for a checked solve that no caller judges), the next
         shift of :data:`SHIFTS` is factored and the solve tried again, and after the last the
-        double-double factor, for good."""
+        double-double factor, for good.  Each solve is deflated by the directions the earlier
+        solves with this factor found (:class:`.krylov.RecycledDirections`); where a deflated solve
+        misses, it runs again without them, and this factor recycles nothing more."""
         target = min(self.backward_target, CG_TARGET)
         good_enough = max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20)
         if self._recycled is None:
