@@ -233,6 +233,20 @@ def test_one_pass_of_the_conjugate_gradients_survives_a_lost_recurrence(seed, mo
     assert res <= 1e-27 * scale
 
 
+def outlier_matrix(seed: int = 0, n: int = 60, k: int = 10):
+    """A = Q diag(1, …, 1, 1 … 1e-12) Qᵀ (k outliers spread over twelve decades), with the identity
+    as preconditioner: the conjugate gradients spend their steps finding the outliers.  Returns
+    (A, (Ap, Ai, (high, low)) of its upper triangle, the generator for right-hand sides)."""
+    rng = np.random.default_rng(seed)
+    lam = np.concatenate([np.ones(n - k), np.logspace(0, -12, k)])
+    Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    A = (Q * lam) @ Q.T
+    A = (A + A.T) / 2
+    U = sp.triu(sp.csc_matrix(A)).tocsc()
+    U.sort_indices()
+    return A, (U.indptr.astype(np.int64), U.indices.astype(np.int64), (U.data.copy(), np.zeros(U.nnz))), rng
+
+
 def test_the_conjugate_gradients_wait_out_a_plateau_of_the_backward_error():
     """The componentwise backward error of the conjugate gradients stalls for many steps and then
     falls where the preconditioned matrix has a spread of outliers (ten eigenvalues from 1 to
@@ -240,17 +254,10 @@ def test_the_conjugate_gradients_wait_out_a_plateau_of_the_backward_error():
     measured first it stops at ~1e-11; the default (:data:`CG_PATIENCE`, 20) waits the plateau
     out to 1e-20 — as on the 9675-contact turned touching bed, where every shift then reached
     1e-20 (docs/DECISIONS.md, "touching piles").  Checked by an 80-digit residual."""
-    rng = np.random.default_rng(0)
-    n, k = 60, 10
-    lam = np.concatenate([np.ones(n - k), np.logspace(0, -12, k)])
-    Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
-    A = (Q * lam) @ Q.T
-    A = (A + A.T) / 2
-    U = sp.triu(sp.csc_matrix(A)).tocsc()
-    U.sort_indices()
+    A, pattern, rng = outlier_matrix()
+    n = A.shape[0]
     b = rng.normal(size=n)
-    args = (U.indptr.astype(np.int64), U.indices.astype(np.int64), (U.data.copy(), np.zeros(U.nnz)),
-            b, np.zeros(n), lambda r: r, 1e-29)
+    args = pattern + (b, np.zeros(n), lambda r: r, 1e-29)
     short, _, _ = krylov.conjugate_gradients_in_double_double(*args, patience=5)
     assert short > 1e-14
     best, (xh, xl), steps = krylov.conjugate_gradients_in_double_double(*args)

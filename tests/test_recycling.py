@@ -6,26 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 
 from rfverify.extended import krylov
 from rfverify.extended import mixed as mixed_module
 
-from test_digits_scale import _residual_of_hi_lo, _touching_engine
-
-
-def _outliers(seed: int = 0, n: int = 60, k: int = 10):
-    """A = Q diag(1, …, 1, 1 … 1e-12) Qᵀ (k outliers spread over twelve decades), the identity as
-    preconditioner: the conjugate gradients spend their steps finding the outliers."""
-    rng = np.random.default_rng(seed)
-    lam = np.concatenate([np.ones(n - k), np.logspace(0, -12, k)])
-    Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
-    A = (Q * lam) @ Q.T
-    A = (A + A.T) / 2
-    U = sp.triu(sp.csc_matrix(A)).tocsc()
-    U.sort_indices()
-    pattern = (U.indptr.astype(np.int64), U.indices.astype(np.int64), (U.data.copy(), np.zeros(U.nnz)))
-    return A, pattern, rng
+from test_digits_scale import _residual_of_hi_lo, _touching_engine, outlier_matrix
 
 
 def test_a_second_solve_deflated_by_the_first_ones_directions_takes_far_fewer_steps():
@@ -33,7 +18,7 @@ def test_a_second_solve_deflated_by_the_first_ones_directions_takes_far_fewer_st
     by the first solve's directions, needs a few, and both answers hold against an 80-digit
     residual.  Without the directions the second takes as many steps as the first (so the
     test can tell recycling from an easy right-hand side)."""
-    A, (Ap, Ai, vals), rng = _outliers()
+    A, (Ap, Ai, vals), rng = outlier_matrix()
     n = A.shape[0]
     recycled = krylov.RecycledDirections(n)
     b1, b2 = rng.normal(size=n), rng.normal(size=n)
