@@ -112,7 +112,8 @@ RECYCLE_BYTES = 128 * 2**20
 """Memory for the search directions one factor keeps for its later solves (:class:`RecycledDirections`:
 each direction and its product, n float64 each).  On the 9675-contact turned touching bed (n = 48375)
 a factor's solves made up to 224 directions, 173 MB; keeping all of them took 956 conjugate-gradient
-steps where none took 2193, and keeping the last 100 took 1526 (docs/DECISIONS.md, "touching piles")."""
+steps where none took 2193; keeping the first 100 took 1008, the last 100 1526 (docs/DECISIONS.md,
+"touching piles")."""
 RECYCLE_DROP = 1e-8
 """Eigenvalues of the recycled directions' Gram matrix WᵀAW (columns scaled to unit A-norm) below
 this fraction of the largest are dropped from its pseudo-inverse: directions that are nearly
