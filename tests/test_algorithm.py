@@ -186,8 +186,6 @@ def test_the_reduced_newton_hooks_have_defaults_and_are_never_probed():
 
     bare = Bare()
     assert bare.observe(0, 1.0, None) is None and bare.retry_solve(1.0) is False and not bare.projects_primal
-    with pytest.raises(NotImplementedError):
-        bare.apply_G_inverse(None)
     assert NewtonBackend in FactoredBackend.__mro__ and FactoredBackend().retry_solve(1.0) is False
     assert dd_ipm.DDBackend.projects_primal
 

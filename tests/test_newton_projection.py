@@ -1,6 +1,7 @@
 """The Newton driver's projection of the primal residual (ReducedNewton._project_primal): it
-zeroes the primal row's error through δ = −Q_{p⁻²}JᵀG⁻¹e_b, is kept only where it lowers the
-larger block-relative residual, and saves float64 solves without changing what is proven."""
+zeroes the primal row's error through the least-‖Q_pδ‖ δ with Jδ = −e_b (DDSpace.lift, exact in
+J however ill-conditioned G is), is kept only where it lowers the larger block-relative residual,
+and saves float64 solves without changing what is proven."""
 
 from __future__ import annotations
 
@@ -13,7 +14,6 @@ from rfverify.algorithm.loop import residuals
 from rfverify.verify.prepare import start_from
 from rfverify.extended import dd
 from rfverify.extended import ipm as X
-from rfverify.extended.contactspace import ContactSpace
 from rfverify.extended.data import ExtendedData
 from rfverify.extended.system import choose_backend
 from rfverify.scenes.random_problems import random_problem
@@ -68,15 +68,14 @@ def test_the_projection_zeroes_the_primal_row_and_keeps_the_complementarity_row_
 
 
 def test_a_projection_that_would_not_help_is_dropped(started, monkeypatch):
-    """With G⁻¹ off by a factor of 1000 the step δ overshoots the primal row a thousandfold: it
-    must be dropped every time, and the run must end as it does without any projection."""
+    """With the lift off by a factor of 1000 the step δ overshoots the primal row a thousandfold:
+    it must be dropped every time, and the run must end as it does without any projection."""
     data, start = started
     kept, tried = [], []
     _spy(monkeypatch, kept, tried)
-    bad = choose_backend(data)
-    real = ContactSpace.apply_G_inverse
-    monkeypatch.setattr(bad, "apply_G_inverse", lambda eh, el: tuple(1000.0 * x for x in real(bad, eh, el)))
-    off = X.run(data, start, max_iter=8, backend=bad)
+    real = X.DDSpace.lift
+    monkeypatch.setattr(X.DDSpace, "lift", lambda self, e, scaling: real(self, e, scaling).scaled(1000.0))
+    off = X.run(data, start, max_iter=8, backend=choose_backend(data))
     assert tried and not any(kept)
     monkeypatch.setattr(N.ReducedNewton, "_project_primal", lambda self, b, c, dv, dr, dz: dz)
     none = X.run(data, start, max_iter=8, backend=choose_backend(data))

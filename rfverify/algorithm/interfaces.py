@@ -143,8 +143,8 @@ class ReducedBackend(Protocol):
 
     in a precision's vectors.  A back end subclasses this protocol and so has its default hooks:
     :meth:`observe` does nothing, :meth:`retry_solve` has nothing more accurate to try, and
-    ``projects_primal`` is False (no :meth:`apply_G_inverse`: the reduced solve's primal residual
-    is not projected away)."""
+    ``projects_primal`` is False: the reduced solve's primal residual is not projected away (where
+    it is True, the space's ``lift(e, scaling)`` does it: :meth:`.newton.ReducedNewton._project_primal`)."""
 
     name: str
     projects_primal: bool = False
@@ -164,7 +164,3 @@ class ReducedBackend(Protocol):
         """Asked after a solve whose refinement stalled at ``residual``: True when the back end
         has made its solves more accurate (the system is then solved again)."""
         return False
-
-    def apply_G_inverse(self, e):
-        """G⁻¹e at the current scaling; called only where ``projects_primal`` is True."""
-        raise NotImplementedError("this back end does not project the primal residual (projects_primal is False)")

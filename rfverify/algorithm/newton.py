@@ -37,10 +37,10 @@ class ReducedNewton:
     in the space's vectors, ``name``; its hooks ``observe(k, mu, last_residual)`` before each
     update, and ``retry_solve(residual) -> bool``, asked after a solve whose refinement
     stalled above ``floor`` short of ``enough``: True when the back end has made its solves more
-    accurate, and the system is solved again; and where ``projects_primal``,
-    ``apply_G_inverse(e) -> G⁻¹e``, with which each reduced solve's primal residual is projected
-    away, :meth:`_project_primal` — the double-double back ends do, the multiple-precision tail's
-    does not).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
+    accurate, and the system is solved again; and ``projects_primal``: True where each reduced
+    solve's primal residual is to be projected away, :meth:`_project_primal`, with the space's
+    ``lift(e, scaling)`` — the double-double back ends' do, the multiple-precision tail's does
+    not).  The complementarity row Q_p dz + Q_{p⁻¹} Jᵀ dr̃ = c gives
     dz = Q_{p⁻¹}(c − Q_{p⁻¹} Jᵀ dr̃), and the primal row H̃ dv − J dz = b then reads
     H̃ dv + G dr̃ = t with t = b + J Q_{p⁻¹} c.  ``scaling.quad(k, y)`` applies Q_{p^k}.
     Refinement: at most ``refine_max`` steps, down to the relative residual ``floor`` (about the
@@ -85,22 +85,23 @@ class ReducedNewton:
         return dv, dr, dz
 
     def _project_primal(self, b, c, dv, dr, dz):
-        """dz + δ with δ = −Q_{p⁻²}Jᵀ G⁻¹ e_b, where e_b = b − H̃dv + J dz is the primal row's
-        residual, if that lowers the larger of the primal and complementarity rows' residuals
-        relative to their right-hand sides; else dz.
+        """dz + δ with Jδ = −e_b, where e_b = b − H̃dv + J dz is the primal row's residual, and δ
+        the one of least ‖Q_p δ‖ (the space's ``lift``), if that lowers the larger of the primal
+        and complementarity rows' residuals relative to their right-hand sides; else dz.
 
         Why: t = b + J Q_{p⁻¹} c is dominated by its c part (by 1e13 and more near the end), so
         the reduced solve's error, small against t, lands in the primal row at up to 1e13 times
-        ‖b‖, and refinement took three or four more solves to bring it below η‖b‖.  J δ = −e_b
+        ‖b‖ and more, and refinement took one to four more solves to bring it below η‖b‖.  Jδ = −e_b
         zeroes that row; the complementarity row gets Q_p δ = −B F⁻¹e_b instead, where
         B = Q_{p⁻¹}JᵀF⁻ᵀ has orthonormal columns (F Fᵀ = G = J Q_{p⁻²}Jᵀ): the scaled residual of the
-        reduced solve, small against c.  Kept only where it helps: δ is computed to about
-        1e-32·cond(G), which near the end (cond(G) ≳ 1e30) is no better than e_b itself."""
-        sp, q, inf = self.space, self.scaling.quad, self.inf
+        reduced solve, small against c.  The lift is exact in J to double-double rounding, however
+        ill-conditioned G is; kept only where it helps, since that damage to c can exceed what it
+        removes early on (docs/DECISIONS.md, "An exact lift")."""
+        sp, inf = self.space, self.inf
         e_b = b - sp.velocity(dv, dr) + sp.J @ dz
-        delta = -q(-2, sp.JT @ self.backend.apply_G_inverse(e_b))
+        delta = sp.lift(-e_b, self.scaling)
         nb, nc = max(inf(b), 1e-300), max(inf(c), 1e-300)
-        if max(inf(e_b + sp.J @ delta) / nb, inf(q(1, delta)) / nc) < inf(e_b) / nb:
+        if max(inf(e_b + sp.J @ delta) / nb, inf(self.scaling.quad(1, delta)) / nc) < inf(e_b) / nb:
             self.projections += 1
             return dz + delta
         return dz

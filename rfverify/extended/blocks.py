@@ -250,9 +250,8 @@ def block_apply_threaded(n, row_start, row_count, Fh, Fl, transpose, xh, xl, oh,
 
 
 def applied_blocks(data, Bh, Bl, transpose: bool, xh, xl, *, threaded: bool = False) -> tuple:
-    """(hi, lo) of the per-contact blocks ``B`` (G⁻¹, or the factor F⁻¹; ``transpose``: Bᵀ) applied
-    to the double-double vector x over ``data``'s kept rows: the one product both Newton-system
-    back ends make (:meth:`.dofspace.DofSpace.apply_G_inverse`, :class:`.contactspace.ContactSpace`'s
+    """(hi, lo) of the per-contact blocks ``B`` (e.g. the factor F⁻¹; ``transpose``: Bᵀ) applied
+    to the double-double vector x over ``data``'s kept rows (:class:`.contactspace.ContactSpace`'s
     F⁻¹ and F⁻ᵀ), ``threaded`` over the CPUs (bit for bit the one-call result)."""
     oh, ol = np.empty(data.nk), np.empty(data.nk)
     (block_apply_threaded if threaded else block_apply)(data.n, data.row_start, data.row_count, Bh, Bl, transpose,

@@ -499,11 +499,6 @@ class ContactSpace(FactoredBackend):
         """F⁻¹x, or F⁻ᵀx with ``transpose`` (double-double (hi, lo), kept rows)."""
         return applied_blocks(self.data, self.Fh, self.Fl, transpose, xh, xl, threaded=True)
 
-    def apply_G_inverse(self, eh, el):
-        """G⁻¹ e = F⁻ᵀ F⁻¹ e (double-double (hi, lo), kept rows) at the current scaling: for the
-        Newton driver's projection of a primal residual (:meth:`.ReducedNewton._core`)."""
-        return self._F_inverse(*self._F_inverse(eh, el, False), True)
-
     def _S_solve(self, rh, rl):
         """S⁻¹ r = F⁻ᵀ S'⁻¹ F⁻¹ r."""
         return self._F_inverse(*self.chol.solve(*self._F_inverse(rh, rl, False)), True)

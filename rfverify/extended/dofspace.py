@@ -8,7 +8,7 @@ import numba
 import numpy as np
 
 from . import dd
-from .blocks import applied_blocks, block_apply, contact_Ginv, scatter_add, small_product
+from .blocks import block_apply, contact_Ginv, scatter_add, small_product
 from .data import ExtendedData, contact_dof_pattern, contact_local_H
 from .factored import FactoredBackend
 from .ldl import DDCholesky
@@ -85,10 +85,6 @@ class DofSpace(FactoredBackend):
                       self.Gih, self.Gil, self.pos, Sh, Sl)
         self.factorisations += 1
         return self.chol.factor(Sh, Sl) < 0
-
-    def apply_G_inverse(self, eh, el):
-        """G⁻¹ e (double-double (hi, lo)) from the closed-form blocks of the current scaling."""
-        return applied_blocks(self.data, self.Gih, self.Gil, False, eh, el)
 
     def solve(self, a, t):
         """(dv, dr̃) with M dv − H̃ᵀ dr̃ = a, H̃ dv + G dr̃ = t (local form: (W̃ + G) dr̃ = t)."""

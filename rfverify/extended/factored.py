@@ -29,10 +29,6 @@ class NewtonBackend(Protocol):
     def solve(self, a: tuple, t: tuple) -> tuple:
         """((dv_hi, dv_lo), (dr_hi, dr_lo)) from a, t given as (hi, lo) pairs."""
 
-    def apply_G_inverse(self, eh, el) -> tuple:
-        """G⁻¹e at the current scaling, as a (hi, lo) pair: the Newton driver projects the reduced
-        solve's primal residual away with it."""
-
     def observe(self, k: int, mu: float, solve_residual: float | None) -> None:
         """Once per iteration, before the update (the hybrid switches forms here)."""
         return None

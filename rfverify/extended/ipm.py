@@ -26,6 +26,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..algorithm.interfaces import Breakdown, ReducedBackend
 from ..algorithm.loop import Precision, iterate
@@ -171,6 +172,23 @@ def interior_start(data: ExtendedData, v, r, u=None, margin_rel: float = 1e-8) -
     return {"v": v, "r_t": r_t, "z": z}
 
 
+def _shared_heads(J, n3: int):
+    """For the lifting's J (kept rows × z, one 1 per column): the row each component of z
+    reads, and the (friction head, rolling head) pairs of z that share a row (a full contact's
+    normal row).  ValueError on any other structure, which :meth:`DDSpace.lift` does not solve."""
+    J = sp.csr_matrix(J)
+    Jc = J.tocsc()
+    per_row = np.diff(J.indptr)
+    if (np.diff(Jc.indptr) != 1).any() or (J.data != 1).any() or (per_row > 2).any():
+        raise ValueError("the lifting's J is not a selection with at most two cone components per row")
+    shared = np.flatnonzero(per_row == 2)
+    first, second = J.indices[J.indptr[shared]], J.indices[J.indptr[shared] + 1]
+    heads = (first, second)
+    if shared.size and ((np.concatenate(heads) % 3 != 0).any() or (np.concatenate(heads) >= 3 * n3).any()):
+        raise ValueError("a row of the lifting's J is shared by components that are not heads of 3-cones")
+    return Jc.indices.astype(np.int64), heads
+
+
 class _DDOperator:
     """A :class:`.data.DDMatrix` applied to double-double vectors by ``@``."""
 
@@ -194,6 +212,37 @@ class DDSpace:
         self.J, self.JT = _DDOperator(data.J), _DDOperator(data.JT)
         self.W = _DDOperator(data.Wt) if data.local else None  # ũ = W̃r̃ + q̃ of the file's W (no dofs)
         self.f, self.w = V(*data.f), V(*data.w_t)
+        self._row_of_z, self._heads = _shared_heads(data.lp.J, data.n3)
+
+    def lift(self, e: V, scaling: "DDScaling") -> V:
+        """δ with Jδ = e, the one of least ‖Q_p δ‖ (Q_p of ``scaling``): Q_{p⁻²}JᵀG⁻¹e, computed
+        without G.  A component of z that alone reads its row of J takes that row's e; a full
+        contact's normal row is read by the heads of both its cones, and its split, e_N − s to one
+        head and s to the other, takes the s that minimises ‖Q_p δ‖ over the two cones (a quadratic
+        in s, minimised from float64 inner products: an error ε in s adds only O(ε²) to ‖Q_p δ‖,
+        tests/test_lift.py).  Jδ = e holds to double-double rounding however
+        ill-conditioned G is; through G⁻¹ = F⁻ᵀF⁻¹ it held only to about 1e-32·cond(G), and with
+        cond(G) ≳ 1e30 near the end δ came out worse than e (docs/DECISIONS.md, "An exact lift")."""
+        h, lo = e.h[self._row_of_z], e.l[self._row_of_z]
+        f, r = self._heads
+        h[r], lo[r] = 0.0, 0.0  # the whole normal row to the first head, then the split
+        delta = V(h, lo)
+        if not f.size:
+            return delta
+        g = np.zeros(h.size)
+        g[f], g[r] = -1.0, 1.0  # J g = 0: moves s from one head to the other
+        Qg = scaling.quad(1, V(g)).h
+        cones = np.concatenate((f[:, None] + np.arange(3), r[:, None] + np.arange(3)), axis=1)
+        Qg = Qg[cones]
+        gg = np.einsum("ij,ij->i", Qg, Qg)
+        Qd = scaling.quad(1, delta).h[cones]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            split = -np.einsum("ij,ij->i", Qg, Qd) / gg
+        split[~np.isfinite(split)] = 0.0
+        step = np.zeros(h.size)
+        step[f], step[r] = -split, split
+        delta = delta + V(step)
+        return delta
 
     def velocity(self, v, r):
         return self.W @ r if self.W is not None else self.H @ v
@@ -283,9 +332,6 @@ class DDBackend(ReducedBackend):
 
     def retry_solve(self, residual: float) -> bool:
         return self.backend.retry_solve(residual)
-
-    def apply_G_inverse(self, e: V) -> V:
-        return V(*self.backend.apply_G_inverse(e.h, e.l))
 
     def update(self, sc: DDScaling) -> bool:
         return self.backend.update(sc.ph, sc.pl, sc.pih, sc.pil, sc.spec)

@@ -16,7 +16,7 @@ and differs only in what it factors (both are symmetric positive definite):
 * :class:`Hybrid` — the first while it is accurate, then the second.
 
 A back end is a :class:`.factored.NewtonBackend` (a typing.Protocol with default hooks):
-``name``, ``update(ph, pl, pih, pil, spec) -> bool``, ``solve(a, t)``, ``apply_G_inverse(eh, el)``,
+``name``, ``update(ph, pl, pih, pil, spec) -> bool``, ``solve(a, t)``,
 and the hooks the hybrid (``observe``) and the contact-space forms (``retry_solve``,
 ``prepare``) fill in; ``stats()`` from :class:`.factored.FactoredBackend`.
 :func:`choose_backend` builds one.
@@ -85,9 +85,6 @@ class Hybrid(FactoredBackend):
 
     def solve(self, a, t):
         return self.current.solve(a, t)
-
-    def apply_G_inverse(self, eh, el):
-        return self.current.apply_G_inverse(eh, el)
 
     def stats(self) -> dict:
         """{}: the hybrid holds two factors, not one."""
