@@ -564,8 +564,9 @@ def test_the_extended_run_refines_each_solve_once_and_is_as_accurate(monkeypatch
     (NEWTON_REFINED_TARGET = inf) and the Newton driver's refinement against the unreduced
     system does the rest, stopping once each block meets NEWTON_ENOUGH: the same iterations, μ
     and residual floors as with solves refined to 1e-29 and refinement to the floor, with
-    fewer float64 solves in all.  (The iterates themselves agree to ~12 digits, not 20: a step
-    to the boundary of a Lorentz cone has a square-root sensitivity to the solves' differences.)"""
+    fewer float64 solves in all.  (The iterates themselves agree to ~7 digits, not 20: the
+    predictor is solved to 1e-2 only, and a step to the boundary of a Lorentz cone has a
+    square-root sensitivity to the solves' differences.)"""
     import math
 
     from rfverify.algorithm import rules
@@ -582,8 +583,14 @@ def test_the_extended_run_refines_each_solve_once_and_is_as_accurate(monkeypatch
     assert strict.chol.backward_target == 1e-29
     import rfverify.algorithm.newton as N
 
-    asked = []
-    spy = lambda *args, enough, **kw: (asked.append(enough), rules.refined_newton(*args, enough=enough, **kw))[1]  # noqa: E731
+    asked, got = [], []
+
+    def spy(*args, enough, **kw):
+        out = rules.refined_newton(*args, enough=enough, **kw)
+        asked.append(enough)
+        got.append((enough, out[4], out[5]))  # η, relative residual, settled
+        return out
+
     monkeypatch.setattr(N, "refined_newton", spy)
     runs = {"light": X.run(data, start, max_iter=9, backend=light),
             "strict": X.run(data, start, max_iter=9, backend=strict, enough=None)}
@@ -594,13 +601,18 @@ def test_the_extended_run_refines_each_solve_once_and_is_as_accurate(monkeypatch
         a, b = (np.array(runs[n].trace[key]) for n in ("light", "strict"))
         assert np.all(np.abs(np.log10(a / b)) < 0.5), key  # within a factor of ~3 at every iterate
     assert runs["light"].trace["pinfeas"][-1] < 1e-26 and runs["light"].trace["mu"][-1] < 1e-20
-    # every block within η of its own right-hand side, so the largest block-relative residual too
-    # (the projection of the primal residual leaves the complementarity row at ~1e-9 of c early on)
-    assert max(runs["light"].trace["solve_residual"]) <= X.NEWTON_ENOUGH
+    # every light solve settled: each block within its phase's η of its own right-hand side, so the
+    # largest block-relative residual too (a predictor's complementarity row can keep ~1e-5 of c)
+    light_solves = got[:len(asked) - asked.count(None)]
+    assert all(settled and res <= eta for eta, res, settled in light_solves), light_solves
+    assert max(runs["light"].trace["solve_residual"]) <= X.PREDICTOR_ENOUGH
     assert max(runs["strict"].trace["solve_residual"]) < 1e-18
     for key in ("v", "r_t", "z"):
+        # the predictor is solved to PREDICTOR_ENOUGH only (its complementarity row keeps up to
+        # ~1e-5 of c after the exact lift): σ and the corrector's second-order term differ by
+        # that much, and the iterates by ~1e-7 (measured 9e-8 in z)
         a, b = (getattr(runs[n], key).longdouble() for n in ("light", "strict"))
-        assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max(), key
+        assert np.abs(a - b).max() <= 1e-6 * np.abs(b).max(), key
     steps = {n: runs[n].stats["refinement_steps"] for n in runs}
     assert steps["light"] < 0.5 * steps["strict"], steps
     assert steps["light"] == runs["light"].stats["solves"]  # one float64 solve per contact-space solve
