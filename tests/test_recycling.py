@@ -22,11 +22,11 @@ def test_a_second_solve_deflated_by_the_first_ones_directions_takes_far_fewer_st
     n = A.shape[0]
     recycled = krylov.RecycledDirections(n)
     b1, b2 = rng.normal(size=n), rng.normal(size=n)
-    best1, x1, steps1 = krylov.conjugate_gradients_in_double_double(Ap, Ai, vals, b1, np.zeros(n), lambda r: r,
+    best1, x1, steps1, _ = krylov.conjugate_gradients_in_double_double(Ap, Ai, vals, b1, np.zeros(n), lambda r: r,
                                                                     1e-22, recycled=recycled)
     assert best1 <= 1e-22 and steps1 >= 25 and recycled.count == steps1
     plain = krylov.conjugate_gradients_in_double_double(Ap, Ai, vals, b2, np.zeros(n), lambda r: r, 1e-22)
-    best2, (xh, xl), steps2 = krylov.conjugate_gradients_in_double_double(Ap, Ai, vals, b2, np.zeros(n),
+    best2, (xh, xl), steps2, _ = krylov.conjugate_gradients_in_double_double(Ap, Ai, vals, b2, np.zeros(n),
                                                                           lambda r: r, 1e-22, recycled=recycled)
     assert plain[2] >= 25 and steps2 <= plain[2] // 3, (plain[2], steps2)
     assert best2 <= 1e-22
@@ -102,7 +102,7 @@ def test_recycling_never_changes_what_a_solve_reports(seed):
     krylov.restarted_conjugate_gradients(*args, good_enough=1e-29, recycled=recycled)
     b2 = np.random.default_rng(seed + 100).normal(size=n)
     args2 = args[:3] + (b2, np.zeros(n)) + args[5:]
-    best, (xh, xl), _ = krylov.restarted_conjugate_gradients(*args2, good_enough=1e-29, recycled=recycled)
+    best, (xh, xl), _, _ = krylov.restarted_conjugate_gradients(*args2, good_enough=1e-29, recycled=recycled)
     res, scale = _residual_of_hi_lo(hi, lo, xh, xl, b2)
     ax = np.abs(hi) @ np.abs(xh) + np.abs(b2)
     assert res <= max(best, 1e-30) * 2 * float(np.max(ax)) + 1e-30 * scale

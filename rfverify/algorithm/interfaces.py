@@ -164,3 +164,8 @@ class ReducedBackend(Protocol):
         """Asked after a solve whose refinement stalled at ``residual``: True when the back end
         has made its solves more accurate (the system is then solved again)."""
         return False
+
+    def set_accuracy(self, relative: float | None) -> None:
+        """Before each Newton solve: the relative residual at which the back end's inner
+        iterative solves may stop (None: their own targets); nothing here."""
+        return None

@@ -33,6 +33,13 @@ class NewtonBackend(Protocol):
         """Once per iteration, before the update (the hybrid switches forms here)."""
         return None
 
+    def set_accuracy(self, relative: float | None) -> None:
+        """The relative residual at which the coming solves' inner iterations (conjugate
+        gradients on a shifted float64 factor) may stop; None: their own targets.  Here: on
+        ``self.chol`` where it has such iterations, else nothing."""
+        if hasattr(getattr(self, "chol", None), "relative_target"):
+            self.chol.relative_target = relative
+
     def retry_solve(self, residual: float) -> bool:
         """After a Newton solve that refined badly: True when the solves were made more accurate."""
         return False

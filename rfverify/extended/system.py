@@ -86,6 +86,10 @@ class Hybrid(FactoredBackend):
     def solve(self, a, t):
         return self.current.solve(a, t)
 
+    def set_accuracy(self, relative: float | None) -> None:
+        self.dof.set_accuracy(relative)
+        self.contact.set_accuracy(relative)
+
     def stats(self) -> dict:
         """{}: the hybrid holds two factors, not one."""
         return {}
