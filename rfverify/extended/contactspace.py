@@ -457,6 +457,14 @@ class ContactSpace(FactoredBackend):
         return chol.escalate(f"the Newton solve refined only to relative residual {residual:.1e} "
                              "with checked conjugate-gradient solves")
 
+    def set_accuracy(self, relative: float | None) -> None:
+        """The coming solves' conjugate gradients, where the float64 factor needs them, may stop
+        at this relative residual ‖b − Ax‖₂/‖b‖₂ (None: at their own backward error); the
+        Newton driver refines against the unreduced system itself
+        (:data:`rfverify.algorithm.newton.INNER_FRACTION`)."""
+        if isinstance(self.chol, (CholmodMixed, MixedCholesky)):
+            self.chol.relative_target = relative
+
     def prepare(self) -> None:
         """What the first :meth:`update` does that needs no iterate — M factored in
         double-double, W̃ = H̃M⁻¹H̃ᵀ, the float64 engine's symbolic analysis — done ahead (the

@@ -35,10 +35,9 @@ class NewtonBackend(Protocol):
 
     def set_accuracy(self, relative: float | None) -> None:
         """The relative residual at which the coming solves' inner iterations (conjugate
-        gradients on a shifted float64 factor) may stop; None: their own targets.  Here: on
-        ``self.chol`` where it has such iterations, else nothing."""
-        if hasattr(getattr(self, "chol", None), "relative_target"):
-            self.chol.relative_target = relative
+        gradients on a shifted float64 factor) may stop; None: their own targets.  Nothing here
+        (a back end without such iterations): :meth:`.contactspace.ContactSpace.set_accuracy`."""
+        return None
 
     def retry_solve(self, residual: float) -> bool:
         """After a Newton solve that refined badly: True when the solves were made more accurate."""
