@@ -165,7 +165,8 @@ class ReducedBackend(Protocol):
         has made its solves more accurate (the system is then solved again)."""
         return False
 
-    def set_accuracy(self, relative: float | None) -> None:
-        """Before each Newton solve: the relative residual at which the back end's inner
-        iterative solves may stop (None: their own targets); nothing here."""
+    def set_accuracy(self, residual_norm: float | None) -> None:
+        """Before each Newton solve: the error ‖·‖∞ the reduced solve may leave in the
+        complementarity row after the primal projection; the back end's inner iterative solves
+        may stop there (None: at their own targets).  Nothing here."""
         return None

@@ -23,11 +23,11 @@ digits as with 1e-8 on the beds measured, 16% fewer float64 solves (docs/DECISIO
 
 INNER_FRACTION = 0.1
 """A Newton solve with η asks the back end's inner iterative solves (conjugate gradients on a
-shifted float64 factor) for a relative residual of ``INNER_FRACTION``·η only
-(:meth:`~.interfaces.ReducedBackend.set_accuracy`), not for double-double accuracy: after the
-primal projection the reduced solve's scaled residual is what the complementarity row keeps,
-and the driver's refinement checks each block against η anyway.  On the 9675-contact turned
-touching bed 333 → 159 conjugate-gradient steps, the same iterations and proven digits
+shifted float64 factor) only for a reduced solve that leaves the complementarity row, after the
+primal projection, within ``INNER_FRACTION``·η·‖c‖∞
+(:meth:`~.interfaces.ReducedBackend.set_accuracy`), not for double-double accuracy: that row
+keeps B r', r' the reduced solve's scaled residual and B with orthonormal columns
+(:meth:`ReducedNewton._project_primal`), and the driver's refinement checks every block anyway
 (docs/DECISIONS.md, "An exact lift")."""
 
 RETRIES = 2
@@ -126,7 +126,8 @@ class ReducedNewton:
 
     def solve(self, a, b, c, phase: str) -> Direction:
         enough = self.predictor_enough if phase == "predictor" else self.enough
-        self.backend.set_accuracy(None if enough is None else INNER_FRACTION * enough)
+        wanted = None if enough is None else INNER_FRACTION * enough * self.inf(c)
+        self.backend.set_accuracy(wanted if wanted else None)
         dv, dr, dz, steps, res, settled = self._refined(a, b, c, enough)
         for _ in range(RETRIES):
             if settled or not self.backend.retry_solve(res):

@@ -50,28 +50,45 @@ def refined_newton(core, residual, a, b, c, *, inf, refine_max: int, floor: floa
     system — ``residual(a, b, c, dv, dr, dz)`` returns its three residual blocks — while the
     relative residual max‖e‖∞ / max(‖a‖∞, ‖b‖∞, ‖c‖∞) at least halves and is above ``floor``.
     With ``enough`` = η it also stops once every block's residual is at most η times its own
-    right-hand side (‖e_a‖ ≤ η‖a‖, ‖e_b‖ ≤ η‖b‖, ‖e_c‖ ≤ η‖c‖), or below the floor: an inexact
-    Newton direction that accurate changes the next iterate's residuals, (1 − α)·rhs + α·e, by a
-    relative η only.  ``settled``: the loop stopped at the floor or on that test, not because
-    refinement stalled or ran out of steps.  Any vector type with + and a norm ``inf`` works
-    (double-double pairs, mpfr arrays)."""
+    right-hand side (‖e_a‖ ≤ η‖a‖, ‖e_b‖ ≤ η‖b‖, ‖e_c‖ ≤ η‖c‖), or below the floor, or at the
+    level at which that block's residual can be evaluated at all (:func:`_evaluation_floors`):
+    an inexact Newton direction that accurate changes the next iterate's residuals, (1 − α)·rhs
+    + α·e, by a relative η only.  ``settled``: the loop stopped at the floor or on that test,
+    not because refinement stalled or ran out of steps.  Any vector type with + and - and a
+    norm ``inf`` works (double-double pairs, mpfr arrays)."""
     dv, dr, dz = core(a, b, c)
     sizes = (inf(a), inf(b), inf(c))
     scale = max(*sizes, 1e-300)
     best, steps, settled = math.inf, 0, False
+    floors, predicted = (0.0, 0.0, 0.0), None
     for _ in range(refine_max):
-        e1, e2, e3 = residual(a, b, c, dv, dr, dz)
-        errors = (inf(e1), inf(e2), inf(e3))
+        e = residual(a, b, c, dv, dr, dz)
+        if predicted is not None:
+            floors = _evaluation_floors(e, predicted, floors, inf)
+        errors = tuple(inf(x) for x in e)
         res = max(errors) / scale
         if res < floor or (enough is not None
-                           and all(e <= max(enough * s, floor * scale) for e, s in zip(errors, sizes))):
+                           and all(err <= max(enough * s, floor * scale, 2 * f)
+                                   for err, s, f in zip(errors, sizes, floors))):
             best, settled = min(best, res), True
             break
         if not res < 0.5 * best:
             best = min(best, res)
             break
         best = res
-        ddv, ddr, ddz = core(e1, e2, e3)
+        ddv, ddr, ddz = core(*e)
+        if enough is not None:  # what the residual will be, evaluated on the correction alone
+            predicted = residual(*e, ddv, ddr, ddz)
         dv, dr, dz = dv + ddv, dr + ddr, dz + ddz
         steps += 1
     return dv, dr, dz, steps, best, settled
+
+
+def _evaluation_floors(evaluated, predicted, floors, inf) -> tuple:
+    """Per block, the largest gap seen between a residual evaluated at the refined direction x + d
+    and the same residual evaluated as e − L d on the correction alone: equal in exact
+    arithmetic, they differ by the rounding of the evaluation, which a further correction cannot
+    remove.  (Measured on a touching pile: the dual row's rhs 5e-35 against H̃ᵀdr̃'s terms of
+    4e-6 — self-stresses cancel in H̃ᵀ — so its residual is evaluated to ~4e-38 only, 1e-3 of
+    the rhs; refinement chased it for three more solves and then asked for a new factor.)"""
+    return tuple(max(f, inf(x - y)) for f, x, y in zip(floors, evaluated, predicted))

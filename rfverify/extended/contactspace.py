@@ -457,13 +457,15 @@ class ContactSpace(FactoredBackend):
         return chol.escalate(f"the Newton solve refined only to relative residual {residual:.1e} "
                              "with checked conjugate-gradient solves")
 
-    def set_accuracy(self, relative: float | None) -> None:
+    def set_accuracy(self, residual_norm: float | None) -> None:
         """The coming solves' conjugate gradients, where the float64 factor needs them, may stop
-        at this relative residual ‖b − Ax‖₂/‖b‖₂ (None: at their own backward error); the
-        Newton driver refines against the unreduced system itself
-        (:data:`rfverify.algorithm.newton.INNER_FRACTION`)."""
+        once they leave the complementarity row within ``residual_norm`` (‖·‖∞; None: at their own
+        backward error).  That row keeps B r' after the primal projection, r' = F⁻¹r − S'y the
+        scaled residual and B = Q_{p⁻¹}JᵀF⁻ᵀ with orthonormal columns, block by contact: a row of
+        B has norm ≤ 1 and meets ≤ 5 entries of r', so ‖B r'‖∞ ≤ √5‖r'‖∞.  The Newton driver
+        refines against the unreduced system itself (:data:`rfverify.algorithm.newton.INNER_FRACTION`)."""
         if isinstance(self.chol, (CholmodMixed, MixedCholesky)):
-            self.chol.relative_target = relative
+            self.chol.residual_target = None if residual_norm is None else residual_norm / math.sqrt(5)
 
     def prepare(self) -> None:
         """What the first :meth:`update` does that needs no iterate — M factored in

@@ -33,10 +33,11 @@ class NewtonBackend(Protocol):
         """Once per iteration, before the update (the hybrid switches forms here)."""
         return None
 
-    def set_accuracy(self, relative: float | None) -> None:
-        """The relative residual at which the coming solves' inner iterations (conjugate
-        gradients on a shifted float64 factor) may stop; None: their own targets.  Nothing here
-        (a back end without such iterations): :meth:`.contactspace.ContactSpace.set_accuracy`."""
+    def set_accuracy(self, residual_norm: float | None) -> None:
+        """The error ‖·‖∞ the coming solves may leave in the complementarity row (after the
+        primal projection), at which their inner iterations (conjugate gradients on a shifted
+        float64 factor) may stop; None: their own targets.
+        Nothing here (a back end without such iterations): :meth:`.contactspace.ContactSpace.set_accuracy`."""
         return None
 
     def retry_solve(self, residual: float) -> bool:

@@ -333,8 +333,8 @@ class DDBackend(ReducedBackend):
     def retry_solve(self, residual: float) -> bool:
         return self.backend.retry_solve(residual)
 
-    def set_accuracy(self, relative: float | None) -> None:
-        self.backend.set_accuracy(relative)
+    def set_accuracy(self, residual_norm: float | None) -> None:
+        self.backend.set_accuracy(residual_norm)
 
     def update(self, sc: DDScaling) -> bool:
         return self.backend.update(sc.ph, sc.pl, sc.pih, sc.pil, sc.spec)

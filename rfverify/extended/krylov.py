@@ -225,22 +225,18 @@ bed's 10th factorisation; with 20 each reached 1e-20 in 66–175 steps, and the 
 class CGResult(NamedTuple):
     """What a conjugate-gradient solve returns: the componentwise backward error of ``x``
     (recomputed in double-double from A, x and b), ``x`` as (high, low), the steps taken, and
-    ‖b − Ax‖₂ / ‖b‖₂ of ``x`` (float64 from the same recomputed residual; 0 where b = 0)."""
+    ‖b − Ax‖∞ of ``x`` (from the same recomputed residual)."""
 
     backward: float
     x: tuple
     steps: int
-    relative_residual: float
-
-
-def _relative_norm(rh, bnorm: float) -> float:
-    return float(np.linalg.norm(rh)) / bnorm if bnorm > 0 else 0.0
+    residual_norm: float
 
 
 def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target: float,
                                          max_steps: int | None = None, patience: int | None = None,
                                          recycled: RecycledDirections | None = None,
-                                         relative: float | None = None) -> CGResult:
+                                         stop_norm: float | None = None) -> CGResult:
     """A x = b (A symmetric positive definite: values (high, low) of its upper triangle in CSC)
     by conjugate gradients with residuals, products and iterates in double-double and a float64
     ``preconditioner`` (``preconditioner(r)`` ≈ P⁻¹r, P a float64 factor of a shifted A).  The
@@ -250,11 +246,11 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     updated and the recomputed residual differ by the rounding of x + αp, ~1e-32 of |A||x| per
     step), and its componentwise backward error against the bound |A||x| + |α||A||p| of |A||x + αp|
     from the same pass; stops at ``target``, after ``patience`` steps without a better one, or
-    after ``max_steps``; with ``relative``, also as soon as ‖r‖₂ ≤ ``relative``·‖b‖₂ (a caller
-    that refines against a larger system and needs only that much: that iterate is returned).
-    The returned iterate's residual and backward error are then recomputed from A, x and b:
-    what it returns is that (:class:`CGResult`; the best iterate by backward error, or the one
-    that met ``relative``).  With ``recycled``, the directions of earlier solves with the same A
+    after ``max_steps``.  With ``stop_norm`` (a caller that refines against a larger system and
+    needs only that much), the best iterate is the one of least ‖r‖∞ instead, ``patience``
+    counts steps without a smaller one, and the solve also stops once ‖r‖∞ ≤ ``stop_norm``.
+    The best iterate's residual and backward error are then recomputed from A, x and b: what it
+    returns is that (:class:`CGResult`).  With ``recycled``, the directions of earlier solves with the same A
     and preconditioner deflate this one (:class:`RecycledDirections`), and this solve's are added
     to them at its end."""
     if recycled is not None:
@@ -269,12 +265,12 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     rh, rl = bh.copy(), bl.copy()
     backward = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
     best, best_x, since, steps = backward, (xh.copy(), xl.copy()), 0, 0
+    best_measure = backward if stop_norm is None else float(np.max(np.abs(rh)))
     z = preconditioner(rh.copy())
     ph, pl = z.copy(), np.zeros(n)
     rz = dd.vdot(rh, rl, z, zero)[0]
     qh, ql, ax, ap = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     fresh = True  # p is the preconditioned true residual: a breakdown now is final
-    bnorm = float(np.linalg.norm(bh))
     for steps in range(1, max_steps + 1):
         symmetric_product(n, Ap, Ai, A[0], A[1], ph, pl, qh, ql, xh, ax, ap)  # q = A p
         pq = dd.vdot(ph, pl, qh, ql)[0]
@@ -301,14 +297,15 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
             backward = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
         else:
             backward = updated_backward(rh, bh, ax, ap, alpha)
-        if backward < best:
-            best, best_x, since = backward, (xh.copy(), xl.copy()), 0
+        # progress: the backward error, or with stop_norm the residual's size, which is what the caller needs
+        measure = backward if stop_norm is None else float(np.max(np.abs(rh)))
+        if measure < best_measure:
+            best, best_measure, best_x, since = backward, measure, (xh.copy(), xl.copy()), 0
         else:
             since += 1
         if best <= target or since >= patience or not backward == backward:
             break
-        if relative is not None and _relative_norm(rh, bnorm) <= relative:
-            best, best_x = backward, (xh.copy(), xl.copy())
+        if stop_norm is not None and best_measure <= stop_norm:
             break
         z = preconditioner(rh.copy())
         rz_new = dd.vdot(rh, rl, z, zero)[0]
@@ -321,7 +318,7 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     best = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, best_x[0], best_x[1], rh, np.empty(n), np.zeros(n))
     if recycled is not None:
         recycled.commit()
-    return CGResult(best, best_x, steps, _relative_norm(rh, bnorm))
+    return CGResult(best, best_x, steps, float(np.max(np.abs(rh), initial=0.0)))
 
 
 CG_RESTARTS = 4
@@ -334,10 +331,10 @@ the one-pass version fell back to the double-double factor; docs/DECISIONS.md, "
 
 def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: float, good_enough: float,
                                   restarts: int | None = None, recycled: RecycledDirections | None = None,
-                                  relative: float | None = None) -> CGResult:
-    """:func:`conjugate_gradients_in_double_double` to ``target`` (or ``relative``); where its
-    best backward error is still above ``good_enough`` and its relative residual above
-    ``relative``, restarted up to ``restarts`` times (:data:`CG_RESTARTS` by default) on the
+                                  stop_norm: float | None = None) -> CGResult:
+    """:func:`conjugate_gradients_in_double_double` to ``target`` (or ``stop_norm``); where its
+    best backward error is still above ``good_enough`` and its residual norm above
+    ``stop_norm``, restarted up to ``restarts`` times (:data:`CG_RESTARTS` by default) on the
     residual b − Ax of the best iterate so far (in double-double), each pass adding its
     correction while that lowers the componentwise backward error; every pass is deflated by, and
     adds to, ``recycled``.  Returns a :class:`CGResult` (steps of all passes)."""
@@ -345,25 +342,23 @@ def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: flo
     n = Ap.size - 1
     bh = np.ascontiguousarray(bh, dtype=np.float64)
     bl = np.ascontiguousarray(bl, dtype=np.float64)
-    bnorm = float(np.linalg.norm(bh))
-    best, (xh, xl), steps, rel = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target,
-                                                                      recycled=recycled, relative=relative)
+    best, (xh, xl), steps, norm = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target,
+                                                                       recycled=recycled, stop_norm=stop_norm)
     for _ in range(restarts):
-        if not best > good_enough or (relative is not None and rel <= relative):  # reached (or NaN)
+        if not best > good_enough or (stop_norm is not None and norm <= stop_norm):  # reached (or NaN)
             break
         rh, rl = np.empty(n), np.empty(n)
         symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
         # the correction's own pass runs until it stalls: its scale is the residual's, not b's
-        rnorm = float(np.linalg.norm(rh))
-        inner = None if relative is None or rnorm == 0 else relative * bnorm / rnorm
         _, (dh, dl), more, _ = conjugate_gradients_in_double_double(Ap, Ai, A, rh, rl, preconditioner, 0.0,
-                                                                    recycled=recycled, relative=inner)
+                                                                    recycled=recycled, stop_norm=stop_norm)
         steps += more
         yh, yl = np.empty(n), np.empty(n)
         dd.vadd(xh, xl, dh, dl, yh, yl)
         ry = np.empty(n)
         backward = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, yh, yl, ry, np.empty(n), np.zeros(n))
-        if not backward < best and not (relative is not None and _relative_norm(ry, bnorm) < rel):
+        norm_y = float(np.max(np.abs(ry), initial=0.0))
+        if not backward < best and not (stop_norm is not None and norm_y < norm):
             break
-        best, xh, xl, rel = backward, yh, yl, _relative_norm(ry, bnorm)
-    return CGResult(best, (xh, xl), steps, rel)
+        best, xh, xl, norm = backward, yh, yl, norm_y
+    return CGResult(best, (xh, xl), steps, norm)

@@ -85,8 +85,8 @@ class _RefinedFloat64Factor:
         self.judged_by_caller = False  # a checked CG solve short of 1e-20 is returned, the caller judges it
         self.cg_short = 0  # such solves, and the worst backward error among them
         self.cg_short_worst = 0.0
-        self.relative_target = None  # a relative residual at which a CG solve is good enough (the caller's)
-        self.cg_relative = 0  # CG solves returned on it
+        self.residual_target = None  # a residual norm at which a CG solve is good enough (the caller's)
+        self.cg_stopped_early = 0  # CG solves returned on it
         self.recycled_most = 0  # the most directions one factor's solves recycled
         self._recycled = None  # RecycledDirections of the current matrix and float64 factor
         self._recycling_off = False  # True where they failed this factor (until the next one)
@@ -102,33 +102,33 @@ class _RefinedFloat64Factor:
         double-double factor, for good.  Each solve is deflated by the directions the earlier
         solves with this factor found (:class:`.krylov.RecycledDirections`); where a deflated solve
         misses, it runs again without them, and this factor recycles nothing more.  With
-        :attr:`relative_target` set, a solve whose relative residual ‖b − Ax‖₂/‖b‖₂ meets it is
-        returned as it is (the caller refines against a larger system and needs only that)."""
+        :attr:`residual_target` set, a solve whose residual ‖b − Ax‖∞ meets it is returned as it
+        is (the caller refines against a larger system and needs only that)."""
         target = min(self.backward_target, CG_TARGET)
         good_enough = max(target, CG_GIVE_UP if self.backward_target == math.inf else 1e-20)
         if self._recycled is None:
             self._recycled = RecycledDirections(self.n)
-        relative = self.relative_target
+        stop_norm = self.residual_target
         args = (self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target, good_enough)
         passes = self._recycled.deflated
-        best, best_x, steps, rel = restarted_conjugate_gradients(
-            *args, recycled=None if self._recycling_off else self._recycled, relative=relative)
+        best, best_x, steps, norm = restarted_conjugate_gradients(
+            *args, recycled=None if self._recycling_off else self._recycled, stop_norm=stop_norm)
         self.recycled_most = max(self.recycled_most, self._recycled.count)
-        met = relative is not None and rel <= relative
+        met = stop_norm is not None and norm <= stop_norm
         if met:
-            self.cg_relative += 1
+            self.cg_stopped_early += 1
         if not best <= good_enough and not met and self._recycled.deflated > passes:
             # the recycled directions' Gram matrix is float64 and can be poor where A's entries
             # reach eps⁻²: the solve again without them, and no more of them for this factor
             self._recycling_off, self.recycling_dropped = True, self.recycling_dropped + 1
             self._recycled.clear()
-            again, again_x, more, rel_again = restarted_conjugate_gradients(*args, relative=relative)
+            again, again_x, more, norm_again = restarted_conjugate_gradients(*args, stop_norm=stop_norm)
             steps += more
             if again < best or not best == best:
                 best, best_x = again, again_x
-            if relative is not None and rel_again <= relative:
+            if stop_norm is not None and norm_again <= stop_norm:
                 best, best_x, met = again, again_x, True
-                self.cg_relative += 1
+                self.cg_stopped_early += 1
         self.last_backward_error, self.last_steps = best, steps
         self.solves += 1
         self.refinement_steps += steps
@@ -260,8 +260,8 @@ class _RefinedFloat64Factor:
                     out += f"; dropped where they failed a solve, {self.recycling_dropped} time"
                     out += "s" if self.recycling_dropped != 1 else ""
                 out += ")"
-        if self.cg_relative:
-            out += (f" ({self.cg_relative} solve{'s' if self.cg_relative != 1 else ''} stopped at the relative "
+        if self.cg_stopped_early:
+            out += (f" ({self.cg_stopped_early} solve{'s' if self.cg_stopped_early != 1 else ''} stopped at the "
                     "residual the Newton refinement asked for)")
         if self.cg_short and self.fallback_at is None:
             out += (f" ({self.cg_short} checked solve{'s' if self.cg_short != 1 else ''} short of 1e-20, "

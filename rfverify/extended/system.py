@@ -86,9 +86,9 @@ class Hybrid(FactoredBackend):
     def solve(self, a, t):
         return self.current.solve(a, t)
 
-    def set_accuracy(self, relative: float | None) -> None:
-        self.dof.set_accuracy(relative)
-        self.contact.set_accuracy(relative)
+    def set_accuracy(self, residual_norm: float | None) -> None:
+        self.dof.set_accuracy(residual_norm)
+        self.contact.set_accuracy(residual_norm)
 
     def stats(self) -> dict:
         """{}: the hybrid holds two factors, not one."""
