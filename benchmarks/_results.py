@@ -117,6 +117,10 @@ def recording(name: str, argv=None):
     path = results_path(name)
     buf = io.StringIO()
     command = " ".join(["python", f"benchmarks/{name}.py", *(sys.argv[1:] if argv is None else argv)])
+    # thread counts change the timings: the command is stamped with the ones set
+    threads = " ".join(f"{k}={os.environ[k]}" for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                        "NUMBA_NUM_THREADS") if k in os.environ)
+    command = f"{threads} {command}" if threads else command
     with contextlib.redirect_stdout(_Tee(sys.stdout, buf)):
         yield path
     if path is None:

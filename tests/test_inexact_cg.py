@@ -135,3 +135,26 @@ def _without_stop(solve):
         finally:
             del self.backend.set_accuracy
     return wrapped
+
+
+def test_a_preconditioned_residual_orthogonal_to_the_residual_ends_the_pass_without_dividing_by_zero():
+    """rᵀM⁻¹r = 0 with M⁻¹r ≠ 0 (a float64 preconditioner that is not positive definite can do
+    it): the step is zero and β would divide by zero.  The pass must end with its best iterate
+    (this raised ZeroDivisionError on the generated 888-contact Chute of bench_digits)."""
+    import scipy.sparse as sp
+
+    A = sp.triu(sp.csc_matrix(np.array([[2.0, 0.5], [0.5, 1.0]]))).tocsc()
+    A.sort_indices()
+    args = (A.indptr.astype(np.int64), A.indices.astype(np.int64), (A.data.copy(), np.zeros(A.nnz)))
+    b = np.array([1.0, 0.0])
+    out = krylov.conjugate_gradients_in_double_double(*args, b, np.zeros(2), lambda r: np.array([-r[1], r[0]]), 1e-29)
+    assert out.steps == 1 and out.backward == 1.0 and np.all(out.x[0] == 0)
+
+
+def test_the_chute_that_divided_by_zero_is_proven():
+    """The first generated 700-size Chute (888 contacts, a self-stress) of bench_digits: at
+    df61386 its conjugate gradients met rᵀM⁻¹r = 0 and the path ended in ZeroDivisionError (the
+    test above pins that case; this one, that the path proves the Chute)."""
+    problem = generate("Chute", count=1, seed=0, size=700)[0]
+    out = rfverify.solve_to_digits(problem, digits=10)
+    assert out.certificate.certified and problem.n_contacts == 888

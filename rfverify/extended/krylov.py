@@ -307,6 +307,8 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
             break
         if stop_norm is not None and best_measure <= stop_norm:
             break
+        if rz == 0.0:  # rᵀM⁻¹r vanished (M⁻¹r ⟂ r): no direction to build from; the best iterate stands
+            break
         z = preconditioner(rh.copy())
         rz_new = dd.vdot(rh, rl, z, zero)[0]
         beta = (rz_new - float(np.dot(r_old, z))) / rz
