@@ -263,7 +263,9 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     zero = np.zeros(n)
     xh, xl = np.zeros(n), np.zeros(n)
     rh, rl = bh.copy(), bl.copy()
-    backward = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
+    # x = 0: r = b, whose componentwise backward error is 1 (0 where b = 0; NaN propagates), without
+    # the pass over A that symmetric_residual would make (~20 ms a solve on a 9675-contact bed)
+    backward = math.nan if not np.isfinite(bh).all() else (1.0 if bh.any() else 0.0)
     best, best_x, since, steps = backward, (xh.copy(), xl.copy()), 0, 0
     best_measure = backward if stop_norm is None else float(np.max(np.abs(rh)))
     z = preconditioner(rh.copy())
