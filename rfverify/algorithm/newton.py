@@ -44,7 +44,9 @@ class ReducedNewton:
 
     (a :class:`~.interfaces.ReducedBackend`: ``update(scaling) -> bool``, ``solve(a, t) -> (dv, dr)``
     in the space's vectors, ``name``; its hooks ``observe(k, mu, last_residual)`` before each
-    update, and ``retry_solve(residual) -> bool``, asked after a solve whose refinement
+    update, ``set_accuracy(residual_norm)`` before each Newton solve (what its inner iterative
+    solves may leave in the complementarity row: :data:`INNER_FRACTION`), and
+    ``retry_solve(residual) -> bool``, asked after a solve whose refinement
     stalled above ``floor`` short of ``enough``: True when the back end has made its solves more
     accurate, and the system is solved again; and ``projects_primal``: True where each reduced
     solve's primal residual is to be projected away, :meth:`_project_primal`, with the space's

@@ -35,7 +35,9 @@ turned touching bed fell back with 64 ulps: 1, 2 and 4 ulps reached 1e-30, 8 rea
 CG_TARGET = 1e-27
 """Componentwise backward error at which the conjugate gradients stop when the caller refines
 each solve itself (an unchecked float64 solve otherwise): double-double's matrix-vector product
-limits them near 1e-27 on the touching beds measured."""
+limits them near 1e-27 on the touching beds measured.  Where the caller sets
+:attr:`_RefinedFloat64Factor.residual_target` they stop at that residual instead, or earlier
+here."""
 CG_GIVE_UP = 1e-8
 """A conjugate-gradient solve whose best backward error stays above this (or above 1e-20 when the
 caller asked for 1e-29 and does not judge it: :attr:`_RefinedFloat64Factor.judged_by_caller`)
