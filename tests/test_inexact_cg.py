@@ -39,6 +39,10 @@ def test_a_stop_at_a_residual_norm_takes_fewer_steps_and_reports_its_true_residu
     early = krylov.conjugate_gradients_in_double_double(Ap, Ai, vals, b, np.zeros(n), lambda r: r, 1e-29,
                                                         stop_norm=wanted)
     assert early.steps < full.steps and early.residual_norm <= wanted
+    # and not later than that: no iterate before the one returned met it
+    before = krylov.conjugate_gradients_in_double_double(Ap, Ai, vals, b, np.zeros(n), lambda r: r, 1e-29,
+                                                         stop_norm=wanted, max_steps=early.steps - 1)
+    assert before.residual_norm > wanted
     true = _residual_norm_80_digits(A, *early.x, b)
     assert true == pytest.approx(early.residual_norm, rel=1e-6), (true, early.residual_norm)
     assert true > 1e-6 * wanted  # it stopped there, not at double-double accuracy
