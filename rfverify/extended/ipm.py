@@ -213,6 +213,10 @@ class DDSpace:
         self.W = _DDOperator(data.Wt) if data.local else None  # ũ = W̃r̃ + q̃ of the file's W (no dofs)
         self.f, self.w = V(*data.f), V(*data.w_t)
         self._row_of_z, self._heads = _shared_heads(data.lp.J, data.n3)
+        f, r = self._heads
+        self._split = np.zeros(data.nz)  # J g = 0: moves a shared row's e_N from one head to the other
+        self._split[f], self._split[r] = -1.0, 1.0
+        self._pair_cones = np.concatenate((f[:, None] + np.arange(3), r[:, None] + np.arange(3)), axis=1)
 
     def lift(self, e: V, scaling: "DDScaling") -> V:
         """δ with Jδ = e, the one of least ‖Q_p δ‖ (Q_p of ``scaling``): Q_{p⁻²}JᵀG⁻¹e, computed
@@ -229,11 +233,8 @@ class DDSpace:
         delta = V(h, lo)
         if not f.size:
             return delta
-        g = np.zeros(h.size)
-        g[f], g[r] = -1.0, 1.0  # J g = 0: moves s from one head to the other
-        Qg = scaling.quad(1, V(g)).h
-        cones = np.concatenate((f[:, None] + np.arange(3), r[:, None] + np.arange(3)), axis=1)
-        Qg = Qg[cones]
+        cones = self._pair_cones
+        Qg = scaling.quad(1, V(self._split)).h[cones]
         gg = np.einsum("ij,ij->i", Qg, Qg)
         Qd = scaling.quad(1, delta).h[cones]
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -117,8 +117,6 @@ class _RefinedFloat64Factor:
             *args, recycled=None if self._recycling_off else self._recycled, stop_norm=stop_norm)
         self.recycled_most = max(self.recycled_most, self._recycled.count)
         met = stop_norm is not None and norm <= stop_norm
-        if met:
-            self.cg_stopped_early += 1
         if not best <= good_enough and not met and self._recycled.deflated > passes:
             # the recycled directions' Gram matrix is float64 and can be poor where A's entries
             # reach eps⁻²: the solve again without them, and no more of them for this factor
@@ -130,12 +128,12 @@ class _RefinedFloat64Factor:
                 best, best_x = again, again_x
             if stop_norm is not None and norm_again <= stop_norm:
                 best, best_x, met = again, again_x, True
-                self.cg_stopped_early += 1
         self.last_backward_error, self.last_steps = best, steps
         self.solves += 1
         self.refinement_steps += steps
         self.cg_iterations += steps
         if met:
+            self.cg_stopped_early += 1
             return self._from_stored(*best_x)
         if self.backward_target == math.inf and not best <= CG_GIVE_UP and best == best:
             # unchecked: the Newton driver refines against the unreduced system and asks for a
