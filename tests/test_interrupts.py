@@ -139,3 +139,47 @@ def test_an_interrupted_solve_keeps_its_best_iterate(monkeypatch):
     res = rfverify.solve(rfverify.load("bundled:sphere"), method="jqinv")
     assert res.status == "Stopped" and res.extras.get("interrupted") and "interrupted" in res.message
     assert res.nit >= 4 and res.criterion < 1
+
+
+def _import_failed_by_ctrl_c() -> ImportError:
+    """What a pybind11 extension (scipy.spatial's ``_distance_pybind``) raises when Ctrl-C lands
+    while it initialises: ``ImportError: initialization failed`` from the KeyboardInterrupt.  The
+    CI run of 2026-12-06 ended so, exit 1 with a traceback, while the parser imported scenes."""
+    error = ImportError("initialization failed")
+    error.__cause__ = KeyboardInterrupt()
+    return error
+
+
+@pytest.mark.parametrize("where", ["building the parser", "running the command"])
+def test_a_ctrl_c_turned_into_an_import_error_is_still_an_interrupt(monkeypatch, capsys, where):
+    from rfverify.cli import app
+
+    error = _import_failed_by_ctrl_c()
+
+    def raising(*args, **kwargs):
+        raise error
+
+    if where == "building the parser":
+        monkeypatch.setattr(app, "build_parser", raising)
+    else:
+        parser = app.build_parser()
+        monkeypatch.setattr(app, "build_parser", lambda: parser)
+        parser.commands["solve"].set_defaults(func=raising)
+    assert app.main(["solve", "bundled:chute", "--quiet"]) == 130
+    assert capsys.readouterr().err == "rfverify solve: interrupted\n"
+
+
+def test_an_import_error_of_its_own_is_not_taken_for_an_interrupt(monkeypatch, capsys):
+    """The check follows the cause chain only: a real ImportError stays an internal error."""
+    from rfverify.cli import app
+
+    parser = app.build_parser()
+    monkeypatch.setattr(app, "build_parser", lambda: parser)
+    monkeypatch.delenv("RFVERIFY_DEBUG", raising=False)
+
+    def broken(args):
+        raise ImportError("initialization failed")
+
+    parser.commands["solve"].set_defaults(func=broken)
+    assert app.main(["solve", "bundled:chute", "--quiet"]) == app.EXIT_INTERNAL
+    assert "internal error: ImportError" in capsys.readouterr().err

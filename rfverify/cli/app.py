@@ -79,10 +79,12 @@ def main(argv=None) -> int:
     try:
         parser = build_parser()
         args, extra = parser.parse_known_args(argv)
-    except KeyboardInterrupt:  # before the parser has named the command: its first word does
-        words = [a for a in (sys.argv[1:] if argv is None else argv) if not str(a).startswith("-")]
-        print(f"rfverify{' ' + str(words[0]) if words else ''}: interrupted", file=sys.stderr)
-        return 130
+    except Exception as exc:  # a Ctrl-C inside an extension's import comes as an ImportError
+        if not _caused_by_ctrl_c(exc):
+            raise
+        return _interrupted_before_parsing(argv)
+    except KeyboardInterrupt:
+        return _interrupted_before_parsing(argv)
     if extra:
         parser.commands[args.command].unrecognized(extra)
     try:
@@ -112,11 +114,36 @@ def main(argv=None) -> int:
         print(f"rfverify {args.command}: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # a bug, not bad input: say so in one line unless debugging
+        if _caused_by_ctrl_c(exc):
+            print(f"rfverify {args.command}: interrupted", file=sys.stderr)
+            return 130
         if os.environ.get("RFVERIFY_DEBUG"):
             raise
         print(f"rfverify {args.command}: internal error: {type(exc).__name__}: {_one_line(exc)} "
               "(please report; set RFVERIFY_DEBUG=1 for a traceback)", file=sys.stderr)
         return EXIT_INTERNAL
+
+
+def _interrupted_before_parsing(argv) -> int:
+    """Ctrl-C before the parser has named the command: the first word that is not an option
+    names it in the one line."""
+    words = [a for a in (sys.argv[1:] if argv is None else argv) if not str(a).startswith("-")]
+    print(f"rfverify{' ' + str(words[0]) if words else ''}: interrupted", file=sys.stderr)
+    return 130
+
+
+def _caused_by_ctrl_c(exc: BaseException) -> bool:
+    """Whether ``exc`` comes from a KeyboardInterrupt.  A Ctrl-C that lands while a compiled
+    extension initialises (scipy.spatial's pybind11 modules, imported on first use) is re-raised
+    by the extension as ``ImportError: initialization failed`` from the KeyboardInterrupt: it is
+    still the user's Ctrl-C, not a bug."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def _print_data_warnings(command: str, caught) -> None:
