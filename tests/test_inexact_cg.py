@@ -130,6 +130,20 @@ def test_refinement_stops_where_a_block_can_be_evaluated_no_better(touching_bed,
     assert unsettled[0] < unsettled[1] and 2 * refinements[0] < refinements[1], (unsettled, refinements)
 
 
+def test_the_10_digit_path_proves_the_same_multiplying_through_the_factors(touching_bed, monkeypatch):
+    """The conjugate gradients multiply by S' through its factors on this bed (the time line says
+    so) and prove what the stored upper triangle's products prove, to 0.05 digits."""
+    from rfverify.extended import contactspace
+
+    problem, through, _ = touching_bed
+    assert "through its factors" in through.extended.factorisation
+    monkeypatch.setattr(contactspace.ContactSpace, "_offer_scaled_product", lambda self, *args: None)
+    stored = rfverify.solve_to_digits(problem, digits=10)
+    assert through.certificate.certified and stored.certificate.certified
+    assert "through its factors" not in stored.extended.factorisation
+    _digits_agree(through, stored)
+
+
 def _without_stop(solve):
     def wrapped(self, a, b, c, phase):
         set_accuracy = self.backend.set_accuracy

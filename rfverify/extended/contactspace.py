@@ -19,6 +19,7 @@ from .factored import FactoredBackend
 from .ldl import DDCholesky
 from ..engines.factor import cholmod_available, cholmod_missing_message
 from .mixed import CholmodMixed, MixedCholesky
+from .scaled_operator import ScaledProduct, block_system, build_z, dense_half, multiply_adds
 from .workers import split
 
 njit = numba.njit(cache=True, nogil=True)  # nogil: run on threads by .workers
@@ -37,36 +38,6 @@ problem, the same with one-step and with fully refined solves; a float64 factor 
 leaves ~1e-16 or worse."""
 DENSE_BLOCK = 200  # blocks of M up to this size are inverted densely when forming W̃
 DENSE_Y_ENTRIES = 2e7  # largest m × nk of a dense Y = blockdiag(L_b⁻¹)Hᵀ (2 float64 each: 320 MB)
-
-
-@njit
-def _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
-    """Y = L⁻¹Hᵀ (s × k) for a small dense SPD M = L Lᵀ (double-double Cholesky), so that
-    H M⁻¹ Hᵀ = YᵀY.  Returns False if M is not positive definite."""
-    s = Mh.shape[0]
-    k = Hh.shape[0]
-    Lh = np.zeros((s, s))
-    Ll = np.zeros((s, s))
-    for j in range(s):
-        ah, al = Mh[j, j], Ml[j, j]
-        for q in range(j):
-            ah, al = dd.fms_acc(ah, al, Lh[j, q], Ll[j, q], Lh[j, q], Ll[j, q])
-        if not ah > 0.0:
-            return False
-        dh, dl = dd.sqrt(ah, al)
-        Lh[j, j], Ll[j, j] = dh, dl
-        for i in range(j + 1, s):
-            ah, al = Mh[i, j], Ml[i, j]
-            for q in range(j):
-                ah, al = dd.fms_acc(ah, al, Lh[i, q], Ll[i, q], Lh[j, q], Ll[j, q])
-            Lh[i, j], Ll[i, j] = dd.div(ah, al, dh, dl)
-    for c in range(k):
-        for i in range(s):
-            ah, al = Hh[c, i], Hl[c, i]
-            for q in range(i):
-                ah, al = dd.fms_acc(ah, al, Lh[i, q], Ll[i, q], Yh[q, c], Yl[q, c])
-            Yh[i, c], Yl[i, c] = dd.div(ah, al, Lh[i, i], Ll[i, i])
-    return True
 
 
 @njit
@@ -89,7 +60,7 @@ def _dense_schur(Mh, Ml, Hh, Hl, Wh, Wl):
     positive definite."""
     Yh = np.zeros((Mh.shape[0], Hh.shape[0]))
     Yl = np.zeros((Mh.shape[0], Hh.shape[0]))
-    if not _dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
+    if not dense_half(Mh, Ml, Hh, Hl, Yh, Yl):
         return False
     YTh = np.zeros((Hh.shape[0], Mh.shape[0]))  # Yᵀ, copied by hand (np.ascontiguousarray
     YTl = np.zeros((Hh.shape[0], Mh.shape[0]))  # would be one more compilation)
@@ -165,31 +136,11 @@ def _small_blocks_W(blocks, dof_order, dof_bounds, m_order, m_bounds, mr, mc, mh
     nonzeros of H̃ in block b, by row.  Returns the first block whose M_b is not positive
     definite, or -1."""
     for b in blocks:
-        lo, hi = bounds[b], bounds[b + 1]
-        if hi == lo:
+        if bounds[b + 1] == bounds[b]:
             continue
-        s = dof_bounds[b + 1] - dof_bounds[b]
-        for i in range(s):
-            local[dof_order[dof_bounds[b] + i]] = i
-        rows = np.empty(hi - lo, dtype=np.int64)
-        slot = np.empty(hi - lo, dtype=np.int64)
-        r = 0
-        for q in range(lo, hi):
-            row = rows_all[order[q]]
-            if r == 0 or rows[r - 1] != row:
-                rows[r] = row
-                r += 1
-            slot[q - lo] = r - 1
-        Hbh, Hbl = np.zeros((r, s)), np.zeros((r, s))
-        for q in range(lo, hi):
-            k = order[q]
-            Hbh[slot[q - lo], local[h_dofs[k]]] = h_hi[k]
-            Hbl[slot[q - lo], local[h_dofs[k]]] = h_lo[k]
-        Mbh, Mbl = np.zeros((s, s)), np.zeros((s, s))
-        for q in range(m_bounds[b], m_bounds[b + 1]):
-            k = m_order[q]
-            Mbh[local[mr[k]], local[mc[k]]] = mh[k]
-            Mbl[local[mr[k]], local[mc[k]]] = ml[k]
+        rows, Hbh, Hbl, Mbh, Mbl = block_system(b, dof_order, dof_bounds, m_order, m_bounds, mr, mc, mh, ml, order,
+                                                bounds, rows_all, h_dofs, h_hi, h_lo, local)
+        r = rows.size
         Wbh, Wbl = np.zeros((r, r)), np.zeros((r, r))
         if not _dense_schur(Mbh, Mbl, Hbh, Hbl, Wbh, Wbl):
             return b
@@ -327,18 +278,11 @@ class ContactSpace(FactoredBackend):
         if d.local:
             self._build_W_local()
             return
-        mr, mc, mh, ml = d.M.coo()
         Wh = np.zeros((self.pc.size, 5, 5))
         Wl = np.zeros((self.pc.size, 5, 5))
-        rows_all = np.repeat(np.arange(d.nk), np.diff(d.Ht.indptr))
+        ix = self._block_index()
+        dof_order, dof_bounds, m_order, m_bounds, mr, mc, mh, ml, order, bounds, rows_all = ix[:11]
         blk_of_nz = self.labels[d.Ht.indices]
-        order = np.lexsort((rows_all, blk_of_nz))
-        bounds = np.searchsorted(blk_of_nz[order], np.arange(self.n_blocks + 1))
-        m_blk = self.labels[mr]
-        m_order = np.argsort(m_blk, kind="stable")
-        m_bounds = np.searchsorted(m_blk[m_order], np.arange(self.n_blocks + 1))
-        dof_order = np.argsort(self.labels, kind="stable")
-        dof_bounds = np.searchsorted(self.labels[dof_order], np.arange(self.n_blocks + 1))
         local = np.empty(d.m, dtype=np.int64)
         row_local = np.arange(d.nk) - d.row_start[self.contact_of_row]
         # rows touching each block: Σ rows_b² is what the block-by-block scatter costs; where a
@@ -386,7 +330,7 @@ class ContactSpace(FactoredBackend):
                 Mbl[local[mr[ms]], local[mc[ms]]] = ml[ms]
                 if dense_Y:
                     Ybh, Ybl = np.zeros((s_, rows.size)), np.zeros((s_, rows.size))
-                    if not _dense_half(Mbh, Mbl, Hbh, Hbl, Ybh, Ybl):
+                    if not dense_half(Mbh, Mbl, Hbh, Hbl, Ybh, Ybl):
                         raise ArithmeticError(f"block {b} of M is not positive definite in double-double")
                     YTh[np.ix_(rows, dofs)], YTl[np.ix_(rows, dofs)] = Ybh.T, Ybl.T
                     continue
@@ -408,6 +352,49 @@ class ContactSpace(FactoredBackend):
             gj = d.row_start[self.pd][:, None, None] + jj[None]
             Wh[valid], Wl[valid] = Gh[gi[valid], gj[valid]], Gl[gi[valid], gj[valid]]
         self._W = (Wh, Wl)
+        self._offer_scaled_product(ix, rows_per_block, block_sizes, dense_Y)
+
+    def _offer_scaled_product(self, index: tuple, rows_per_block: np.ndarray, block_sizes: np.ndarray,
+                              dense_Y: bool) -> None:
+        """Give the float64 factor's conjugate gradients the product through the factors
+        (:class:`.scaled_operator.ScaledProduct`) where it takes fewer multiply-adds than the
+        stored upper triangle of S' (each off-diagonal entry used twice) and every block of M is
+        small enough to be factored densely."""
+        d = self.data
+        if dense_Y or not isinstance(self.chol, (CholmodMixed, MixedCholesky)) or block_sizes.max(initial=0) > DENSE_BLOCK:
+            return
+        blocks = np.flatnonzero(rows_per_block > 0)
+        z_entries = int(np.sum(rows_per_block[blocks] * block_sizes[blocks]))
+        if multiply_adds(z_entries, d.row_count) >= 2 * self.chol.nnz_upper:
+            return
+
+        def make_z():
+            Z = build_z(index, blocks, rows_per_block.astype(np.int64), (d.nk, d.m))
+            if Z is None:  # _build_W factored the same blocks: not reached
+                raise ArithmeticError("a block of M is not positive definite in double-double")
+            return Z
+
+        self.chol.operator = ScaledProduct(d, self.Fh, self.Fl, make_z)
+
+    def _block_index(self) -> tuple:
+        """The arrays by which the compiled kernels walk M block by block (its connected
+        components): (dof_order, dof_bounds, m_order, m_bounds, mr, mc, mh, ml, order, bounds,
+        rows_all, h_dofs, h_hi, h_lo) — the dofs, M's entries and H̃'s nonzeros sorted by block
+        (``order[bounds[b]:bounds[b + 1]]``: block b's nonzeros of H̃, by row; rows_all: the row
+        of each nonzero), as :func:`.scaled_operator.block_system` reads them."""
+        d = self.data
+        mr, mc, mh, ml = d.M.coo()
+        rows_all = np.repeat(np.arange(d.nk), np.diff(d.Ht.indptr))
+        blk_of_nz = self.labels[d.Ht.indices]
+        order = np.lexsort((rows_all, blk_of_nz))
+        bounds = np.searchsorted(blk_of_nz[order], np.arange(self.n_blocks + 1))
+        m_blk = self.labels[mr]
+        m_order = np.argsort(m_blk, kind="stable")
+        m_bounds = np.searchsorted(m_blk[m_order], np.arange(self.n_blocks + 1))
+        dof_order = np.argsort(self.labels, kind="stable")
+        dof_bounds = np.searchsorted(self.labels[dof_order], np.arange(self.n_blocks + 1))
+        return (dof_order, dof_bounds, m_order, m_bounds, mr, mc, mh, ml, order, bounds, rows_all,
+                d.Ht.indices, d.Ht.hi, d.Ht.lo)
 
     def _schur_sparse(self, Hbh, Hbl, dofs):
         """H_b M_b⁻¹ H_bᵀ for a large block through the sparse factor of M (one solve per row)."""

@@ -236,7 +236,7 @@ class CGResult(NamedTuple):
 def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target: float,
                                          max_steps: int | None = None, patience: int | None = None,
                                          recycled: RecycledDirections | None = None,
-                                         stop_norm: float | None = None) -> CGResult:
+                                         stop_norm: float | None = None, product=None) -> CGResult:
     """A x = b (A symmetric positive definite: values (high, low) of its upper triangle in CSC)
     by conjugate gradients with residuals, products and iterates in double-double and a float64
     ``preconditioner`` (``preconditioner(r)`` ≈ P⁻¹r, P a float64 factor of a shifted A).  The
@@ -252,7 +252,12 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     The best iterate's residual and backward error are then recomputed from A, x and b: what it
     returns is that (:class:`CGResult`).  With ``recycled``, the directions of earlier solves with the same A
     and preconditioner deflate this one (:class:`RecycledDirections`), and this solve's are added
-    to them at its end."""
+    to them at its end.  ``product(ph, pl)`` (only with ``stop_norm``, which needs no |A||x|)
+    returns A p in double-double some cheaper way than the stored upper triangle (the contact
+    space's through its factors, :meth:`.contactspace.ContactSpace.factored_product`); the
+    residual of the returned iterate is still recomputed from the stored A."""
+    if product is not None and stop_norm is None:
+        raise ValueError("a product of its own needs stop_norm: the steps track ‖r‖∞, not |A||x|")
     if recycled is not None:
         preconditioner = recycled.preconditioner(preconditioner)
     max_steps = CG_MAX_STEPS if max_steps is None else max_steps
@@ -274,7 +279,10 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     qh, ql, ax, ap = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     fresh = True  # p is the preconditioned true residual: a breakdown now is final
     for steps in range(1, max_steps + 1):
-        symmetric_product(n, Ap, Ai, A[0], A[1], ph, pl, qh, ql, xh, ax, ap)  # q = A p
+        if product is None:
+            symmetric_product(n, Ap, Ai, A[0], A[1], ph, pl, qh, ql, xh, ax, ap)  # q = A p
+        else:
+            qh, ql = product(ph, pl)
         pq = dd.vdot(ph, pl, qh, ql)[0]
         if not (pq > 0.0 and math.isfinite(rz)):
             if fresh:
@@ -297,8 +305,10 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
         if abs(alpha) * np.max(np.abs(qh)) > CG_REPLACE_ABOVE * np.max(np.abs(rh)):
             # the update cancelled too many digits to be trusted: the true residual instead
             backward = symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
-        else:
+        elif product is None:
             backward = updated_backward(rh, bh, ax, ap, alpha)
+        else:  # no |A||x| from this product: the backward error is known only where recomputed
+            backward = math.inf if np.isfinite(rh).all() else math.nan
         # progress: the backward error, or with stop_norm the residual's size, which is what the caller needs
         measure = backward if stop_norm is None else float(np.max(np.abs(rh)))
         if measure < best_measure:
@@ -335,7 +345,7 @@ the one-pass version fell back to the double-double factor; docs/DECISIONS.md, "
 
 def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: float, good_enough: float,
                                   restarts: int | None = None, recycled: RecycledDirections | None = None,
-                                  stop_norm: float | None = None) -> CGResult:
+                                  stop_norm: float | None = None, product=None) -> CGResult:
     """:func:`conjugate_gradients_in_double_double` to ``target`` (or ``stop_norm``); where its
     best backward error is still above ``good_enough`` and its residual norm above
     ``stop_norm``, restarted up to ``restarts`` times (:data:`CG_RESTARTS` by default) on the
@@ -347,7 +357,8 @@ def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: flo
     bh = np.ascontiguousarray(bh, dtype=np.float64)
     bl = np.ascontiguousarray(bl, dtype=np.float64)
     best, (xh, xl), steps, norm = conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, target,
-                                                                       recycled=recycled, stop_norm=stop_norm)
+                                                                       recycled=recycled, stop_norm=stop_norm,
+                                                                       product=product)
     for _ in range(restarts):
         if not best > good_enough or (stop_norm is not None and norm <= stop_norm):  # reached (or NaN)
             break
@@ -355,7 +366,8 @@ def restarted_conjugate_gradients(Ap, Ai, A, bh, bl, preconditioner, target: flo
         symmetric_residual(n, Ap, Ai, A[0], A[1], bh, bl, xh, xl, rh, rl, np.zeros(n))
         # the correction's own pass runs until it stalls: its scale is the residual's, not b's
         _, (dh, dl), more, _ = conjugate_gradients_in_double_double(Ap, Ai, A, rh, rl, preconditioner, 0.0,
-                                                                    recycled=recycled, stop_norm=stop_norm)
+                                                                    recycled=recycled, stop_norm=stop_norm,
+                                                                    product=product)
         steps += more
         yh, yl = np.empty(n), np.empty(n)
         dd.vadd(xh, xl, dh, dl, yh, yl)

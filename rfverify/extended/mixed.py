@@ -88,6 +88,10 @@ class _RefinedFloat64Factor:
         self.cg_short = 0  # such solves, and the worst backward error among them
         self.cg_short_worst = 0.0
         self.residual_target = None  # a residual norm at which a CG solve is good enough (the caller's)
+        # A p in double-double, cheaper than the stored upper triangle (the owner's: the contact space
+        # through its factors), for solves to residual_target; ``product(ph, pl)`` in the pattern's order
+        self.operator = None
+        self.operator_solves = 0  # CG solves that used it
         self.cg_stopped_early = 0  # CG solves returned on it
         self.recycled_most = 0  # the most directions one factor's solves recycled
         self._recycled = None  # RecycledDirections of the current matrix and float64 factor
@@ -112,9 +116,11 @@ class _RefinedFloat64Factor:
             self._recycled = RecycledDirections(self.n)
         stop_norm = self.residual_target
         args = (self.Ap, self.Ai, self._A, *self._to_stored(bh, bl), self._float64_solve, target, good_enough)
+        product = None if stop_norm is None or self.operator is None else self._stored_product
+        self.operator_solves += product is not None
         passes = self._recycled.deflated
         best, best_x, steps, norm = restarted_conjugate_gradients(
-            *args, recycled=None if self._recycling_off else self._recycled, stop_norm=stop_norm)
+            *args, recycled=None if self._recycling_off else self._recycled, stop_norm=stop_norm, product=product)
         self.recycled_most = max(self.recycled_most, self._recycled.count)
         met = stop_norm is not None and norm <= stop_norm
         if not best <= good_enough and not met and self._recycled.deflated > passes:
@@ -122,7 +128,8 @@ class _RefinedFloat64Factor:
             # reach eps⁻²: the solve again without them, and no more of them for this factor
             self._recycling_off, self.recycling_dropped = True, self.recycling_dropped + 1
             self._recycled.clear()
-            again, again_x, more, norm_again = restarted_conjugate_gradients(*args, stop_norm=stop_norm)
+            again, again_x, more, norm_again = restarted_conjugate_gradients(*args, stop_norm=stop_norm,
+                                                                             product=product)
             steps += more
             if again < best or not best == best:
                 best, best_x = again, again_x
@@ -159,6 +166,10 @@ class _RefinedFloat64Factor:
                 return np.full(self.n, np.nan), np.full(self.n, np.nan)
             return self._dd_solve(bh, bl)
         return self._from_stored(*best_x)
+
+    def _stored_product(self, ph: np.ndarray, pl: np.ndarray):
+        """:attr:`operator` between the stored order and the pattern's own."""
+        return self._to_stored(*self.operator(*self._from_stored(ph, pl)))
 
     def escalate(self, reason: str) -> bool:
         """The caller's refinement stalled with this factor's checked conjugate-gradient solves:
@@ -260,6 +271,9 @@ class _RefinedFloat64Factor:
                     out += f"; dropped where they failed a solve, {self.recycling_dropped} time"
                     out += "s" if self.recycling_dropped != 1 else ""
                 out += ")"
+        if self.operator_solves:
+            out += (f" ({self.operator_solves} solve{'s' if self.operator_solves != 1 else ''} multiplying by the "
+                    "scaled matrix through its factors)")
         if self.cg_stopped_early:
             out += (f" ({self.cg_stopped_early} solve{'s' if self.cg_stopped_early != 1 else ''} stopped at the "
                     "residual the Newton refinement asked for)")
