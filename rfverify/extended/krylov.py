@@ -254,7 +254,7 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     and preconditioner deflate this one (:class:`RecycledDirections`), and this solve's are added
     to them at its end.  ``product(ph, pl)`` (only with ``stop_norm``, which needs no |A||x|)
     returns A p in double-double some cheaper way than the stored upper triangle (the contact
-    space's through its factors, :meth:`.contactspace.ContactSpace.factored_product`); the
+    space's through its factors, :class:`.scaled_operator.ScaledProduct`); the
     residual of the returned iterate is still recomputed from the stored A."""
     if product is not None and stop_norm is None:
         raise ValueError("a product of its own needs stop_norm: the steps track ‖r‖∞, not |A||x|")

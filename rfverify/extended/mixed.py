@@ -264,19 +264,16 @@ class _RefinedFloat64Factor:
                     f"factorisation {self.shifted_from}: {self.shift_reason})")
         if self.cg_iterations:
             out += f", {self.cg_iterations} conjugate-gradient steps in double-double"
+            notes = []
             if self.recycled_most:
-                out += (f" (deflated by up to {self.recycled_most} directions recycled from earlier solves "
-                        "with the same factor")
-                if self.recycling_dropped:
-                    out += f"; dropped where they failed a solve, {self.recycling_dropped} time"
-                    out += "s" if self.recycling_dropped != 1 else ""
-                out += ")"
-        if self.operator_solves:
-            out += (f" ({self.operator_solves} solve{'s' if self.operator_solves != 1 else ''} multiplying by the "
-                    "scaled matrix through its factors)")
-        if self.cg_stopped_early:
-            out += (f" ({self.cg_stopped_early} solve{'s' if self.cg_stopped_early != 1 else ''} stopped at the "
-                    "residual the Newton refinement asked for)")
+                notes.append(f"deflated by up to {self.recycled_most} directions recycled from earlier solves with "
+                             "the same factor" + (f", dropped where they failed a solve, {_times(self.recycling_dropped)}"
+                                                  if self.recycling_dropped else ""))
+            if self.operator_solves:
+                notes.append(f"{_solves(self.operator_solves)} multiplying by the scaled matrix through its factors")
+            if self.cg_stopped_early:
+                notes.append(f"{_solves(self.cg_stopped_early)} stopped at the residual the Newton refinement asked for")
+            out += f" ({'; '.join(notes)})" if notes else ""
         if self.cg_short and self.fallback_at is None:
             out += (f" ({self.cg_short} checked solve{'s' if self.cg_short != 1 else ''} short of 1e-20, "
                     f"worst {self.cg_short_worst:.1e}, accepted by the Newton refinement)")
@@ -491,3 +488,11 @@ class CholmodMixed(_RefinedFloat64Factor):
 
     def _from_stored(self, xh: np.ndarray, xl: np.ndarray):
         return xh.copy(), xl.copy()
+
+
+def _solves(k: int) -> str:
+    return f"{k} solve{'s' if k != 1 else ''}"
+
+
+def _times(k: int) -> str:
+    return f"{k} time{'s' if k != 1 else ''}"
