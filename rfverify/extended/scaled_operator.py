@@ -5,8 +5,9 @@
 
 On a granular bed Z has H̃'s pattern, and this product reads 2·nnz(H̃) + 2·Σ_c k_c² entries where
 the stored upper triangle of S' is read for 2·nnz(S'); on the 9675-contact turned touching bed
-that is 1.3 M against 2.5 M double-double multiply-adds, 10.6 ms against 19.1 ms a conjugate-
-gradient step (docs/DECISIONS.md, "A product through the factors").  The two agree to about
+that is 1.3 M against 2.5 M double-double multiply-adds, 5.6 ms on the thread pool (10.5 ms on one
+thread) against 19–21 ms a conjugate-gradient step (docs/DECISIONS.md, "A product through the
+factors").  The two agree to about
 1e-31 of |S'||p| (the rounding of either); the conjugate gradients that use it
 (:func:`.krylov.conjugate_gradients_in_double_double` with ``product``) still recompute the
 residual they return from the stored S'."""
