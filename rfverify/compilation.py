@@ -115,7 +115,7 @@ EXTENDED_KERNELS = (
     ("contactspace", "_scaled_blocks", "(int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], int64[:, :, ::1], float64[::1], float64[::1])"),
     ("blocks", "contact_factor_inverse", "(int64, int64[::1], int64[::1], int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, :, ::1])"),
     ("contactspace", "_small_blocks_W", "(int64[::1], int64[::1], int64[::1], int64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], int64, int64[::1], float64[:, :, ::1], float64[:, :, ::1])"),
-    ("ldl", "numeric_ldl", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1])"),
+    ("ldl", "numeric_ldl", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], int64[::1], int64[::1], int64[::1], int64[::1])"),
     ("blocks", "scatter_add", "(int64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "nt_scaling", "(int64, float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[:, ::1])"),
     ("dd", "vmul_d", "(float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),

@@ -13,6 +13,12 @@ class Breakdown(Exception):
     without the iteration (the loop prefixes "iteration k: ")."""
 
 
+class OutOfTime(Exception):
+    """The time limit was reached inside a long computation of an iteration (a compiled kernel
+    stopped by :func:`rfverify.extended.stoppable.run_stoppable`): the run ends with the best
+    iterate so far, the message saying what was stopped."""
+
+
 PROMOTE = "promote"
 """What :meth:`Policy.observe` returns to continue in the next, wider precision."""
 
@@ -133,6 +139,11 @@ class Policy(Protocol):
     def interrupted(self, k: int):
         """Ctrl-C during iteration k: a verdict that returns the best iterate so far, or None (this
         default) to let the KeyboardInterrupt go on to the caller."""
+        return None
+
+    def out_of_time(self, message: str):
+        """The verdict of an :class:`OutOfTime` (message already prefixed), or None (this
+        default) to let it go on to the caller."""
         return None
 
 

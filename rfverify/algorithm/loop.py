@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from .interfaces import PROMOTE, Breakdown, Residuals
+from .interfaces import PROMOTE, Breakdown, OutOfTime, Residuals
 
 
 @dataclass
@@ -124,6 +124,10 @@ def iterate(precision: Precision, policy, start: tuple, *, n_contacts: int, n_co
             policy.after_step(alpha)
     except Breakdown as exc:
         verdict = policy.breakdown(f"iteration {k}: {exc}")
+    except OutOfTime as exc:
+        verdict = policy.out_of_time(f"iteration {k}: {exc}")
+        if verdict is None:
+            raise
     except KeyboardInterrupt:
         # Ctrl-C: a policy that can return its best iterate does (and says so); else it propagates.
         verdict = policy.interrupted(k)

@@ -45,6 +45,10 @@ class UntilPolicy(Policy):
     def breakdown(message):
         return ("NumericalError", message)
 
+    @staticmethod
+    def out_of_time(message):
+        return ("MaxTime", message)
+
 
 def extended_trace(records: list) -> dict:
     """The extended phases' trace from the loop's records: mu, pinfeas, dinfeas, time per

@@ -107,8 +107,8 @@ class Iterate:
 @dataclass
 class ExtendedResult:
     """Outcome of :func:`run`: the last iterate (v, r̃, z as double-double), status
-    ("Stopped" when ``until`` accepted an iterate, "MaxIterations", "NumericalError"),
-    per-iteration trace and timings; ``stats``: the back end's factorisation statistics
+    ("Stopped" when ``until`` accepted an iterate, "MaxIterations", "NumericalError", "MaxTime"
+    when a long kernel was stopped at the time limit), per-iteration trace and timings; ``stats``: the back end's factorisation statistics
     (:meth:`.factored.FactoredBackend.stats`)."""
 
     v: V

@@ -21,6 +21,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import dd
+from ..algorithm.interfaces import Breakdown, OutOfTime
+from .stoppable import announce, run_stoppable, seconds_left
 
 
 def fill_reducing_order(pattern: sp.spmatrix) -> np.ndarray:
@@ -93,10 +95,13 @@ def _row_pattern(k, Ap, Ai, parent, flag, pattern, n):
 
 
 @numba.njit(cache=True, nogil=True)
-def numeric_ldl(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl, yh, yl, flag, pattern, lnz):
-    """Returns -1 on success, else the index of the first non-positive pivot.  Work arrays:
+def numeric_ldl(n, Ap, Ai, Axh, Axl, Lp, parent, Li, Lxh, Lxl, Dh, Dl, yh, yl, flag, pattern, lnz, stop):
+    """Returns -1 on success, else the index of the first non-positive pivot, or -2 when
+    ``stop[0]`` (polled once per row; :mod:`.stoppable`) became nonzero.  Work arrays:
     yh, yl zero (n,); flag, pattern, lnz from :func:`ldl_workspace`."""
     for k in range(n):
+        if stop[0] != 0:
+            return -2
         for p in range(Ap[k], Ap[k + 1]):
             if Ai[p] <= k:
                 yh[Ai[p]], yl[Ai[p]] = dd.add(yh[Ai[p]], yl[Ai[p]], Axh[p], Axl[p])
@@ -176,6 +181,40 @@ def upper_positions(keys: np.ndarray, n: int, a: np.ndarray, b: np.ndarray) -> n
     return pos
 
 
+STOPPABLE_ABOVE = 1e8
+"""Multiply-adds (about a second) above which a numeric factorisation runs on a helper thread
+that the time limit and Ctrl-C can stop (:mod:`.stoppable`); smaller ones run inline."""
+TYPICAL_RATE = 1.35e8
+"""Double-double multiply-adds per second of :func:`numeric_ldl`, measured on 3-D Laplacians
+of 8000–64 000 rows (1.33e8–1.37e8 on one core of a 2-core AMD EPYC, the other core busy;
+docs/DECISIONS.md, "Stoppable kernels"): the expected time a progress line announces."""
+FASTEST_RATE = 1e9
+"""A rate :func:`numeric_ldl` does not reach (7× :data:`TYPICAL_RATE`): a factorisation that
+would take longer than the time left even at this rate is not started."""
+ANNOUNCE_ABOVE = 10.0
+"""Expected seconds above which a factorisation is announced by a progress line first."""
+MEMORY_SHARE = 0.8
+"""The share of the memory available (``MemAvailable``) that L's arrays may take."""
+
+
+class FactorTooLarge(Breakdown):
+    """A double-double factorisation refused before it started: its factor does not fit in the
+    memory available.  The run ends with the best iterate so far (a :class:`Breakdown`)."""
+
+
+def memory_available() -> int | None:
+    """Bytes the kernel could give this process now without swapping (Linux's ``MemAvailable``),
+    or None where that is not known (no ``/proc/meminfo``)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
 class DDCholesky:
     """LDLᵀ of symmetric positive definite matrices with a fixed sparsity pattern.
 
@@ -195,13 +234,53 @@ class DDCholesky:
         # _keys: col * n + row of each stored upper entry, in permuted coordinates
         self.Ap, self.Ai, self._keys = upper_csc(P[self.perm][:, self.perm])
         self.parent, self.Lp = symbolic_ldl(n, self.Ap, self.Ai)
-        nnz = int(self.Lp[-1])
-        self.Li = np.zeros(nnz, dtype=np.int64)
-        self.Lxh = np.zeros(nnz)
-        self.Lxl = np.zeros(nnz)
+        self.Li = self.Lxh = self.Lxl = None  # L's entries: allocated by the first factor(), once they fit
         self.Dh = np.zeros(n)
         self.Dl = np.zeros(n)
         self.factored = False
+
+    @property
+    def multiply_adds(self) -> float:
+        """Double-double multiply-adds of one numeric factorisation: Σ c(c − 1)/2 over the
+        column counts c of L (row k of L updates, for each of its entries in a column, the
+        entries of that column above row k)."""
+        c = np.diff(self.Lp).astype(np.float64)
+        return float(np.sum(c * (c - 1.0)) / 2.0)
+
+    @property
+    def factor_bytes(self) -> int:
+        """Memory of L's entries: a row index and a double-double value each (24 bytes)."""
+        return 24 * self.nnz_L
+
+    def _allocate(self) -> None:
+        """L's arrays, refused (:class:`FactorTooLarge`) where they would take more than
+        :data:`MEMORY_SHARE` of the memory available now (docs/DECISIONS.md, "Stoppable kernels")."""
+        if self.Li is not None:
+            return
+        have = memory_available()
+        refusal = (f"the double-double factorisation of {self.n} rows was not started: its factor needs "
+                   f"{self.factor_bytes / 2**30:.1f} GiB (nnz(L) = {self.nnz_L:.3g})")
+        if have is not None and self.factor_bytes > MEMORY_SHARE * have:
+            raise FactorTooLarge(f"{refusal}, {have / 2**30:.1f} GiB is available")
+        try:
+            self.Li = np.zeros(self.nnz_L, dtype=np.int64)
+            self.Lxh = np.zeros(self.nnz_L)
+            self.Lxl = np.zeros(self.nnz_L)
+        except MemoryError:
+            self.Li = self.Lxh = self.Lxl = None
+            raise FactorTooLarge(f"{refusal}, and numpy could not allocate it") from None
+
+    def _refuse_past_deadline(self) -> None:
+        """:class:`OutOfTime` before starting a factorisation that would end, even at
+        :data:`FASTEST_RATE`, after the time limit (:func:`.stoppable.seconds_left`)."""
+        left = seconds_left()
+        if left is None:
+            return
+        fastest = self.multiply_adds / FASTEST_RATE
+        if fastest > left:
+            raise OutOfTime(f"the double-double factorisation of {self.n} rows was not started: its "
+                            f"{self.multiply_adds:.2g} multiply-adds take at least {fastest:.0f} s, "
+                            f"{max(left, 0.0):.0f} s were left")
 
     def prepare(self) -> None:
         """Nothing to do ahead: the symbolic analysis is done here, on construction (the float64
@@ -223,10 +302,26 @@ class DDCholesky:
                                 self.iperm[np.asarray(cols, dtype=np.int64)])
 
     def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
-        """Numeric factorisation; returns -1 on success, else the first non-positive pivot."""
-        bad = numeric_ldl(self.n, self.Ap, self.Ai, Axh, Axl, self.Lp, self.parent, self.Li, self.Lxh,
-                       self.Lxl, self.Dh, self.Dl, np.zeros(self.n), np.zeros(self.n), *ldl_workspace(self.n))
-        self.factored = bad < 0
+        """Numeric factorisation; returns -1 on success, else the first non-positive pivot.
+        A large one (:data:`STOPPABLE_ABOVE`) is refused where it cannot fit in memory
+        (:class:`FactorTooLarge`) or end before the time limit (:class:`OutOfTime`), and runs
+        where the time limit and Ctrl-C can stop it (:func:`.stoppable.run_stoppable`)."""
+        self.factored = False
+        self._allocate()
+        args = (self.n, self.Ap, self.Ai, Axh, Axl, self.Lp, self.parent, self.Li, self.Lxh, self.Lxl, self.Dh,
+                self.Dl, np.zeros(self.n), np.zeros(self.n), *ldl_workspace(self.n))
+        if self.multiply_adds < STOPPABLE_ABOVE:
+            bad = numeric_ldl(*args, np.zeros(1, dtype=np.int64))
+        else:
+            self._refuse_past_deadline()
+            what = f"the double-double factorisation of {self.n} rows"
+            expected = self.multiply_adds / TYPICAL_RATE
+            if expected > ANNOUNCE_ABOVE:
+                announce(f"{what}: nnz(L) = {self.nnz_L:.3g} ({self.factor_bytes / 2**30:.1f} GiB), "
+                         f"{self.multiply_adds:.2g} multiply-adds, about {_duration(expected)} at "
+                         f"{TYPICAL_RATE:.2g} a second (Ctrl-C or the time limit stop it)")
+            bad = run_stoppable(numeric_ldl, args, f"{what} ({self.multiply_adds:.2g} multiply-adds)")
+        self.factored = bad == -1
         return int(bad)
 
     def solve(self, bh: np.ndarray, bl: np.ndarray):
@@ -239,3 +334,12 @@ class DDCholesky:
         oh[self.perm] = xh
         ol[self.perm] = xl
         return oh, ol
+
+
+def _duration(seconds: float) -> str:
+    """"40 s", "12 min", "3.4 h"."""
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"

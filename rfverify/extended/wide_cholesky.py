@@ -150,7 +150,8 @@ class SparseWideCholesky:
         nnz = int(Lp[-1])
         Li = np.zeros(nnz, dtype=np.int64)
         if numeric_ldl(m, Ap, Ai, dominant, np.zeros(Ai.size), Lp, pattern.parent, Li, np.zeros(nnz), np.zeros(nnz),
-                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), *ldl_workspace(m)) >= 0:
+                       np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), *ldl_workspace(m),
+                       np.zeros(1, dtype=np.int64)) >= 0:
             raise AssertionError("a diagonally dominant matrix lost a pivot")
         self.Lp, self.Li = Lp, Li
         # row j of L: the columns k < j with an entry there, each with the offset of that entry

@@ -48,6 +48,10 @@ class PaperPolicy(Policy):
     def breakdown(message):
         return Verdict(Status.NUMERICAL_ERROR, message)
 
+    @staticmethod
+    def out_of_time(message):
+        return Verdict(Status.MAX_TIME, message)
+
 
 class Termination:
     """The stopping rules of one run (see the module docstring)."""

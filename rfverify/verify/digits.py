@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..algorithm.interfaces import OutOfTime
 from ..compilation import (
     compile_extended_in_background,
     compile_seconds,
@@ -34,6 +35,7 @@ from ..errors import InvalidArgumentError, require_time_limit
 from ..extended import ipm as ext
 from ..extended import wide
 from ..extended.contactspace import ENGINES
+from ..extended.stoppable import long_kernels
 from ..extended.workers import threads
 from ..model.scaling import in_scaled_units
 from ..model.problem import Problem
@@ -195,8 +197,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     t0, c0 = time.perf_counter(), compile_seconds()
     prepared = Preparation(problem, backend, factor_engine,
                            background=not compiling and not extended_cache_is_cold() and preparing_beside(),
-                           refine=None if _on_face is None else _on_face[1].refine)
-    deadline = None if time_limit is None else t0 + time_limit
+                           refine=None if _on_face is None else _on_face[1].refine,
+                           deadline=None if time_limit is None else t0 + time_limit)
+    deadline = prepared.deadline
     limit = {} if time_limit is None else {"time_limit": time_limit}
     try:
         with on_factoring(prepared.start if prepared.in_background else None):
@@ -245,13 +248,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     c_ext = compile_seconds()  # (what start_from compiled counts in "compile" only)
     if first is not None:  # the double answer's proof, to beat
         driver.offer(first[0], point, first[1], proof_site("double"))
-    try:
-        ext_out = extend(data, start, driver, system, max_iter=extended_max_iter, wide_tail=wide_tail,
-                         wide_bits=wide_bits, wide_max_iter=wide_max_iter, say=say, verbose=progress is not None)
-    except KeyboardInterrupt:  # Ctrl-C: the best proof reached so far is the answer
-        interrupted = True
-        ext_out = Extension(ext.ExtendedResult(None, None, None, "Stopped", "interrupted (Ctrl-C)", 0), None,
-                            "not run (interrupted)", None, time.perf_counter() - t1, 0.0)
+    ext_out, interrupted = _extend_stoppably(data, start, driver, system, deadline, progress, t1, dict(
+        max_iter=extended_max_iter, wide_tail=wide_tail, wide_bits=wide_bits, wide_max_iter=wide_max_iter))
     if first is None and not driver.certified and _on_face is None:  # the double answer's proof, left until now
         _prove_double_answer_last(driver, ctx, point, digits, relative, say)
     face_note = None
@@ -282,6 +280,23 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         timings["face"] = face_note["seconds"]  # the solve on the face (its final proof is in "proof")
     return DigitsSolution(v=v, u=u, r=r, point=point, certificate=cert, double=double, extended=ext_out.run,
                           wide=ext_out.wide, timings=timings, timed_out=timed_out, interrupted=interrupted)
+
+
+def _extend_stoppably(data, start, driver: ProofDriver, system, deadline, progress, t1: float,
+                      limits: dict) -> tuple[Extension, bool]:
+    """(:func:`.extend.extend`'s outcome, interrupted): a Ctrl-C, or the time limit reached
+    outside Algorithm 1's loop (which returns its best iterate itself), ends it with the best
+    proof so far; long factorisations inside are stopped by either (:mod:`.extended.stoppable`)."""
+    try:
+        with long_kernels(deadline, progress):
+            return extend(data, start, driver, system, say=progress, verbose=progress is not None, **limits), False
+    except KeyboardInterrupt:
+        return Extension(ext.ExtendedResult(None, None, None, "Stopped", "interrupted (Ctrl-C)", 0), None,
+                         "not run (interrupted)", None, time.perf_counter() - t1, 0.0), True
+    except OutOfTime as exc:
+        driver.timed_out = True
+        return Extension(ext.ExtendedResult(None, None, None, "MaxTime", str(exc), 0), None,
+                         "not run (the time limit was reached)", None, time.perf_counter() - t1, 0.0), False
 
 
 def _check_path_arguments(method: str, factor_engine: str) -> None:

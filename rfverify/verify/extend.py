@@ -85,6 +85,8 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
 
     run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system, progress=extended_tick)
     seconds_dd = time.perf_counter() - t0 - (driver.proof_seconds - p0)
+    if run.status == "MaxTime":  # a long kernel was stopped at the time limit (.extended.stoppable)
+        driver.timed_out = True
     tail, note, hand_k, seconds_wide = None, "not needed", None, 0.0
     if not driver.certified:
         if driver.timed_out:

@@ -13,6 +13,7 @@ import scipy.sparse as sp
 
 from ..extended import ipm as ext
 from ..extended.data import ExtendedData
+from ..extended.stoppable import long_kernels
 from ..extended.system import choose_backend
 from ..extended.workers import threads
 from ..model.problem import Problem
@@ -47,14 +48,17 @@ class Preparation:
     always did.  :meth:`cancel` (the path ends early) stops the thread at its next step and
     waits for it."""
 
-    def __init__(self, problem: Problem, backend: str, engine: str, background: bool, refine=None):
+    def __init__(self, problem: Problem, backend: str, engine: str, background: bool, refine=None,
+                 deadline: float | None = None):
         self.problem, self.backend, self.engine = problem, backend, engine
+        self.deadline = deadline  # the path's time limit (perf_counter), for the long kernels of the thread
         self.refine = refine  # refine(data): more exact data for the extended phase (a problem on a face)
         self._ctx = self._ctx_error = None
         self._system = self._system_error = None
         self._ctx_ready = threading.Event()
         self._go = threading.Event()  # start: at the double solve's first GIL-free factorisation, or when asked
         self._cancelled = False
+        self._stop_kernels = threading.Event()  # cancel(): a long kernel of the thread stops (.extended.stoppable)
         self._thread = None
         if background:
             self._thread = threading.Thread(target=self._build, name="rfverify-prepare", daemon=True)
@@ -71,6 +75,12 @@ class Preparation:
         self._go.set()
 
     def _build(self) -> None:
+        # Ctrl-C reaches only the main thread: the path's cancel() and its time limit stop a
+        # long factorisation here (the first update repeats whatever was stopped)
+        with long_kernels(self.deadline, cancel=self._stop_kernels):
+            self._build_here()
+
+    def _build_here(self) -> None:
         # Waiting for the double solve's first factorisation keeps this thread off the GIL while
         # the solve sets itself up (patterns, orderings: Python and GIL-holding calls).
         self._go.wait()
@@ -133,6 +143,7 @@ class Preparation:
         called without an active exception", exit 134: 1 run in 10–20 of a local file refused
         after its double solve)."""
         self._cancelled = True
+        self._stop_kernels.set()
         self.start()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join()
