@@ -114,10 +114,12 @@ def test_cholmod_refuses_an_indefinite_matrix_with_an_arithmetic_error():
     engine = CholmodEngine()
     A = sp.csc_matrix(np.array([[1.0, 0.0], [0.0, 2.0]]))
     engine.factor(sp.tril(A, format="csc"))
-    assert engine.permutation() is not None
+    order = engine.permutation()
+    assert order is not None
     with pytest.raises(ArithmeticError, match="CHOLMOD"):
         engine.factor(sp.tril(sp.csc_matrix(np.array([[1.0, 0.0], [0.0, -2.0]])), format="csc"))
     assert engine.factorisations == 1
+    assert np.array_equal(engine.permutation(), order)  # the analysis's order outlives a failed factor
     engine.release()
     assert engine.permutation() is None
 

@@ -262,9 +262,10 @@ class CholmodEngine:
         return None if found is None else found[1] - 1
 
     def permutation(self) -> np.ndarray | None:
-        """CHOLMOD's fill-reducing order P (L Lᵀ = K[P][:, P]), or None before the first
-        numeric factorisation (or after :meth:`release`)."""
-        if self._pattern is None or not self._chol.numeric:
+        """CHOLMOD's fill-reducing order P (L Lᵀ = K[P][:, P]) from the symbolic analysis —
+        also after a numeric factorisation that failed — or None before the analysis (or
+        after :meth:`release`)."""
+        if self._pattern is None:
             return None
         found = self._chol.counts()
         return None if found is None else found[0]
