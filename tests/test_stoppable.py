@@ -163,3 +163,23 @@ def test_cancelling_the_set_up_stops_its_long_factorisation(monkeypatch):
     assert calls == ["started"]
     prepared.cancel()
     assert calls == ["started", "stopped"]
+
+
+def test_a_refused_fallback_is_named_in_the_time_line_and_not_counted(monkeypatch):
+    """The refinement's fallback to the double-double factor, refused for memory: the time line
+    counts no double-double factorisation and says which one was not finished, and why."""
+    from rfverify.extended.mixed import MixedCholesky
+
+    _, _, A = _laplacian_factor(6, with_matrix=True)
+    mixed = MixedCholesky(A)
+    cols = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    values = np.zeros(mixed.nnz_upper)
+    values[mixed.positions(A.indices, cols)] = A.data
+    assert mixed.factor(values, np.zeros_like(values)) == -1
+    monkeypatch.setattr(ldl, "memory_available", lambda: 1024)
+    with pytest.raises(FactorTooLarge):
+        mixed._fall_back("a test's reason")
+    cost = mixed.describe_cost()
+    assert "0 in double-double" in cost and "from factorisation 1: a test's reason" in cost
+    assert "; not finished: factorisation 1: the double-double factorisation of 216 rows was not started: " \
+           "its factor needs" in cost

@@ -17,6 +17,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from ..algorithm.interfaces import Breakdown, OutOfTime
 from ..engines.factor import CholmodEngine, QDLDLEngine
 from .krylov import RecycledDirections, refine_in_double_double, restarted_conjugate_gradients
 from .ldl import DDCholesky, symbolic_ldl, symmetric_pattern, upper_csc, upper_positions
@@ -73,6 +74,7 @@ class _RefinedFloat64Factor:
         self.refinement_steps = 0
         self.factorisations = 0  # numeric factorisations asked for, and the one that fell back
         self.fallback_at = None
+        self.unfinished = ""  # a factorisation refused before it started or stopped at the time limit, and why
         self.factor_seconds = {"float64": 0.0, "double-double": 0.0}
         self.factor_counts = {"float64": 0, "shifted": 0, "double-double": 0}
         self.factor_seconds["shifted"] = 0.0
@@ -239,11 +241,17 @@ class _RefinedFloat64Factor:
             self._recycled.clear()
         self._recycling_off = False
         t0 = time.perf_counter()
+        finished = False
         try:
-            return factor()
+            bad = factor()
+            finished = True
+            return bad
+        except (Breakdown, OutOfTime) as exc:  # refused before it started, or stopped at the time limit
+            self.unfinished = f"factorisation {self.factorisations}: {exc}"
+            raise
         finally:
             self.factor_seconds[precision] += time.perf_counter() - t0
-            self.factor_counts[precision] += 1
+            self.factor_counts[precision] += finished
 
     def describe_cost(self) -> str:
         """Which factorisations ran and what they cost, for the time line: e.g. "4 float64
@@ -277,10 +285,10 @@ class _RefinedFloat64Factor:
         if self.cg_short and self.fallback_at is None:
             out += (f" ({self.cg_short} checked solve{'s' if self.cg_short != 1 else ''} short of 1e-20, "
                     f"worst {self.cg_short_worst:.1e}, accepted by the Newton refinement)")
-        if self.fallback_at is None:
-            return out
-        return (f"{out}, {counts['double-double']} in double-double {secs['double-double']:.1f} s (double-double "
-                f"from factorisation {self.fallback_at}: {self.fallback_reason})")
+        if self.fallback_at is not None:
+            out += (f", {counts['double-double']} in double-double {secs['double-double']:.1f} s (double-double "
+                    f"from factorisation {self.fallback_at}: {self.fallback_reason})")
+        return out + (f"; not finished: {self.unfinished}" if self.unfinished else "")
 
     def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
         """Numeric factorisation; -1 on success, else a non-positive pivot (in double-double,
