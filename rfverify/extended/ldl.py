@@ -235,6 +235,7 @@ class DDCholesky:
         self.Ap, self.Ai, self._keys = upper_csc(P[self.perm][:, self.perm])
         self.parent, self.Lp = symbolic_ldl(n, self.Ap, self.Ai)
         self.Li = self.Lxh = self.Lxl = None  # L's entries: allocated by the first factor(), once they fit
+        self._multiply_adds = None
         self.Dh = np.zeros(n)
         self.Dl = np.zeros(n)
         self.factored = False
@@ -244,8 +245,10 @@ class DDCholesky:
         """Double-double multiply-adds of one numeric factorisation: Σ c(c − 1)/2 over the
         column counts c of L (row k of L updates, for each of its entries in a column, the
         entries of that column above row k)."""
-        c = np.diff(self.Lp).astype(np.float64)
-        return float(np.sum(c * (c - 1.0)) / 2.0)
+        if self._multiply_adds is None:
+            c = np.diff(self.Lp).astype(np.float64)
+            self._multiply_adds = float(np.sum(c * (c - 1.0)) / 2.0)
+        return self._multiply_adds
 
     @property
     def factor_bytes(self) -> int:
@@ -303,9 +306,10 @@ class DDCholesky:
 
     def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
         """Numeric factorisation; returns -1 on success, else the first non-positive pivot.
-        A large one (:data:`STOPPABLE_ABOVE`) is refused where it cannot fit in memory
-        (:class:`FactorTooLarge`) or end before the time limit (:class:`OutOfTime`), and runs
-        where the time limit and Ctrl-C can stop it (:func:`.stoppable.run_stoppable`)."""
+        The first one is refused where L cannot fit in memory (:class:`FactorTooLarge`); a
+        large one (:data:`STOPPABLE_ABOVE`) where it cannot end before the time limit
+        (:class:`OutOfTime`), and it runs where the time limit and Ctrl-C can stop it
+        (:func:`.stoppable.run_stoppable`)."""
         self.factored = False
         self._allocate()
         args = (self.n, self.Ap, self.Ai, Axh, Axl, self.Lp, self.parent, self.Li, self.Lxh, self.Lxl, self.Dh,
