@@ -183,3 +183,21 @@ def test_a_refused_fallback_is_named_in_the_time_line_and_not_counted(monkeypatc
     assert "0 in double-double" in cost and "from factorisation 1: a test's reason" in cost
     assert "; not finished: factorisation 1: the double-double factorisation of 216 rows was not started: " \
            "its factor needs" in cost
+
+
+def test_the_cholmod_fallback_factors_in_cholmods_order():
+    """The double-double fallback of a CHOLMOD-refined factor takes CHOLMOD's fill-reducing
+    order (no minimum-degree LU of the pattern of its own), and solves right in it."""
+    from rfverify.extended.mixed import CholmodMixed
+
+    _, _, A = _laplacian_factor(8, with_matrix=True)
+    mixed = CholmodMixed(A)
+    cols = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    values = np.zeros(mixed.nnz_upper)
+    values[mixed.positions(A.indices, cols)] = A.data
+    assert mixed.factor(values, np.zeros_like(values)) == -1
+    order = mixed._engine.permutation()
+    assert mixed._fall_back("a test's reason") == -1
+    assert np.array_equal(mixed._dd.perm, order) and mixed.precision == "double-double"
+    b = np.linspace(-1.0, 1.0, A.shape[0])
+    assert np.allclose(mixed.solve(b, np.zeros_like(b))[0], spsolve(A, b), rtol=1e-13, atol=0)
