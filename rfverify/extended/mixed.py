@@ -285,9 +285,10 @@ class _RefinedFloat64Factor:
         if self.cg_short and self.fallback_at is None:
             out += (f" ({self.cg_short} checked solve{'s' if self.cg_short != 1 else ''} short of 1e-20, "
                     f"worst {self.cg_short_worst:.1e}, accepted by the Newton refinement)")
-        if self.fallback_at is not None:
-            out += (f", {counts['double-double']} in double-double {secs['double-double']:.1f} s (double-double "
-                    f"from factorisation {self.fallback_at}: {self.fallback_reason})")
+        if self.fallback_at is not None:  # (none finished: refused or stopped, said below)
+            done = f"{counts['double-double']} in double-double" if counts["double-double"] else "double-double"
+            out += (f", {done} {secs['double-double']:.1f} s (double-double from factorisation {self.fallback_at}: "
+                    f"{self.fallback_reason})")
         return out + (f"; not finished: {self.unfinished}" if self.unfinished else "")
 
     def factor(self, Axh: np.ndarray, Axl: np.ndarray) -> int:
