@@ -1,7 +1,8 @@
 """Long compiled kernels obey the time limit and Ctrl-C, and a double-double factorisation that
 cannot fit or cannot end in time is refused before it starts (rfverify.extended.stoppable,
-DDCholesky.factor).  A 96 256-contact touching bed was inside one double-double LDLᵀ 50 minutes
-into its run, past its 2400 s time limit and two Ctrl-Cs, with 1 GB of memory left."""
+DDCholesky.factor).  A 96 256-contact touching bed was inside its double-double fallback
+factorisation 50 minutes into its run, past its 2400 s time limit and two Ctrl-Cs, with 1 GB of
+memory left."""
 
 from __future__ import annotations
 

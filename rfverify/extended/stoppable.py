@@ -1,9 +1,9 @@
 """Compiled kernels that can run for minutes, stoppable by the time limit and by Ctrl-C.
 
 A compiled loop never returns to the interpreter, so neither a signal handler nor a deadline
-check runs until it ends: a 96 256-contact touching bed was inside one double-double LDLᵀ
-50 minutes into its run, past its 2400 s time limit and two Ctrl-Cs (docs/DECISIONS.md,
-"Stoppable kernels").
+check runs until it ends: a 96 256-contact touching bed was inside its double-double fallback
+factorisation 50 minutes into its run, past its 2400 s time limit and two Ctrl-Cs
+(docs/DECISIONS.md, "Stoppable kernels").
 :func:`run_stoppable` therefore runs such a kernel (``nogil=True``, polling a stop flag) on a
 helper thread while the main thread waits in short slices: a Ctrl-C (which Python delivers to
 the main thread) or the time limit sets the flag, the kernel returns at its next poll, and the
