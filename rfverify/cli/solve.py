@@ -69,8 +69,9 @@ def add_parser(sub) -> None:
                           "component, labelled); with --method clarabel, Clarabel's own log")
     sol.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
                      help="stop after S seconds with the best iterate (status MaxTime, exit 1); with --digits "
-                          "the whole path stops there (each extended iteration checks it) and the best proof "
-                          "reached is the result, written with --out")
+                          "the whole path stops there (each extended iteration checks it, and a long double-double "
+                          "factorisation is stopped, or not started where it cannot end in time) and the best "
+                          "proof reached is the result, written with --out")
     sol.add_argument("--digits", type=digit_count, default=None, metavar="K",
                      help="produce a solution proven right to K significant digits (1-15): the "
                           "double solve, then Algorithm 1 continued in double-double (and, if that "
