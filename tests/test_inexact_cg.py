@@ -176,3 +176,24 @@ def test_the_chute_that_divided_by_zero_is_proven():
     problem = generate("Chute", count=1, seed=0, size=700)[0]
     out = rfverify.solve_to_digits(problem, digits=10)
     assert out.certificate.certified and problem.n_contacts == 888
+
+
+def test_a_residual_that_grows_first_does_not_end_the_solve_at_x_zero():
+    """A residual-norm stop judges iterates by ‖r‖∞, which CG does not decrease monotonically:
+    b mostly on small eigenvalues with a trace of a huge one makes the first residual ~1e3 × b.
+    Patience counted on ‖r‖∞ from x = 0 returned x = 0 (the 96 256-contact touching bed's checked
+    solves, backward error 1.0); while the error's A-norm still falls it must go on."""
+    import scipy.sparse as sp
+
+    n = 60
+    rng = np.random.default_rng(5)
+    eigenvalues = np.concatenate([np.linspace(1.0, 2.0, n - 1), [1e10]])
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    A = (Q * eigenvalues) @ Q.T
+    U = sp.triu(sp.csc_matrix((A + A.T) / 2), format="csc")
+    U.sort_indices()
+    Ap, Ai, vals = U.indptr.astype(np.int64), U.indices.astype(np.int64), (U.data.copy(), np.zeros(U.data.size))
+    b = Q[:, :n - 1] @ rng.standard_normal(n - 1) + 1e-3 * Q[:, -1]
+    out = krylov.conjugate_gradients_in_double_double(Ap, Ai, vals, b, np.zeros(n), lambda r: r, 0.0, patience=1,
+                                                      stop_norm=1e-20 * float(np.max(np.abs(b))))
+    assert np.any(out.x[0] != 0.0) and out.residual_norm < 0.1 * float(np.max(np.abs(b)))
