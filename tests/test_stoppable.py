@@ -203,3 +203,20 @@ def test_the_cholmod_fallback_factors_in_cholmods_order():
     assert np.array_equal(mixed._dd.perm, order) and mixed.precision == "double-double"
     b = np.linspace(-1.0, 1.0, A.shape[0])
     assert np.allclose(mixed.solve(b, np.zeros_like(b))[0], spsolve(A, b), rtol=1e-13, atol=0)
+
+
+def test_a_conjugate_gradient_solve_stops_at_the_time_limit():
+    """At 10⁵ contacts one CG solve took over three minutes: each step checks the time limit."""
+    from rfverify.extended import krylov
+
+    chol, values, A = _laplacian_factor(4, with_matrix=True)
+    U = sp.triu(A, format="csc")
+    U.sort_indices()
+    Ap, Ai = U.indptr.astype(np.int64), U.indices.astype(np.int64)
+    b = np.ones(A.shape[0])
+    with long_kernels(time.perf_counter() - 1.0), pytest.raises(OutOfTime, match="conjugate-gradient solve"):
+        krylov.conjugate_gradients_in_double_double(Ap, Ai, (U.data.copy(), np.zeros(U.nnz)), b, np.zeros(b.size),
+                                                    lambda r: r, 1e-29)
+    out = krylov.conjugate_gradients_in_double_double(Ap, Ai, (U.data.copy(), np.zeros(U.nnz)), b, np.zeros(b.size),
+                                                      lambda r: r, 1e-29)  # no time limit: solved
+    assert out.backward <= 1e-29

@@ -14,6 +14,8 @@ import numba
 import numpy as np
 
 from . import dd
+from ..algorithm.interfaces import OutOfTime
+from .stoppable import seconds_left
 
 
 @numba.njit(cache=True, nogil=True)
@@ -285,6 +287,9 @@ def conjugate_gradients_in_double_double(Ap, Ai, A, bh, bl, preconditioner, targ
     fresh = True  # p is the preconditioned true residual: a breakdown now is final
     energy, beaten = 0.0, False  # the A-norm² decrease so far; whether an iterate beat x = 0 yet
     for steps in range(1, max_steps + 1):
+        left = seconds_left()  # a solve at 10⁵ contacts can take minutes: the time limit is checked each step
+        if left is not None and left < 0:
+            raise OutOfTime(f"the time limit was reached during a conjugate-gradient solve (step {steps})")
         if product is None:
             symmetric_product(n, Ap, Ai, A[0], A[1], ph, pl, qh, ql, xh, ax, ap)  # q = A p
         else:
