@@ -14,9 +14,10 @@ class Breakdown(Exception):
 
 
 class OutOfTime(Exception):
-    """The time limit was reached inside a long computation of an iteration (a compiled kernel
-    stopped by :func:`rfverify.extended.stoppable.run_stoppable`): the run ends with the best
-    iterate so far, the message saying what was stopped."""
+    """The time limit was reached inside a long computation of an iteration (a double-double
+    factorisation stopped by :func:`rfverify.extended.stoppable.run_stoppable` or not started, a
+    conjugate-gradient solve): the run ends with the best iterate so far, the message saying
+    what was stopped."""
 
 
 PROMOTE = "promote"
