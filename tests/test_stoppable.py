@@ -28,10 +28,16 @@ def _laplacian_factor(k: int, with_matrix: bool = False):
     T = sp.diags([-1.0, 2.5, -1.0], [-1, 0, 1], shape=(k, k))
     A = (sp.kron(sp.kron(T, eye), eye) + sp.kron(sp.kron(eye, T), eye) + sp.kron(sp.kron(eye, eye), T)).tocsc()
     chol = DDCholesky(A)
-    cols = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    values = np.zeros(chol.nnz_upper)
-    values[chol.positions(A.indices, cols)] = A.data
+    values = _values_for(chol, A)
     return (chol, values, A) if with_matrix else (chol, values)
+
+
+def _values_for(factor, A):
+    """A's entries in ``factor``'s stored upper triangle (its ``positions``)."""
+    cols = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    values = np.zeros(factor.nnz_upper)
+    values[factor.positions(A.indices, cols)] = A.data
+    return values
 
 
 @pytest.fixture(scope="module")
@@ -173,9 +179,7 @@ def test_a_refused_fallback_is_named_in_the_time_line_and_not_counted(monkeypatc
 
     _, _, A = _laplacian_factor(6, with_matrix=True)
     mixed = MixedCholesky(A)
-    cols = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    values = np.zeros(mixed.nnz_upper)
-    values[mixed.positions(A.indices, cols)] = A.data
+    values = _values_for(mixed, A)
     assert mixed.factor(values, np.zeros_like(values)) == -1
     monkeypatch.setattr(ldl, "memory_available", lambda: 1024)
     with pytest.raises(FactorTooLarge):
@@ -194,9 +198,7 @@ def test_the_cholmod_fallback_factors_in_cholmods_order():
 
     _, _, A = _laplacian_factor(8, with_matrix=True)
     mixed = CholmodMixed(A)
-    cols = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    values = np.zeros(mixed.nnz_upper)
-    values[mixed.positions(A.indices, cols)] = A.data
+    values = _values_for(mixed, A)
     assert mixed.factor(values, np.zeros_like(values)) == -1
     order = mixed._engine.permutation()
     assert mixed._fall_back("a test's reason") == -1
