@@ -248,3 +248,34 @@ def test_the_set_up_begins_at_the_double_solves_first_factorisation_or_when_aske
     assert waiting._ctx_ready.wait(30) and waiting.context().hypotheses_proven
     asked = P.Preparation(problem, "auto", "auto", background=True)
     assert asked.context().hypotheses_proven and asked.system()[0].n == problem.n_contacts
+
+
+def test_the_gate_refuses_a_bound_between_the_relative_and_the_absolute_tests():
+    """The proof certifies v relatively (bound ≤ 10⁻ᵏ‖v‖∞) or, only where ‖v‖∞ itself is below
+    10⁻ᵏ of its data scale, absolutely.  A bound that fits 10⁻ᵏ of the scale but not of a v that
+    is not small certifies nothing, so the gate must say no (it said yes, and a 9675-contact bed
+    spent 0.5 s proving an iterate to 9.6 digits)."""
+    problem = rfverify.solver.posed(random_problem(6, 14, seed=1), None, "auto")
+    ctx = ProofContext(problem)
+    coupled = ctx.exact.free_blocks(ctx.mass, problem.as_stored).coupled
+    root_minv = float(np.sqrt(np.max(ctx.mass.minv_diag_upper[coupled])))
+    scale, tol, u_ok = ctx.scales["v"], 1e-10, 1e300
+    assert scale > 0
+    eps = 0.5 * tol * scale / root_minv  # v's bound is then at least half of 10⁻¹⁰ of the scale
+    assert not ctx.may_certify(eps, scale / 10, u_ok, 10)
+    assert ctx.may_certify(eps, 0.5 * tol * scale, u_ok, 10)  # v below 10⁻¹⁰ of its scale
+    assert not ctx.may_certify(eps, 0.5 * tol * scale, u_ok, 10, relative=True)
+    assert ctx.may_certify(eps, 1e3 * scale, u_ok, 10)  # the bound fits 10⁻¹⁰ of v itself
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 50), tol_exp=st.integers(6, 12), digits=st.integers(2, 8))
+def test_where_the_gate_says_no_to_relative_digits_the_proof_does_not_certify_them(seed, tol_exp, digits):
+    problem = rfverify.solver.posed(random_problem(6, 14, seed=seed), None, "auto")
+    double = rfverify.solve(problem, tol=10.0 ** -tol_exp)
+    ctx = ProofContext(problem)
+    point = candidate_point(double.v, double.r)
+    vv, uu, rr = ctx.rounded(point)
+    proof = ctx.prove(point, vv, uu, rr, requested=digits, relative=True)
+    may = P.double_answer_may_certify(ctx, problem, double.v, double.r, digits, relative=True)
+    assert may or not proof.certified, (proof.summary(), tol_exp, digits)

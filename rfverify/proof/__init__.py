@@ -247,18 +247,28 @@ class ProofContext:
         ε with g = 0, globally and for the local theorem)."""
         return math.sqrt(max(gap, 0.0))
 
-    def may_certify(self, eps_lower: float, v_inf: float, u_inf: float, requested: int) -> bool:
+    def may_certify(self, eps_lower: float, v_inf: float, u_inf: float, requested: int,
+                    relative: bool = False) -> bool:
         """Necessary condition, cheap: with ε ≥ ``eps_lower`` the bounds on v and u are at least
         √((M⁻¹)_jj)·ε (j outside the free blocks, which are bounded without ε) and √(W_kk)·ε
-        (√(W_kk)·ε on u for a local problem), which must fit 10⁻ᵏ of the larger of the
-        vector's norm and its data scale.  False means no proof of this point can certify
-        ``requested`` digits."""
+        (√(W_kk)·ε on u for a local problem).  A quantity is certified relatively only where its
+        bound fits 10⁻ᵏ of its own norm, and absolutely only where the norm itself is below 10⁻ᵏ
+        of its data scale (:func:`.quantity.quantity_bound`; never with ``relative``), so a
+        bound between the two tests is refused here as in the proof.  False means no proof of
+        this point can certify ``requested`` digits."""
         if not self.hypotheses_proven:
             return True  # let the proof say why
         tol = 10.0 ** (-requested)
+
+        def fits(bound: float, norm: float, scale: float) -> bool:
+            # 1.01: the norms here are of the iterate, the proof's of its rounded answer
+            if bound <= tol * norm * 1.01:
+                return True
+            return not relative and norm <= tol * scale * 1.01 and bound <= tol * scale * 1.01
+
         eu = float(np.sqrt(np.max(self.w_diag, initial=0.0))) * eps_lower
         if self.is_local:
-            return eu <= tol * max(u_inf, self.scales["u"]) * 1.01
+            return fits(eu, u_inf, self.scales["u"])
         coupled = self.exact.free_blocks(self.mass, self.problem.as_stored).coupled
         ev = float(np.sqrt(np.max(self.mass.minv_diag_upper[coupled], initial=0.0))) * eps_lower
-        return ev <= tol * max(v_inf, self.scales["v"]) * 1.01 and eu <= tol * max(u_inf, self.scales["u"]) * 1.01
+        return fits(ev, v_inf, self.scales["v"]) and fits(eu, u_inf, self.scales["u"])

@@ -231,7 +231,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     interrupted = bool(double.extras.get("interrupted"))
     first = None
     if _on_face is None and (out_of_time or interrupted or not ctx.hypotheses_proven
-                             or double_answer_may_certify(ctx, problem, double.v, double.r, digits)):
+                             or double_answer_may_certify(ctx, problem, double.v, double.r, digits, relative)):
         first = proven_answer(ctx, point, digits, relative)
     if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted):
         prepared.cancel()

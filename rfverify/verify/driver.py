@@ -176,7 +176,8 @@ class ProofDriver:
                 u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
             key = ("dd", it.k)
         eps_lower = self.ctx.eps_lower(gap)
-        if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested):
+        if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested,
+                                                                      relative=self.relative):
             return False
         if key in self.proven_keys:
             return False

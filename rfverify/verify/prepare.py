@@ -149,7 +149,8 @@ class Preparation:
             self._thread.join()
 
 
-def double_answer_may_certify(ctx: ProofContext, problem: Problem, v, r, requested: int) -> bool:
+def double_answer_may_certify(ctx: ProofContext, problem: Problem, v, r, requested: int,
+                              relative: bool = False) -> bool:
     """:meth:`ProofContext.may_certify` for the double solve's answer (v, r), from its duality
     gap rᵀu (u = Hᵀv + w, or W r + q for a local problem) computed in long double and lowered by
     twice a bound of that computation's rounding error, (k + N + 3)·ε·Σ|r_i|(|Hᵀ||v| + |w|)_i
@@ -173,7 +174,7 @@ def double_answer_may_certify(ctx: ProofContext, problem: Problem, v, r, request
         u_inf = float(np.max(np.abs(u), initial=0.0))
     if not (math.isfinite(gap) and math.isfinite(slack) and math.isfinite(u_inf) and math.isfinite(v_inf)):
         return True  # let the proof say what it can
-    return ctx.may_certify(ctx.eps_lower(max(gap - slack, 0.0)), v_inf, u_inf, requested)
+    return ctx.may_certify(ctx.eps_lower(max(gap - slack, 0.0)), v_inf, u_inf, requested, relative=relative)
 
 
 def start_from(data: ExtendedData, double: SolveResult) -> dict:
