@@ -95,6 +95,23 @@ def test_a_factor_larger_than_the_memory_available_is_refused(monkeypatch):
     assert np.allclose(chol.solve(b, np.zeros(chol.n))[0], spsolve(A, b), rtol=1e-13, atol=0)
 
 
+def test_a_solve_without_a_successful_factor_is_refused(monkeypatch):
+    """A refused factorisation leaves no L, a failed one a partial L: neither may be solved with."""
+    chol, values = _laplacian_factor(4)
+    b = np.ones(chol.n)
+    with pytest.raises(RuntimeError, match="without a successful factor"):
+        chol.solve(b, np.zeros(chol.n))  # never factored
+    monkeypatch.setattr(ldl, "memory_available", lambda: chol.factor_bytes)
+    with pytest.raises(FactorTooLarge):
+        chol.factor(values, np.zeros_like(values))
+    with pytest.raises(RuntimeError, match="without a successful factor"):
+        chol.solve(b, np.zeros(chol.n))  # refused
+    monkeypatch.setattr(ldl, "memory_available", lambda: 2 * chol.factor_bytes)
+    assert chol.factor(-values, np.zeros_like(values)) != -1  # −A: the first pivot fails
+    with pytest.raises(RuntimeError, match="without a successful factor"):
+        chol.solve(b, np.zeros(chol.n))
+
+
 def test_the_multiply_add_count():
     """A dense n × n matrix: column j of L has n − 1 − j entries, Σ c(c − 1)/2 = C(n, 3)."""
     chol = DDCholesky(sp.csc_matrix(np.ones((10, 10))))

@@ -329,7 +329,11 @@ class DDCholesky:
         return int(bad)
 
     def solve(self, bh: np.ndarray, bl: np.ndarray):
-        """x = A⁻¹ b in double-double (b in original ordering)."""
+        """x = A⁻¹ b in double-double (b in original ordering).  Only after a successful
+        :meth:`factor`: a failed one leaves a partial factor (or none, where it was refused)."""
+        if not self.factored:
+            raise RuntimeError("DDCholesky.solve called without a successful factor(): the caller must check "
+                               "factor()'s result (-1) or .factored first")
         xh = np.ascontiguousarray(bh[self.perm])
         xl = np.ascontiguousarray(bl[self.perm])
         _solve(self.n, self.Lp, self.Li, self.Lxh, self.Lxl, self.Dh, self.Dl, xh, xl)
