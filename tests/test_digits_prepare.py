@@ -268,6 +268,29 @@ def test_the_gate_refuses_a_bound_between_the_relative_and_the_absolute_tests():
     assert ctx.may_certify(eps, 1e3 * scale, u_ok, 10)  # the bound fits 10⁻¹⁰ of v itself
 
 
+@pytest.mark.parametrize("relative", [False, True])
+def test_the_gate_says_yes_wherever_the_proofs_own_rule_certifies(relative):
+    """At and around both thresholds of :func:`quantity_bound` (bound against 10⁻ᵏ‖v‖∞, and ‖v‖∞
+    against 10⁻ᵏ of the scale): wherever the proof would certify v, the gate lets the proof be
+    made.  A gate tighter by a few per cent fails here."""
+    from rfverify.proof.quantity import quantity_bound
+
+    problem = rfverify.solver.posed(random_problem(6, 14, seed=1), None, "auto")
+    ctx = ProofContext(problem)
+    coupled = ctx.exact.free_blocks(ctx.mass, problem.as_stored).coupled
+    root_minv = float(np.sqrt(np.max(ctx.mass.minv_diag_upper[coupled])))
+    scale, tol = ctx.scales["v"], 1e-10
+    certified = 0
+    for norm in (tol * scale * f for f in (0.0, 0.2, 0.98, 0.999, 1.0, 1.01, 1.05, 10.0, 1e6)):
+        for bound in (tol * ref * f for ref in (norm, scale) for f in (0.5, 0.97, 0.999, 0.99999, 1.0, 1.02)):
+            proof_says = quantity_bound("v", np.array([bound]), np.array([norm]), ctx.scales, 10,
+                                        relative=relative).certified
+            certified += proof_says
+            assert not proof_says or ctx.may_certify(bound / root_minv, norm, 1e300, 10, relative=relative), \
+                (norm / (tol * scale), bound / (tol * norm))
+    assert certified > 10  # the grid does reach the thresholds from both sides
+
+
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 50), tol_exp=st.integers(6, 12), digits=st.integers(2, 8))
 def test_where_the_gate_says_no_to_relative_digits_the_proof_does_not_certify_them(seed, tol_exp, digits):
