@@ -107,7 +107,7 @@ EXTENDED_KERNELS = (
     ("cones", "product", "(int64, float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("dd", "vscale", "(float64, float64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("dd", "vaxpy", "(float64, float64, float64[::1], float64[::1], float64[::1], float64[::1])"),
-    ("cones", "max_step", "(int64, float64[::1], float64[::1], float64[::1], float64[::1])"),
+    ("cones", "max_step_at", "(int64, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("blocks", "block_apply", "(int64, int64[::1], int64[::1], float64[:, :, ::1], float64[:, :, ::1], boolean, float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("ldl", "_solve", "(int64, int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1])"),
     ("cones", "quad_spectral", "(int64, float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1])"),

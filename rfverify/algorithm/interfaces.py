@@ -97,7 +97,9 @@ class Scaling(Protocol):
         Mehrotra's second-order term from the predictor's (dz, ds)."""
 
     def max_step(self, dz, ds) -> float:
-        """The largest α with z + α dz and s + α ds in the cones (inf when unbounded)."""
+        """The largest α with z + α dz and s + α ds in the cones (inf when unbounded).  A
+        scaling may also set ``limit`` = (cone index, "z" or "s"), the cone that sets it (None
+        when unbounded); the loop records it for the corrector's step."""
 
 
 class Cones(Protocol):

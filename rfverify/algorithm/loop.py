@@ -41,9 +41,9 @@ class LoopOutcome:
     """What :func:`iterate` ends with: the last iterate (v, r̃, z), the verdict the policy
     (or a breakdown) gave, the last iteration index k, one record per iterate (its columns:
     iter, mu, pinfeas, dinfeas, time, what the policy and the scaling add, and for an
-    iterate that computed its step sigma, alpha_aff, alpha, gamma, solve_residual,
-    refine_steps), and the seconds spent scaling and factoring ("factor") and solving
-    ("solve")."""
+    iterate that computed its step sigma, alpha_aff, alpha, gamma, limit (the scaling's: the
+    cone that set the corrector's step, or None), solve_residual, refine_steps), and the
+    seconds spent scaling and factoring ("factor") and solving ("solve")."""
 
     iterate: tuple
     verdict: Any
@@ -115,6 +115,7 @@ def iterate(precision: Precision, policy, start: tuple, *, n_contacts: int, n_co
             timings["solve"] += time.perf_counter() - t_solve
             alpha = min(1.0, gamma * scaling.max_step(corr.dz, ds))
             record.update(sigma=sigma, alpha_aff=alpha_aff, alpha=alpha, gamma=gamma,
+                          limit=getattr(scaling, "limit", None),
                           solve_residual=max(pred.residual, corr.residual), refine_steps=pred.steps + corr.steps)
             verdict = policy.after_direction(k, record, pred, corr)
             if verdict is not None:

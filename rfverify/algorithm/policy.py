@@ -9,17 +9,21 @@ from .interfaces import Policy
 
 class UntilPolicy(Policy):
     """The extended phases' policy: stop when ``until(iterate)`` accepts an iterate (status
-    "Stopped") or at ``max_iter``; the paper's σ rule; γ = min(γ_max, 0.9 + (γ_max − 0.9)α)."""
+    "Stopped") or at ``max_iter``; the paper's σ rule; γ = min(γ_max, 0.9 + (γ_max − 0.9)α).
+    ``progress(k, mu, pinfeas, dinfeas, step)`` is told of each iterate, with ``step`` = (α, limit)
+    of the step that led to it (None for the first): limit is the scaling's (cone, "z" or "s")
+    that set the step to the boundary, or None."""
 
     gamma0 = 0.9
 
     def __init__(self, until, progress, max_iter: int, make_iterate, gamma_max: float, stop_words: str):
         self.until, self.progress, self.max_iter = until, progress, max_iter
         self.make_iterate, self.gamma_max, self.stop_words = make_iterate, gamma_max, stop_words
+        self.last_step = None  # (α, limit) of the step just taken
 
     def observe(self, k, iterate, res, record):
         if self.progress:
-            self.progress(k, res.mu, res.pinfeas, res.dinfeas)
+            self.progress(k, res.mu, res.pinfeas, res.dinfeas, self.last_step)
         if self.until is not None and self.until(self.make_iterate(k, iterate, res)):
             return ("Stopped", f"{self.stop_words} at iteration {k} (μ = {res.mu:.2e})")
         if k == self.max_iter:
@@ -30,8 +34,8 @@ class UntilPolicy(Policy):
     def sigma(mu, mu_aff, alpha_aff):
         return rules.centring("paper", mu_aff, mu, alpha_aff)
 
-    @staticmethod
-    def after_direction(k, record, predictor, corrector):
+    def after_direction(self, k, record, predictor, corrector):
+        self.last_step = (record["alpha"], record.get("limit"))
         return None
 
     @staticmethod
@@ -53,11 +57,13 @@ class UntilPolicy(Policy):
 def extended_trace(records: list) -> dict:
     """The extended phases' trace from the loop's records: mu, pinfeas, dinfeas, time per
     iterate; the step columns per iteration that computed its step (``refine`` is the
-    records' refine_steps); "centrality" per iteration that reached its scaling."""
+    records' refine_steps) and ``limit`` (the (cone, "z" or "s") that set the step to the boundary,
+    or None); "centrality" per iteration that reached its scaling."""
     trace = {key: [rec[key] for rec in records] for key in ("mu", "pinfeas", "dinfeas", "time")}
     stepped = [rec for rec in records if "sigma" in rec]
     for key in ("sigma", "alpha", "refine", "solve_residual"):
         trace[key] = [rec["refine_steps" if key == "refine" else key] for rec in stepped]
+    trace["limit"] = [rec.get("limit") for rec in stepped]
     if any("centrality" in rec for rec in records):
         trace["centrality"] = [rec["centrality"] for rec in records if "centrality" in rec]
     return trace

@@ -63,7 +63,8 @@ def add_parser(sub) -> None:
                           f"has taken {PROGRESS_AFTER:g} s ({PROGRESS_AFTER_ENV}=S sets another threshold), its "
                           "iterations, at most two lines a second, with the form, mu and the criterion (--verbose "
                           "prints every one on stdout instead); with --digits, one line per stage and extended "
-                          "iteration too); --json also has none")
+                          "iteration too, with the step that led to it and the contact whose cone cut it "
+                          "short); --json also has none")
     sol.add_argument("--verbose", action="store_true",
                      help="print a settings header and each iteration as it happens (every independent "
                           "component, labelled); with --method clarabel, Clarabel's own log")

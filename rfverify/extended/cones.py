@@ -225,7 +225,15 @@ def arrow_solve(n3, xh, xl, yh, yl, oh, ol):
 @njit
 def max_step(n3, xh, xl, dxh, dxl):
     """Largest α with x + α dx in the product cone (x interior); inf when unbounded."""
+    return max_step_at(n3, xh, xl, dxh, dxl)[0]
+
+
+@njit
+def max_step_at(n3, xh, xl, dxh, dxl):
+    """(:func:`max_step`, the cone that sets it): cone c < n3 is the L3 cone of entries 3c … 3c+2,
+    cone n3 + k the L1 cone of entry 3·n3 + k; the first such cone on ties, -1 when unbounded."""
     best = math.inf
+    at = -1
     for c in range(n3):
         i = 3 * c
         l1, l1l, l2, l2l = _lams(xh[i], xl[i], xh[i + 1], xl[i + 1], xh[i + 2], xl[i + 2])
@@ -256,14 +264,14 @@ def max_step(n3, xh, xl, dxh, dxl):
         if ly2 < 0.0:
             a = -1.0 / ly2
             if a < best:
-                best = a
+                best, at = a, c
     for k in range(xh.size - 3 * n3):
         i = 3 * n3 + k
         if dxh[i] < 0.0:
             a = -xh[i] / dxh[i]
             if a < best:
-                best = a
-    return best
+                best, at = a, n3 + k
+    return best, at
 
 
 def identity(n3, nz):
@@ -405,8 +413,17 @@ def quad_spectral_threaded(n3, table, spec, yh, yl, oh, ol) -> None:
 
 def max_step_threaded(n3, xh, xl, dxh, dxl) -> float:
     """:func:`max_step` over the threads."""
-    def run(lo, hi):
-        return min((max_step(k3, xh[e], xl[e], dxh[e], dxl[e]) for k3, _, e in _pieces(n3, lo, hi)),
-                   default=math.inf)
+    return max_step_at_threaded(n3, xh, xl, dxh, dxl)[0]
 
-    return min(split(_n_cones(n3, xh.size), run, min_items=8192))
+
+def max_step_at_threaded(n3, xh, xl, dxh, dxl) -> tuple[float, int]:
+    """:func:`max_step_at` over the threads: the same step and cone as the single call."""
+    def run(lo, hi):
+        best = (math.inf, -1)
+        for k3, c, e in _pieces(n3, lo, hi):
+            step, at = max_step_at(k3, xh[e], xl[e], dxh[e], dxl[e])
+            if step < best[0]:  # a piece's cone index counts from the piece's first cone
+                best = (step, c.start + at)
+        return best
+
+    return min(split(_n_cones(n3, xh.size), run, min_items=8192), key=lambda found: found[0])

@@ -22,6 +22,7 @@ contact-space Schur complement, factored in float64 and refined in double-double
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -268,6 +269,7 @@ class DDScaling:
 
     def __init__(self, n3: int, nz: int, n_cones: int, e: V, z: V, s: V):
         self.n3, self.e, self.z, self.s = n3, e, z, s
+        self.limit = None  # set by max_step
         self.ph, self.pl, self.pih, self.pil, lh, ll = (np.zeros(nz) for _ in range(6))
         self.spec = np.zeros((n_cones, 8))
         self._tables = {}  # k → eigenvalues of Q_{p^k} (cones.spectral_table)
@@ -305,8 +307,13 @@ class DDScaling:
         return self._cone(C.arrow_solve, self.lam, xi)
 
     def max_step(self, dz, ds) -> float:
-        return min(C.max_step_threaded(self.n3, self.z.h, self.z.l, dz.h, dz.l),
-                   C.max_step_threaded(self.n3, self.s.h, self.s.l, ds.h, ds.l))
+        """The largest α keeping z + α dz and s + α ds in their cones; :attr:`limit` is then
+        (cone, "z" or "s") of the cone that sets it, the z side on a tie (None when unbounded)."""
+        step_z, cone_z = C.max_step_at_threaded(self.n3, self.z.h, self.z.l, dz.h, dz.l)
+        step_s, cone_s = C.max_step_at_threaded(self.n3, self.s.h, self.s.l, ds.h, ds.l)
+        step = min(step_z, step_s)
+        self.limit = None if step == math.inf else ((cone_z, "z") if step_z <= step_s else (cone_s, "s"))
+        return step
 
 
 class DDCones:

@@ -5,7 +5,7 @@ factorisation budget (:data:`WIDE_MAX_FACTOR_OPS`)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..extended import ipm as ext
 from ..extended import wide, wide_factor
@@ -31,6 +31,51 @@ WIDE_GIVE_UP = 5
 contacts leave no strictly feasible point stays outside K* at every one of 40 iterations)."""
 
 
+CONE_PARTS = ("friction", "rolling", "normal")
+"""The part of a contact each cone of the lifted problem holds (``LiftedProblem.cone_part``)."""
+
+CONE_SIDES = {"z": "velocity", "s": "reaction"}
+"""A cone's two members: z (H̃v + w̃ = Jz, the lifted velocity u) and s = Jᵀr̃ (the reaction)."""
+
+
+def held_by(data: ExtendedData, limit) -> dict | None:
+    """The cone that set a step to the boundary, ``limit`` = (cone, "z" or "s") of the lifted
+    problem, as {"contact": index in the problem, "part": friction / rolling / normal, "side":
+    velocity / reaction}; None when unknown."""
+    if limit is None:
+        return None
+    cone, side = limit
+    lp = data.lp
+    return {"contact": int(lp.cone_contact[cone]), "part": CONE_PARTS[int(lp.cone_part[cone])],
+            "side": CONE_SIDES[side]}
+
+
+def step_words(data: ExtendedData, step) -> str:
+    """The step that led to an iterate, for its progress line: "; step 0.955, held by contact
+    453's rolling cone (reaction)" (the cone whose boundary cut it short), "; full step", or ""
+    for the first iterate."""
+    if step is None:
+        return ""
+    alpha, limit = step
+    if alpha >= 1.0:
+        return "; full step"
+    held = held_by(data, limit)
+    if held is None:
+        return f"; step {alpha:.3g}"
+    return f"; step {alpha:.3g}, held by contact {held['contact']}'s {held['part']} cone ({held['side']})"
+
+
+def steps_held(data: ExtendedData, trace: dict) -> list[dict]:
+    """Each step of a run shorter than 1, with the cone that cut it short: [{"from_iteration" (the
+    step from that iterate to the next), "alpha", "contact", "part", "side"}] (:func:`held_by`;
+    the last three absent where the run does not know them)."""
+    out = []
+    for k, (alpha, limit) in enumerate(zip(trace.get("alpha", []), trace.get("limit", []))):
+        if alpha < 1.0:
+            out.append({"from_iteration": k, "alpha": float(alpha), **(held_by(data, limit) or {})})
+    return out
+
+
 @dataclass
 class Extension:
     """What :func:`extend` ran: the double-double run, the multiple-precision tail (None if it
@@ -42,6 +87,7 @@ class Extension:
     handover_iteration: int | None
     seconds_dd: float
     seconds_wide: float
+    steps_held: list = field(default_factory=list)  # the double-double run's :func:`steps_held`
 
     @property
     def point_source(self) -> str:
@@ -51,7 +97,7 @@ class Extension:
 
     def summary(self) -> dict:
         out = {"extended_status": self.run.status, "extended_iterations": self.run.nit, "backend": self.run.backend,
-               "wide_tail": self.wide_note}
+               "wide_tail": self.wide_note, "extended_steps_held": self.steps_held}
         if self.wide is not None:
             out.update(wide_status=self.wide.status, wide_iterations=self.wide.nit, wide_bits=self.wide.bits,
                        wide_handover_iteration=self.handover_iteration)
@@ -69,19 +115,20 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
     say = say or (lambda msg: None)
 
     def tick(phase):
-        return (lambda k, mu, pinf, dinf: say(f"  {phase} iteration {k}: μ = {mu:.2e}, pinfeas = {pinf:.1e}, "
-                                              f"dinfeas = {dinf:.1e}")) if verbose else None
+        return (lambda k, mu, pinf, dinf, step=None: say(
+            f"  {phase} iteration {k}: μ = {mu:.2e}, pinfeas = {pinf:.1e}, dinfeas = {dinf:.1e}"
+            + step_words(data, step))) if verbose else None
 
     t0 = time.perf_counter()
     p0 = driver.proof_seconds
     named = [system.name]
 
-    def extended_tick(k, mu, pinf, dinf):  # a change of the factorisation is said when it happens
+    def extended_tick(k, mu, pinf, dinf, step=None):  # a change of the factorisation is said when it happens
         if system.name != named[-1]:
             named.append(system.name)
             say(f"  extended iteration {k}: the last step's factorisation changed: {system.name}")
         if verbose:
-            tick("extended")(k, mu, pinf, dinf)
+            tick("extended")(k, mu, pinf, dinf, step)
 
     run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system, progress=extended_tick)
     seconds_dd = time.perf_counter() - t0 - (driver.proof_seconds - p0)
@@ -133,6 +180,6 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             # one line, not one per iterate: the progress goes forward
             say(f"the last iterates ({', '.join(str(it.k) for it in again)}) proven too, in case the final one "
                 f"left a cone: the best proof is {site_words(driver.best_at)}'s: {driver.best[1].summary()}")
-    return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide)
+    return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide, steps_held(data, run.trace))
 
 
