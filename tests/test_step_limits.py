@@ -153,3 +153,26 @@ def test_the_ten_digit_path_reports_each_short_step_and_its_cone(capsys):
         want = (f"extended iteration {h['from_iteration'] + 1}: ", f"held by contact {h['contact']}'s "
                 f"{h['part']} cone ({h['side']})")
         assert any(all(w in line for w in want) for line in said), (want, said)
+
+
+@given(st.integers(0, 2**31), st.integers(0, 6), st.integers(0, 4))
+@example(3, 5, 2)
+def test_the_multiple_precision_step_names_the_same_cone_as_double_double(seed, n3, n1):
+    """The 320-bit tail's arg-min (jordan.mpfr.max_step_at) and the double-double kernel's agree
+    on the same exactly representable data: the same cone, steps within double-double rounding."""
+    from rfverify.extended import wide_data
+    from rfverify.jordan import mpfr as JM
+
+    if n3 + n1 == 0:
+        return
+    rng = np.random.default_rng(seed)
+    x, dx = _interior(rng, n3, n1), rng.normal(size=3 * n3 + n1)
+    zero = np.zeros(x.size)
+    best, at = C.max_step_at(n3, x, zero, dx, zero)
+    with wide_data.context(320):
+        wide_best, wide_at = JM.max_step_at(n3, wide_data.from_dd(x), wide_data.from_dd(dx))
+    steps = sorted(_cone_steps(n3, x, dx))
+    if best == math.inf:
+        assert wide_best == math.inf and wide_at == -1
+    elif len(steps) < 2 or steps[1] > steps[0] * (1 + 1e-20):  # a clear minimum: both name it
+        assert wide_at == at and wide_best == pytest.approx(best, rel=1e-25)

@@ -217,6 +217,10 @@ def test_the_tail_proves_ten_digits_of_the_lattice_and_they_are_true(lattice):
     assert out.wide is not None and out.wide.bits == BITS
     extra = out.certificate.extra
     assert extra["wide_iterations"] == out.wide.nit > 0 and "multiple-precision" in extra["point_source"]
+    # the tail's steps shorter than 1, each with the cone whose boundary cut it short
+    assert [h["from_iteration"] for h in extra["wide_steps_held"]] == [
+        k for k, a in enumerate(out.wide.trace["alpha"]) if a < 1]
+    assert extra["wide_steps_held"] and all({"contact", "part", "side"} <= set(h) for h in extra["wide_steps_held"])
     assert out.point.terms == -(-BITS // 53)
     ref = _truth(problem)
     with mpmath.workdps(80):

@@ -23,6 +23,7 @@ gmpy2's precision is set in a local context for the duration of each call; nothi
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -32,7 +33,7 @@ from ..algorithm.interfaces import Breakdown, ReducedBackend
 from ..algorithm.loop import Precision, iterate
 from ..algorithm.newton import NEWTON_ENOUGH, PREDICTOR_ENOUGH, ReducedNewton
 from ..algorithm.policy import UntilPolicy, extended_trace
-from ..jordan.mpfr import arrow_solve, centrality, identity, max_step, nt_scaling, product, quad_pow
+from ..jordan.mpfr import arrow_solve, centrality, identity, max_step_at, nt_scaling, product, quad_pow
 from .data import ExtendedData
 from .ipm import ExtendedResult
 from .wide_cholesky import DenseWideCholesky, SparseWideCholesky
@@ -142,6 +143,7 @@ class _WideScaling:
         if sc is None:
             raise Breakdown(f"cone {bad} is not strictly interior")
         self.n3, self.n_cones, self.e, self.z, self.s, self.sc = n3, n_cones, e, z, s, sc
+        self.limit = None  # set by max_step
 
     def describe(self) -> dict:
         return {"centrality": centrality(self.n3, self.sc, dot(self.z, self.s) / self.n_cones)}
@@ -158,7 +160,13 @@ class _WideScaling:
         return arrow_solve(n3, lam, xi)
 
     def max_step(self, dz, ds) -> float:
-        return min(max_step(self.n3, self.z, dz), max_step(self.n3, self.s, ds))
+        """The largest α keeping z + α dz and s + α ds in their cones; :attr:`limit` is then
+        (cone, "z" or "s") of the cone that sets it, the z side on a tie (None when unbounded)."""
+        step_z, cone_z = max_step_at(self.n3, self.z, dz)
+        step_s, cone_s = max_step_at(self.n3, self.s, ds)
+        step = min(step_z, step_s)
+        self.limit = None if step == math.inf else ((cone_z, "z") if step_z <= step_s else (cone_s, "s"))
+        return step
 
 
 class _WideCones:

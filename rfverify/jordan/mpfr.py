@@ -129,22 +129,34 @@ def arrow_solve(n3: int, x, y) -> np.ndarray:
 def max_step(n3: int, x, dx) -> float:
     """Largest α with x + α·dx in the cone (x interior), as a float; inf when unbounded.
     Through y = Q_{x^{-1/2}} dx: α = −1/λ₂(y) where λ₂(y) < 0."""
-    best = math.inf
+    return max_step_at(n3, x, dx)[0]
+
+
+def max_step_at(n3: int, x, dx) -> tuple[float, int]:
+    """(:func:`max_step`, the cone that sets it): cone c < n3 is the L3 cone of entries
+    3c … 3c+2, cone n3 + k the L1 cone of entry 3·n3 + k; the first such cone on ties, -1 when
+    unbounded."""
+    best, at = math.inf, -1
     if n3:
         xr = _rows(n3, x)
         l1, l2, _ = _spec(xr)
         w = _inverse_sqrt(xr, l1, l2)
         m1, m2, _ = _spec(w)
         ly2 = _spec(_quad(w, _rows(n3, dx), m1 * m2))[1]
-        neg = (ly2 < 0).astype(bool)
-        if neg.any():
-            best = min(best, float(min(-1 / ly2[neg])))
+        neg = np.flatnonzero((ly2 < 0).astype(bool))
+        if neg.size:
+            steps = -1 / ly2[neg]
+            j = int(np.argmin(steps))  # the first of equal minima
+            best, at = float(steps[j]), int(neg[j])
     xt, dt = x[3 * n3:], dx[3 * n3:]
     if len(xt):
-        neg = (dt < 0).astype(bool)
-        if neg.any():
-            best = min(best, float(min(-xt[neg] / dt[neg])))
-    return best
+        neg = np.flatnonzero((dt < 0).astype(bool))
+        if neg.size:
+            steps = -xt[neg] / dt[neg]
+            j = int(np.argmin(steps))
+            if float(steps[j]) < best:
+                best, at = float(steps[j]), n3 + int(neg[j])
+    return best, at
 
 
 def centrality(n3: int, sc: Scaling, mu) -> float:

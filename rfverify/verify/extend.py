@@ -88,6 +88,7 @@ class Extension:
     seconds_dd: float
     seconds_wide: float
     steps_held: list = field(default_factory=list)  # the double-double run's :func:`steps_held`
+    wide_steps_held: list = field(default_factory=list)  # the tail's, where it ran
 
     @property
     def point_source(self) -> str:
@@ -100,7 +101,7 @@ class Extension:
                "wide_tail": self.wide_note, "extended_steps_held": self.steps_held}
         if self.wide is not None:
             out.update(wide_status=self.wide.status, wide_iterations=self.wide.nit, wide_bits=self.wide.bits,
-                       wide_handover_iteration=self.handover_iteration)
+                       wide_handover_iteration=self.handover_iteration, wide_steps_held=self.wide_steps_held)
         return out
 
 
@@ -180,6 +181,7 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
             # one line, not one per iterate: the progress goes forward
             say(f"the last iterates ({', '.join(str(it.k) for it in again)}) proven too, in case the final one "
                 f"left a cone: the best proof is {site_words(driver.best_at)}'s: {driver.best[1].summary()}")
-    return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide, steps_held(data, run.trace))
+    return Extension(run, tail, note, hand_k, seconds_dd, seconds_wide, steps_held(data, run.trace),
+                     [] if tail is None else steps_held(data, tail.trace))
 
 
