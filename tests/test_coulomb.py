@@ -16,7 +16,7 @@ import mpmath
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 import rfverify
 from rfverify.cli import main
@@ -237,9 +237,13 @@ def _shifted_bounds(problem, bounds):
 
 @settings(max_examples=8)
 @given(mu=st.floats(0.1, 1.5), push=st.floats(1.2, 3.0), load=st.floats(0.5, 2.0))
+@example(mu=0.1015625, push=1.203125, load=1.5)  # slow sliding: u_N = −2.6e-12 against ‖u‖∞ = 0.025
 def test_sliding_blocks_solve_and_certify(mu, push, load):
     """Random sliding blocks (‖f_T‖ = push·μ·|f_N|): the proven answer is the closed form, and
-    its backward error is below 1e-10."""
+    its backward error is below 1e-10.  The physical conditions hold to 1e-10 of their scales,
+    u_N ≥ 0 and r ⊥ ũ up to what the certificate allows: it proves the exact solution for w_N
+    moved by δ (|δ| ≤ backward error × ‖f‖∞ here), within u's proven bound of the answer, and
+    where the block slides slowly ‖u‖∞ is small beside those."""
     F = push * mu * load
     p = block(mu, fT=(0.6 * F, 0.8 * F), fN=-load)
     out = rfverify.solve_to_digits(p, digits=10, problem="coulomb")
@@ -247,7 +251,10 @@ def test_sliding_blocks_solve_and_certify(mu, push, load):
     assert abs(out.r[0] - load) <= 1e-9 * load
     assert abs(out.u[0]) <= 1e-9 * F
     bad = physical_violations(p, out.v, out.r)
-    assert all(x <= 1e-10 for x in bad.values()), bad
+    u_inf = float(np.max(np.abs(p.H.T @ out.v + p.w)))
+    allowed = (out.backward_error * float(np.max(np.abs(p.f))) + out.certificate.quantities["u"].abs_bound) / u_inf
+    assert bad["dynamics"] <= 1e-10 and bad["cone"] <= 1e-10, bad
+    assert bad["normal"] <= 1e-10 + allowed and bad["complementarity"] <= 1e-10 + allowed, (bad, allowed)
 
 
 def test_non_convergence_is_reported_with_its_residual(chute):

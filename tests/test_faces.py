@@ -237,3 +237,28 @@ def test_generic_frames_never_give_a_false_claim(turn):
         assert np.max(np.abs(out.v - v_ref)) <= proof.quantities["v"].abs_bound
     else:
         assert "no self-stress" in out.message
+
+
+def test_the_face_runs_step_reports_name_the_posed_problems_contacts():
+    """The run on the face numbers its contacts its own way (the kept ones first, then the
+    face's edge contacts); what it reports of its steps names the posed problem's contact, or
+    the face's edge contact, never a reduced index as if it were the problem's."""
+    problem = corner_problem(1, True)
+    lines = []
+    out = rfverify.solve_to_digits(problem, digits=10, progress=lines.append)
+    note = out.certificate.extra["face"]
+    in_stress = {int(c) for s in note["self_stresses"] for c in s["contacts"]}
+    kept = sorted(set(range(problem.n_contacts)) - in_stress)  # the contacts no self-stress touches
+    n_edges = note["reduced_contacts"] - len(kept)
+    held = note["extended_steps_held"]
+    assert held and n_edges > 0
+    for h in held:
+        if h["contact"] is None:
+            assert 0 <= h["face_edge"] < n_edges
+        else:
+            assert h["contact"] in kept and "face_edge" not in h
+    said = [line for line in lines if "(on the face)" in line and "held by" in line]
+    assert len(said) == len(held)
+    for h, line in zip(held, said):
+        who = f"contact {h['contact']}'s" if h["contact"] is not None else f"the face's edge contact {h['face_edge']}'s"
+        assert f"held by {who} {h['part']} cone ({h['side']})" in line

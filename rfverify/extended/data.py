@@ -143,6 +143,9 @@ class ExtendedData:
         self.nk, self.nz = lp.nk, lp.nz
         self.n3, self.n1 = lp.n3, lp.n1
         self.n = problem.n_contacts
+        # Each contact's index in the problem a user posed, where this one is another's on a face
+        # (FaceReduction.refine sets it; −1 − e: the face's edge contact e); None: its own.
+        self.contact_names = None
         if self.local:
             HT = sp.csr_matrix((lp.nk, 0))
         else:

@@ -397,7 +397,8 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
                           _on_face=(ctx, reduction, stresses, driver.target), **settings)
     note.update(reduction=f"solved there, each point proven on the problem itself: {sub.status}",
                 seconds=time.perf_counter() - t0, reduced_dofs=reduction.problem.n_dofs,
-                reduced_contacts=reduction.problem.n_contacts, reduced_iterations=sub.nit)
+                reduced_contacts=reduction.problem.n_contacts, reduced_iterations=sub.nit,
+                extended_steps_held=sub.certificate.extra.get("extended_steps_held", []))
     proof, point = sub.certificate.proof, sub.point
     if proof is None or point is None:
         return note

@@ -41,13 +41,21 @@ CONE_SIDES = {"z": "velocity", "s": "reaction"}
 def held_by(data: ExtendedData, limit) -> dict | None:
     """The cone that set a step to the boundary, ``limit`` = (cone, "z" or "s") of the lifted
     problem, as {"contact": index in the problem, "part": friction / rolling / normal, "side":
-    velocity / reaction}; None when unknown."""
+    velocity / reaction}; None when unknown.  For a problem on a face (``data.contact_names``)
+    the contact is the posed problem's, or None for an edge contact the face made (then
+    "face_edge": its index among the face's edge contacts)."""
     if limit is None:
         return None
     cone, side = limit
     lp = data.lp
-    return {"contact": int(lp.cone_contact[cone]), "part": CONE_PARTS[int(lp.cone_part[cone])],
-            "side": CONE_SIDES[side]}
+    contact = int(lp.cone_contact[cone])
+    out = {"contact": contact, "part": CONE_PARTS[int(lp.cone_part[cone])], "side": CONE_SIDES[side]}
+    names = getattr(data, "contact_names", None)
+    if names is not None:
+        out["contact"] = int(names[contact]) if names[contact] >= 0 else None
+        if out["contact"] is None:
+            out["face_edge"] = int(-1 - names[contact])
+    return out
 
 
 def step_words(data: ExtendedData, step) -> str:
@@ -62,7 +70,9 @@ def step_words(data: ExtendedData, step) -> str:
     held = held_by(data, limit)
     if held is None:
         return f"; step {alpha:.3g}"
-    return f"; step {alpha:.3g}, held by contact {held['contact']}'s {held['part']} cone ({held['side']})"
+    who = (f"contact {held['contact']}'s" if held["contact"] is not None
+           else f"the face's edge contact {held['face_edge']}'s")
+    return f"; step {alpha:.3g}, held by {who} {held['part']} cone ({held['side']})"
 
 
 def steps_held(data: ExtendedData, trace: dict) -> list[dict]:
