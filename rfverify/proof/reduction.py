@@ -138,10 +138,11 @@ class FaceReduction:
         :class:`~rfverify.extended.data.ExtendedData`) the entries of H̃ on the face's dofs as the
         exact products Zᵀ H of the original data (Z exact, rational) rounded to double-double,
         and the edge contacts' exact coefficients, instead of the float64 roundings the reduced
-        problem holds (and ``data.contact_names``: each contact's index in the original, −1 − e for
-        the face's edge contact e): a contact beside the face that is active at the solution sits ~1e-29
+        problem holds: a contact beside the face that is active at the solution sits ~1e-29
         inside its cone at a converged iterate, far less than those roundings (~1e-16), and its
-        lifted velocity (:meth:`lift`, with the same exact Z) must be in the cone exactly."""
+        lifted velocity (:meth:`lift`, with the same exact Z) must be in the cone exactly.  Also
+        ``data.contact_names``: each contact's index in the original, −1 − e for the face's edge
+        contact e (for the run's step reports)."""
         from fractions import Fraction
 
         # its contacts named as the problem's own where they are (the step reports of its run)
