@@ -135,7 +135,7 @@ code).  A test keeps the list equal to what such a run compiles.  The child comp
 
 FLOAT64_KERNELS = tuple(("rfverify.solver.kernels", name, "(int64" + ", float64[::1]" * arrays + ")") for name, arrays in (
     ("lambda2", 2), ("nt_scaling", 6), ("quad_det", 2), ("quad_blocks", 2), ("quad_apply", 4), ("step_point", 3),
-    ("min_ray_lambda2", 3), ("product", 3), ("arrow_solve", 3)))
+    ("min_ray_lambda2_at", 3), ("product", 3), ("arrow_solve", 3)))
 """The float64 cone kernels of the double solver (:mod:`rfverify.solver.kernels`, every one of
 them, as the product cone calls them: the number of cones and flat float64 vectors).  On a cold
 cache the k-digit path's double solve runs their numpy formulas instead of waiting for them

@@ -81,7 +81,11 @@ def _assert_flat_equals_jordan(cones, z, s, dz, ds):
     _same(cond, _by_family(cones, lambda a, b: jordan.nt_scaling(a, b).cond, z, s).astype(np.float64))
     alphas = np.concatenate([_by_family(cones, jordan.step_to_boundary, z, dz),
                              _by_family(cones, jordan.step_to_boundary, s, ds)])
-    assert cones.stepper(z, s)(dz, ds) == float(np.min(alphas, initial=np.inf))
+    step, limit = cones.stepper(z, s)(dz, ds)
+    assert step == float(np.min(alphas, initial=np.inf))
+    # the cone named is the first (z before s) whose own step by jordan is the step
+    assert limit is None if step == np.inf else (
+        int(np.argmin(alphas)) == limit[0] + (cones.n_cones if limit[1] == "s" else 0))
     assert cones.max_step(z, dz) == float(np.min(_by_family(cones, jordan.step_to_boundary, z, dz),
                                                  initial=np.inf))
 

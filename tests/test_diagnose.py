@@ -139,6 +139,26 @@ def test_a_problem_without_a_solution_is_the_data():
     assert d.conclusion.startswith("Cause: the data")
 
 
+def test_a_stalled_run_names_the_cone_that_held_most_of_its_steps():
+    """The evidence lists the run's short steps (as `rfverify solve` runs it) and names the cone
+    that held the most of them; recounted here from a run's own trace."""
+    problem = _infeasible()
+    d = diagnose(problem, tol=1e-10, witness_time=0)
+    run = rfverify.solve(problem, method="jqinv", tol=1e-10)
+    tr = run.trace
+    short = [k for k, a in enumerate(tr["alpha"]) if a < 1]
+    assert [h["from_iteration"] for h in d.evidence["steps_held"]] == short and short
+    cones = [(int(tr["step_cone"][k]), int(tr["step_side"][k])) for k in short]
+    top = max(set(cones), key=lambda c: (cones.count(c), -cones.index(c)))
+    most = d.evidence["held_most"]
+    assert most["count"] == cones.count(top) and most["short_steps"] == len(short)
+    assert most["iterations"] == [k for k, c in zip(short, cones) if c == top]
+    lp = rfverify.model.lifting.lift(problem)
+    assert (most["contact"], most["side"]) == (int(lp.cone_contact[top[0]]), ("velocity", "reaction")[top[1]])
+    assert (f"{len(short)} of the run's steps were cut short by a cone's boundary; contact {most['contact']}'s "
+            f"{most['part']} cone ({most['side']}) held {most['count']} of them") in " ".join(d.evidence["text"])
+
+
 def test_the_cause_follows_the_counterfactual_not_a_constant(monkeypatch):
     """With the continuation's outcome forced, the cause follows it: never reaching → data;
     reaching at once → precision.  (A diagnosis that decided without running it would give the

@@ -15,7 +15,9 @@ from rfverify.scenes.random_problems import random_local_problem
 from rfverify.solver.result import IterationInfo
 
 ITERATION_LINE = re.compile(r"^rfverify solve:   (\w+) iteration (\d+)(?: \(component \d+\))?: "
-                            r"μ = \S+, criterion = \S+, [\d.]+ s$")
+                            r"μ = \S+, criterion = \S+, [\d.]+ s"
+                            r"(?:; its step [\d.]+, held by contact \d+'s (?:friction|rolling|normal) cone "
+                            r"\((?:velocity|reaction)\))?$")
 
 
 def run(capsys, *argv):

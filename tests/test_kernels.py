@@ -45,7 +45,9 @@ def _results(cone, z, s, y, y2):
         "quad_operator": cone.quad_operator(p)(y),
         "quad_operator_inv": cone.quad_operator(p_inv)(y2),
         "quad_blocks": cone.quad_blocks(p),
-        "max_step_pair": step(y, y2),
+        "max_step_pair": step(y, y2)[0],
+        # the cone that sets the step, and its side (1: s), the same on both routes
+        "step_limit": (-1, -1) if step(y, y2)[1] is None else (step(y, y2)[1][0], int(step(y, y2)[1][1] == "s")),
         "max_step": cone.max_step(z, y),
         "min_lambda2": cone.min_lambda2(y),
         "lambda2": cone.lambda2(z),
@@ -85,7 +87,7 @@ def test_compiled_kernels_are_bitwise_the_numpy_formulas(seed, n3, n1, log_scale
 def test_the_compiled_route_is_taken_for_ordinary_float64_and_not_otherwise(monkeypatch):
     """Guards the test above against comparing the numpy route with itself."""
     calls = []
-    for name in ("nt_scaling", "quad_det", "quad_apply", "quad_blocks", "step_point", "min_ray_lambda2",
+    for name in ("nt_scaling", "quad_det", "quad_apply", "quad_blocks", "step_point", "min_ray_lambda2_at",
                  "lambda2", "product", "arrow_solve"):
         fn = getattr(kernels, name)
         monkeypatch.setattr(kernels, name, lambda *a, _fn=fn, _name=name: (calls.append(_name), _fn(*a))[1])
@@ -93,7 +95,7 @@ def test_the_compiled_route_is_taken_for_ordinary_float64_and_not_otherwise(monk
     z, s = _interior(rng, 4, 2, 1.0, 0.5), _interior(rng, 4, 2, 1.0, 0.5)
     y, y2 = rng.standard_normal((2, 14))
     _results(ProductCone(4, 2), z, s, y, y2)
-    assert set(calls) == {"nt_scaling", "quad_det", "quad_apply", "quad_blocks", "step_point", "min_ray_lambda2",
+    assert set(calls) == {"nt_scaling", "quad_det", "quad_apply", "quad_blocks", "step_point", "min_ray_lambda2_at",
                           "lambda2", "product", "arrow_solve"}
     calls.clear()
     _results(ProductCone(4, 2, compiled=False), z, s, y, y2)

@@ -17,7 +17,8 @@ from rfverify.extended import cones as C
 from rfverify.extended import workers as W
 from rfverify.extended.data import ExtendedData
 from rfverify.extended.ipm import V, DDScaling
-from rfverify.verify.extend import CONE_PARTS, held_by, step_words, steps_held
+from rfverify.model.lifting import CONE_PARTS
+from rfverify.verify.extend import held_by, step_words, steps_held
 from tests.exact_problems import exact_problem
 
 

@@ -11,6 +11,7 @@ import sys
 import warnings
 
 from ..errors import RfverifyError
+from ..model.lifting import cone_words
 from .argtypes import nonneg_float
 
 EXIT_OK = 0
@@ -179,7 +180,8 @@ def progress_after() -> float:
 class IterationProgress:
     """A ``callback`` of :func:`rfverify.solve` that shows a long run as it goes: once ``after``
     seconds have passed since ``start``, one line per iteration through ``say`` — the form, the
-    iteration, μ and the criterion (DESIGN §4.5) — at most one per :data:`PROGRESS_EVERY`
+    iteration, μ and the criterion (DESIGN §4.5), and the cone that cut that iteration's step
+    short where one did — at most one per :data:`PROGRESS_EVERY`
     seconds except when the form (``auto`` moving on) or the component changes.  Never stops the
     run."""
 
@@ -201,8 +203,11 @@ class IterationProgress:
             return False
         self.key, self.last = key, now
         where = f" (component {info.component + 1})" if info.component else ""
+        held = getattr(info, "held_by", None)
+        step = (f"; its step {info.alpha:.3g}, held by {cone_words(held)}" if held is not None and "contact" in held
+                else "")
         self.say(f"  {info.method or 'Algorithm 1'} iteration {info.iteration}{where}: μ = {info.mu:.2e}, "
-                 f"criterion = {info.criterion:.2e}, {now - self.start:.1f} s")
+                 f"criterion = {info.criterion:.2e}, {now - self.start:.1f} s{step}")
         return False
 
 

@@ -162,6 +162,7 @@ def cmd_solve(args) -> int:
         "presolve": result.presolve, "out": args.out,
         "numerical_warnings": warning_summary(caught),
         "timings": result.timings,
+        "steps_held": result.steps_held,
         "trace": {k: np.asarray(v).tolist() for k, v in result.trace.items()},
         "component_traces": [{"status": str(c["status"]), "message": c["message"], "nit": c["nit"],
                               "trace": {k: np.asarray(v).tolist() for k, v in c["trace"].items()}}

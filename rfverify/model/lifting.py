@@ -37,6 +37,22 @@ from .problem import SPACEDIM, Problem
 
 KIND_FULL, KIND_COULOMB, KIND_ROLLING, KIND_NORMAL = 0, 1, 2, 3
 KIND_NAMES = ("full", "coulomb", "rolling", "normal")
+CONE_PARTS = ("friction", "rolling", "normal")
+"""The part of a contact each cone of the lifted problem holds (``LiftedProblem.cone_part``)."""
+
+CONE_SIDES = {"z": "velocity", "s": "reaction"}
+"""A cone's two members: z (H̃v + w̃ = Jz, the lifted velocity u) and s = Jᵀr̃ (the reaction)."""
+
+
+def cone_words(held: dict) -> str:
+    """"contact 453's rolling cone (velocity)" for a :meth:`LiftedProblem.held_by` dict; a
+    contact None with "face_edge" e (a problem on a self-stress's face) is "the face's edge
+    contact e's"."""
+    who = (f"contact {held['contact']}'s" if held.get("contact") is not None
+           else f"the face's edge contact {held['face_edge']}'s")
+    return f"{who} {held['part']} cone ({held['side']})"
+
+
 _KEPT = {  # kept local components per kind
     KIND_FULL: (0, 1, 2, 3, 4),
     KIND_COULOMB: (0, 1, 2),
@@ -96,6 +112,14 @@ class LiftedProblem:
     @property
     def n_cones(self) -> int:
         return self.n3 + self.n1
+
+    def held_by(self, cone: int, side: str) -> dict:
+        """Cone ``cone`` (an index of ``cone_contact``) on side ``side`` — "z" (the lifted
+        velocity) or "s" (Jᵀr̃, the reaction) — in the problem's terms: {"contact": its
+        contact, "part": friction / rolling / normal (:data:`CONE_PARTS`), "side": velocity /
+        reaction (:data:`CONE_SIDES`)}."""
+        return {"contact": int(self.cone_contact[cone]), "part": CONE_PARTS[int(self.cone_part[cone])],
+                "side": CONE_SIDES[side]}
 
     def reduction_counts(self) -> dict:
         """How many contacts of each kind (the cone-reduction part of the presolve report)."""

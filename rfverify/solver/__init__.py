@@ -343,11 +343,17 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
             c = lp.cone_contact[g]
             return f"contact {c} {part} [{KIND_NAMES[lp.kinds[c]]} contact]"
 
+        def held_by(k, side, cone_ids=cone_ids):
+            return {"cone": int(cone_ids[k]), **lp.held_by(int(cone_ids[k]), side)}
+
         out = ipm.run(M[dofs][:, dofs].tocsc(), problem.f[dofs], lp.H_t[rows][:, dofs].tocsr(),
                       lp.w_t[rows], lp.J[rows][:, zidx].tocsr(), cones, n_c, method, settings,
                       judge=judges[index], describe_cone=describe,
                       keep_iterates=keep_iterates, callback=callback, component=index, t0=t0,
-                      printer=printer, M_eq=problem.M[dofs][:, dofs].tocsc() if problem.as_stored else None)
+                      printer=printer, M_eq=problem.M[dofs][:, dofs].tocsc() if problem.as_stored else None,
+                      held_by=held_by)
+        for key in ("min_lam2_z_cone", "min_lam2_s_cone"):  # the component's cones -> the lifted problem's
+            out.trace[key] = cone_ids[out.trace[key].astype(np.int64)]
         v[dofs] = out.v
         r_t[rows] = out.r_t
         z[zidx] = out.z
@@ -384,6 +390,8 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
                 "returned_iteration": [o.returned_iteration for o in runs],
                 "interrupted": any(o.interrupted for o in runs),
                 "n_cones": {"L3": lp.n3, "L1": lp.n1},
+                "steps_held": [dict(held, component=c) if len(groups) > 1 else held
+                               for c, o in enumerate(runs) for held in steps_held(lp, o.trace)],
                 "component_runs": [{"status": o.status, "message": o.message, "nit": o.nit, "trace": o.trace}
                                    for o in runs] if len(groups) > 1 else [],
                 "iterates": runs[0].iterates if keep_iterates else [],
@@ -393,6 +401,15 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
     if printer is not None:
         printer.summary(result)
     return result
+
+
+def steps_held(lp, trace: dict) -> list[dict]:
+    """Each step of a run's ``trace`` that a cone's boundary cut short (α < 1), in the problem's
+    terms: [{"from_iteration" (the step from that iterate to the next), "alpha", "cone" (index
+    in the lifted problem ``lp``), "contact", "part", "side"}] (``LiftedProblem.held_by``)."""
+    rows = zip(trace["iter"], trace["alpha"], trace["step_cone"], trace["step_side"])
+    return [{"from_iteration": int(k), "alpha": float(alpha), "cone": int(cone),
+             **lp.held_by(int(cone), "zs"[int(side)])} for k, alpha, cone, side in rows if cone >= 0]
 
 
 def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> SolveResult:

@@ -167,32 +167,41 @@ class ProductCone:
 
     # ------------------------------------------------------------------ step lengths
     def _min_lambda2_along(self, point, dx):
-        """min over cones of λ2(Q_{x^{-1/2}} dx) for a point of :meth:`_step_point` (+inf for
-        no cones)."""
+        """(min over cones of λ2(Q_{x^{-1/2}} dx), the first cone that has it) for a point of
+        :meth:`_step_point` ((+inf, -1) for no cones)."""
         point, w = point
         if w is not None and self._compiled(dx):
-            return kernels.min_ray_lambda2(self.n3, w, point.det, dx)
+            return kernels.min_ray_lambda2_at(self.n3, w, point.det, dx)
         l2 = self._call(lambda d, **kw: jordan.ray_lambda2_rows(point, d, **kw), dx, op="step_to_boundary")
-        return np.min(l2, initial=np.inf)
+        if not l2.size:
+            return np.inf, -1
+        at = int(np.argmin(l2))
+        return l2[at], at  # in l2's own precision (longdouble where the run is)
 
     def max_step(self, x, dx) -> float:
         """Largest α ≥ 0 (possibly ∞) with x + α dx in the cone, for x strictly interior."""
-        return self.stepper(x, x)(dx, None)
+        return self.stepper(x, x)(dx, None)[0]
 
     def stepper(self, z, s):
-        """A function (dz, ds) ↦ max_step_pair(z, dz, s, ds) for this (z, s), which keeps what
-        depends on the point only (x^{-1/2} of each cone) for the next direction; ds = None
-        measures dz alone."""
+        """A function (dz, ds) ↦ (max_step_pair(z, dz, s, ds), limit) for this (z, s), which keeps
+        what depends on the point only (x^{-1/2} of each cone) for the next direction; ds = None
+        measures dz alone.  ``limit`` = (cone, "z" or "s") is the cone whose boundary sets the
+        step (the first cone on ties, the z side on a tie of the two sides), None when the step
+        is unbounded."""
         pz = self._step_point(z)
         ps = pz if s is z else self._step_point(s)
 
         def max_step(dz, ds):
             # α = −1/λ2(y) decreases with −λ2(y): the smallest step belongs to the most negative
             # λ2, so one reduction replaces a division per cone.
-            lo = self._min_lambda2_along(pz, dz)
+            lo, cone = self._min_lambda2_along(pz, dz)
+            side = "z"
             if ds is not None:
-                lo = min(lo, self._min_lambda2_along(ps, ds))
-            return float(jordan.step_from_lambda2(np.asarray(lo)))
+                lo_s, cone_s = self._min_lambda2_along(ps, ds)
+                if lo_s < lo:
+                    lo, cone, side = lo_s, cone_s, "s"
+            step = float(jordan.step_from_lambda2(np.asarray(lo)))
+            return step, (None if step == np.inf else (int(cone), side))
 
         return max_step
 
@@ -207,7 +216,7 @@ class ProductCone:
 
     def max_step_pair(self, z, dz, s, ds) -> float:
         """min(max_step(z, dz), max_step(s, ds))."""
-        return self.stepper(z, s)(dz, ds)
+        return self.stepper(z, s)(dz, ds)[0]
 
     # ------------------------------------------------------------------ diagnostics
     def min_lambda2(self, x):

@@ -23,6 +23,7 @@ from ..algorithm import rules
 from ..algorithm.interfaces import PROMOTE, Breakdown, Direction
 from ..algorithm.loop import Precision, iterate
 from ..errors import ConeDomainError
+from ..model.lifting import CONE_SIDES
 from .cones import ProductCone
 from .forms import FORMS
 from .kkt import ScalingPoint, abs_max
@@ -62,7 +63,7 @@ class RunResult(Outcome):
 
 def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, settings: Settings,
         judge, describe_cone=lambda k: f"cone {k}", keep_iterates: bool = False, callback=None,
-        component: int = 0, t0: float | None = None, printer=None, M_eq=None) -> RunResult:
+        component: int = 0, t0: float | None = None, printer=None, M_eq=None, held_by=None) -> RunResult:
     """Run Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) on one lifted problem in
     float64, continued in the extended settings (longdouble where asked) once the criterion
     is below ``settings.longdouble_below`` or a float64 solve falls short (:func:`_adequate`).
@@ -71,7 +72,10 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
     original variables (the one definition of "solved"); :class:`Termination` decides from it.
     ``callback(IterationInfo)`` is called once per iteration; returning True stops the run
     (status Stopped).  ``printer(IterationInfo)`` (verbose output) is called likewise.
-    ``describe_cone(k)`` turns a global cone index into words for messages;
+    ``describe_cone(k)`` turns a global cone index into words for messages; ``held_by(k,
+    side)`` names cone k on side "z" or "s" for the step reports, as
+    :meth:`rfverify.model.lifting.LiftedProblem.held_by` with "cone", its index in the lifted
+    problem (default: {"cone": k, "side": ...} alone);
     ``keep_iterates`` stores every iterate (v, r̃, z) (for lockstep diagnosis).
     ``M_eq`` (default ``M``) is the matrix of the equations the residuals are measured with:
     the stored, unsymmetric M of ``as_stored`` problems, while the forms factor the symmetric
@@ -106,7 +110,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
         v, r_t, z = _least_squares_start(system, cones, space.f, space.w, space.JT, v, r_t, z, jd, work)
 
     policy = _DoublePolicy(settings, Termination(settings, callback, t0), judge, cones, extended,
-                           keep_iterates, component, printer, describe_cone, form)
+                           keep_iterates, component, printer, describe_cone, form, held_by or _unnamed_cone)
     out = iterate(precision, policy, (v, r_t, z), n_contacts=n_contacts, n_cones=cones.n_cones, clock_origin=t0)
     # An iterate whose judging raised never became a trace row (the loop stopped there).
     records = [rec for rec in out.records if "criterion" in rec]
@@ -173,6 +177,7 @@ class _NumpyScaling:
         else:
             self.point = ScalingPoint(z=self.z, s=self.s)
         self._stepper = None
+        self.limit = None
 
     def describe(self) -> dict:
         return {"max_cond_Qp": float(self.cond.max(initial=1.0))} if self.symmetric else {}
@@ -190,9 +195,12 @@ class _NumpyScaling:
         return target * C.identity(jd) - C.product(self.z, self.s) - C.product(dz_aff.astype(jd), ds_aff.astype(jd))
 
     def max_step(self, dz, ds) -> float:
+        """The largest α keeping z + α dz and s + α ds in their cones; :attr:`limit` is then
+        (cone, "z" or "s") of the cone that sets it (None when unbounded)."""
         if self._stepper is None:  # the predictor and the corrector step from the same point
             self._stepper = self.cones.stepper(self.z, self.s)
-        return self._stepper(dz.astype(self.jd), ds.astype(self.jd))
+        step, self.limit = self._stepper(dz.astype(self.jd), ds.astype(self.jd))
+        return step
 
 
 class _KKTNewton:
@@ -250,9 +258,11 @@ class _DoublePolicy(PaperPolicy):
     paper's γ = 0.9 + 0.09α, the λ₂ check of every iterate, and the trace columns."""
 
     def __init__(self, settings: Settings, term: Termination, judge, cones: ProductCone, extended: bool,
-                 keep_iterates: bool, component: int, printer, describe_cone, form: str = ""):
+                 keep_iterates: bool, component: int, printer, describe_cone, form: str = "",
+                 held_by=None):
         self.settings, self.term, self.judge, self.cones = settings, term, judge, cones
         self.form = form
+        self.held_by = held_by or _unnamed_cone
         self.describe_cone = describe_cone
         self.extended = extended
         self.longdouble_from = 0 if extended else None
@@ -302,7 +312,12 @@ class _DoublePolicy(PaperPolicy):
         self.double_short = not self.extended and not (_adequate(predictor.info, self.settings.tol, self.term_scales)
                                                        and _adequate(corrector.info, self.settings.tol,
                                                                      self.term_scales))
-        info = _info(_with_defaults(record), self.component, self.form)
+        # The cone whose boundary cut the step short, in the problem's terms (none for a full step).
+        limit = record.get("limit")
+        held = self.held_by(*limit) if limit is not None and record["alpha"] < 1.0 else None
+        record.update(step_cone=-1 if held is None else held["cone"],
+                      step_side=-1 if held is None else int(limit[1] == "s"))
+        info = _info(_with_defaults(record), self.component, self.form, held)
         if self.printer is not None:
             self.printer(info)
         verdict = self.term.ask_callback(info)
@@ -422,19 +437,24 @@ def _adequate(info, tol, term_scales) -> bool:
                for e, rn, sc in zip(info.block_residuals, info.rhs_norms, term_scales))
 
 
-def _info(record, component, form: str = "") -> IterationInfo:
+def _unnamed_cone(cone: int, side: str) -> dict:
+    return {"cone": int(cone), "side": CONE_SIDES[side]}
+
+
+def _info(record, component, form: str = "", held_by: dict | None = None) -> IterationInfo:
     return IterationInfo(component=component, method=form, iteration=int(record["iter"]),
                          criterion=float(record["criterion"]),
                          pinfeas=float(record["pinfeas"]), dinfeas=float(record["dinfeas"]), mu=float(record["mu"]),
                          sigma=float(record["sigma"]), alpha_aff=float(record["alpha_aff"]),
                          alpha=float(record["alpha"]), min_lam2_z=float(record["min_lam2_z"]),
                          min_lam2_s=float(record["min_lam2_s"]), max_cond_Qp=float(record["max_cond_Qp"]),
-                         solve_residual=float(record["solve_residual"]), elapsed=float(record["time"]))
+                         solve_residual=float(record["solve_residual"]), elapsed=float(record["time"]),
+                         held_by=held_by)
 
 
 # The columns of a trace row that only an iterate that computed its step fills.
 _STEP_DEFAULTS = dict(sigma=np.nan, alpha_aff=np.nan, alpha=np.nan, gamma=np.nan, max_cond_Qp=np.nan,
-                      solve_residual=np.nan, refine_steps=0)
+                      solve_residual=np.nan, refine_steps=0, step_cone=-1, step_side=-1)
 
 
 def _with_defaults(record: dict) -> dict:

@@ -176,24 +176,26 @@ def step_point(n3, x, w, det):
 
 
 @njit
-def min_ray_lambda2(n3, w, det, d):
-    """min over cones of λ2(Q_w d) for a step point (w, det) of :func:`step_point` (+inf for
-    no cones): x + α d stays in the cone iff 1 + α·λ2 ≥ 0."""
+def min_ray_lambda2_at(n3, w, det, d):
+    """(min over cones of λ2(Q_w d), the first cone that has it) for a step point (w, det) of
+    :func:`step_point` ((+inf, -1) for no cones): x + α d stays in the cone iff 1 + α·λ2 ≥ 0,
+    so that cone is the one whose boundary sets the step."""
     lo = math.inf
+    at = -1
     for c in range(n3):
         i = 3 * c
         head, b1, b2 = _quad3(w[i], w[i + 1], w[i + 2], d[i], d[i + 1], d[i + 2], det[c])
         l2 = head - math.hypot(b1, b2)
         if l2 < lo:
-            lo = l2
+            lo, at = l2, c
     for k in range(w.size - 3 * n3):
         i = 3 * n3 + k
         h = w[i] * d[i]
         h *= 2
         l2 = h * w[i] - det[n3 + k] * d[i]
         if l2 < lo:
-            lo = l2
-    return lo
+            lo, at = l2, n3 + k
+    return lo, at
 
 
 @njit
@@ -257,7 +259,7 @@ def warm_up():
     quad_blocks(1, x, np.empty(10))
     nt_scaling(1, x, x, np.empty(4), np.empty(4), np.empty(4), np.empty(2))
     step_point(1, x, w, det)
-    min_ray_lambda2(1, w, det, x)
+    min_ray_lambda2_at(1, w, det, x)
     lambda2(1, x, np.empty(2))
     product(1, x, x, out)
     arrow_solve(1, x, x, out)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import sys
 
 from ..engines.factor import schur_engine_name
+from ..model.lifting import cone_words
 
 COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e}"),
            ("pinfeas", "pinfeas", "{:>9.2e}"), ("dinfeas", "dinfeas", "{:>9.2e}"), ("mu", "mu", "{:>9.2e}"),
@@ -15,6 +16,8 @@ COLUMNS = (("iteration", "iter", "{:>4d}"), ("criterion", "criterion", "{:>10.2e
            ("min_lam2_z", "min λ2(z)", "{:>10.2e}"), ("min_lam2_s", "λ2(Jᵀr̃)", "{:>10.2e}"),
            ("max_cond_Qp", "cond(Qp)", "{:>9.2e}"), ("solve_residual", "solve res", "{:>9.2e}"),
            ("elapsed", "time [s]", "{:>8.3f}"))
+HELD_BY = "held by"
+"""The last column: the cone whose boundary cut the row's step α short (blank for a full step)."""
 
 
 def settings_header(problem, method: str, settings, cone_counts: dict) -> str:
@@ -57,12 +60,13 @@ def _shown(label: str) -> int:
 def column_header(labelled: bool) -> str:
     head = " ".join(" " * max(0, len(fmt.format(0 if "d" in fmt else 0.0)) - _shown(label)) + label
                     for _, label, fmt in COLUMNS)
-    return ("comp " if labelled else "") + head
+    return ("comp " if labelled else "") + head + "  " + HELD_BY
 
 
 def row(info, labelled: bool) -> str:
     """One table row; a quantity the final row has no value for (no step was taken: σ, α,
-    cond(Qp), the solve residual) is printed as "-", not "nan"."""
+    cond(Qp), the solve residual) is printed as "-", not "nan"; the last column names the cone
+    that held a step shorter than 1."""
     cells = []
     for name, _, fmt in COLUMNS:
         val = getattr(info, name)
@@ -73,6 +77,9 @@ def row(info, labelled: bool) -> str:
             cells.append(f"{'-':>{width}}")
         else:
             cells.append(fmt.format(float(val)))
+    held = getattr(info, "held_by", None)
+    if held is not None and "contact" in held:
+        cells.append(" " + cone_words(held))
     return (f"{info.component:>4d} " if labelled else "") + " ".join(cells)
 
 

@@ -295,14 +295,17 @@ for _old, _new in RENAMED_SETTINGS.items():
 
 TRACE_FIELDS = ("iter", "criterion", "pinfeas", "dinfeas", "mu", "sigma", "alpha_aff", "alpha", "gamma",
                 "min_lam2_z", "min_lam2_z_cone", "min_lam2_s", "min_lam2_s_cone", "max_cond_Qp",
-                "solve_residual", "refine_steps", "time")
+                "solve_residual", "refine_steps", "step_cone", "step_side", "time")
 """Per-iteration trace columns.  ``criterion`` is rfverify's stopping measure
 (:func:`rfverify.model.measures.measures`, the ``max``) of that iterate's (v, u, r) on its run's own data:
 its component, without the contact-free bodies (solved apart), in the iterate's arithmetic — the
 returned answer's criterion on the whole problem is ``SolveResult.criterion``;
 ``pinfeas``, ``dinfeas``, ``mu`` are the paper's (DESIGN §4), reported beside it.
 ``min_lam2_*_cone`` is the index of the cone (see
-``LiftedProblem.cone_contact``/``cone_part`` for its contact); ``solve_residual`` is the
+``LiftedProblem.cone_contact``/``cone_part`` for its contact); ``step_cone`` is the cone of the
+lifted problem whose boundary cut that iterate's step α short and ``step_side`` its member (0:
+z, the lifted velocity; 1: s = Jᵀr̃, the reaction), both −1 where the step was full or not taken
+(``SolveResult.steps_held`` says the same in words); ``solve_residual`` is the
 largest relative residual of the linear solves of that iteration after refinement; ``time``
 is seconds since the start of the solve."""
 
@@ -319,8 +322,11 @@ class IterationInfo:
     rfverify's ``criterion`` (of the iterate on its run's data, as in the trace) and the paper's ``pinfeas``, ``dinfeas``, ``mu``, the centring
     ``sigma``, step lengths ``alpha_aff``, ``alpha``, ``min_lam2_z``/``min_lam2_s`` (smallest
     λ2 of z and Jᵀr̃), ``max_cond_Qp``, the linear ``solve_residual`` (backward error),
-    ``elapsed`` seconds since the solve started, and the ``method`` (linear-system form) of the
-    run it belongs to — under ``method="auto"``, the form running now."""
+    ``elapsed`` seconds since the solve started, the ``method`` (linear-system form) of the
+    run it belongs to — under ``method="auto"``, the form running now — and ``held_by``: the
+    cone whose boundary cut the step α short, {"cone" (index in the lifted problem),
+    "contact", "part" (friction / rolling / normal), "side" (velocity: z; reaction: Jᵀr̃)},
+    or None for a full step."""
 
     component: int
     iteration: int
@@ -337,6 +343,7 @@ class IterationInfo:
     solve_residual: float
     elapsed: float
     method: str = ""
+    held_by: dict | None = None
 
 
 
@@ -438,6 +445,9 @@ class SolveResult(Outcome, ResultAliases):
     settings : Settings
     presolve : dict           reductions applied (cone kinds, free bodies, components)
     extras : dict             method-specific extras (e.g. Clarabel's own status)
+    steps_held : list of dict each step a cone's boundary cut short (α < 1): from_iteration,
+                              alpha, cone, contact, part, side (and component when split);
+                              empty for the peers
     iterations, solve_time    Clarabel's names for ``nit`` and ``timings["total"]``
     """
 
@@ -461,15 +471,25 @@ class SolveResult(Outcome, ResultAliases):
         """``measures.max`` (NaN when not computed)."""
         return float("nan") if self.measures is None else self.measures.max
 
+    @property
+    def steps_held(self) -> list:
+        """Each step of the run that a cone's boundary cut short (α < 1), with that cone:
+        [{"from_iteration", "alpha", "cone" (lifted index), "contact", "part" (friction /
+        rolling / normal), "side" (velocity: z; reaction: Jᵀr̃)}, plus "component" when the
+        problem was solved as independent components]; the trace's ``step_cone`` and
+        ``step_side`` in words.  Empty for the peers."""
+        return list(self.extras.get("steps_held", []))
+
     def as_dict(self) -> dict:
         """The JSON-able summary (``rfverify solve --json`` prints it with CLI details added):
         status, success, message, method, nit, time, criterion, measures, the paper's measures,
-        timings, presolve; the vectors v, u, r as lists."""
+        timings, presolve, steps_held; the vectors v, u, r as lists."""
         return {"status": str(self.status), "success": self.success, "message": self.message,
                 "method": self.method, "nit": self.nit, "time": self.time, "criterion": self.criterion,
                 "measures": None if self.measures is None else self.measures.as_dict(),
                 "pinfeas": self.pinfeas, "dinfeas": self.dinfeas, "mu": self.mu, "timings": dict(self.timings),
-                "presolve": self.presolve, "v": self.v.tolist(), "u": self.u.tolist(), "r": self.r.tolist()}
+                "presolve": self.presolve, "steps_held": self.steps_held,
+                "v": self.v.tolist(), "u": self.u.tolist(), "r": self.r.tolist()}
 
     def __repr__(self) -> str:
         return (f"SolveResult(method={self.method!r}, status={self.status}, nit={self.nit}, "

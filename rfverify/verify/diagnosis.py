@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model.lifting import lift
+from ..model.lifting import cone_words, lift
 from ..model.problem import Problem
 from ..solver import posed, solve
 from ..solver.result import ResultAliases, Status, renamed_settings
@@ -113,6 +113,10 @@ class Diagnosis(ResultAliases):
                               ``expected``, ``through``), ``exact`` (the counterfactual run,
                               :meth:`rfverify.verify.exact.ExactRun.as_dict`), ``exact_from_start``,
                               ``witness``, ``r_unique``, ``mu_zero_contacts``,
+                              ``steps_held`` (the run's steps a cone's boundary cut short,
+                              ``SolveResult.steps_held``), ``held_most`` (the cone that held
+                              the most of them, :func:`held_most`; named in ``text`` when the
+                              run was not Solved),
                               ``remedies_tried`` (every candidate run: ``args``, ``status``,
                               ``criterion``, ``time``)
     remedy : dict or None     the first candidate that met the tolerance: ``args`` (for
@@ -251,6 +255,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
                 "mu_zero_contacts": int(np.sum(problem.mu == 0)), "form_block": FORM_BLOCK.get(method),
                 "form_power": FORM_POWER.get(method), "form_order": ctx.order, "text": []}
     evidence["run"] = run_record(plain, "as `rfverify solve` runs it")
+    evidence["steps_held"], evidence["held_most"] = plain.steps_held, held_most(plain)
     evidence["lockstep_run"] = run_record(res, "one system, every linear solve refined to the floor, longdouble "
                                                 "arithmetic from the first iteration (refine_tol=None, "
                                                 "longdouble_below=None unless given)")
@@ -291,6 +296,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
         run_witness(ctx, steps, focus, decided, evidence, dps, witness_time, timings)
         diag.cause = witnessed_cause(diag.cause, evidence.get("witness"), max_iter)
         evidence["text"] += cause_text(ctx, diag.cause, dep, sf, main, early, decided, steps, evidence)
+        evidence["text"] += held_text(evidence["held_most"], plain.nit)
         if remedies and ctx.in_time():
             t5 = time.perf_counter()
             diag.remedy, evidence["remedies_tried"] = try_remedies(ctx, diag.cause, decided, user_options)
@@ -306,6 +312,35 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     diag.timings = timings
     diag.evidence = evidence
     return diag
+
+
+def held_most(result) -> dict | None:
+    """The cone that cut the most of a run's steps short (``SolveResult.steps_held``; the first
+    to do so on a tie): {"contact", "part", "side", ("component"), "count", "iterations" (the
+    steps it held, by the iterate they start from), "short_steps" (all steps shorter than 1)};
+    None when every step was full."""
+    held = result.steps_held
+    if not held:
+        return None
+    names = [tuple((key, h[key]) for key in ("component", "contact", "part", "side") if key in h) for h in held]
+    counts = {}
+    for name in names:
+        counts[name] = counts.get(name, 0) + 1
+    top = max(counts, key=counts.get)  # dicts keep first-seen order, and max keeps the first maximum
+    return {**dict(top), "count": counts[top], "short_steps": len(held),
+            "iterations": [h["from_iteration"] for h, name in zip(held, names) if name == top]}
+
+
+def held_text(most: dict | None, nit: int) -> list[str]:
+    """The sentence of :func:`held_most` for the evidence (none for None): where a stalled run's
+    steps hit a cone's boundary."""
+    if most is None:
+        return []
+    its = most["iterations"]
+    where = f" of component {most['component'] + 1}" if "component" in most else ""
+    return [f"{most['short_steps']} of the run's steps were cut short by a cone's boundary; "
+            f"{cone_words(most)}{where} held {most['count']} of them, the first at iteration {its[0]} and the "
+            f"last at iteration {its[-1]} (of {nit})"]
 
 
 CAUSE_WORDS = {"precision": "double precision", "iterations": "too few iterations", "data": "the data, not precision",

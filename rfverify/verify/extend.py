@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from ..extended import ipm as ext
 from ..extended import wide, wide_factor
 from ..extended.data import ExtendedData
+from ..model.lifting import cone_words
 from .driver import ProofDriver, point_from_iterate, site_words
 
 WIDE_MAX_FACTOR_OPS = 2e7
@@ -31,27 +32,19 @@ WIDE_GIVE_UP = 5
 contacts leave no strictly feasible point stays outside K* at every one of 40 iterations)."""
 
 
-CONE_PARTS = ("friction", "rolling", "normal")
-"""The part of a contact each cone of the lifted problem holds (``LiftedProblem.cone_part``)."""
-
-CONE_SIDES = {"z": "velocity", "s": "reaction"}
-"""A cone's two members: z (H̃v + w̃ = Jz, the lifted velocity u) and s = Jᵀr̃ (the reaction)."""
-
-
 def held_by(data: ExtendedData, limit) -> dict | None:
     """The cone that set a step to the boundary, ``limit`` = (cone, "z" or "s") of the lifted
     problem, as {"contact": index in the problem, "part": friction / rolling / normal, "side":
-    velocity / reaction}; None when unknown.  For a problem on a face (``data.contact_names``)
-    the contact is the posed problem's, or None for an edge contact the face made (then
-    "face_edge": its index among the face's edge contacts)."""
+    velocity / reaction} (:meth:`rfverify.model.lifting.LiftedProblem.held_by`); None when
+    unknown.  For a problem on a face (``data.contact_names``) the contact is the posed
+    problem's, or None for an edge contact the face made (then "face_edge": its index among
+    the face's edge contacts)."""
     if limit is None:
         return None
-    cone, side = limit
-    lp = data.lp
-    contact = int(lp.cone_contact[cone])
-    out = {"contact": contact, "part": CONE_PARTS[int(lp.cone_part[cone])], "side": CONE_SIDES[side]}
+    out = data.lp.held_by(*limit)
     names = getattr(data, "contact_names", None)
     if names is not None:
+        contact = out["contact"]
         out["contact"] = int(names[contact]) if names[contact] >= 0 else None
         if out["contact"] is None:
             out["face_edge"] = int(-1 - names[contact])
@@ -70,9 +63,7 @@ def step_words(data: ExtendedData, step) -> str:
     held = held_by(data, limit)
     if held is None:
         return f"; step {alpha:.3g}"
-    who = (f"contact {held['contact']}'s" if held["contact"] is not None
-           else f"the face's edge contact {held['face_edge']}'s")
-    return f"; step {alpha:.3g}, held by {who} {held['part']} cone ({held['side']})"
+    return f"; step {alpha:.3g}, held by {cone_words(held)}"
 
 
 def steps_held(data: ExtendedData, trace: dict) -> list[dict]:
