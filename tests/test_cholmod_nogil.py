@@ -327,3 +327,70 @@ def test_rfverify_never_writes_cvxopts_options(monkeypatch):
     engine.factor(spd(2500, 9))  # nested dissection or AMD
     engine.solve(np.ones(2500))
     assert recording.changes == [] and dict(recording) == {}
+
+
+def _laplacian3(k):
+    """Lower triangle of a k³ × k³ grid Laplacian (+ 1e-3 I): at k = 44, L has about 3.6e7 entries
+    with AMD and its factorisation takes about 2 s, long enough to interrupt."""
+    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(k, k))
+    I = sp.identity(k)
+    A = sp.kron(sp.kron(T, I), I) + sp.kron(sp.kron(I, T), I) + sp.kron(sp.kron(I, I), T)
+    K = sp.tril((A + 1e-3 * sp.identity(k ** 3)).tocsc(), format="csc")
+    K.sort_indices()
+    return K
+
+
+def test_ctrl_c_is_raised_during_a_long_factorisation_which_then_finishes_on_its_thread():
+    """CHOLMOD cannot be stopped, but the Ctrl-C need not wait for it: the main thread is told at
+    once, the factorisation goes on on its helper thread (its factor refusing every other call
+    meanwhile) and the factor is whole and usable once it is done."""
+    import _thread
+
+    K = _laplacian3(44)
+    chol = cholmod_nogil.session()
+    assert chol.analyse(K.indptr, K.indices) and chol._large
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            chol.factorize(K.data)
+        still_running = chol._running.is_set()  # the interrupt did not wait for CHOLMOD
+    finally:
+        timer.cancel()
+    assert still_running
+    for call in (lambda: chol.solve(np.ones(K.shape[0])), lambda: chol.factorize(K.data), chol.release,
+                 lambda: chol.analyse(K.indptr, K.indices)):
+        with pytest.raises(RuntimeError, match="interrupted by Ctrl-C is still running"):
+            call()
+    deadline = time.perf_counter() + 120
+    while chol._running.is_set() and time.perf_counter() < deadline:
+        time.sleep(0.05)
+    assert not chol._running.is_set()
+    assert chol.factorize(K.data) == K.shape[0]  # the factor is whole: factored again, and solved with
+    b = np.arange(K.shape[0], dtype=float) % 7
+    x = chol.solve(b)
+    A = K + sp.tril(K, -1).T
+    assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+
+
+def test_a_factor_still_running_at_exit_is_not_freed_under_it():
+    """The finaliser (also run at the interpreter's exit) leaves a factor alone while an
+    interrupted factorisation still uses it, and frees it otherwise."""
+    freed = []
+
+    class Lib:
+        def cholmod_l_free_factor(self, factor, common):
+            freed.append("factor")
+
+        def cholmod_l_finish(self, common):
+            freed.append("common")
+
+    import ctypes
+
+    running = threading.Event()
+    running.set()
+    cholmod_nogil._finish(Lib(), ctypes.c_void_p(1234), None, running)
+    assert freed == []
+    running.clear()
+    cholmod_nogil._finish(Lib(), ctypes.c_void_p(1234), None, running)
+    assert freed == ["factor", "common"]

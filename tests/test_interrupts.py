@@ -183,3 +183,43 @@ def test_an_import_error_of_its_own_is_not_taken_for_an_interrupt(monkeypatch, c
     parser.commands["solve"].set_defaults(func=broken)
     assert app.main(["solve", "bundled:chute", "--quiet"]) == app.EXIT_INTERNAL
     assert "internal error: ImportError" in capsys.readouterr().err
+
+
+def _ending_script(second_ctrl_c: bool) -> str:
+    """A process whose command 'returned 130' while a factorisation that a Ctrl-C left running
+    (here a thread sleeping for ``hold`` seconds) goes on; with ``second_ctrl_c`` the process
+    sends itself one more SIGINT once it waits."""
+    return (
+        "import os, signal, sys, threading, time\n"
+        "from rfverify.engines import cholmod_nogil\n"
+        "import rfverify.__main__ as entry\n"
+        f"hold = {60 if second_ctrl_c else 1.0}\n"
+        "t = threading.Thread(target=time.sleep, args=(hold,))\n"
+        "t.start()\n"
+        "cholmod_nogil._left_running.add(t)\n"
+        f"if {second_ctrl_c}:\n"
+        "    threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT)).start()\n"
+        "t0 = time.perf_counter()\n"
+        "entry._ending(130)\n"
+        "print('waited', round(time.perf_counter() - t0, 1), signal.getsignal(signal.SIGINT) is signal.SIG_IGN)\n"
+        "sys.exit(130)\n")
+
+
+def test_the_process_waits_for_a_factorisation_a_ctrl_c_left_running_and_says_so():
+    """Ending under a CHOLMOD factorisation that is still running crashes the process (its BLAS
+    is torn down at exit): the entry point waits for it, saying why, and then ignores Ctrl-C
+    during the teardown, where Python would otherwise end the process by the signal."""
+    done = subprocess.run([sys.executable, "-c", _ending_script(False)], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr == ("rfverify: waiting for a CHOLMOD factorisation that cannot be stopped to finish; "
+                           "Ctrl-C again to leave at once\n")
+    waited, ignored = done.stdout.split()[1:]
+    assert float(waited) >= 0.5 and ignored == "True"
+
+
+def test_a_second_ctrl_c_leaves_at_once_with_the_commands_code():
+    done = subprocess.run([sys.executable, "-c", _ending_script(True)], capture_output=True, text=True,
+                          timeout=50)  # the thread holds for 60 s: only leaving at once passes
+    assert done.returncode == 130 and "waited" not in done.stdout, (done.stdout, done.stderr)
+    assert "Traceback" not in done.stderr

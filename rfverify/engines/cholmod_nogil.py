@@ -47,6 +47,28 @@ _EXPECTED_DEFAULTS = ((0, "d", 0.0), (8, "d", 1.2), (16, "d", 1.2), (24, "Q", 5)
                       (_SUPERNODAL_OFFSET, "i", 1), (80, "d", 0.8), (104, "Q", 4), (_PRINT_OFFSET, "i", 3))
 _CHOLMOD_LONG, _CHOLMOD_REAL, _CHOLMOD_DOUBLE = 2, 1, 0
 
+INTERRUPTIBLE_MIN_ENTRIES = 1_000_000
+"""A numeric factorisation whose L has at least this many entries (about 0.05 s and up), called
+from the main thread, runs on a helper thread while the main thread waits in
+:data:`WAIT_SECONDS` slices, so that a Ctrl-C is raised at once instead of after the
+factorisation (seconds at 10⁴ contacts, half a minute at 10⁵).  CHOLMOD cannot be stopped: the
+factorisation finishes on its thread, which keeps the factor alive until then, and the factor
+refuses every other call meanwhile.  The thread is not a daemon: the process ends after it (at
+exit the BLAS libraries are torn down, and a factorisation still running in them crashes it),
+and the command line says so while it waits (:func:`left_running`)."""
+
+WAIT_SECONDS = 0.1
+
+_left_running: set[threading.Thread] = set()  # factorisations a Ctrl-C left running
+
+
+def left_running() -> list[threading.Thread]:
+    """The helper threads of factorisations that a Ctrl-C left running and that have not ended
+    yet (join them before the process exits)."""
+    ended = {t for t in list(_left_running) if not t.is_alive()}
+    _left_running.difference_update(ended)
+    return list(_left_running)
+
 
 class _Dense(ctypes.Structure):
     """``cholmod_dense`` (unchanged since CHOLMOD 1)."""
@@ -164,7 +186,10 @@ class Cholmod:
         self._factor = ctypes.c_void_p(None)
         self._pattern = None  # (indptr, indices) of the analysed lower triangle, int64
         self._numeric = False
-        weakref.finalize(self, _finish, lib, self._factor, self._common)
+        self._large = False  # L has INTERRUPTIBLE_MIN_ENTRIES entries or more
+        # Set while a factorisation left running by a Ctrl-C goes on, on its helper thread.
+        self._running = threading.Event()
+        weakref.finalize(self, _finish, lib, self._factor, self._common, self._running)
 
     @property
     def analysed(self) -> bool:
@@ -179,6 +204,7 @@ class Cholmod:
         """Symbolic analysis of the lower triangle with this pattern (CSC, int64, sorted): AMD,
         or — given ``perm`` — the better of ``perm`` and AMD (CHOLMOD's choice with its default
         ``nmethods``).  Returns False when CHOLMOD reports an error (out of memory)."""
+        self._idle("analyse")
         self.release()
         n = indptr.size - 1
         indptr, indices = _int64(indptr), _int64(indices)
@@ -192,12 +218,15 @@ class Cholmod:
             return False
         self._factor.value = L
         self._pattern = (indptr, indices)
+        counts = self.counts()
+        self._large = counts is not None and int(counts[1].sum()) >= INTERRUPTIBLE_MIN_ENTRIES
         return True
 
     def factorize(self, values: np.ndarray) -> int | None:
         """Numeric factorisation of the analysed pattern with ``values`` (float64, one per stored
         entry).  Returns the column CHOLMOD stopped at (the order n when the matrix is positive
         definite), or None when CHOLMOD reports an error (out of memory, invalid input)."""
+        self._idle("factorize")
         if not self.analysed:
             raise ValueError("factorize needs an analysed pattern (analyse first)")
         indptr, indices = self._pattern
@@ -208,14 +237,57 @@ class Cholmod:
         A = _Sparse(n, n, values.size, indptr.ctypes.data, indices.ctypes.data, None, values.ctypes.data, None,
                     -1, _CHOLMOD_LONG, _CHOLMOD_REAL, _CHOLMOD_DOUBLE, 1, 1)
         self._numeric = False
-        if not self._lib.cholmod_l_factorize(ctypes.byref(A), self._factor, self._common):
+
+        def factorize():
+            # A points into values, indptr and indices without owning them: holding them here
+            # keeps them (and self, so the factor) alive while CHOLMOD reads them, also after
+            # a Ctrl-C has left this call running on its helper thread.
+            _ = (values, indptr, indices)
+            return self._lib.cholmod_l_factorize(ctypes.byref(A), self._factor, self._common)
+
+        interruptible = self._large and threading.current_thread() is threading.main_thread()
+        if not (self._interruptibly(factorize) if interruptible else factorize()):
             return None
         column = int(ctypes.c_size_t.from_address(self._factor.value + ctypes.sizeof(ctypes.c_size_t)).value)
         self._numeric = column >= n
         return column
 
+    def _interruptibly(self, call):
+        """``call()`` on a helper thread while this (main) thread waits; a Ctrl-C meanwhile is
+        raised here at once and the call left to finish on its thread (:data:`INTERRUPTIBLE_MIN_ENTRIES`)."""
+        done, failed = [], []
+        finished = threading.Event()
+        self._running.set()
+
+        def work():
+            try:
+                done.append(call())
+            except BaseException as exc:  # handed to the waiting thread
+                failed.append(exc)
+            finally:
+                self._running.clear()
+                finished.set()
+
+        thread = threading.Thread(target=work, name="rfverify-cholmod")
+        thread.start()
+        try:
+            while not finished.wait(WAIT_SECONDS):  # not Thread.join: see rfverify.extended.stoppable
+                pass
+        except BaseException:
+            _left_running.add(thread)
+            raise
+        if failed:
+            raise failed[0]
+        return done[0]
+
+    def _idle(self, what: str) -> None:
+        if self._running.is_set():
+            raise RuntimeError(f"CHOLMOD: cannot {what} while a factorisation interrupted by Ctrl-C is still "
+                               "running on this factor")
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """A⁻¹ rhs with the last successful factorisation (a new float64 array)."""
+        self._idle("solve")
         if not self._numeric:
             raise ValueError("solve needs a successful numeric factorisation")
         n = self._pattern[0].size - 1
@@ -253,6 +325,7 @@ class Cholmod:
 
     def release(self) -> None:
         """Free the factor (and its analysis)."""
+        self._idle("release")
         if self._factor.value:
             self._lib.cholmod_l_free_factor(ctypes.byref(self._factor), self._common)
             self._factor.value = None
@@ -260,8 +333,12 @@ class Cholmod:
         self._numeric = False
 
 
-def _finish(lib, factor: ctypes.c_void_p, common) -> None:
-    """Free a :class:`Cholmod`'s factor, then its common (the factor needs the common to be freed)."""
+def _finish(lib, factor: ctypes.c_void_p, common, running: threading.Event) -> None:
+    """Free a :class:`Cholmod`'s factor, then its common (the factor needs the common to be freed);
+    nothing at the interpreter's exit while a factorisation left running by a Ctrl-C still uses
+    them (the process's end frees them)."""
+    if running.is_set():
+        return
     if factor.value:
         lib.cholmod_l_free_factor(ctypes.byref(factor), common)
     lib.cholmod_l_finish(common)
