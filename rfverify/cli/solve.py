@@ -57,17 +57,21 @@ def add_parser(sub) -> None:
                           "/solution (and /certificate with --digits) and "
                           "keeps everything else in it")
     sol.add_argument("--json", action="store_true",
-                     help="print status, iterations, time and final residuals as JSON")
+                     help="print status, iterations, time and final residuals as JSON (with the trace and "
+                          "steps_held: each step a cone cut short, with its contact, part and side; with "
+                          "--digits, the certificate and its extended_steps_held)")
     sol.add_argument("--quiet", action="store_true",
                      help="no progress lines on stderr (otherwise: a numba compilation as it starts; once a run "
                           f"has taken {PROGRESS_AFTER:g} s ({PROGRESS_AFTER_ENV}=S sets another threshold), its "
-                          "iterations, at most two lines a second, with the form, mu and the criterion (--verbose "
+                          "iterations, at most two lines a second, with the form, mu, the criterion and the "
+                          "contact whose cone cut that iteration's step short, if one did (--verbose "
                           "prints every one on stdout instead); with --digits, one line per stage and extended "
                           "iteration too, with the step that led to it and the contact whose cone cut it "
                           "short); --json also has none")
     sol.add_argument("--verbose", action="store_true",
                      help="print a settings header and each iteration as it happens (every independent "
-                          "component, labelled); with --method clarabel, Clarabel's own log")
+                          "component, labelled; the last column names the cone that cut the row's step short); "
+                          "with --method clarabel, Clarabel's own log")
     sol.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
                      help="stop after S seconds with the best iterate (status MaxTime, exit 1); with --digits "
                           "the whole path stops there (each extended iteration checks it, and a long double-double "
