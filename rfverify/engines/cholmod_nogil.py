@@ -269,12 +269,15 @@ class Cholmod:
                 finished.set()
 
         thread = threading.Thread(target=work, name="rfverify-cholmod")
-        thread.start()
         try:
+            thread.start()
             while not finished.wait(WAIT_SECONDS):  # not Thread.join: see rfverify.extended.stoppable
                 pass
         except BaseException:
-            _left_running.add(thread)
+            if thread.ident is None:  # it never started (no thread to be had): nothing runs
+                self._running.clear()
+            else:
+                _left_running.add(thread)
             raise
         if failed:
             raise failed[0]

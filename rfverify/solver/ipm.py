@@ -110,7 +110,7 @@ def run(M, f, H_t, w_t, J, cones: ProductCone, n_contacts: int, form: str, setti
         v, r_t, z = _least_squares_start(system, cones, space.f, space.w, space.JT, v, r_t, z, jd, work)
 
     policy = _DoublePolicy(settings, Termination(settings, callback, t0), judge, cones, extended,
-                           keep_iterates, component, printer, describe_cone, form, held_by or _unnamed_cone)
+                           keep_iterates, component, printer, describe_cone, form, held_by)
     out = iterate(precision, policy, (v, r_t, z), n_contacts=n_contacts, n_cones=cones.n_cones, clock_origin=t0)
     # An iterate whose judging raised never became a trace row (the loop stopped there).
     records = [rec for rec in out.records if "criterion" in rec]
