@@ -314,3 +314,26 @@ def test_a_plot_path_that_cannot_be_written_is_refused_before_any_work(tmp_path,
     assert main(["diagnose", "bundled:sphere", "--plot", str(tmp_path / "no" / "such" / "dir" / "x.png")]) == 2
     captured = capsys.readouterr()
     assert "--plot" in captured.err and "does not exist" in captured.err and "double run" not in captured.err
+
+
+def test_the_cone_named_is_the_most_frequent_the_first_on_a_tie_and_its_component_is_said():
+    from types import SimpleNamespace
+
+    from rfverify.verify.diagnosis import held_most, held_text
+
+    def step(k, contact, part="rolling", side="velocity", **extra):
+        return {"from_iteration": k, "alpha": 0.5, "cone": 2 * contact, "contact": contact, "part": part,
+                "side": side, **extra}
+
+    run = SimpleNamespace(steps_held=[step(1, 4), step(2, 9), step(5, 9, side="reaction"), step(6, 4), step(8, 9)])
+    most = held_most(run)  # 4 and 9 (velocity) twice each, 9 (reaction) once: the first seen, 4
+    assert (most["contact"], most["side"], most["count"], most["iterations"], most["short_steps"]) == (
+        4, "velocity", 2, [1, 6], 5)
+    assert held_text(most, 12) == ["5 of the run's steps were cut short by a cone's boundary; contact 4's rolling "
+                                   "cone (velocity) held 2 of them, the first at iteration 1 and the last at "
+                                   "iteration 6 (of 12)"]
+    split = SimpleNamespace(steps_held=[step(3, 7, component=1), step(4, 7, component=1), step(2, 0, component=0)])
+    most = held_most(split)
+    assert (most["component"], most["contact"], most["count"]) == (1, 7, 2)
+    assert "contact 7's rolling cone (velocity) (component 2) held 2 of them" in held_text(most, 9)[0]
+    assert held_most(SimpleNamespace(steps_held=[])) is None and held_text(None, 3) == []

@@ -337,10 +337,11 @@ def held_text(most: dict | None, nit: int) -> list[str]:
     if most is None:
         return []
     its = most["iterations"]
-    where = f" of component {most['component'] + 1}" if "component" in most else ""
+    # nit is the longest component's: a component's iterations are its own
+    where, of = (f" (component {most['component'] + 1})", "") if "component" in most else ("", f" (of {nit})")
     return [f"{most['short_steps']} of the run's steps were cut short by a cone's boundary; "
             f"{cone_words(most)}{where} held {most['count']} of them, the first at iteration {its[0]} and the "
-            f"last at iteration {its[-1]} (of {nit})"]
+            f"last at iteration {its[-1]}{of}"]
 
 
 CAUSE_WORDS = {"precision": "double precision", "iterations": "too few iterations", "data": "the data, not precision",
