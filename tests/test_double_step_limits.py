@@ -6,6 +6,7 @@ independent recomputation (each cone's own step, and the steps the kept iterates
 from __future__ import annotations
 
 import json
+import re
 
 import mpmath
 import numpy as np
@@ -192,22 +193,38 @@ def test_the_verbose_table_and_the_json_name_the_cone(capsys):
     assert held == {}  # every listed step had its row
 
 
-def _info(alpha, held):
+def _info(k, alpha, held, method="schur", component=0):
     nan = float("nan")
-    return IterationInfo(component=0, iteration=7, criterion=1e-5, pinfeas=nan, dinfeas=nan, mu=1e-6, sigma=0.1,
-                         alpha_aff=0.9, alpha=alpha, min_lam2_z=nan, min_lam2_s=nan, max_cond_Qp=nan,
-                         solve_residual=nan, elapsed=1.0, method="schur", held_by=held)
+    return IterationInfo(component=component, iteration=k, criterion=1e-5, pinfeas=nan, dinfeas=nan, mu=1e-6,
+                         sigma=0.1, alpha_aff=0.9, alpha=alpha, min_lam2_z=nan, min_lam2_s=nan, max_cond_Qp=nan,
+                         solve_residual=nan, elapsed=1.0, method=method, held_by=held)
 
 
-def test_the_progress_line_and_the_row_say_which_cone_held_the_step():
+def test_the_progress_line_names_the_step_that_led_to_its_iterate_and_the_row_its_own():
+    """As the extended phase's lines do, each progress line ends with the step from the previous
+    iteration (shown or not) to its iterate; the table's row, like its α, has the step taken from
+    it."""
     held = {"cone": 12, "contact": 5, "part": "rolling", "side": "velocity"}
     lines = []
-    IterationProgress(lines.append, after=0.0)(_info(0.953, held))
-    assert lines[0].endswith("; its step 0.953, held by contact 5's rolling cone (velocity)"), lines
-    IterationProgress(lines.append, after=0.0)(_info(1.0, None))
-    assert lines[1].endswith(" s"), lines  # a full step: nothing added
-    assert row(_info(0.953, held), False).endswith(" contact 5's rolling cone (velocity)")
-    assert row(_info(1.0, None), False).endswith("1.000")
+    progress = IterationProgress(lines.append, after=0.0, every=0.0)
+    for info in (_info(6, 0.953, held), _info(7, 1.0, None), _info(8, 0.5, {"cone": 3, "side": "reaction"}),
+                 _info(9, 0.9, held), _info(0, 0.9, held, method="jqinv"), _info(4, 0.9, held, component=1)):
+        progress(info)
+    assert [re.sub(r"^.*, [\d.]+ s", "", line) for line in lines] == [
+        "",  # the first line of the run: no step led to it here
+        "; step 0.953, held by contact 5's rolling cone (velocity)",
+        "; full step",
+        "; step 0.5",  # a cone without a contact (a run given no names)
+        "", ""]  # another form, another component: not the previous line's step
+    quiet = []
+    spaced = IterationProgress(quiet.append, after=0.0, every=3600.0)
+    spaced(_info(0, 0.7, held)), spaced(_info(1, 0.9, None)), spaced(_info(2, 1.0, None))
+    assert len(quiet) == 1  # spaced out; the step of a line not shown is still the next one's
+    spaced.every = 0.0
+    spaced(_info(3, 1.0, None))
+    assert quiet[-1].endswith("; full step")
+    assert row(_info(6, 0.953, held), False).endswith(" contact 5's rolling cone (velocity)")
+    assert row(_info(7, 1.0, None), False).endswith("1.000")
 
 
 @pytest.mark.parametrize("method", ["clarabel"])

@@ -16,8 +16,8 @@ from rfverify.solver.result import IterationInfo
 
 ITERATION_LINE = re.compile(r"^rfverify solve:   (\w+) iteration (\d+)(?: \(component \d+\))?: "
                             r"μ = \S+, criterion = \S+, [\d.]+ s"
-                            r"(?:; its step [\d.]+, held by contact \d+'s (?:friction|rolling|normal) cone "
-                            r"\((?:velocity|reaction)\))?$")
+                            r"(?:; full step|; step [\d.]+, held by contact \d+'s (?:friction|rolling|normal) "
+                            r"cone \((?:velocity|reaction)\))?$")
 
 
 def run(capsys, *argv):

@@ -180,10 +180,10 @@ def progress_after() -> float:
 class IterationProgress:
     """A ``callback`` of :func:`rfverify.solve` that shows a long run as it goes: once ``after``
     seconds have passed since ``start``, one line per iteration through ``say`` — the form, the
-    iteration, μ and the criterion (DESIGN §4.5), and the cone that cut that iteration's step
-    short where one did — at most one per :data:`PROGRESS_EVERY`
-    seconds except when the form (``auto`` moving on) or the component changes.  Never stops the
-    run."""
+    iteration, μ and the criterion (DESIGN §4.5), and the step that led to that iterate ("full
+    step", or its length and the cone whose boundary cut it short), as the extended phase's
+    lines say it — at most one per :data:`PROGRESS_EVERY` seconds except when the form (``auto``
+    moving on) or the component changes.  Never stops the run."""
 
     def __init__(self, say, after: float, start: float | None = None, every: float = PROGRESS_EVERY):
         import time
@@ -191,10 +191,12 @@ class IterationProgress:
         self.say, self.after, self.every = say, after, every
         self.start = time.perf_counter() if start is None else start
         self.last, self.key = -math.inf, None
+        self.previous = None  # the info of the last call, shown or not: it holds the step to this one
 
     def __call__(self, info) -> bool:
         import time
 
+        before, self.previous = self.previous, info
         now = time.perf_counter()
         if now - self.start < self.after:
             return False
@@ -203,12 +205,22 @@ class IterationProgress:
             return False
         self.key, self.last = key, now
         where = f" (component {info.component + 1})" if info.component else ""
-        held = getattr(info, "held_by", None)
-        step = (f"; its step {info.alpha:.3g}, held by {cone_words(held)}" if held is not None and "contact" in held
-                else "")
         self.say(f"  {info.method or 'Algorithm 1'} iteration {info.iteration}{where}: μ = {info.mu:.2e}, "
-                 f"criterion = {info.criterion:.2e}, {now - self.start:.1f} s{step}")
+                 f"criterion = {info.criterion:.2e}, {now - self.start:.1f} s{_step_to(before, info)}")
         return False
+
+
+def _step_to(before, info) -> str:
+    """"; step 0.604, held by contact 623's rolling cone (reaction)", "; full step", or "" (the
+    first iteration of a run): the step from ``before``, the previous iteration's info, to
+    ``info``'s iterate."""
+    if before is None or (before.method, before.component, before.iteration + 1) != (
+            info.method, info.component, info.iteration):
+        return ""
+    if before.alpha >= 1.0:
+        return "; full step"
+    held = getattr(before, "held_by", None)
+    return f"; step {before.alpha:.3g}" + (f", held by {cone_words(held)}" if held and "contact" in held else "")
 
 
 def print_quantities(cert) -> None:

@@ -64,7 +64,7 @@ def add_parser(sub) -> None:
                      help="no progress lines on stderr (otherwise: a numba compilation as it starts; once a run "
                           f"has taken {PROGRESS_AFTER:g} s ({PROGRESS_AFTER_ENV}=S sets another threshold), its "
                           "iterations, at most two lines a second, with the form, mu, the criterion and the "
-                          "contact whose cone cut that iteration's step short, if one did (--verbose "
+                          "step that led to the iterate, with the contact whose cone cut it short (--verbose "
                           "prints every one on stdout instead); with --digits, one line per stage and extended "
                           "iteration too, with the step that led to it and the contact whose cone cut it "
                           "short); --json also has none")
