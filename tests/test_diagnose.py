@@ -337,3 +337,31 @@ def test_the_cone_named_is_the_most_frequent_the_first_on_a_tie_and_its_componen
     assert (most["component"], most["contact"], most["count"]) == (1, 7, 2)
     assert "contact 7's rolling cone (velocity) (component 2) held 2 of them" in held_text(most, 9)[0]
     assert held_most(SimpleNamespace(steps_held=[])) is None and held_text(None, 3) == []
+
+
+def test_a_local_file_solved_only_on_its_lifting_is_the_data_not_precision():
+    """The bundled sphere-from-global's W, as printed, is not positive semidefinite: the run solves
+    the lifting (which drops W's negative part) but not the file's own u = W r + q.  Exact steps
+    solve the same lifting, so "double precision" (what the diagnosis said before) was false:
+    the cause is the data, shown by W's own eigenvalues, recomputed here."""
+    problem = rfverify.load("bundled:sphere-from-global")
+    W = problem.local.W.toarray()
+    assert np.linalg.eigvalsh((W + W.T) / 2).min() < -1e-12  # the file's W, as stored
+    plain = rfverify.solve(problem, tol=1e-10)
+    assert plain.extras["run_verdict"][0] == "Solved" and not plain.success  # the lifting met, the file not
+    d = diagnose(problem, tol=1e-10, witness_time=0)
+    assert d.cause == "data" and d.evidence["file_only"]["criterion"] == pytest.approx(plain.criterion)
+    assert d.conclusion.startswith("Cause: the data, not double precision") and "not positive semidefinite" in \
+        d.conclusion
+    assert "double precision is the cause" not in " ".join(d.evidence["text"])
+    assert d.remedy is None and d.evidence["remedies_tried"]
+
+
+def test_a_local_file_whose_w_is_positive_semidefinite_is_not_taken_for_one_solved_on_its_lifting_only():
+    from rfverify.verify.diagnosis import solved_on_the_lifting_only
+
+    problem = rfverify.load("bundled:sphere")
+    res = rfverify.solve(problem, tol=1e-10)
+    assert res.success and solved_on_the_lifting_only(problem, res) is None
+    stopped = rfverify.solve(problem, tol=1e-10, max_iter=2)  # not met on the lifting either
+    assert not stopped.success and solved_on_the_lifting_only(problem, stopped) is None

@@ -259,8 +259,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     evidence["lockstep_run"] = run_record(res, "one system, every linear solve refined to the floor, longdouble "
                                                 "arithmetic from the first iteration (refine_tol=None, "
                                                 "longdouble_below=None unless given)")
-    if note_units:
-        evidence["units"] = note_units
+    evidence.update({"units": note_units} if note_units else {})
     timings = {"double": t1 - t0, "setup": t2 - t1, "steps": t3 - t2, "exact": 0.0, "witness": 0.0,
                "remedies": 0.0}
     dep = sf = None
@@ -272,6 +271,11 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     if cut is not None:
         diag.status, diag.message = Status.MAX_TIME, f"{plain.message}; {cut}"
         evidence["text"].append(cut)
+    elif (file_only := solved_on_the_lifting_only(problem, plain)) is not None:
+        diag.cause, evidence["file_only"] = "data", file_only
+        evidence["text"].append(file_only["text"])
+        if remedies and ctx.in_time():
+            _run_remedies(ctx, diag, evidence, timings, "data", None, user_options)
     elif plain.success or res.success:
         if plain.success:
             diag.cause = "none"
@@ -282,9 +286,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
         run_witness(ctx, steps, focus, None, evidence, dps, witness_time, timings)
         evidence["text"] += (evidence.get("witness") or {}).get("text", [])
         if not plain.success and remedies and ctx.in_time():
-            t5 = time.perf_counter()
-            diag.remedy, evidence["remedies_tried"] = try_remedies(ctx, "precision", None, user_options)
-            timings["remedies"] = time.perf_counter() - t5
+            _run_remedies(ctx, diag, evidence, timings, "precision", None, user_options)
     else:
         t4 = time.perf_counter()
         main, early = counterfactual(ctx, focus, keep=witness_time > 0)
@@ -298,9 +300,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
         evidence["text"] += cause_text(ctx, diag.cause, dep, sf, main, early, decided, steps, evidence)
         evidence["text"] += held_text(evidence["held_most"], plain.nit)
         if remedies and ctx.in_time():
-            t5 = time.perf_counter()
-            diag.remedy, evidence["remedies_tried"] = try_remedies(ctx, diag.cause, decided, user_options)
-            timings["remedies"] = time.perf_counter() - t5
+            _run_remedies(ctx, diag, evidence, timings, diag.cause, decided, user_options)
         elif remedies:
             evidence["remedies_tried"] = []
             evidence["text"].append("the time limit was reached before any remedy was tried")
@@ -312,6 +312,32 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     diag.timings = timings
     diag.evidence = evidence
     return diag
+
+
+def _run_remedies(ctx, diag: Diagnosis, evidence: dict, timings: dict, cause, run, user_options) -> None:
+    """The remedy candidates for ``cause`` (:func:`.cause.try_remedies`), into the diagnosis."""
+    t0 = time.perf_counter()
+    diag.remedy, evidence["remedies_tried"] = try_remedies(ctx, cause, run, user_options)
+    timings["remedies"] = time.perf_counter() - t0
+
+
+def solved_on_the_lifting_only(problem: Problem, result) -> dict | None:
+    """For a local file's problem whose run met the tolerance on its lifting but not on the
+    file's own u = W r + q (:func:`rfverify.solver.judged_on_the_file`): {"lifting_status",
+    "criterion" (the file's), "text"}; None otherwise.  Then the cause is in the data — the
+    lifting is not the file's W (as stored, W is not positive semidefinite, or the lifting
+    dropped part of it) — and no arithmetic removes it: exact steps would solve the lifting too."""
+    run_status = (result.extras.get("run_verdict") or (None, None))[0]
+    if problem.local is None or run_status != Status.SOLVED or result.success:
+        return None
+    lift = problem.provenance.get("lift") or problem.provenance.get("lifted") or {}
+    why = ("W as stored is not positive semidefinite (the lifting dropped "
+           f"{lift.get('dropped')} eigenvalue(s), the smallest {float(lift.get('min_eigenvalue', 0.0)):.2e})"
+           if float(lift.get("min_eigenvalue", 0.0)) < 0 else "the lifting is not the file's W")
+    return {"lifting_status": str(run_status), "criterion": float(result.criterion),
+            "text": (f"the run solved the lifting of the file's local problem, but the file's own u = W r + q is "
+                     f"not met (criterion {result.criterion:.2e}): {why}; exact arithmetic would solve the same "
+                     "lifting, so precision is not the cause")}
 
 
 def held_most(result) -> dict | None:
@@ -378,6 +404,8 @@ def _conclusion(d: Diagnosis) -> str:
         what = (f"Cause: too few iterations — the run's steps are the exact ones, and the exact algorithm needs "
                 f"{reached if reached is not None else 'more than'} {'iterations' if reached is not None else ''}"
                 .rstrip() + f" (max_iter = {d.nit if d.status == Status.MAX_ITERATIONS else 'its limit'}).")
+    elif ev.get("file_only"):
+        what = f"Cause: the data, not double precision — {ev['file_only']['text']}."
     else:
         what = (f"Cause: the data, not double precision — the same algorithm in exact arithmetic stalls too "
                 f"({run.get('status', '?')}, best criterion {run.get('best_criterion', float('nan')):.1e}).")
