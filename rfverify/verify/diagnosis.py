@@ -44,6 +44,7 @@ The result is a :class:`Diagnosis`; :meth:`Diagnosis.to_dict` is what ``rfverify
 from __future__ import annotations
 
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -349,10 +350,8 @@ def held_most(result) -> dict | None:
     if not held:
         return None
     names = [tuple((key, h[key]) for key in ("component", "contact", "part", "side") if key in h) for h in held]
-    counts = {}
-    for name in names:
-        counts[name] = counts.get(name, 0) + 1
-    top = max(counts, key=counts.get)  # dicts keep first-seen order, and max keeps the first maximum
+    counts = Counter(names)
+    top = max(counts, key=counts.get)  # counters keep first-seen order, and max keeps the first maximum
     return {**dict(top), "count": counts[top], "short_steps": len(held),
             "iterations": [h["from_iteration"] for h, name in zip(held, names) if name == top]}
 
