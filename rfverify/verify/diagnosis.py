@@ -337,8 +337,8 @@ def solved_on_the_lifting_only(problem: Problem, result) -> dict | None:
            if float(lift.get("min_eigenvalue", 0.0)) < 0 else "the lifting is not the file's W")
     return {"lifting_status": str(run_status), "criterion": float(result.criterion),
             "text": (f"the run solved the lifting of the file's local problem, but the file's own u = W r + q is "
-                     f"not met (criterion {result.criterion:.2e}): {why}; exact arithmetic would solve the same "
-                     "lifting, so precision is not the cause")}
+                     f"not met (criterion {result.criterion:.2e}): {why}; the run's own arithmetic already met the "
+                     "tolerance on the lifting, so precision is not the cause")}
 
 
 def held_most(result) -> dict | None:
