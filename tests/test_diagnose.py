@@ -341,9 +341,9 @@ def test_the_cone_named_is_the_most_frequent_the_first_on_a_tie_and_its_componen
 
 def test_a_local_file_solved_only_on_its_lifting_is_the_data_not_precision():
     """The bundled sphere-from-global's W, as printed, is not positive semidefinite: the run solves
-    the lifting (which drops W's negative part) but not the file's own u = W r + q.  Exact steps
-    solve the same lifting, so "double precision" (what the diagnosis said before) was false:
-    the cause is the data, shown by W's own eigenvalues, recomputed here."""
+    the lifting (which drops W's negative part) but not the file's own u = W r + q.  The run's own
+    arithmetic met the tolerance on the lifting, so "double precision" (what the diagnosis said
+    before) was false: the cause is the data, shown by W's own eigenvalues, recomputed here."""
     problem = rfverify.load("bundled:sphere-from-global")
     W = problem.local.W.toarray()
     assert np.linalg.eigvalsh((W + W.T) / 2).min() < -1e-12  # the file's W, as stored
@@ -365,3 +365,37 @@ def test_a_local_file_whose_w_is_positive_semidefinite_is_not_taken_for_one_solv
     assert res.success and solved_on_the_lifting_only(problem, res) is None
     stopped = rfverify.solve(problem, tol=1e-10, max_iter=2)  # not met on the lifting either
     assert not stopped.success and solved_on_the_lifting_only(problem, stopped) is None
+
+
+def test_a_local_file_whose_w_is_not_psd_is_the_data_even_where_the_lifting_is_not_met():
+    """At tol 1e-12 the run misses the tolerance on its lifting too, so the file-only case above does
+    not apply; the diagnosis said "double precision" (the exact steps run on the file's own W, a
+    different, non-convex problem, and met it). The file's criterion of the run's answer is the
+    dropped part of W, recomputed here on the lifting (u = Hᵀv + w) and on the file (u = W r + q)."""
+    from rfverify.model.measures import measures
+
+    problem = rfverify.load("bundled:sphere-from-global")
+    plain = rfverify.solve(problem, tol=1e-12)
+    assert plain.extras["run_verdict"][0] != "Solved" and not plain.success
+    W = problem.local.W.toarray()
+    on_file = measures(problem, plain.v, W @ plain.r + problem.local.q, plain.r, "longdouble").max
+    on_lifting = measures(problem, plain.v, problem.H.T @ plain.v + problem.w, plain.r, "longdouble").max
+    assert on_file > 1e4 * on_lifting and on_file > 1e-12
+    d = diagnose(problem, tol=1e-12, witness_time=0, remedies=False)
+    assert d.cause == "data", d.conclusion
+    facts = d.evidence["file_only"]
+    assert facts["criterion"] == pytest.approx(on_file) and facts["lifting_criterion"] == pytest.approx(on_lifting)
+    assert "not convex" in d.conclusion and "double precision is the cause" not in " ".join(d.evidence["text"])
+    # the lockstep compares the lifting's steps with the file's: its departure says so
+    dep = d.evidence["departure"]
+    assert dep is not None and dep["through"].startswith("the lifting, not rounding"), dep
+    assert all(s["digits_lifting"] < 12 for s in d.steps if math.isfinite(s["digits"]))
+
+
+def test_the_lifting_of_a_positive_semidefinite_w_agrees_with_it_to_rounding():
+    """The other side of the attribution above: where W is PSD, the lifting agrees with it to what
+    float64 holds, so no step of the lockstep is put down to the lifting."""
+    d = diagnose(rfverify.load("bundled:sphere"), tol=1e-13, witness_time=0, remedies=False)
+    lifting = [s["digits_lifting"] for s in d.steps if math.isfinite(s["digits"])]
+    assert lifting and min(lifting) > 15
+    assert d.cause == "none" and "file_only" not in d.evidence and d.evidence["departure"] is None
