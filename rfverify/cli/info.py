@@ -42,9 +42,24 @@ def cmd_info(args) -> int:
                                   max_asymmetry=args.max_asymmetry)
     if caught:
         summary["numerical_warnings"] = warning_summary(caught)
+    _physical_solution(problem, summary, args.solution_tol)
     if args.json:
         print(dumps(summary, indent=2))
     else:
         print(format_summary(summary))
         print_warnings(summary.get("numerical_warnings"), "while describing the problem")
     return EXIT_OK
+
+
+def _physical_solution(problem, summary: dict, tol: float) -> None:
+    """A /solution written by ``solve --problem coulomb --out`` answers the physical problem (the
+    /coulomb shift beside it says so): it is checked as such, not as the relaxation's answer."""
+    if problem.solution is None or not str(problem.source).lower().endswith((".h5", ".hdf5")):
+        return
+    from ..coulomb.model import check_physical_solution
+    from ..coulomb.storage import read_shift
+    from ..io import resolve_path
+
+    shift = read_shift(resolve_path(problem.source), problem.n_contacts)
+    if shift is not None:
+        summary["solution"] = check_physical_solution(problem, problem.solution, shift, tol)

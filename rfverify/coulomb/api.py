@@ -156,7 +156,7 @@ def coulomb_to_digits(problem: Problem, digits: int = 10, method: str = "auto", 
     def evaluate(shifted):  # one proven round: the k-digit path on the shifted problem, and δ bounded
         left = None if deadline is None else max(deadline - time.perf_counter(), 1e-3)
         sol = solve_to_digits(shifted, digits, method, tol, max_iter, relative=relative, progress=progress,
-                              time_limit=left, **options)
+                              time_limit=left, _named_limit=time_limit, **options)
         u_phys = physical_of_inner(problem, shifted, sol.u)
         cert = coulomb_certificate(problem, shifted, sol.certificate, sol.v, sol.u, sol.r, digits, scales, relative,
                                    u_phys=u_phys, extra={"proven_round": len(rounds)})

@@ -93,15 +93,34 @@ class BackwardError:
                 "worst_contact": int(np.argmax(self.delta)) if self.delta.size else None}
 
 
+TINY = 5e-324  # the smallest subnormal: the most a part scaled into the subnormals is rounded by
+SMALLEST_NORMAL = 2.2250738585072014e-308
+
+
 def _norm_bounds(a, b):
-    """Lower and upper bounds of √(a² + b²), elementwise, from float64 a, b."""
-    hi = _up(np.sqrt(_up(_up(a * a) + _up(b * b))))
-    lo = _down(np.sqrt(np.maximum(_down(_down(a * a) + _down(b * b)), 0.0)))
-    return np.maximum(lo, 0.0), hi
+    """Lower and upper bounds of √(a² + b²), elementwise, from float64 a, b.  The squares are
+    formed in units of the power of two of max(|a|, |b|), so that they neither overflow (|a| up
+    to float64's largest) nor vanish; exactly 0 where a = b = 0."""
+    a, b = np.abs(np.asarray(a, dtype=np.float64)), np.abs(np.asarray(b, dtype=np.float64))
+    _, k = np.frexp(np.maximum(a, b))  # max(|a|, |b|) = f·2^k with f in [0.5, 1) (k = 0 for 0)
+    A, B = np.ldexp(a, -k), np.ldexp(b, -k)  # exact, but where a part lands in the subnormals
+
+    def widened(x):  # (lower, upper) bounds of the exact scaled part
+        sub = x < SMALLEST_NORMAL
+        return np.where(sub, np.maximum(x - TINY, 0.0), x), np.where(sub, x + TINY, x)
+
+    (A_lo, A_hi), (B_lo, B_hi) = widened(A), widened(B)
+    hi = _up(np.sqrt(_up(_up(A_hi * A_hi) + _up(B_hi * B_hi))))
+    lo = _down(np.sqrt(np.maximum(_down(_down(A_lo * A_lo) + _down(B_lo * B_lo)), 0.0)))
+    with np.errstate(over="ignore", under="ignore"):  # inf is an upper bound; a subnormal result rounds
+        hi, lo = _up(np.ldexp(hi, k)), _down(np.ldexp(np.maximum(lo, 0.0), k))
+    zero = (a == 0) & (b == 0)
+    return np.where(zero, 0.0, np.maximum(lo, 0.0)), np.where(zero, 0.0, hi)
 
 
 def phi_bounds(problem: Problem, u) -> tuple[np.ndarray, np.ndarray]:
-    """Rigorous (lower, upper) bounds of Φ_i(u) = μ_i‖u_T‖ + μr_i‖u_R‖ for a float64 u (5n,)."""
+    """Rigorous (lower, upper) bounds of Φ_i(u) = μ_i‖u_T‖ + μr_i‖u_R‖ for a float64 u (5n,);
+    exactly 0 where both terms are (a zero coefficient or a zero part)."""
     U = np.asarray(u, dtype=np.float64).reshape(-1, SPACEDIM)
     mu, mur = np.asarray(problem.mu, dtype=np.float64), np.asarray(problem.mu_r, dtype=np.float64)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
@@ -109,7 +128,20 @@ def phi_bounds(problem: Problem, u) -> tuple[np.ndarray, np.ndarray]:
         r_lo, r_hi = _norm_bounds(U[:, 3], U[:, 4])
         lo = _down(_down(mu * t_lo) + _down(mur * r_lo))
         hi = _up(_up(mu * t_hi) + _up(mur * r_hi))
-    return np.maximum(lo, 0.0), hi
+    zero = ((mu == 0) | (t_hi == 0)) & ((mur == 0) | (r_hi == 0))
+    return np.where(zero, 0.0, np.maximum(lo, 0.0)), np.where(zero, 0.0, hi)
+
+
+def _difference_bounds(x, y):
+    """(lower, upper) bounds of x − y elementwise, exact where float64's x − y is: the rounding
+    error of the difference (TwoSum, Knuth) says which way, if any, it was rounded."""
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow gives ±inf, an outward bound
+        d = x - y
+        z = d - x
+        err = (x - (d - z)) + (-y - z)  # x − y = d + err exactly (no overflow)
+        finite = np.isfinite(err)
+        return (np.where(finite & (err >= 0), d, _down(d)), np.where(finite & (err <= 0), d, _up(d)))
 
 
 def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scale: float,
@@ -126,12 +158,13 @@ def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scal
     a = offsets(shifted)[0::SPACEDIM]
     b = offsets(problem)[0::SPACEDIM]
     with np.errstate(over="ignore"):
-        s_hi, s_lo = _up(a - b), _down(a - b)  # ŝ = a − b exactly lies between
+        s_lo, s_hi = _difference_bounds(a, b)  # ŝ = a − b exactly lies between
         p_lo, p_hi = phi_bounds(problem, u_inner)
-        fixed = np.maximum(np.maximum(_up(s_hi - p_lo), _up(p_hi - s_lo)), 0.0)
+        fixed = np.maximum(np.maximum(_difference_bounds(s_hi, p_lo)[1], _difference_bounds(p_hi, s_lo)[1]), 0.0)
         e_vec = _up(SQRT2_UP * e_u)
         lip = _up(_up(problem.mu * e_vec) + _up(problem.mu_r * e_vec)) if e_u > 0 else np.zeros(n)
-        delta = _up(fixed + lip)
+        lip = np.where((problem.mu == 0) & (problem.mu_r == 0), 0.0, lip)  # Φ is then 0 whatever u is
+        delta = np.where((fixed == 0) | (lip == 0), fixed + lip, _up(fixed + lip))  # (exact where a term is 0)
         psd = np.zeros(n)
         if diag_shift:
             psd = np.full(n, math.inf) if r_upper is None else _up(diag_shift * np.asarray(r_upper, dtype=np.float64))
@@ -139,10 +172,12 @@ def backward_bound(problem: Problem, shifted: Problem, u_inner, e_u: float, scal
         opened = proven_open_and_apart(problem, u_inner, e_u, s_hi)
         fixed, lip, psd, delta = (np.where(opened, 0.0, x) for x in (fixed, lip, psd, delta))
     absolute = float(np.max(delta, initial=0.0))
-    if scale > 0:
+    if absolute == 0:
+        relative = 0.0
+    elif scale > 0:
         relative = float(_up(absolute / scale))
     else:
-        relative = 0.0 if absolute == 0 else math.inf
+        relative = math.inf
     proven = bool(np.all(np.isfinite(delta)))
     return BackwardError(delta, absolute, relative, scale, scale_name, float(np.max(fixed, initial=0.0)),
                          float(np.max(lip, initial=0.0)), proven, "" if proven else "a bound overflowed (or r* is "
@@ -169,7 +204,8 @@ def physical_u_bound(problem: Problem, shifted: Problem, u_phys, u_inner, e_u: f
     diff = (Dyadic.from_float(u_phys) - Dyadic.from_float(u_inner) + Dyadic.from_float(offsets(shifted))
             - Dyadic.from_float(offsets(problem)))
     with np.errstate(over="ignore"):
-        return _up(diff.abs_upper() + e_u)
+        upper = diff.abs_upper()
+        return np.where((upper == 0) | (e_u == 0), upper + e_u, _up(upper + e_u))  # (exact where a term is 0)
 
 
 def physical_quantities(problem: Problem, shifted: Problem, proof, u_phys, u_inner, scales: dict,

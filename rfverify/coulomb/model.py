@@ -159,3 +159,35 @@ def physical_residuals(problem: Problem, u, r, s=None, scale: float | None = Non
     fixed = None if s is None else float(np.max(np.abs(np.asarray(s, dtype=ld) - ph), initial=0.0)) / den
     return PhysicalResiduals(fixed, normal / den, float(np.max(cone, initial=0.0)) / r_inf,
                              comp / (den * r_inf), scale)
+
+
+PHYSICAL_CHECKS = ("dynamics", "velocity", "cone", "normal", "complementarity")
+
+
+def check_physical_solution(problem: Problem, solution, shift, tol: float) -> dict:
+    """``rfverify info``'s check of a stored /solution that answers the physical problem (a file
+    written by ``solve --problem coulomb --out``, with ``shift`` (n,) read from /coulomb): the
+    relative residuals of M v = H r + f and u = Hᵀv + w (:func:`rfverify.check_solution`), and the
+    physical conditions of :func:`physical_residuals` — r ∈ K (``cone``), u_N ≥ 0 (``normal``),
+    rᵀũ = 0 (``complementarity``) — in float64 and long double, never trusting the file; the stored
+    shift's distance from Φ(u) is ``fixed_point`` (information: any shift the answer solves is one
+    a certificate can use).  Keys: those, ``max_error``, ``tolerance``, ``consistent``, ``problem``
+    ("coulomb"), ``missing``, ``zero``, ``verdict``."""
+    from ..model.check import check_solution
+
+    chk = check_solution(problem, solution)
+    out = {"problem": "coulomb", "missing": list(chk.missing), "zero": list(chk.zero), "tolerance": tol}
+    where = "answer to the physical problem (/coulomb/shift stored beside it)"
+    if chk.missing:
+        return {**out, "consistent": False, "verdict": f"{where}, incomplete: {', '.join(chk.missing)} missing"}
+    u = solution.u if solution.u is not None else physical_velocity(problem, solution.v, solution.r)
+    ph = physical_residuals(problem, u, solution.r, shift)
+    values = {"dynamics": chk.dynamics, "velocity": chk.velocity, "cone": ph.cone, "normal": ph.normal,
+              "complementarity": ph.complementarity}
+    worst = max(PHYSICAL_CHECKS, key=lambda k: values[k])
+    ok = bool(values[worst] <= tol)
+    zero = f"{', '.join(chk.zero)} all zero; " if chk.zero else ""
+    verdict = (f"{where}: {zero}consistent to {values[worst]:.2e} (≤ {tol:g})" if ok else
+               f"{where}: {zero}NOT a solution of it to {tol:g}: {worst} residual {values[worst]:.2e}")
+    return {**out, **values, "fixed_point": ph.fixed_point, "max_error": float(values[worst]),
+            "consistent": ok, "verdict": verdict}

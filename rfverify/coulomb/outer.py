@@ -127,9 +127,10 @@ class Anderson:
         F = np.array([gk - xk for xk, gk in zip(self.xs, self.gs)])
         dF = np.diff(F, axis=0).T
         dG = np.diff(np.array(self.gs), axis=0).T
-        colscale = np.linalg.norm(dF, axis=0)
-        if not np.all(colscale > 0):
+        big = np.max(np.abs(dF), axis=0)
+        if not np.all(big > 0):
             return g
+        colscale = np.linalg.norm(dF / big, axis=0) * big  # the 2-norms, without squares that overflow
         gamma = np.linalg.lstsq(dF / colscale, F[-1], rcond=1e-12)[0] / colscale
         out = g - dG @ gamma
         return out if np.all(np.isfinite(out)) else g

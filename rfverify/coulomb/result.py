@@ -18,6 +18,9 @@ STATEMENT = ("the physical problem (Coulomb friction and rolling resistance with
 NOT_UNIQUE = ("Solutions of the physical problem need not be unique: this is a backward-error certificate "
               "— the exact solution it names solves the physical problem exactly for data that differ from "
               "the file's by δ, not necessarily the file's own (any other) solution")
+NOT_UNIQUE_UNCERTIFIED = ("Solutions of the physical problem need not be unique: a certificate of it is a "
+                          "backward-error one, about the exact solution for data that differ from the file's by "
+                          "δ, not necessarily the file's own (any other) solution")
 
 
 @dataclass
@@ -88,7 +91,7 @@ def coulomb_verdict(requested: int, quantities: dict, backward: BackwardError, i
     tol = 10.0 ** (-requested)
     if not inner_valid:
         return False, (f"not certified for {STATEMENT}{posed}: the shifted convex problem's proof failed "
-                       f"({inner_failure}). {NOT_UNIQUE}.")
+                       f"({inner_failure}). {NOT_UNIQUE_UNCERTIFIED}.")
     parts = []
     for q in quantities.values():
         parts.append(q.short())
@@ -106,8 +109,10 @@ def coulomb_verdict(requested: int, quantities: dict, backward: BackwardError, i
     data = (f"for {whose}data q differing from the file's by δ e_N + D r* (D the "
             "diagonal added to W, which as stored is not positive semidefinite)" if backward.psd_part
             else "for data whose w_N differs from the file's by δ")
-    text = f"{head} against the exact solution of {STATEMENT}{posed} {data}, {backward.describe()}. {NOT_UNIQUE}."
-    return digits_ok and be_ok, text
+    certified = digits_ok and be_ok
+    text = (f"{head} against the exact solution of {STATEMENT}{posed} {data}, {backward.describe()}. "
+            f"{NOT_UNIQUE if certified else NOT_UNIQUE_UNCERTIFIED}.")
+    return certified, text
 
 
 @dataclass

@@ -12,7 +12,9 @@ FORMAT = "rfverify-coulomb-shift"
 
 
 def write_shift(fh, shift, statement: str, backward_error: float | None) -> None:
-    """Write ``/coulomb/shift`` (n,) into the open h5py file ``fh`` (replacing any)."""
+    """Write ``/coulomb/shift`` (n,) into the open h5py file ``fh`` (replacing any), and name the
+    problem the /solution beside it answers (its ``problem`` attribute, ``statement``): the
+    physical one, not the relaxation the writer of /solution assumes."""
     if GROUP in fh:
         del fh[GROUP]
     grp = fh.create_group(GROUP)
@@ -23,6 +25,8 @@ def write_shift(fh, shift, statement: str, backward_error: float | None) -> None
     if backward_error is not None:
         grp.attrs["backward_error"] = float(backward_error)
     grp.create_dataset("shift", data=np.asarray(shift, dtype=np.float64))
+    if "solution" in fh:
+        fh["solution"].attrs["problem"] = statement
 
 
 def read_shift(path, n: int):

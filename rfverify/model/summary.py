@@ -77,7 +77,7 @@ def problem_summary(problem, *, solution_tol: float = 1e-6, max_asymmetry: float
         summary["solution"] = None
     else:
         chk = check_solution(problem, problem.solution)
-        summary["solution"] = {**chk.as_dict(), "tolerance": solution_tol,
+        summary["solution"] = {"problem": "relaxation", **chk.as_dict(), "tolerance": solution_tol,
                                "consistent": chk.ok(solution_tol),
                                "verdict": chk.verdict(solution_tol)}
     summary["guesses"] = len(problem.guesses)

@@ -129,7 +129,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
                     relative: bool = False, progress=None, factor_engine: str = "auto",
                     as_stored: bool | None = None, time_limit: float | None = None, callback=None,
-                    _face_depth: int = 0, _on_face=None, **options) -> DigitsSolution:
+                    _face_depth: int = 0, _on_face=None, _named_limit: float | None = None,
+                    **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; DESIGN §6.3 says what "digits" means when a quantity is zero).
     ``progress(message)`` receives one line per stage; ``callback`` is the double solve's
@@ -163,7 +164,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
 
     ``time_limit`` (seconds): the whole path stops there — the double solve, the setup, each
     iteration of the extended phases — and returns the best proof reached so far (status
-    MaxTime when it falls short of ``digits``).
+    MaxTime when it falls short of ``digits``).  (``_named_limit``: a caller's whole limit, of
+    which ``time_limit`` is what is left; the verdict and the progress lines name it.)
 
     ``as_stored``: True proves the equations with M exactly as stored, False those with
     (M + Mᵀ)/2, None (default) what ``problem.equations`` says (symmetrised unless the problem
@@ -179,12 +181,14 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     and says why."""
     digits = validate_digits(digits)
     require_time_limit(time_limit)
+    named_limit = time_limit if _named_limit is None else _named_limit
     problem = posed(problem, as_stored, method)
     if _on_face is None:  # data beyond float64's safe range: the whole path in scaled units
         out = in_scaled_units(problem, lambda scaled, _: solve_to_digits(
             scaled, digits, method, tol, max_iter, extended_max_iter=extended_max_iter, backend=backend,
             wide_tail=wide_tail, wide_bits=wide_bits, wide_max_iter=wide_max_iter, relative=relative,
-            progress=progress, factor_engine=factor_engine, time_limit=time_limit, callback=callback, **options),
+            progress=progress, factor_engine=factor_engine, time_limit=time_limit, callback=callback,
+            _named_limit=_named_limit, **options),
             _unscaled_solution)
         if out is not None:
             return out
@@ -236,7 +240,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted):
         prepared.cancel()
         return _ended_after_double(first, ctx, point, double, say, interrupted=interrupted, out_of_time=out_of_time,
-                                   time_limit=time_limit, clock=(t0, c0, t1, c1, t_double))
+                                   time_limit=named_limit, clock=(t0, c0, t1, c1, t_double))
     data, system = prepared.system()
     t_setup = time.perf_counter() - t1
     c2 = compile_seconds()
@@ -258,7 +262,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         face_note = solve_on_face(problem, ctx, driver, digits, relative, say, deadline,
                                    dict(method=method, tol=tol, max_iter=max_iter, extended_max_iter=extended_max_iter,
                                         backend=backend, wide_tail=wide_tail, wide_bits=wide_bits,
-                                        wide_max_iter=wide_max_iter, factor_engine=factor_engine, **options),
+                                        wide_max_iter=wide_max_iter, factor_engine=factor_engine,
+                                        _named_limit=named_limit, **options),
                                    _face_depth)
     _, proof, point, (v, u, r) = driver.best
     extra = {"point_source": ext_out.point_source, **ext_out.summary(), "proof_attempts": driver.attempts,
@@ -270,7 +275,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         face_note.pop("_point", None)
     timed_out = driver.timed_out and not proof.certified
     if timed_out:
-        extra["time_limit"] = time_limit
+        extra["time_limit"] = named_limit
     cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra=extra)
     c3 = compile_seconds()  # in extend(): the double-double kernels (the tail and the proofs compile none)
     timings = {"double": t_double - (c1 - c0), "setup": t_setup - (c2 - c1), "extended": ext_out.seconds_dd - (c3 - c_ext),
