@@ -399,3 +399,42 @@ def test_the_lifting_of_a_positive_semidefinite_w_agrees_with_it_to_rounding():
     lifting = [s["digits_lifting"] for s in d.steps if math.isfinite(s["digits"])]
     assert lifting and min(lifting) > 15
     assert d.cause == "none" and "file_only" not in d.evidence and d.evidence["departure"] is None
+
+
+def test_a_witness_with_fewer_digits_than_double_double_is_refused(capsys):
+    """A 9-digit witness overruled a double-double continuation that met 1e-25 ("the data") and a
+    10-digit one crashed (exit 3): the witness must carry more digits than the steps it checks."""
+    from rfverify.errors import InvalidArgumentError
+
+    problem = rfverify.load("bundled:sphere")
+    with pytest.raises(InvalidArgumentError, match="dps"):
+        diagnose(problem, tol=1e-12, dps=9)
+    assert diagnose(problem, tol=1e-12, dps=9, witness_time=0, remedies=False).cause == "none"  # no witness
+    with pytest.raises(SystemExit) as stop:
+        main(["diagnose", "bundled:sphere", "--dps", "9", "--quiet"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--dps" in err[0] and "34" in err[0]
+
+
+def test_a_breakdown_of_the_witness_own_linear_algebra_decides_nothing():
+    from types import SimpleNamespace
+
+    from rfverify.verify.cause import witnessed_cause
+    from rfverify.verify.exact import witness
+
+    class Broken:  # a reference whose step's factorisation fails at its precision
+        def iterate(self, *args):
+            return SimpleNamespace(r_t=None)
+
+        def step(self, it, gamma, rule):
+            raise ArithmeticError("reduced system not positive definite at pivot 4")
+
+    settings = SimpleNamespace(tol=1e-25, sigma_rule="paper")
+    w = witness(Broken(), SimpleNamespace(r_t=None), 12, 0.9, settings, lambda it: SimpleNamespace(max=1.0),
+                lambda k, it: 30.0, max_steps=5, deadline=math.inf, dps=40)
+    assert w.stopped.startswith("its linear algebra broke down at iteration 12") and w.reached_at is None
+    assert witnessed_cause("precision", {"run": w.as_dict()}, 40) == "precision"
+    # a step the exact algorithm does not have (its point not interior) still decides
+    assert witnessed_cause("precision", {"run": {**w.as_dict(), "stopped": "no step from iteration 12: x"}},
+                           40) == "data"

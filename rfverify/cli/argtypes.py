@@ -58,6 +58,12 @@ def positive_int(text: str) -> int:
     return _integer(text, least=1)
 
 
+def witness_digits(text: str) -> int:
+    """D of diagnose's and report's --dps: the mpmath witness checks double-double steps (about
+    32 digits), so at least :data:`rfverify.verify.lockstep.WITNESS_MIN_DPS`."""
+    return _integer(text, least=34)
+
+
 def digit_count(text: str) -> int:
     """K of --digits: 1 … 15 (what the proof can show in double-double)."""
     from ..errors import InvalidArgumentError

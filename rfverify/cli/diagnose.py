@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from ..solver.result import ALGORITHM1_METHODS
-from .argtypes import nonneg_float, out_path, positive_float, positive_int
+from .argtypes import nonneg_float, out_path, positive_float, witness_digits
 from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, add_run_limits, dumps, load_problem,
                      print_warnings, progress_printer, recorded_warnings, warning_summary)
 
@@ -61,8 +61,8 @@ def add_parser(sub) -> None:
                    max_iter_help="iteration limit of the double run, and of the exact continuation for the cause "
                                  "'precision' (default: %(default)s)")
     diag.add_argument("--plot", type=out_path, default=None, metavar="FILE", help=PLOT_HELP)
-    diag.add_argument("--dps", type=positive_int, default=40, metavar="D",
-                      help="digits of the mpmath witness (default: %(default)s)")
+    diag.add_argument("--dps", type=witness_digits, default=40, metavar="D",
+                      help="digits of the mpmath witness, at least 34: it checks double-double steps (default: %(default)s)")
     diag.add_argument("--witness-time", type=nonneg_float, default=None, metavar="S",
                       help="seconds the mpmath witness may take (default: 90; 0: no witness)")
     diag.add_argument("--no-remedy", action="store_true", help="try no remedy")

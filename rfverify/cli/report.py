@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from .argtypes import nonneg_int, positive_int
+from .argtypes import nonneg_int, positive_int, witness_digits
 from .common import exit_codes, EXIT_OK, dumps, progress_printer
 
 HELP = "write RUN_DIR/report.html and RUN_DIR/summary.md from a bench run"
@@ -37,8 +37,8 @@ def add_parser(sub) -> None:
                         help="lockstep-diagnose the N worst cases (default: %(default)s; 0 skips)")
     report.add_argument("--diagnose-max-contacts", type=positive_int, default=40, metavar="N",
                         help="only diagnose problems with at most N contacts (default: %(default)s)")
-    report.add_argument("--dps", type=positive_int, default=40, metavar="D",
-                        help="digits of the lockstep reference steps (default: %(default)s)")
+    report.add_argument("--dps", type=witness_digits, default=40, metavar="D",
+                        help="digits of the mpmath witness of each diagnosis, at least 34 (default: %(default)s)")
     report.add_argument("--quiet", action="store_true", help="no progress output")
     report.add_argument("--json", action="store_true", help="print paths and counts as JSON")
     report.set_defaults(func=cmd_report)

@@ -66,6 +66,7 @@ from .cause import (
 from .lockstep import (
     FORM_BLOCK,
     FORM_POWER,
+    WITNESS_MIN_DPS,
     WITNESS_SECONDS,
     DiagnosisContext,
     departure,
@@ -211,6 +212,12 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     the counterfactual continues the NT algorithm from its best iterate.
     """
     say = progress or (lambda message: None)
+    if witness_time and dps < WITNESS_MIN_DPS:
+        from ..errors import InvalidArgumentError
+
+        raise InvalidArgumentError("dps", f"is {dps}, below {WITNESS_MIN_DPS}: the mpmath witness checks, and may "
+                                          "overrule, double-double steps (about 32 digits), so it must carry more",
+                                   fix=f"pass dps ≥ {WITNESS_MIN_DPS} (default 40), or witness_time=0 for no witness")
     t0 = time.perf_counter()
     options = renamed_settings(options)
     time_limit = options.get("time_limit")

@@ -325,6 +325,9 @@ def witness(reference_solver, start_iterate: tuple, k0: int, gamma0: float, sett
         except RJ.ReferenceDomainError as exc:
             stopped = f"no step from iteration {k}: {exc}"
             break
+        except ArithmeticError as exc:  # its own linear algebra, at its precision: the run it checks stands
+            stopped = f"its linear algebra broke down at iteration {k} ({exc}) at {dps} digits"
+            break
         last = time.perf_counter() - t_step
         it = step.iterate
         gamma = rules.step_fraction(float(step.alpha), 0.09)

@@ -32,6 +32,11 @@ EXACT_EXTRA = 50
 """Iterations the exact continuation may take beyond the double run's limit, to tell "more
 iterations" (it meets the tolerance later) from "data" (it never does)."""
 
+WITNESS_MIN_DPS = 34
+"""Fewest digits the mpmath witness may carry: it checks double-double steps (2⁻¹⁰⁶ ≈ 1.2e-32, about
+32 digits) and may overrule them, so it must carry more (a 9-digit witness overruled a double-double
+run that met 1e-25, and a 10-digit one broke down)."""
+
 WITNESS_SECONDS = 90.0
 """Default budget of the mpmath witness (seconds): at 700 contacts one reference step takes
 about 3 s (40 digits), so the continuation of a ~750-contact Chute fits, with the rest of the

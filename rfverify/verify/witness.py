@@ -73,6 +73,15 @@ def _reference_iterate(ctx, ref, v: ext.V, r_t: ext.V, z: ext.V):
                              z=[list(c) for c in cones])
 
 
+def _no_step(exc, dps: int) -> str:
+    """What a reference step that raised ``exc`` says: no exact step (its point is not interior),
+    or a breakdown of the reference's own linear algebra at ``dps`` digits (it proves nothing)."""
+    from reference import jordan as RJ
+
+    return "no exact step" if isinstance(exc, RJ.ReferenceDomainError) else \
+        f"no step: its linear algebra broke down at {dps} digits"
+
+
 def run_witness(ctx, steps, focus, run, evidence, dps, budget, timings):
     """The mpmath reference on the iterations that decide the verdict, within ``budget``
     seconds: (1) the exact step from the deciding double iterate (``focus``, else the fewest
@@ -101,9 +110,9 @@ def run_witness(ctx, steps, focus, run, evidence, dps, budget, timings):
     try:
         step = ref.step(ref.iterate(*_reference_layout(ctx.lp, ctx.reference_order, ctx.v_full(v_k), r_k, z_k)),
                         gamma, sigma_rule=rule)
-    except RJ.ReferenceDomainError as exc:
+    except (RJ.ReferenceDomainError, ArithmeticError) as exc:
         out["step"].update(agrees_with_double_double=None, double_digits=None)
-        out["text"].append(f"mpmath witness: no exact step from iteration {k} either ({exc})")
+        out["text"].append(f"mpmath witness: {_no_step(exc, dps)} from iteration {k} ({exc})")
     else:
         after = step
         try:
@@ -131,9 +140,10 @@ def run_witness(ctx, steps, focus, run, evidence, dps, budget, timings):
             entry = {"iter": kl}
             try:
                 nxt = ref.step(it, row["gamma"], sigma_rule=rule_at(ctx.settings.sigma_rule, row["criterion"]))
-            except RJ.ReferenceDomainError as exc:
+            except (RJ.ReferenceDomainError, ArithmeticError) as exc:
                 entry.update(agrees_with_double_double=None, criterion=None)
-                out["text"].append(f"mpmath witness: no step from the exact continuation's iteration {kl} ({exc})")
+                out["text"].append(f"mpmath witness: {_no_step(exc, dps)} from the exact continuation's iteration "
+                                   f"{kl} ({exc})")
             else:
                 crit = ctx.judge_reference(nxt.iterate).max
                 agree = _mp_digits(ctx, nxt.iterate, *run.kept[last][:2])
