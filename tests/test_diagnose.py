@@ -335,7 +335,7 @@ def test_the_cone_named_is_the_most_frequent_the_first_on_a_tie_and_its_componen
     split = SimpleNamespace(steps_held=[step(3, 7, component=1), step(4, 7, component=1), step(2, 0, component=0)])
     most = held_most(split)
     assert (most["component"], most["contact"], most["count"]) == (1, 7, 2)
-    assert "contact 7's rolling cone (velocity) (component 2) held 2 of them" in held_text(most, 9)[0]
+    assert "contact 7's rolling cone (velocity) (component 1) held 2 of them" in held_text(most, 9)[0]
     assert held_most(SimpleNamespace(steps_held=[])) is None and held_text(None, 3) == []
 
 

@@ -50,7 +50,7 @@ def test_every_command_takes_quiet(command):
 def test_info_and_diagnose_run_quietly(capsys):
     code, out, err = run(capsys, "info", "bundled:sphere", "--quiet")
     assert code == 0 and err == ""
-    code, out, err = run(capsys, "diagnose", "bundled:sphere", "--quiet", "--dps", "20")
+    code, out, err = run(capsys, "diagnose", "bundled:sphere", "--quiet", "--dps", "34")
     assert code == 0 and err == "" and out
 
 
@@ -144,7 +144,7 @@ def test_certify_and_diagnose_take_a_time_limit(capsys):
     d = rfverify.diagnose(p, tol=1e-25, time_limit=1e-3)
     assert d.status == "MaxTime" and "time limit" in d.message
     code, out, err = run(capsys, "diagnose", "bundled:chute", "--tol", "1e-25", "--time-limit", "0.001", "--json",
-                         "--dps", "20")
+                         "--dps", "34")
     assert code == 1 and json.loads(out)["status"] == "MaxTime"
 
 
@@ -184,12 +184,12 @@ def test_a_bench_task_past_its_solver_share_records_max_time_with_its_answer(tmp
 def test_diagnose_explains_its_columns_and_starts_with_a_sentence(capsys):
     """The first line is the cause and the remedy in words (issue 46; it was the last line, and
     said "double precision is not the cause" of stalls that exact arithmetic does not have)."""
-    code, out, err = run(capsys, "diagnose", "bundled:sphere", "--quiet", "--dps", "20")
+    code, out, err = run(capsys, "diagnose", "bundled:sphere", "--quiet", "--dps", "34")
     lines = out.splitlines()
     assert lines[0].startswith("Cause: none") and "nothing to fix" in lines[0]
     columns = next(line for line in lines if line.startswith("columns"))
     assert "digits of agreement" in columns and "where r is unique" in columns
-    code, out, err = run(capsys, "diagnose", "bundled:chute", "--tol", "1e-25", "--quiet", "--dps", "20",
+    code, out, err = run(capsys, "diagnose", "bundled:chute", "--tol", "1e-25", "--quiet", "--dps", "34",
                          "--witness-time", "0")
     first = out.splitlines()[0]
     assert code == 1 and first.startswith("Cause: double precision") and "Remedy: `rfverify solve" in first

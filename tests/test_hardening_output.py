@@ -56,8 +56,8 @@ def overflowing(tmp_path_factory):
 @pytest.mark.parametrize("argv", [
     ["info", "{big}", "--json"],
     ["solve", "{big}", "--json"],
-    ["diagnose", "{big}", "--json", "--dps", "20"],
-    ["diagnose", "bundled:chute", "--tol", "1e-25", "--json", "--dps", "30"],
+    ["diagnose", "{big}", "--json", "--dps", "34"],
+    ["diagnose", "bundled:chute", "--tol", "1e-25", "--json", "--dps", "34"],
 ])
 def test_json_output_is_strict_and_warnings_do_not_leak(capsys, overflowing, argv):
     argv = [str(overflowing) if a == "{big}" else a for a in argv]

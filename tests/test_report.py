@@ -52,7 +52,7 @@ def test_component_subproblem_is_the_run_the_solver_made(two_bodies_problem, met
 def test_diagnosis_of_a_split_run_diagnoses_its_failing_component(two_bodies_problem):
     """With 4 iterations every component stops at MaxIterations: the diagnosis is of the
     first failing component alone, says so, and ends as it did inside the split run."""
-    diag = diagnose_as_run(two_bodies_problem, "jqinv", 1e-10, max_iter=4, dps=30, bench_status="MaxIterations")
+    diag = diagnose_as_run(two_bodies_problem, "jqinv", 1e-10, max_iter=4, dps=34, bench_status="MaxIterations")
     scope = diag["scope"]
     assert scope["mode"] == "component" and scope["index"] == 0 and scope["count"] == 2
     assert scope["reproduced"] and scope["status"] == diag["status"] == "MaxIterations" and diag["nit"] == 4
@@ -61,7 +61,7 @@ def test_diagnosis_of_a_split_run_diagnoses_its_failing_component(two_bodies_pro
 
 
 def test_diagnosis_says_when_every_component_met_the_tolerance(two_bodies_problem):
-    diag = diagnose_as_run(two_bodies_problem, "jqinv", 1e-8, max_iter=100, dps=30, bench_status="Solved")
+    diag = diagnose_as_run(two_bodies_problem, "jqinv", 1e-8, max_iter=100, dps=34, bench_status="Solved")
     assert diag["scope"]["mode"] == "unsplit" and "diagnosed without splitting" in diag["scope"]["text"]
 
 

@@ -16,6 +16,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import rfverify
+from rfverify.model.directed import digits_text
 from rfverify.proof import ProofContext
 from rfverify.proof.bound import prove
 from rfverify.proof.freeblocks import FreeBlocks
@@ -42,7 +43,7 @@ def _check_stored_claims(seed, n, free, contact_skew):
         if q.mode != "information":
             assert errs[name] <= q.abs_bound * (1 + 1e-12), (name, errs[name], q.abs_bound)
     if stored.fewest_digits() is not None:
-        assert f"{stored.fewest_digits():.1f} proven digits" in sym.certificate.verdict
+        assert f"{digits_text(stored.fewest_digits())} proven digits" in sym.certificate.verdict
     return stored, errs
 
 

@@ -22,6 +22,7 @@ from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import reference
 import rfverify
+from rfverify.model.directed import digits_text
 from rfverify.cli import main
 from rfverify.proof import bound as B
 from rfverify.proof import Point
@@ -70,7 +71,7 @@ def check_stored_solution(seed: int, n: int):
     errs_sym, _ = _errors(sym.v, sym.u, sym.r, v, u, r, p.H)
     _assert_bounds_hold(stored, errs_sym)
     if stored.fewest_digits() is not None:
-        assert f"{stored.fewest_digits():.1f} proven digits" in sym.certificate.verdict
+        assert f"{digits_text(stored.fewest_digits())} proven digits" in sym.certificate.verdict
 
 
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -161,7 +162,7 @@ def test_chute_as_stored_matches_an_independent_solution_of_the_stored_equations
                 assert stored.quantities[name].abs_bound <= 1.01 * e
     # 0.7 proven digits before (one ε shared by every dof); 3.1 true ones
     assert stored.fewest_digits() >= 3.0
-    assert f"of which this answer has {stored.fewest_digits():.1f} proven digits" in sym.message
+    assert f"of which this answer has {digits_text(stored.fewest_digits())} proven digits" in sym.message
 
 
 # ---------------------------------------------------------------------- files never keep a stale claim

@@ -32,6 +32,14 @@ def positive_float(text: str) -> float:
     return val
 
 
+def seconds(text: str) -> float:
+    """A time limit in seconds: a number > 0 (inf: none)."""
+    val = number(text)
+    if not val > 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be > 0 seconds; fix: give a number of seconds > 0, e.g. 600")
+    return val
+
+
 def tolerance(text: str) -> float:
     """A tolerance: a finite number > 0 (inf would stop at once and call anything solved)."""
     val = positive_float(text)

@@ -11,7 +11,7 @@ from ..bench.coulomb import COULOMB_DEFAULT_METHODS
 from ..bench.runner import DEFAULT_METHODS, DEFAULT_TOLS
 from ..coulomb.model import PROBLEMS
 from ..solver.result import METHODS
-from .argtypes import method_list, nonneg_int, out_path, positive_float, positive_int, tol_list, tolerance
+from .argtypes import method_list, nonneg_int, out_path, positive_int, seconds, tol_list, tolerance
 from .common import (DOCS_NOTE, EXIT_OK, PSD_SHIFT_HELP, add_equations_option, add_load_options, dumps, exit_codes,
                      progress_printer)
 
@@ -66,7 +66,7 @@ def add_parser(sub) -> None:
                             "times are comparable only within one bench run); with --scheduler, "
                             "the most runs in flight on the cluster (default: twice its worker "
                             "threads)")
-    bench.add_argument("--time-limit", type=positive_float, default=600.0, metavar="S",
+    bench.add_argument("--time-limit", type=seconds, default=600.0, metavar="S",
                        help="wall-clock limit per run in seconds (default: %(default)g): its solver stops "
                             "at 80%% of it (a trajectory's at 50%%, which then rechecks every iterate) and the "
                             "record keeps the best answer with status MaxTime; a run still going at the "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .coulomb import add_problem_option, certify_physical
-from .argtypes import digit_count, out_path, positive_float, positive_int
+from .argtypes import digit_count, out_path, positive_int, seconds
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, dumps, end_problem_command, exit_codes,
                      is_hdf5_input, load_problem, print_quantities, progress_printer, require_same_problem,
                      same_problem)
@@ -50,7 +50,7 @@ def add_parser(sub) -> None:
                       help="write the problem, the given solution and /certificate (the point, "
                            "exactly and as decimal strings, the bound and every intermediate norm)")
     cert.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    cert.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
+    cert.add_argument("--time-limit", type=seconds, default=None, metavar="S",
                       help="stop the search for a proof point after S seconds and report the best proof "
                            "reached (status MaxTime when short of --digits, exit 1)")
     add_problem_option(cert)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from ..solver.result import ALGORITHM1_METHODS
-from .argtypes import nonneg_float, out_path, positive_float, witness_digits
+from .argtypes import nonneg_float, out_path, seconds, witness_digits
 from .common import (EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, add_load_options, add_run_limits, dumps, load_problem,
                      print_warnings, progress_printer, recorded_warnings, warning_summary)
 
@@ -68,7 +68,7 @@ def add_parser(sub) -> None:
     diag.add_argument("--no-remedy", action="store_true", help="try no remedy")
     diag.add_argument("--json", action="store_true", help="print the diagnosis as JSON")
     diag.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    diag.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
+    diag.add_argument("--time-limit", type=seconds, default=None, metavar="S",
                       help="stop after S seconds: the double run gets the limit, and each later stage stops at "
                            "its first step past it, keeping what was done (status MaxTime, exit 1)")
     add_load_options(diag)

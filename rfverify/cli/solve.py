@@ -7,7 +7,7 @@ import numpy as np
 
 from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS, PEER_METHODS
 from .coulomb import add_problem_option, add_start_option, solve_physical
-from .argtypes import digit_count, out_path, positive_float
+from .argtypes import digit_count, out_path, seconds
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, PROGRESS_AFTER, PROGRESS_AFTER_ENV,
                      IterationProgress, add_run_limits, dumps, end_problem_command, exit_codes, is_hdf5_input,
                      load_problem, print_quantities, print_warnings, progress_after, progress_printer,
@@ -72,7 +72,7 @@ def add_parser(sub) -> None:
                      help="print a settings header and each iteration as it happens (every independent "
                           "component, labelled; the last column names the cone that cut the row's step short); "
                           "with --method clarabel, Clarabel's own log")
-    sol.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
+    sol.add_argument("--time-limit", type=seconds, default=None, metavar="S",
                      help="stop after S seconds with the best iterate (status MaxTime, exit 1); with --digits "
                           "the whole path stops there (each extended iteration checks it, and a long double-double "
                           "factorisation is stopped, or not started where it cannot end in time) and the best "

@@ -33,6 +33,7 @@ import numpy as np
 from ..model.problem import SPACEDIM, Problem
 from ..proof.quantity import DATA_SCALE_NAMES, DATA_SCALE_NAMES_LOCAL, QuantityBound
 from ..proof.quantity import quantity_bound as quantity_record
+from ..model.directed import bound_text
 from ..proof.dyadic import Dyadic
 from .model import offsets
 
@@ -80,7 +81,8 @@ class BackwardError:
         psd = f", W's diagonal shift D r* {self.psd_part:.1e}" if self.psd_part else ""
         opened = (f"; δ = 0 on {self.open_contacts} contact(s) proven open, where the shift is immaterial"
                   if self.open_contacts else "")
-        return (f"backward error |δ| ≤ {self.absolute:.2e} (relative {self.relative:.1e} of the data scale "
+        return (f"backward error |δ| ≤ {bound_text(self.absolute)} (relative {bound_text(self.relative, 1)} of the "
+                f"data scale "
                 f"{self.scale_name} = {self.scale:.2e}; largest parts over the contacts: fixed point "
                 f"{self.fixed_point_part:.1e}, inner proof "
                 f"{self.proof_part:.1e}{psd}{opened})")

@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._arrays import as_csc, as_vector, check_finite_sparse, check_finite_vector, freeze, freeze_sparse
+from .directed import bound_text
 from ..errors import InvalidArgumentError, InvalidProblemError
 from .massmatrix import (DENSE_BLOCK_LIMIT, BlockStructure, SymmetryReport, asymmetry_error,
                          block_structure_and_definiteness, check_positive_diagonal, symmetrise,
@@ -370,7 +371,7 @@ class Problem:
         if self.provenance.get("spacedim") == 3:
             text += " of the 3-D problem (μr = 0, De Saxcé's term dropped: not the Coulomb solution)"
         shift = self.provenance.get("psd_shift")
-        why = (f" ({PSD_SHIFT_MARK}, ≤ {shift['largest_change']:.2e} = {shift['relative']:.1e}·‖W‖, added because "
+        why = (f" ({PSD_SHIFT_MARK}, ≤ {bound_text(shift['largest_change'])} = {bound_text(shift['relative'], 1)}·‖W‖, added because "
                "W as stored is not positive semidefinite)") if shift else ""
         if not self.matrix_is_symmetric:
             text += (f" with {X}{' + D' if shift else ''} as stored (unsymmetric){why}" if self.equations == "stored"

@@ -94,6 +94,8 @@ def _negative_eigenvalue_note(lf: dict, add) -> None:
 
 def format_summary(s: dict) -> str:
     """The text ``rfverify info`` prints for a :func:`problem_summary`."""
+    from .directed import bound_text
+
     lines = []
     add = lines.append
     add(f"problem    {s['title'] or '(untitled)'}")
@@ -139,7 +141,7 @@ def format_summary(s: dict) -> str:
         + f"; {b['contact_free_blocks']} contact-free ({b['contact_free_dofs']} dofs)")
     if b["min_eigenvalue_lower"] is not None:
         exact = f"; {b['decided_exactly']} block(s) decided in exact arithmetic" if b["decided_exactly"] else ""
-        add(f"           positive definite (verified): smallest block eigenvalue ≥ {b['min_eigenvalue_lower']:.3e}"
+        add(f"           positive definite (verified): smallest block eigenvalue ≥ {bound_text(b['min_eigenvalue_lower'], 3, upper=False)}"
             f"{exact}")
     a, sym = s["M_asymmetry"], s["symmetrised"]
     limit = f"limit {sym['limit']:g}, --max-asymmetry"

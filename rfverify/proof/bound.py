@@ -131,11 +131,12 @@ class Proof:
         return min(bad, key=lambda q: -math.inf if q.digits is None else q.digits).name
 
     def fewest_digits(self) -> float | None:
-        """The smallest relative digits over the quantities that have a bound (None: some
-        quantity has none, or the proof is invalid)."""
+        """The smallest relative digits over the quantities judged in relative digits (one proven
+        zero within a bound, in absolute terms, has none by design and is not counted; None: one
+        judged relatively has none, none is, or the proof is invalid)."""
         if not self.valid:
             return None
-        vals = [q.digits for q in self.quantities.values() if q.mode != "information"]
+        vals = [q.digits for q in self.quantities.values() if q.mode == "relative"]
         return None if any(d is None for d in vals) or not vals else min(vals)
 
     def summary(self) -> str:

@@ -55,6 +55,7 @@ import scipy.sparse as sp
 
 from ..model.definiteness import exact_ldlt
 from ..model.problem import SPACEDIM, LocalForm, Problem
+from ..model.directed import bound_text
 from .bound import Proof, cone_violations, cones_failure, eps_M_upper, invalid_proof
 from .quantity import DATA_SCALE_NAMES_LOCAL, QuantityBound, down, quantity_bound, up, up_times, validate_digits
 from .reactions import proven_open
@@ -152,7 +153,7 @@ def prove_psd(W: sp.spmatrix) -> LocalFacts:
     mass = verify_mass_matrix(A_raw)
     if mass.proven:
         lam = float(np.nanmin(mass.lam_lower))
-        return LocalFacts(True, "", f"verified λmin((W + Wᵀ)/2) ≥ {lam:.3e} > 0 "
+        return LocalFacts(True, "", f"verified λmin((W + Wᵀ)/2) ≥ {bound_text(lam, 3, upper=False)} > 0 "
                                     "on its nonzero rows (floating point with rounding-error bounds)", diag,
                           lam_lower=lam, nonzero_rows=rows)
     for fb in mass.failures:
@@ -269,8 +270,8 @@ def prove_local(problem: Problem, point_r: Dyadic, u, r, *, requested: int = 10,
         e_r, note, r_terms = _local_r_bound(problem, ex, u_p, sqrtW * eps, point_r, eps, r)
     else:  # ‖r_p − r*‖₂ ≤ δ on every component
         e_r = upper_sum((Dyadic.from_float(r) - point_r).abs_upper(), np.full(r.size, delta))
-        note, r_terms = (f"unique: W definite (verified λmin ≥ {ex.facts.lam_lower:.2e}); u = Wr + q raised into "
-                         f"K* by ‖e‖₂ ≤ {e_norm:.1e}"), {}
+        note, r_terms = (f"unique: W definite (verified λmin ≥ {bound_text(ex.facts.lam_lower, upper=False)}); u = Wr + q raised into "
+                         f"K* by ‖e‖₂ ≤ {bound_text(e_norm, 1)}"), {}
         rows = ex.facts.nonzero_rows
         only_by_shift = _unique_only_by_the_shift(problem, sp.csr_matrix(ex.local.W)[rows][:, rows])
         if only_by_shift:  # bounded (the backward error needs it), but no claim about the file
@@ -451,7 +452,7 @@ def _local_r_bound(problem, ex: LocalExact, u_p: Dyadic, u_radius, point_r: Dyad
     e[cols] = upper_sum(d_r, up(radius * per) if radius else np.zeros(cols.size))
     terms.update({"lam_min_W_S_lower": float(np.min(lam)), "W_norm_r_open": t})
     note = (f"unique: {int(open_.sum())} contacts proven open (r* = 0), W definite on the other {S.size} "
-            f"(verified λmin ≥ {float(np.min(lam)):.2e})")
+            f"(verified λmin ≥ {bound_text(float(np.min(lam)), upper=False)})")
     if only_by_shift:  # a bound on W + D's r* (the backward error needs it), but no claim
         terms[R_INFORMATION_ONLY] = True
         note = f"{only_by_shift} (W + D's r* is bounded: {note})"

@@ -26,6 +26,7 @@ import scipy.sparse as sp
 from ..errors import InvalidArgumentError, InvalidProblemError
 from ..io.local_lift import eigenvalue_range, factor_delassus
 from ..model.problem import Problem, StoredSolution, make_local_form
+from ..model.directed import bound_text
 from .local import prove_psd
 from .massbounds import verify_mass_matrix
 
@@ -54,7 +55,7 @@ class PsdShift:
         return self.largest_change / self.norm if self.norm > 0 else math.inf
 
     def phrase(self) -> str:
-        return (f"W + D (D ≥ 0 diagonal, ≤ {self.largest_change:.2e} = {self.relative:.1e}·‖W‖ on {self.rows} rows: "
+        return (f"W + D (D ≥ 0 diagonal, ≤ {bound_text(self.largest_change)} = {bound_text(self.relative, 1)}·‖W‖ on {self.rows} rows: "
                 f"W as stored is not positive semidefinite, smallest eigenvalue ≈ {self.min_eigenvalue:.1e})")
 
     def as_dict(self) -> dict:

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.directed import bound_text, digits_text
+
 FLOAT64_DIGITS = 53 * math.log10(2)  # ≈ 15.95: what a float64 can carry relative to its norm
 MAX_CERTIFIABLE_DIGITS = 15
 QUANTITIES = ("v", "u", "Hr", "r")
@@ -74,16 +76,17 @@ class QuantityBound:
         or zero within a bound — else None."""
         n = self.name
         if self.mode == "information":
-            bound = (f"|error| ≤ {self.abs_bound:.2e}, claimed for no digits" if math.isfinite(self.abs_bound)
+            bound = (f"|error| ≤ {bound_text(self.abs_bound)}, claimed for no digits" if math.isfinite(self.abs_bound)
                      else "error bound not available")
-            return f"{n} not unique", f"{n}: not unique ({self.note}); {bound}"
+            return f"{n} not unique", f"{n}: not proven unique ({self.note}); {bound}"
         if self.mode == "absolute" and self.zero_within == 0:
-            return f"{n} exactly 0", f"{n}: exactly 0 (the candidate is the solution: error bound 0)"
+            return f"{n} exactly 0", f"{n}: exactly 0 (the candidate's {n} is the solution's exactly: error bound 0)"
         if self.mode == "absolute":
-            return (f"{n} zero within {self.zero_within:.1e} ({self.scale_digits:.1f} digits of {self.data_scale_name})",
-                    f"{n}: zero within {self.zero_within:.2e} (‖{n}*‖∞ ≤ {self.zero_within:.2e} = "
-                    f"{self.scale_digits:.1f} digits below the data scale {self.data_scale_name} = "
-                    f"{self.data_scale:.2e}; |error| ≤ {self.abs_bound:.2e}; no significant digits are claimed)")
+            return (f"{n} zero within {bound_text(self.zero_within, 1)} ({digits_text(self.scale_digits)} digits of "
+                    f"{self.data_scale_name})",
+                    f"{n}: zero within {bound_text(self.zero_within)} (‖{n}*‖∞ ≤ {bound_text(self.zero_within)} = "
+                    f"{digits_text(self.scale_digits)} digits below the data scale {self.data_scale_name} = "
+                    f"{self.data_scale:.2e}; |error| ≤ {bound_text(self.abs_bound)}; no significant digits are claimed)")
         return None
 
     def short(self) -> str:
@@ -91,15 +94,17 @@ class QuantityBound:
         words = self._not_relative()
         if words is not None:
             return words[0]
-        return f"{self.name} {self.digits:.1f} digits" if self.digits is not None else f"{self.name} no relative digits"
+        return (f"{self.name} {digits_text(self.digits)} digits" if self.digits is not None
+                else f"{self.name} no relative digits")
 
     def describe(self) -> str:
         words = self._not_relative()
         if words is not None:
             return words[1]
-        d = "no relative digits" if self.digits is None else f"{self.digits:.1f} digits"
+        d = "no relative digits" if self.digits is None else f"{digits_text(self.digits)} digits"
         extra = f"; {self.note}" if self.note and not self.certified and self.digits is None else ""
-        return (f"{self.name}: {d} (|error| ≤ {self.abs_bound:.2e}, ‖{self.name}*‖∞ ≥ {self.own_scale:.2e})"
+        return (f"{self.name}: {d} (|error| ≤ {bound_text(self.abs_bound)}, ‖{self.name}*‖∞ ≥ "
+                f"{bound_text(self.own_scale, upper=False)})"
                 + extra)
 
     def as_dict(self) -> dict:
@@ -152,11 +157,11 @@ def quantity_bound(name, e, x, scales, requested, note="", names=DATA_SCALE_NAME
     if relative:
         if digits is None:
             note = note or (f"relative digits requested, but ‖{name}*‖∞ may be 0 (‖{name}‖∞ = {norm:.2e} ≤ "
-                            f"error bound {e_inf:.2e}): relative digits are meaningless here")
+                            f"error bound {bound_text(e_inf)}): relative digits are meaningless here")
         return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)
     # x* may be zero: judge absolutely against the data scale when it is negligible there.
     limit = float(down(float(down(tol)) * data))  # ≤ 10⁻ᵏ·scale exactly
     if data > 0 and float(up(norm + e_inf)) <= limit and e_inf <= limit:
         return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "absolute", True,
-                             note or f"‖{name}*‖∞ ≤ {float(up(norm + e_inf)):.2e} ≤ 1e-{requested}·{names[name]}")
+                             note or f"‖{name}*‖∞ ≤ {bound_text(float(up(norm + e_inf)))} ≤ 1e-{requested}·{names[name]}")
     return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)

@@ -48,7 +48,7 @@ def r_bound(problem, exact, mass, u_p, u_radius, point_r, Hr_p, g, eps, r, store
     m = problem.n_dofs
     if cols.size > m:
         return None, (f"H has {cols.size} columns on the {S.size} possibly loaded contacts and only {m} rows: "
-                      "r is not unique (hyperstatic), Hr is"), terms
+                      "r may not be unique (hyperstatic), Hr is"), terms
     e = np.abs(r).astype(np.float64)  # off S (and dropped components): r* = 0 there
     r_S = np.zeros_like(r)
     r_S[cols] = r[cols]

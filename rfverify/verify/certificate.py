@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..model.directed import digits_text
 from ..model.problem import PSD_SHIFT_MARK
 from ..proof import Point, Proof
 from ..solver.result import ResultAliases, Status, alias
@@ -159,7 +160,7 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
     else:
         worst = proof.weakest()
         q = proof.quantities[worst]
-        have = "no relative digits" if q.digits is None else f"{q.digits:.1f} proven digits"
+        have = "no relative digits" if q.digits is None else f"{digits_text(q.digits)} proven digits"
         why = f"; {q.note}" if q.digits is None and q.note else ""
         verdict = f"not proven to {req} digits{about}: {worst} has {have} ({proof.summary()}){why}"
     at = (extra or {}).get("proven_at")
@@ -185,7 +186,7 @@ def stored_sentence(proof: Proof) -> str:
     if st.certified:
         return f". It is also proven to {st.requested} digits for {X} as stored (unsymmetric): {st.summary()}"
     fewest = st.fewest_digits()
-    have = "no relative digits" if fewest is None else f"{fewest:.1f} proven digits"
+    have = "no relative digits" if fewest is None else f"{digits_text(fewest)} proven digits"
     how = "; --as-stored (as_stored=True) solves and proves those" if X == "M" else ""
     return (f". {X} as stored is unsymmetric and its equations have another solution, of which this answer has "
             f"{have} ({st.summary()}){how}")

@@ -212,19 +212,13 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     the counterfactual continues the NT algorithm from its best iterate.
     """
     say = progress or (lambda message: None)
-    if witness_time and dps < WITNESS_MIN_DPS:
-        from ..errors import InvalidArgumentError
-
-        raise InvalidArgumentError("dps", f"is {dps}, below {WITNESS_MIN_DPS}: the mpmath witness checks, and may "
-                                          "overrule, double-double steps (about 32 digits), so it must carry more",
-                                   fix=f"pass dps ≥ {WITNESS_MIN_DPS} (default 40), or witness_time=0 for no witness")
+    _check_witness_digits(dps, witness_time)
     t0 = time.perf_counter()
     options = renamed_settings(options)
     time_limit = options.get("time_limit")
     deadline = None if time_limit is None else t0 + time_limit
     user_options = {k: v for k, v in options.items() if k != "time_limit"}
-    options.setdefault("refine_tol", None)
-    options.setdefault("longdouble_below", None)
+    options = {"refine_tol": None, "longdouble_below": None, **options}  # the lockstep run's (docstring)
     problem = posed(problem, options.pop("as_stored", None), method)
     from ..model.scaling import binary_scaling, scaled_problem
 
@@ -325,6 +319,15 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     return diag
 
 
+def _check_witness_digits(dps: int, witness_time: float) -> None:
+    if witness_time and dps < WITNESS_MIN_DPS:
+        from ..errors import InvalidArgumentError
+
+        raise InvalidArgumentError("dps", f"is {dps}, below {WITNESS_MIN_DPS}: the mpmath witness checks, and may "
+                                          "overrule, double-double steps (about 32 digits), so it must carry more",
+                                   fix=f"pass dps ≥ {WITNESS_MIN_DPS} (default 40), or witness_time=0 for no witness")
+
+
 def _run_remedies(ctx, diag: Diagnosis, evidence: dict, timings: dict, cause, run, user_options) -> None:
     """The remedy candidates for ``cause`` (:func:`.cause.try_remedies`), into the diagnosis."""
     t0 = time.perf_counter()
@@ -393,7 +396,8 @@ def held_text(most: dict | None, nit: int) -> list[str]:
         return []
     its = most["iterations"]
     # nit is the longest component's: a component's iterations are its own
-    where, of = (f" (component {most['component'] + 1})", "") if "component" in most else ("", f" (of {nit})")
+    # numbered from 0, as contacts are, and as solve --verbose and the JSON number components
+    where, of = (f" (component {most['component']})", "") if "component" in most else ("", f" (of {nit})")
     return [f"{most['short_steps']} of the run's steps were cut short by a cone's boundary; "
             f"{cone_words(most)}{where} held {most['count']} of them, the first at iteration {its[0]} and the "
             f"last at iteration {its[-1]}{of}"]

@@ -185,7 +185,8 @@ def r_unique(problem: Problem, lp) -> tuple[bool, str]:
     if nk == 0:
         return True, "no reaction components"
     if nk > HK.shape[0]:
-        return False, f"H has {nk} kept columns and only {HK.shape[0]} rows: r is not unique (hyperstatic), Hr is"
+        return False, (f"H has {nk} kept columns and only {HK.shape[0]} rows: r may not be unique (hyperstatic, "
+                       "unless enough contacts are open at the solution), Hr is")
     A = (HK.T @ HK).tocsc()
     lam_max = float(np.max(np.asarray(abs(A).sum(axis=1)).ravel(), initial=0.0))
     if lam_max == 0:
@@ -207,8 +208,8 @@ def r_unique(problem: Problem, lp) -> tuple[bool, str]:
     lam_min = lam - delta
     if lam_min > delta:
         return True, f"unique: H has full column rank on the kept components (λmin/λmax(HᵀH) ≈ {lam_min / lam_max:.1e})"
-    return False, (f"r is not unique (hyperstatic): H is rank deficient on the kept components "
-                   f"(λmin(HᵀH) ≤ {nk}·u·λmax); Hr is unique")
+    return False, (f"r may not be unique (hyperstatic, unless enough contacts are open at the solution): H is "
+                   f"rank deficient on the kept components (λmin(HᵀH) ≤ {nk}·u·λmax); Hr is unique")
 
 
 # ---------------------------------------------------------------------- lockstep

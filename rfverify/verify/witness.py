@@ -183,8 +183,9 @@ def run_witness(ctx, steps, focus, run, evidence, dps, budget, timings):
                                f"({w.stopped}), best criterion {min(w.criteria):.1e}, its iterates agreeing with "
                                f"the double-double ones to {agree} digits")
     if not ctx.problem.as_stored and not ctx.problem.matrix_is_symmetric:
-        out["text"].append("(the mpmath reference solves with (M + Mᵀ)/2 rounded to float64, the exact steps with it "
-                           "exact: M is unsymmetric here, so the two agree only to that rounding)")
+        X = "W" if ctx.local else "M"
+        out["text"].append(f"(the mpmath reference solves with ({X} + {X}ᵀ)/2 rounded to float64, the exact steps "
+                           f"with it exact: {X} is unsymmetric here, so the two agree only to that rounding)")
     out["seconds"] = time.perf_counter() - t0
     timings["witness"] += out["seconds"]
     evidence["witness"] = out
