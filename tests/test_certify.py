@@ -236,3 +236,18 @@ def test_the_k_digit_path_continues_a_centred_double_solve(monkeypatch):
     cert = certification.certify(problem, res.v, res.u, res.r, digits=10)
     # (a double candidate is not 10 digits accurate, so it is not certified; the path is what counts)
     assert seen["certify"][:1] == ["paper"] and not cert.certified
+
+
+def test_a_given_proof_point_that_fails_is_a_hint_not_the_last_word(tmp_path, capsys):
+    """A global lifting written from the bundled local sphere keeps the local certificate, whose
+    point is another problem's: tried first, it fails (u ∉ K*), and the solution is then proven
+    from the candidate and a computed point (it stopped at 'not certified' before)."""
+    from rfverify.cli import main
+
+    path = tmp_path / "sphere_lifted.h5"
+    assert main(["solve", "bundled:sphere", "--digits", "10", "--out", str(path), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["certify", str(path)]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("certified") and "the given proof point: no proof" in err
+    assert "about ANOTHER problem" in out  # the stored claim is still judged as what it is

@@ -158,32 +158,39 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
         return Certificate(digits, False, "not certified: the solution contains NaN or Inf",
                            seconds=time.perf_counter() - t0)
     ctx = ProofContext(problem)
-    extra = {}
+    deadline = None if time_limit is None else t0 + time_limit
     if point is not None:
-        proof = ctx.prove(point, v, u, r, digits, relative=relative)
-        extra["point_source"] = "given"
+        proof, extra = ctx.prove(point, v, u, r, digits, relative=relative), {"point_source": "given"}
+        if not proof.certified and ctx.hypotheses_proven:  # a given point is a hint: look for a better one too
+            say(f"the given proof point: {proof.summary()}; now the candidate itself and a computed point")
+            found = _own_proof(problem, ctx, v, u, r, digits, polish_max_iter, say, relative, deadline, time_limit)
+            if ProofDriver.score(found[0]) > ProofDriver.score(proof):
+                proof, point, extra = found
     else:
-        own = candidate_point(v, r)
-        proof = ctx.prove(own, v, u, r, digits, relative=relative)
-        say(f"the candidate itself as the proof point: {proof.summary()}")
-        if proof.certified or not ctx.hypotheses_proven:
-            point, extra["point_source"] = own, "the candidate itself"
-        else:
-            deadline = None if time_limit is None else t0 + time_limit
-            polished, at, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative,
-                                                   deadline, time_limit)
-            # Keep the better proof: a computed point can bound the candidate worse than itself.
-            if ProofDriver.score(polished) >= ProofDriver.score(proof):
-                proof, point = polished, at
-                extra.update(info)
-            else:
-                point, extra["point_source"] = own, "the candidate itself (better than the computed point)"
+        proof, point, extra = _own_proof(problem, ctx, v, u, r, digits, polish_max_iter, say, relative, deadline,
+                                         time_limit)
     cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra)
     if cross_check:
         say(f"cross-check: independent reference at {dps} digits")
         cert.cross_check = reference_agreement(problem, v, u, r, dps=dps)
     cert.seconds = time.perf_counter() - t0
     return cert
+
+
+def _own_proof(problem, ctx, v, u, r, digits, polish_max_iter, say, relative, deadline, time_limit):
+    """(proof, point, extra): the candidate itself as the proof point, and where that does not
+    certify, a computed point near the solution set (:func:`_polish_and_prove`), the better kept."""
+    own = candidate_point(v, r)
+    proof = ctx.prove(own, v, u, r, digits, relative=relative)
+    say(f"the candidate itself as the proof point: {proof.summary()}")
+    if proof.certified or not ctx.hypotheses_proven:
+        return proof, own, {"point_source": "the candidate itself"}
+    polished, at, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative,
+                                           deadline, time_limit)
+    # Keep the better proof: a computed point can bound the candidate worse than itself.
+    if ProofDriver.score(polished) >= ProofDriver.score(proof):
+        return polished, at, dict(info)
+    return proof, own, {"point_source": "the candidate itself (better than the computed point)"}
 
 
 def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=False, deadline=None, time_limit=None):
