@@ -249,5 +249,5 @@ def test_a_given_proof_point_that_fails_is_a_hint_not_the_last_word(tmp_path, ca
     capsys.readouterr()
     assert main(["certify", str(path)]) == 0
     out, err = capsys.readouterr()
-    assert out.startswith("certified") and "the given proof point: no proof" in err
+    assert out.startswith("certified") and "the stored point gives no proof" in err
     assert "about ANOTHER problem" in out  # the stored claim is still judged as what it is

@@ -161,11 +161,6 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     deadline = None if time_limit is None else t0 + time_limit
     if point is not None:
         proof, extra = ctx.prove(point, v, u, r, digits, relative=relative), {"point_source": "given"}
-        if not proof.certified and ctx.hypotheses_proven:  # a given point is a hint: look for a better one too
-            say(f"the given proof point: {proof.summary()}; now the candidate itself and a computed point")
-            found = _own_proof(problem, ctx, v, u, r, digits, polish_max_iter, say, relative, deadline, time_limit)
-            if ProofDriver.score(found[0]) > ProofDriver.score(proof):
-                proof, point, extra = found
     else:
         proof, point, extra = _own_proof(problem, ctx, v, u, r, digits, polish_max_iter, say, relative, deadline,
                                          time_limit)

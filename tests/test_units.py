@@ -1,0 +1,78 @@
+"""Grossly mismatched units (issue 47's 'bad units', found by an audit): the same problem with its
+forces in units 2^20 smaller ended InsufficientProgress, and with its velocities in units 2^100
+larger MaxIterations, though every number stays far inside float64.  Such problems are now
+brought back to units near 1 by an exact power-of-two change (answers scaled back), the same for
+every unit variant; the answers are checked against the original's, scaled by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import example, given, settings, strategies as st
+
+import rfverify
+from rfverify.model.measures import measures
+from rfverify.model.scaling import UNIT_EXPONENT, BinaryScaling, binary_scaling, scaled_problem
+
+
+@pytest.fixture(scope="module")
+def chute():
+    p = rfverify.load("bundled:chute")
+    return p, rfverify.solve(p, tol=1e-10)
+
+
+def variant(p, force: int, velocity: int):
+    """The problem with reactions in units 2^force smaller and velocities 2^velocity smaller:
+    M·2^force, f·2^(force+velocity), w·2^velocity (H unchanged), built by hand."""
+    return rfverify.Problem.from_arrays(p.M * 2.0 ** force, p.H, p.f * 2.0 ** (force + velocity),
+                                        p.w * 2.0 ** velocity, p.mu, p.mu_r)
+
+
+@pytest.mark.parametrize("force, velocity", [(20, 0), (-20, 0), (40, 0), (0, 30), (0, -100), (-20, 20), (60, -60)])
+def test_unit_variants_of_the_chute_are_solved_to_the_same_answer(chute, force, velocity):
+    p, base = chute
+    q = variant(p, force, velocity)
+    res = rfverify.solve(q, tol=1e-10)
+    assert res.success, res.message
+    # judged independently on the variant as given, in long double
+    assert measures(q, res.v, q.H.T @ res.v + q.w, res.r, "longdouble").max <= 1e-10
+    # units are exact powers of two: scaled back, the answer is one of the original problem's,
+    # judged there as tightly, and it is the original's answer to what that criterion allows
+    v, r = res.v / 2.0 ** velocity, res.r / 2.0 ** (force + velocity)
+    assert measures(p, v, p.H.T @ v + p.w, r, "longdouble").max <= 1.01e-10
+    np.testing.assert_allclose(v, base.v, rtol=0, atol=1e-6 * np.max(np.abs(base.v)))
+
+
+@settings(max_examples=20, deadline=None)
+@given(force=st.integers(-150, 150), velocity=st.integers(-150, 150))
+@example(force=UNIT_EXPONENT + 1, velocity=0)
+@example(force=0, velocity=-UNIT_EXPONENT - 1)
+def test_every_grossly_scaled_variant_is_brought_to_the_same_problem(chute, force, velocity):
+    p, _ = chute
+    q = variant(p, force, velocity)
+    scaling = binary_scaling(q)
+    if max(abs(force), abs(velocity), abs(force + velocity)) <= UNIT_EXPONENT - 6:
+        assert scaling is None  # well inside: untouched, bit for bit
+    if scaling is None:
+        return
+    a = scaled_problem(q, scaling)
+    ref = variant(p, 40, 0)  # one far variant: its scaled problem is the one every variant gets
+    b = scaled_problem(ref, binary_scaling(ref))
+    for x, y in ((a.M, b.M), (a.H, b.H)):
+        assert (x != y).nnz == 0
+    assert np.array_equal(a.f, b.f) and np.array_equal(a.w, b.w)
+
+
+def test_problems_in_reasonable_units_are_untouched(chute):
+    p, _ = chute
+    assert binary_scaling(p) is None
+    assert binary_scaling(variant(p, 8, -8)) is None
+
+
+def test_a_tiny_problem_is_solved_and_proven():
+    """M ~ 2^-664 and f ~ 2^-830: brought into the safe range before, it kept f ~ 2^-166 there
+    (MaxIterations, no digits); now its units are normalised too."""
+    p = rfverify.load("bundled:chute")
+    q = rfverify.Problem.from_arrays(p.M * 2.0 ** -664, p.H, p.f * 2.0 ** -830, p.w * 2.0 ** -166, p.mu, p.mu_r)
+    out = rfverify.solve_to_digits(q, digits=10)
+    assert out.success, out.certificate.verdict
