@@ -134,3 +134,27 @@ def test_written_solution_names_the_physical_problem_and_info_judges_it_so(tmp_p
         fh["solution/u"][1] += 1e-3
     _, summary = _cli_json(["info", str(path), "--json"])
     assert not summary["solution"]["consistent"] and "NOT a solution of it" in summary["solution"]["verdict"]
+
+
+def test_a_start_file_is_never_written(tmp_path, capsys):
+    """`--out` naming the `--start` file (or a link to it) replaced its /solution (an audit found
+    it); it is refused now, before any work.  A start that is the problem file itself, written in
+    place, is the problem's own in-place write and stays allowed."""
+    import hashlib
+    import os
+
+    H = np.c_[np.eye(3), np.zeros((3, 2))]
+    src = tmp_path / "block.hdf5"
+    rfverify.save(rfverify.Problem.from_arrays(np.eye(3), H, [-1.0, 1.2, 1.6], np.zeros(5), [0.5], [0.0]), src)
+    start = tmp_path / "start.h5"
+    assert main(["solve", str(src), "--out", str(start), "--quiet"]) == 0
+    link = tmp_path / "link.h5"
+    os.symlink(start, link)
+    before = hashlib.sha256(start.read_bytes()).hexdigest()
+    for given in (start, link):
+        assert main(["solve", str(src), "--problem", "coulomb", "--start", str(given), "--out", str(start),
+                     "--quiet"]) == 2
+    assert hashlib.sha256(start.read_bytes()).hexdigest() == before
+    assert "is also an input of this command" in capsys.readouterr().err
+    assert main(["solve", str(src), "--out", str(src), "--quiet"]) == 0  # the problem's own /solution
+    assert main(["solve", str(src), "--problem", "coulomb", "--start", str(src), "--out", str(src), "--quiet"]) == 0

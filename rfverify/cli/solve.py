@@ -106,7 +106,7 @@ def check_outputs(args) -> None:
     from ..io.output import check_output_file
 
     if args.out is not None:
-        args.out_target = check_output_file(args.out, inputs=[args.problem],
+        args.out_target = check_output_file(args.out, inputs=[args.problem, getattr(args, "start", None)],
                                             in_place_ok=is_hdf5_input(args.problem))
 
 
@@ -325,7 +325,7 @@ def _write_solution_file(args, problem, v, u, r, certificate=None, more=None) ->
     from ..model.problem import StoredSolution
 
     target = getattr(args, "out_target", None) or check_output_file(
-        args.out, inputs=[args.problem], in_place_ok=is_hdf5_input(args.problem))
+        args.out, inputs=[args.problem, getattr(args, "start", None)], in_place_ok=is_hdf5_input(args.problem))
     solution = StoredSolution(v=v, u=u, r=r)
     extra = None
     if certificate is not None:

@@ -125,9 +125,10 @@ def check_output_file(path, *, inputs=(), option: str = "--out",
     """Check an output file path before any work is done (see the module docstring).
 
     ``inputs`` are the files (or ``bundled:NAME`` specs; None entries are skipped) the same
-    command reads.  When the target is one of them it is refused, unless ``in_place_ok`` (the
-    caller then writes in place and must preserve the rest of the file); a bundled problem is
-    never written.
+    command reads, the problem first.  When the target is one of them it is refused, unless it
+    is the problem and ``in_place_ok`` (the caller then writes in place and must preserve the rest
+    of the file); any other input (a ``--start`` or ``--solution`` file) is never written, nor is
+    a bundled problem.
 
     Raises
     ------
@@ -139,7 +140,7 @@ def check_output_file(path, *, inputs=(), option: str = "--out",
     exists = _refuse_non_regular(real, path, option)
     in_place, spec = False, None
     if exists:
-        for item in inputs:
+        for position, item in enumerate(inputs):
             if item is None:
                 continue
             inp, bundled = _input_path(item)
@@ -155,11 +156,12 @@ def check_output_file(path, *, inputs=(), option: str = "--out",
                 raise OutputPathError(path, f"is the problem file bundled with rfverify ({item}); "
                                             "it is never written", option=option,
                                       fix="choose another output path")
-            if not in_place_ok:
+            if not (in_place_ok and (position == 0 or in_place)):  # another input that is the problem file
                 raise OutputPathError(path, f"is also an input of this command ({item}); writing "
                                             "would replace it", option=option,
                                       fix=f"choose a different {option} path")
-            in_place, spec = True, str(item)
+            if position == 0:
+                in_place, spec = True, str(item)
         if not os.access(real, os.W_OK):
             raise OutputPathError(path, "exists and is read-only", option=option,
                                   fix="make it writable (chmod u+w) or choose another path")
