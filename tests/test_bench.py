@@ -477,3 +477,21 @@ def test_progress_line_shows_a_refuted_claim_as_what_it_claimed(run_dir):
     rec = next(r for r in _records(path, "solve") if r["refuted"])
     line = outcome(path, {"problem": rec["problem"], "kind": "solve", "method": rec["method"], "tol": rec["tol"]})
     assert line.startswith(f"{rec['claim']} (refuted: ") and "(not verified" in line, line
+
+
+def test_the_hard_iterations_table_counts_iterations_not_iterates(run_dir):
+    """The table 'cond(Q_p) and λ2 per iteration' printed len(iterates), the start point included:
+    one more than the trajectory's own nit (an audit found 15 against 14)."""
+    path, _ = run_dir
+    make_report(path, diagnose_count=0, diagnose_max_contacts=4)
+    section = (path / "summary.md").read_text().split("## cond(Q_p) and λ2 per iteration", 1)[1].split("\n## ", 1)[0]
+    rows = [line.split("|")[1:-1] for line in section.splitlines() if line.startswith("|")][2:]
+    assert rows
+    for row in rows:
+        cells = [c.strip() for c in row]
+        problem, iterations = cells[1], int(cells[3])
+        found = list(path.glob(f"runs/{problem}/trajectory-jqinv@*.json")) or \
+            list(path.glob(f"runs/*/{problem}/trajectory-jqinv@*.json"))
+        assert len(found) == 1, problem
+        traj = json.loads(found[0].read_text())
+        assert iterations == traj["nit"] == len(traj["iterates"]) - 1

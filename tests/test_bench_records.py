@@ -174,3 +174,24 @@ def test_records_missing_a_field_are_exit_2_one_line(capsys, run_dir):
     # ... and the report is whole again
     code, out, err = report(capsys, run_dir)
     assert code == 0 and err == ""
+
+
+def test_a_split_run_records_its_worst_component(tmp_path):
+    """The bundled Chute solves as 4 independent components; its record's max cond(Q_p) and min λ2
+    were the longest component's (1.96e6 where another reached 1.06e10).  Recomputed here from
+    each component's own trace of the same solve."""
+    import numpy as np
+
+    import rfverify
+    from rfverify.bench.tasks import _solve
+
+    problem = rfverify.load("bundled:chute")
+    task = {**TASK, "problem": "bundled/chute", "tol": 1e-10}
+    rec = _solve(problem, task, str(tmp_path / "chute.npz"))
+    res = rfverify.solve(problem, method="jqinv", tol=1e-10)
+    runs = res.extras["component_runs"]
+    assert len(runs) > 1
+    cond = max(float(np.nanmax(run["trace"]["max_cond_Qp"])) for run in runs)
+    lam = min(float(np.nanmin(np.r_[run["trace"]["min_lam2_z"], run["trace"]["min_lam2_s"]])) for run in runs)
+    assert rec["max_cond_Qp"] == cond and rec["min_lam2"] == lam
+    assert cond > float(np.nanmax(res.trace["max_cond_Qp"]))  # not the longest component's alone

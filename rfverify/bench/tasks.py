@@ -189,8 +189,7 @@ def _solve(problem, task, npz_path) -> dict:
         "solver_measures": {"criterion": res.criterion, "pinfeas": res.pinfeas, "dinfeas": res.dinfeas,
                             "mu": res.mu},
         "verified": verified, "solved": bool(verified["max"] <= task["tol"]),
-        "max_cond_Qp": _nan_extreme(trace.get("max_cond_Qp"), np.nanmax),
-        "min_lam2": _min_lam2(trace),
+        **_extremes_over_components(res),
         "presolve": res.presolve,
     }
 
@@ -219,6 +218,15 @@ def _nan_extreme(values, reducer) -> float | None:
     values = np.asarray(values, dtype=np.float64)
     values = values[~np.isnan(values)]
     return float(reducer(values)) if values.size else None
+
+
+def _extremes_over_components(res) -> dict:
+    """``max_cond_Qp`` and ``min_lam2`` over every independent component's trace (``res.trace``
+    is the longest component's only: a split run's worst cond(Q_p) may be in another)."""
+    traces = [run["trace"] for run in res.extras.get("component_runs") or []] or [res.trace]
+    conds = [x for x in (_nan_extreme(t.get("max_cond_Qp"), np.nanmax) for t in traces) if x is not None]
+    lams = [x for x in (_min_lam2(t) for t in traces) if x is not None]
+    return {"max_cond_Qp": max(conds) if conds else None, "min_lam2": min(lams) if lams else None}
 
 
 def _min_lam2(trace) -> float | None:

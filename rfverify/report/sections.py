@@ -178,7 +178,8 @@ def hard_section(doc: Doc, data: RunData, out: Path) -> None:
                figures.hard_iterations, picks, out)
     doc.table(["family", "problem", "contacts", "iterations", "end status", "max cond(Q_p)", "min λ2"],
               [[p["family"], p["problem"], data.problems[p["problem"]]["n_contacts"],
-                len(p["trajectory"]["iterates"]), p["trajectory"].get("status"), fmt(p["max_cond"], ".1e"),
+                p["trajectory"].get("nit", len(p["trajectory"]["iterates"]) - 1),  # the iterates include the start
+                p["trajectory"].get("status"), fmt(p["max_cond"], ".1e"),
                 fmt(min((x for it in p["trajectory"]["iterates"] for x in (it.get("min_lam2_z"),
                                                                              it.get("min_lam2_s"))
                           if x is not None), default=None), ".1e")] for p in picks])
