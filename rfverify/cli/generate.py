@@ -39,7 +39,7 @@ def add_parser(sub) -> None:
     gen.add_argument("--list", action="store_true",
                      help="list the scenes with their default size and parameters, then exit")
     gen.add_argument("--count", type=positive_int, default=1, metavar="N",
-                     help="problems in the trace; problem K comes from stage K/(N-1) of the run "
+                     help="problems in the trace (at most 10000); problem K comes from stage K/(N-1) of the run "
                           "(default: %(default)s)")
     gen.add_argument("--seed", type=nonneg_int, default=0, metavar="S",
                      help="random seed (default: %(default)s)")

@@ -58,6 +58,10 @@ __all__ = ["SCENES", "FE_SCENES", "ALL_SCENES", "Scene", "World", "generate", "s
            "resolve_scene", "scene_parameters", "GENERATOR_VERSION", "DEFAULT_STEPS"]
 
 
+MAX_COUNT = 10_000
+"""Most problems one :func:`generate` call makes (they are kept in memory until written)."""
+
+
 def scene_parameters(scene, size=None, **params) -> tuple[Scene, dict, int]:
     """(scene, parameters, size) after applying overrides to the scene's defaults.
 
@@ -129,6 +133,9 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
     sc, p, size = scene_parameters(scene, size, **params)
     if int(count) < 1:
         raise SceneError(f"count = {count!r} must be ≥ 1")
+    if int(count) > MAX_COUNT:  # (a billion allocated its seeds before the first problem, 1.2 GB in 15 s)
+        raise SceneError(f"count = {count!r}: at most {MAX_COUNT} problems a run (each is simulated and kept "
+                         f"until written); fix: run generate several times with different --seed values")
     if int(steps) < 1:
         raise SceneError(f"steps = {steps!r} must be ≥ 1")
     count, steps = int(count), int(steps)
