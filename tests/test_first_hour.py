@@ -109,11 +109,11 @@ def test_a_bad_threshold_is_refused_with_the_fix(capsys, monkeypatch, value):
     assert "fix: set RFVERIFY_PROGRESS_AFTER=2" in err
 
 
-def _info(k, method="jqinv", component=0):
+def _info(k, method="jqinv", component=0, components=2):
     nan = float("nan")
     return IterationInfo(component=component, iteration=k, criterion=10.0 ** -k, pinfeas=nan, dinfeas=nan,
                          mu=10.0 ** -k, sigma=nan, alpha_aff=nan, alpha=nan, min_lam2_z=nan, min_lam2_s=nan,
-                         max_cond_Qp=nan, solve_residual=nan, elapsed=0.0, method=method)
+                         max_cond_Qp=nan, solve_residual=nan, elapsed=0.0, method=method, components=components)
 
 
 def test_iteration_lines_are_spaced_but_a_new_form_or_component_is_always_shown():
@@ -121,8 +121,13 @@ def test_iteration_lines_are_spaced_but_a_new_form_or_component_is_always_shown(
     progress = IterationProgress(lines.append, after=0.0, every=3600.0)
     for info in (_info(0), _info(1), _info(0, "reduced"), _info(1, "reduced"), _info(0, "reduced", 1)):
         assert progress(info) is False  # never stops the run
-    assert [x.split(":")[0].strip() for x in lines] == ["jqinv iteration 0", "reduced iteration 0",
-                                                        "reduced iteration 0 (component 2)"]
+    # numbered from 0 as in the JSON, the first component named too (it was not, and the second was "2")
+    assert [x.split(":")[0].strip() for x in lines] == ["jqinv iteration 0 (component 0)",
+                                                        "reduced iteration 0 (component 0)",
+                                                        "reduced iteration 0 (component 1)"]
+    one = []
+    IterationProgress(one.append, after=0.0, every=3600.0)(_info(0, components=1))
+    assert one[0].split(":")[0].strip() == "jqinv iteration 0"  # a problem solved as one names none
     every = []
     progress = IterationProgress(every.append, after=0.0, every=0.0)
     for k in range(4):
@@ -131,3 +136,20 @@ def test_iteration_lines_are_spaced_but_a_new_form_or_component_is_always_shown(
     late = []
     IterationProgress(late.append, after=3600.0)(_info(0))
     assert late == []
+
+
+def test_a_split_run_names_every_component_of_its_progress_lines(capsys, monkeypatch):
+    """The bundled Chute is solved as 4 independent components: every iteration line names its
+    component, numbered as the JSON's component_traces are."""
+    import json
+    import re
+
+    monkeypatch.setenv(PROGRESS_AFTER_ENV, "0")
+    code, out, err = run(capsys, "solve", "bundled:chute")
+    lines = [x for x in err.splitlines() if " iteration " in x and "μ =" in x]
+    assert code == 0 and lines, err
+    named = [re.search(r"\(component (\d+)\)", x) for x in lines]
+    assert all(named), lines
+    code, out, _ = run(capsys, "solve", "bundled:chute", "--json", "--quiet")
+    traces = json.loads(out)["component_traces"]
+    assert {int(m.group(1)) for m in named} == set(range(len(traces))) and len(traces) == 4

@@ -204,7 +204,8 @@ class IterationProgress:
         if key == self.key and now - self.last < self.every:
             return False
         self.key, self.last = key, now
-        where = f" (component {info.component + 1})" if info.component else ""
+        # numbered from 0, as in the JSON and the --verbose table; named wherever the problem was split
+        where = f" (component {info.component})" if getattr(info, "components", 1) > 1 else ""
         self.say(f"  {info.method or 'Algorithm 1'} iteration {info.iteration}{where}: μ = {info.mu:.2e}, "
                  f"criterion = {info.criterion:.2e}, {now - self.start:.1f} s{_step_to(before, info)}")
         return False

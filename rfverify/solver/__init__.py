@@ -221,6 +221,13 @@ def _unscaled_result(res: SolveResult, scaled: Problem, scaling) -> SolveResult:
     return dataclasses.replace(res, **back, message=f"{res.message} ({note})", extras=extras)
 
 
+def _counting(callback, components: int):
+    """``callback`` receiving infos that say how many components the problem was split into."""
+    if callback is None or components == 1:
+        return callback
+    return lambda info: callback(dataclasses.replace(info, components=components))
+
+
 def posed(problem: Problem, as_stored: bool | None, method: str | None = None) -> Problem:
     """``problem`` posing the equations ``as_stored`` asks for (None: its own), refused where
     they cannot be solved: the peers (Clarabel, Siconos) take (M + Mᵀ)/2 only, and a local file
@@ -349,7 +356,7 @@ def _solve_form(problem: Problem, method: str, settings: Settings, keep_iterates
         out = ipm.run(M[dofs][:, dofs].tocsc(), problem.f[dofs], lp.H_t[rows][:, dofs].tocsr(),
                       lp.w_t[rows], lp.J[rows][:, zidx].tocsr(), cones, n_c, method, settings,
                       judge=judges[index], describe_cone=describe,
-                      keep_iterates=keep_iterates, callback=callback, component=index, t0=t0,
+                      keep_iterates=keep_iterates, callback=_counting(callback, len(groups)), component=index, t0=t0,
                       printer=printer, M_eq=problem.M[dofs][:, dofs].tocsc() if problem.as_stored else None,
                       held_by=held_by)
         for key in ("min_lam2_z_cone", "min_lam2_s_cone"):  # the component's cones -> the lifted problem's

@@ -107,4 +107,4 @@ class IterationPrinter:
             ["each component on its own"] if self.labelled else [])
         rows = f" (the rows judge each iterate {', '.join(apart)})" if apart else ""
         print(f"criterion of the returned (v, u, r) on the whole problem: {result.criterion:.2e}{rows}; "
-              f"time {result.timings.get('total', float('nan')):.3f} s", file=self.stream, flush=True)
+              f"time in the solver {result.timings.get('total', float('nan')):.3f} s", file=self.stream, flush=True)

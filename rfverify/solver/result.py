@@ -326,7 +326,8 @@ class IterationInfo:
     run it belongs to — under ``method="auto"``, the form running now — and ``held_by``: the
     cone whose boundary cut the step α short, {"cone" (index in the lifted problem),
     "contact", "part" (friction / rolling / normal), "side" (velocity: z; reaction: Jᵀr̃)},
-    or None for a full step."""
+    or None for a full step; ``components``: how many independent components the problem was
+    split into (numbered from 0, as in the JSON and the ``--verbose`` table)."""
 
     component: int
     iteration: int
@@ -344,6 +345,7 @@ class IterationInfo:
     elapsed: float
     method: str = ""
     held_by: dict | None = None
+    components: int = 1
 
 
 
