@@ -144,7 +144,7 @@ def test_boxes_stack_at_rest_is_certified_for_the_physical_problem_and_rechecked
     assert code == 0
     verdict = json.loads(printed.getvalue())["verdict"]
     assert ") with (W + Wᵀ)/2 for data q differing from the file's by δ e_N + D r*" in verdict
-    assert "r not unique" in verdict
+    assert "r not proven unique" in verdict
     W, q, mu = _file_W_q_mu(BOXES)
     WT = W.T.tocsr()
     with h5py.File(out, "r") as f:

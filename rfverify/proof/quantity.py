@@ -78,7 +78,9 @@ class QuantityBound:
         if self.mode == "information":
             bound = (f"|error| ≤ {bound_text(self.abs_bound)}, claimed for no digits" if math.isfinite(self.abs_bound)
                      else "error bound not available")
-            return f"{n} not unique", f"{n}: not proven unique ({self.note}); {bound}"
+            # "not unique" only where that is proven (a verified self-stress); else only not proven unique
+            words = "not unique" if self.note.startswith(f"{n} is not unique") else "not proven unique"
+            return f"{n} {words}", f"{n}: {words} ({self.note}); {bound}"
         if self.mode == "absolute" and self.zero_within == 0:
             return f"{n} exactly 0", f"{n}: exactly 0 (the candidate's {n} is the solution's exactly: error bound 0)"
         if self.mode == "absolute":
