@@ -482,3 +482,30 @@ def test_a_count_beyond_what_a_run_can_hold_is_refused_before_any_work(capsys):
     assert main(["generate", "SpheresPile", "--size", "5", "--count", "1000000000", "--out", "unused"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "fix:" in err[0]
+
+
+def test_every_scene_parameter_domain_names_a_parameter_and_holds_its_default():
+    from rfverify.scenes import PARAMETER_DOMAINS, SCENE_DOMAINS, resolve_scene
+    from rfverify.scenes.library import ALL_SCENES
+
+    names = set()
+    for name in ALL_SCENES:
+        sc = resolve_scene(name)
+        names |= set(sc.defaults)
+        for key, value in sc.defaults.items():
+            domain = SCENE_DOMAINS.get(sc.name, {}).get(key, PARAMETER_DOMAINS.get(key))
+            assert domain is None or domain[1](value), (name, key, value)
+    assert set(PARAMETER_DOMAINS) <= names  # no domain for a name no scene has (a typo)
+
+
+@pytest.mark.parametrize("scene, param", [("SpheresPile", "recent_fraction=2"), ("SpheresPile", "tilt=95"),
+                                          ("SpheresPile", "first_stage_bodies=2.5"), ("Lattice", "width=-1"),
+                                          ("Chute", "width=0"), ("MassRatio", "mass_ratio=0.5"),
+                                          ("AllOpen", "gap_lo=0.9")])
+def test_a_parameter_outside_its_domain_is_refused_with_the_fix(capsys, scene, param):
+    """An audit found these accepted: clamped, truncated, recorded as given, or the pile upside down."""
+    from rfverify.cli import main
+
+    assert main(["generate", scene, "--size", "5", "--param", param, "--out", "unused"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and param.split("=")[0] in err[0] and "fix:" in err[0], err

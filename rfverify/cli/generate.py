@@ -50,7 +50,9 @@ def add_parser(sub) -> None:
                      help="Moreau-Jean steps per stage; the last is dumped (default: %(default)s; "
                           "not used by GranularBed)")
     gen.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                     help="override a numeric scene parameter (repeatable; see --list)")
+                     help="override a numeric scene parameter (repeatable; see --list); a value outside "
+                          "its domain (a fraction above 1, a tilt of 90 degrees or more, a count that is not "
+                          "whole) is refused with exit 2")
     gen.add_argument("--out", metavar="DIR", type=out_path,
                      help="directory for the HDF5 files (created if missing); required "
                           "unless --list")

@@ -58,6 +58,28 @@ __all__ = ["SCENES", "FE_SCENES", "ALL_SCENES", "Scene", "World", "generate", "s
            "resolve_scene", "scene_parameters", "GENERATOR_VERSION", "DEFAULT_STEPS"]
 
 
+PARAMETER_DOMAINS = {
+    **{k: ("> 0", lambda x: x > 0) for k in (
+        "diameter", "density", "h", "margin", "radius_min", "radius_max", "drop_radius", "box_half_width",
+        "box_depth", "fall_height", "flow_speed", "rain_speed", "layers", "cell", "young", "expansion",
+        "width_ratio", "height_ratio")},
+    **{k: ("≥ 0", lambda x: x >= 0) for k in ("mu", "mu_r", "agitation", "speed_noise", "spin", "gap_jitter")},
+    **{k: ("in [0, 1]", lambda x: 0 <= x <= 1) for k in (
+        "recent_fraction", "capsule_fraction", "bed_fraction", "first_stage_fraction", "first_bed_fraction",
+        "stream_packing", "rain_packing", "jitter")},
+    "tilt": ("in [0, 90) degrees", lambda x: 0 <= x < 90),
+    "incline": ("in (0, 90) degrees", lambda x: 0 < x < 90),
+    "mass_ratio": ("≥ 1", lambda x: x >= 1),
+    "first_stage_bodies": ("a whole number ≥ 1", lambda x: x >= 1 and float(x).is_integer()),
+    "width": ("a whole number ≥ 0 (0: the scene's own choice)", lambda x: x >= 0 and float(x).is_integer()),
+}
+"""What each scene parameter may be (where a value outside would be silently clamped, truncated or
+turn the scene upside down); the scenes check the rest (packing, orientation, gap_lo < gap_hi,
+the elastic constants) themselves.  :data:`SCENE_DOMAINS` overrides a name one scene uses
+otherwise."""
+
+SCENE_DOMAINS = {"Chute": {"width": ("> 0 (the channel's width, m)", lambda x: x > 0)}}
+
 MAX_COUNT = 10_000
 """Most problems one :func:`generate` call makes (they are kept in memory until written)."""
 
@@ -81,6 +103,10 @@ def scene_parameters(scene, size=None, **params) -> tuple[Scene, dict, int]:
             raise SceneError(f"{sc.name}: parameter {k} = {val!r} is not a number") from None
         if not math.isfinite(val):
             raise SceneError(f"{sc.name}: parameter {k} = {val!r} must be finite")
+        domain = SCENE_DOMAINS.get(sc.name, {}).get(k, PARAMETER_DOMAINS.get(k))
+        if domain is not None and not domain[1](val):
+            raise SceneError(f"{sc.name}: parameter {k} = {val:g} must be {domain[0]}; fix: give --param "
+                             f"{k}=VALUE with VALUE {domain[0]} (default {sc.defaults[k]:g})")
         p[k] = val
     for k in ("h", "margin"):
         if k in p and not p[k] > 0:

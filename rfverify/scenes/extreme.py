@@ -276,7 +276,8 @@ class AllOpen(Scene):
 
     def prepare(self, p, size, rng):
         if not 0 < p["gap_lo"] < p["gap_hi"] < 1:
-            raise SceneError("AllOpen: need 0 < gap_lo < gap_hi < 1 (fractions of the margin)")
+            raise SceneError("AllOpen: need 0 < gap_lo < gap_hi < 1 (fractions of the margin); fix: give e.g. "
+                             "--param gap_lo=0.25 --param gap_hi=0.85 (the defaults)")
         radii = rng.uniform(p["radius_min"], p["radius_max"], size)
         m = p["margin"]
         return {"radii": radii, "pos": open_cluster(radii, rng, p["gap_lo"] * m, p["gap_hi"] * m)}
