@@ -501,7 +501,7 @@ def test_every_scene_parameter_domain_names_a_parameter_and_holds_its_default():
 @pytest.mark.parametrize("scene, param", [("SpheresPile", "recent_fraction=2"), ("SpheresPile", "tilt=95"),
                                           ("SpheresPile", "first_stage_bodies=2.5"), ("Lattice", "width=-1"),
                                           ("Chute", "width=0"), ("MassRatio", "mass_ratio=0.5"),
-                                          ("AllOpen", "gap_lo=0.9")])
+                                          ("AllOpen", "gap_lo=0.9"), ("SpheresPile", "first_stage_bodies=100")])
 def test_a_parameter_outside_its_domain_is_refused_with_the_fix(capsys, scene, param):
     """An audit found these accepted: clamped, truncated, recorded as given, or the pile upside down."""
     from rfverify.cli import main

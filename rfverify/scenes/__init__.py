@@ -114,6 +114,10 @@ def scene_parameters(scene, size=None, **params) -> tuple[Scene, dict, int]:
     size = sc.default_size if size is None else int(size)
     if size < sc.min_size:
         raise SceneError(f"{sc.name}: size {size} is below the minimum of {sc.min_size} {sc.size_unit}")
+    if params.get("first_stage_bodies") is not None and p["first_stage_bodies"] > size:  # (clamped, recorded as given)
+        raise SceneError(f"{sc.name}: parameter first_stage_bodies = {p['first_stage_bodies']:g} is more than the "
+                         f"size, {size} {sc.size_unit}; fix: give --param first_stage_bodies={min(size, 4)} or a "
+                         "larger --size")
     return sc, p, size
 
 
