@@ -501,7 +501,11 @@ def test_every_scene_parameter_domain_names_a_parameter_and_holds_its_default():
 @pytest.mark.parametrize("scene, param", [("SpheresPile", "recent_fraction=2"), ("SpheresPile", "tilt=95"),
                                           ("SpheresPile", "first_stage_bodies=2.5"), ("Lattice", "width=-1"),
                                           ("Chute", "width=0"), ("MassRatio", "mass_ratio=0.5"),
-                                          ("AllOpen", "gap_lo=0.9"), ("SpheresPile", "first_stage_bodies=100")])
+                                          ("AllOpen", "gap_lo=0.9"), ("SpheresPile", "first_stage_bodies=100"),
+                                          ("GranularBed", "packing=2"), ("GranularBed", "orientation=2"),
+                                          ("GranularBed", "gap_jitter=0.5"), ("GranularBed", "margin=1"),
+                                          ("ElasticBlock", "jitter=0.5"), ("ElasticBlock", "poisson=0.6"),
+                                          ("SpheresPile", "colour=1"), ("SpheresPile", "mu=abc")])
 def test_a_parameter_outside_its_domain_is_refused_with_the_fix(capsys, scene, param):
     """An audit found these accepted: clamped, truncated, recorded as given, or the pile upside down."""
     from rfverify.cli import main
@@ -509,3 +513,6 @@ def test_a_parameter_outside_its_domain_is_refused_with_the_fix(capsys, scene, p
     assert main(["generate", scene, "--size", "5", "--param", param, "--out", "unused"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and param.split("=")[0] in err[0] and "fix:" in err[0], err
+    with pytest.raises(SystemExit) as stop:  # (an argparse type: argparse exits)
+        main(["generate", "NoSuchScene", "--out", "unused"])
+    assert stop.value.code == 2 and "fix:" in capsys.readouterr().err

@@ -94,15 +94,18 @@ def scene_parameters(scene, size=None, **params) -> tuple[Scene, dict, int]:
     unknown = sorted(set(params) - set(sc.defaults))
     if unknown:
         raise SceneError(f"{sc.name}: unknown parameter(s) {', '.join(unknown)}; parameters: "
-                         f"{', '.join(sorted(sc.defaults))}")
+                         f"{', '.join(sorted(sc.defaults))}; fix: use one of those names (rfverify generate --list "
+                         "gives each scene's parameters and defaults)")
     p = dict(sc.defaults)
     for k, val in params.items():
         try:
             val = float(val)
         except (TypeError, ValueError):
-            raise SceneError(f"{sc.name}: parameter {k} = {val!r} is not a number") from None
+            raise SceneError(f"{sc.name}: parameter {k} = {val!r} is not a number; fix: give --param {k}=NUMBER "
+                             f"(default {sc.defaults[k]:g})") from None
         if not math.isfinite(val):
-            raise SceneError(f"{sc.name}: parameter {k} = {val!r} must be finite")
+            raise SceneError(f"{sc.name}: parameter {k} = {val!r} must be finite; fix: give a finite number "
+                             f"(default {sc.defaults[k]:g})")
         domain = SCENE_DOMAINS.get(sc.name, {}).get(k, PARAMETER_DOMAINS.get(k))
         if domain is not None and not domain[1](val):
             raise SceneError(f"{sc.name}: parameter {k} = {val:g} must be {domain[0]}; fix: give --param "
@@ -110,10 +113,11 @@ def scene_parameters(scene, size=None, **params) -> tuple[Scene, dict, int]:
         p[k] = val
     for k in ("h", "margin"):
         if k in p and not p[k] > 0:
-            raise SceneError(f"{sc.name}: parameter {k} = {p[k]!r} must be > 0")
+            raise SceneError(f"{sc.name}: parameter {k} = {p[k]!r} must be > 0; fix: give --param {k}=VALUE > 0")
     size = sc.default_size if size is None else int(size)
     if size < sc.min_size:
-        raise SceneError(f"{sc.name}: size {size} is below the minimum of {sc.min_size} {sc.size_unit}")
+        raise SceneError(f"{sc.name}: size {size} is below the minimum of {sc.min_size} {sc.size_unit}; fix: give "
+                         f"--size {sc.min_size} or more")
     if params.get("first_stage_bodies") is not None and p["first_stage_bodies"] > size:  # (clamped, recorded as given)
         raise SceneError(f"{sc.name}: parameter first_stage_bodies = {p['first_stage_bodies']:g} is more than the "
                          f"size, {size} {sc.size_unit}; fix: give --param first_stage_bodies={min(size, 4)} or a "
@@ -162,12 +166,12 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
     """
     sc, p, size = scene_parameters(scene, size, **params)
     if int(count) < 1:
-        raise SceneError(f"count = {count!r} must be ≥ 1")
+        raise SceneError(f"count = {count!r} must be ≥ 1; fix: give --count 1 or more")
     if int(count) > MAX_COUNT:  # (a billion allocated its seeds before the first problem, 1.2 GB in 15 s)
         raise SceneError(f"count = {count!r}: at most {MAX_COUNT} problems a run (each is simulated and kept "
                          f"until written); fix: run generate several times with different --seed values")
     if int(steps) < 1:
-        raise SceneError(f"steps = {steps!r} must be ≥ 1")
+        raise SceneError(f"steps = {steps!r} must be ≥ 1; fix: give --steps 1 or more")
     count, steps = int(count), int(steps)
     children = np.random.SeedSequence(int(seed)).spawn(count + 1)
     say = progress or (lambda frac, text: None)
@@ -193,7 +197,8 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
                 f"{sc.name} {K + 1}/{count}: step {len(records)}, {rec.n_contacts} contacts")
         if dumped is None:
             raise SceneError(f"{sc.name} stage {K} (phi = {phi:.3f}): no contact in "
-                             f"{len(records)} steps; nothing to dump")
+                             f"{len(records)} steps; nothing to dump; fix: a larger --size, more --steps or "
+                             "another --seed")
         t_stage = time.perf_counter() - t1
         solves = [{"step": r.step, "contacts": r.n_contacts, "status": r.status,
                    "iterations": r.nit, "solves": r.desaxce_solves, "time": round(r.solve_time, 4),
@@ -291,7 +296,8 @@ def _generate_step_free(sc: Scene, p: dict, size: int, count: int, seed: int, ch
     for K, phi, t1, world in worlds:
         M, H, f, w, mu, mu_r, contacts = _stepper(world).one_step_arrays()
         if contacts.count == 0:
-            raise SceneError(f"{sc.name} stage {K} (phi = {phi:.3f}): no contact; nothing to dump")
+            raise SceneError(f"{sc.name} stage {K} (phi = {phi:.3f}): no contact; nothing to dump; fix: a larger "
+                             "--size or another --seed")
         gaps = contacts.gap
         notes = dict(world.notes, contacts=contacts.count, open_gap_max=float(gaps.max()),
                      touching=int(np.sum(gaps <= 0)))

@@ -189,24 +189,27 @@ class GranularBed(Scene):
         d = p["diameter"]
         if p["packing"] not in (0.0, 1.0):
             raise SceneError(f"{self.name}: parameter packing = {p['packing']!r} must be 0 (simple "
-                             "cubic) or 1 (FCC)")
+                             "cubic) or 1 (FCC); fix: give --param packing=0 or 1")
         if not 0 <= p["gap_jitter"] < 0.1:
             raise SceneError(f"{self.name}: parameter gap_jitter = {p['gap_jitter']!r} must be in "
-                             "[0, 0.1) (a fraction of the diameter)")
+                             "[0, 0.1) (a fraction of the diameter); fix: give e.g. --param gap_jitter=0.001 "
+                             "(the default), or 0 for touching contacts")
         # Lattice neighbours must all be contacts, second neighbours (at sqrt(2) d) none.
         if not p["gap_jitter"] * d <= p["margin"] < (math.sqrt(2.0) - 1.0) * d:
             raise SceneError(f"{self.name}: margin = {p['margin']:g} must be at least gap_jitter * "
                              f"diameter = {p['gap_jitter'] * d:g} and below (sqrt(2) - 1) * diameter = "
-                             f"{(math.sqrt(2.0) - 1.0) * d:g}")
+                             f"{(math.sqrt(2.0) - 1.0) * d:g}; fix: a --param margin=VALUE between them")
         for k in ("diameter", "density"):
             if not p[k] > 0:
-                raise SceneError(f"{self.name}: parameter {k} = {p[k]!r} must be > 0")
+                raise SceneError(f"{self.name}: parameter {k} = {p[k]!r} must be > 0; fix: give --param {k}=VALUE > 0")
         if not p["agitation"] >= 0:
-            raise SceneError(f"{self.name}: parameter agitation = {p['agitation']!r} must be >= 0")
+            raise SceneError(f"{self.name}: parameter agitation = {p['agitation']!r} must be >= 0; fix: give "
+                             "--param agitation=VALUE >= 0")
         if p["orientation"] not in (0.0, 1.0):
             raise SceneError(f"{self.name}: parameter orientation = {p['orientation']!r} must be 0 "
                              "(lattice axes: vertical and horizontal contact normals) or 1 (the bed "
-                             "turned by a random 3-D rotation: generic contact frames)")
+                             "turned by a random 3-D rotation: generic contact frames); fix: give --param "
+                             "orientation=0 or 1")
 
     def layer_width(self, p, size) -> int:
         """Spheres along x and y of the bottom layer: ``width``, or a roughly cubic bed."""

@@ -137,7 +137,7 @@ def block_mesh(nx: int, ny: int, nz: int, cell: float, jitter: float = 0.0,
     vol = np.abs(vol)
     if vol.min() < 0.05 * cell ** 3 / 6:
         raise SceneError(f"block_mesh: a tetrahedron is inverted or nearly flat (volume "
-                         f"{vol.min():.3g} against {cell ** 3 / 6:.3g} undistorted); lower jitter")
+                         f"{vol.min():.3g} against {cell ** 3 / 6:.3g} undistorted); fix: a lower --param jitter")
     bottom = np.flatnonzero(grid[:, 2] == 0)
     return Mesh(nodes=nodes, tets=tets, bottom=bottom, shape=(nx, ny, nz), cell=float(cell))
 
@@ -162,7 +162,8 @@ def lame(young: float, poisson: float) -> tuple[float, float]:
     """(λ, G) of an isotropic material."""
     if not (young > 0 and -1.0 < poisson < 0.5):
         raise SceneError(f"elastic material needs young > 0 and -1 < poisson < 0.5, got "
-                         f"young = {young!r}, poisson = {poisson!r}")
+                         f"young = {young!r}, poisson = {poisson!r}; fix: give --param young=VALUE > 0 and "
+                         "--param poisson=VALUE in (-1, 0.5)")
     return (young * poisson / ((1 + poisson) * (1 - 2 * poisson)),
             young / (2 * (1 + poisson)))
 
@@ -309,12 +310,12 @@ class ElasticMoreauJean:
             k = int(np.argmin(rN))
             raise SceneError(f"ElasticBlock step {self.steps_done}: contact {k} would open "
                              f"(clamped normal impulse {rN[k]:.3g} <= 0); the body is not "
-                             "resting on every bottom node")
+                             "resting on every bottom node; fix: another --seed or a lower --param jitter")
         ratio = rT / rN
         if not np.all(ratio < self.mu):
             k = int(np.argmax(ratio))
             raise SceneError(f"ElasticBlock step {self.steps_done}: contact {k} would slide "
-                             f"(|r_T|/r_N = {ratio[k]:.4g} >= mu = {self.mu:g}); raise mu")
+                             f"(|r_T|/r_N = {ratio[k]:.4g} >= mu = {self.mu:g}); fix: a larger --param mu")
         r = np.zeros(5 * rc.shape[0])
         r.reshape(-1, 5)[:, :3] = rc
         rec = ElasticStep(step=self.steps_done, time=self.time, f=f, v=v, r=r,
@@ -370,12 +371,13 @@ class ElasticBlock(Scene):
     def prepare(self, p, size, rng):
         for k in ("cell", "density", "young", "width_ratio", "height_ratio"):
             if not p[k] > 0:
-                raise SceneError(f"{self.name}: parameter {k} = {p[k]!r} must be > 0")
+                raise SceneError(f"{self.name}: parameter {k} = {p[k]!r} must be > 0; fix: give --param {k}=VALUE > 0")
         if not p["mu"] >= 0:
-            raise SceneError(f"{self.name}: parameter mu = {p['mu']!r} must be >= 0")
+            raise SceneError(f"{self.name}: parameter mu = {p['mu']!r} must be >= 0; fix: give --param mu=VALUE >= 0")
         if not 0 <= p["jitter"] <= 0.25:
             raise SceneError(f"{self.name}: parameter jitter = {p['jitter']!r} must be in "
-                             "[0, 0.25] (a fraction of the cell edge)")
+                             "[0, 0.25] (a fraction of the cell edge); fix: give e.g. --param jitter=0.1 "
+                             "(the default)")
         lame(p["young"], p["poisson"])  # checks the material
         nx, ny, nz = self.cells(p, size)
         mesh = block_mesh(nx, ny, nz, p["cell"], p["jitter"], rng)

@@ -40,5 +40,5 @@ def resolve_scene(name: str) -> Scene:
     table = {k.lower(): v for k, v in ALL_SCENES.items()}
     low = ALIASES.get(key.lower(), key).lower()
     if low not in table:
-        raise SceneError(f"unknown scene {name!r}; scenes: {', '.join(ALL_SCENES)}")
+        raise SceneError(f"unknown scene {name!r}; scenes: {', '.join(ALL_SCENES)}; fix: use one of those names")
     return table[low]

@@ -43,7 +43,8 @@ class SpheresPile(Scene):
         R_drop = p["drop_radius"]
         if R_drop + d / 2 > a:
             raise SceneError(f"{self.name}: drop_radius + d/2 = {R_drop + d / 2:g} exceeds "
-                             f"box_half_width = {a:g}")
+                             f"box_half_width = {a:g}; fix: a larger --param box_half_width or a smaller "
+                             "--param drop_radius")
 
         def drop_xy(g, R):
             rr = R_drop * math.sqrt(g.uniform())
@@ -54,7 +55,7 @@ class SpheresPile(Scene):
                               footprint=(-a, a, -a, a))
         if dep.centers.shape[0] < size:
             raise SceneError(f"{self.name}: only {dep.centers.shape[0]} of {size} spheres could "
-                             f"be deposited on the box (make box_half_width larger)")
+                             f"be deposited on the box; fix: a larger --param box_half_width")
         materials = self.materials(rng, size)
         return {"deposit": dep, "materials": materials}
 
@@ -130,7 +131,8 @@ class Chute(Scene):
     def prepare(self, p, size, rng):
         W = p["width"]
         if 2 * p["radius_max"] >= W:
-            raise SceneError("Chute: width must exceed the largest diameter")
+            raise SceneError("Chute: width must exceed the largest diameter; fix: a larger --param width or a "
+                             "smaller --param radius_max")
         n_bed = max(2, int(round(size * p["bed_fraction"])))
         radii = rng.uniform(p["radius_min"], p["radius_max"], n_bed)
         stream_radii = rng.uniform(p["radius_min"], p["radius_max"], size)
@@ -144,7 +146,8 @@ class Chute(Scene):
         planes_o = [0.0, -W / 2, -W / 2]
         dep = deposit_spheres(radii, rng, drop_xy, planes_n, planes_o)
         if dep.centers.shape[0] < n_bed:
-            raise SceneError(f"Chute: only {dep.centers.shape[0]} of {n_bed} bed spheres deposited")
+            raise SceneError(f"Chute: only {dep.centers.shape[0]} of {n_bed} bed spheres deposited; fix: a smaller "
+                             "--param bed_fraction or a larger --param width")
         return {"deposit": dep, "stream_radii": stream_radii, "length": length}
 
     def stage(self, base, p, size, phi, rng):
@@ -216,7 +219,8 @@ class PrimitiveSoup(Scene):
         dep = deposit_spheres(Rb, rng, lambda g, R: tuple(g.uniform(R, S - R, 2)),
                               statics.plane_normal, statics.plane_offset)
         if dep.centers.shape[0] < size:
-            raise SceneError(f"PrimitiveSoup: only {dep.centers.shape[0]} of {size} bodies deposited")
+            raise SceneError(f"PrimitiveSoup: only {dep.centers.shape[0]} of {size} bodies deposited; fix: a "
+                             "smaller --size or another --seed")
         src = dep.source
         bodies = Bodies.make(r[src], hl[src], p["density"], dep.centers,
                              random_quaternions(rng, size))
