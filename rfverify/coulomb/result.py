@@ -98,7 +98,10 @@ def coulomb_verdict(requested: int, quantities: dict, backward: BackwardError, i
     bad = [q.name for q in quantities.values() if q.mode != "information" and not q.certified]
     digits_ok = not bad
     be_ok = backward.proven and backward.relative <= tol
-    if digits_ok and be_ok:
+    if digits_ok and be_ok and any(q.mode == "absolute" for q in quantities.values()):
+        # a quantity proven zero within a bound has no relative digits: not "proven to K digits" (DESIGN §6.3)
+        head = f"certified ({requested} digits requested; zero quantities bounded absolutely: {', '.join(parts)})"
+    elif digits_ok and be_ok:
         head = f"proven to {requested} digits ({', '.join(parts)})"
     elif digits_ok:
         head = (f"not certified: the digits are proven ({', '.join(parts)}) but the backward error "
@@ -176,6 +179,10 @@ class CoulombSolution(ResultAliases):
                 "inner_criterion": None if self.inner is None else self.inner.criterion,
                 "inner_method": None if self.inner is None else self.inner.method,
                 "physical_residuals": self.residuals.as_dict(), "timings": dict(self.timings)}
+
+    def __repr__(self) -> str:  # (the dataclass default printed every array: 200 lines on the Chute)
+        return (f"CoulombSolution(status={self.status}, nit={self.nit}, criterion={self.criterion:.1e}, "
+                f"time={self.time:.3g} s,\n    {self.message!r})")
 
 
 @dataclass

@@ -118,4 +118,7 @@ def choose_backend(data: ExtendedData, backend: str = "auto", engine: str = "aut
         return ContactSpace(data, mixed=False)
     if backend == "hybrid":
         return Hybrid(data, contact=ContactSpace(data, engine=engine, backward_target=NEWTON_REFINED_TARGET))
-    raise ValueError(f"backend {backend!r} is not one of auto, contact, contact-dd, hybrid, dof")
+    from ..errors import InvalidArgumentError
+
+    raise InvalidArgumentError("backend", f"{backend!r} is not one of auto, contact, contact-dd, hybrid, dof",
+                               fix="use backend='auto' (the default)")

@@ -12,8 +12,17 @@ import scipy.sparse as sp
 from ..errors import InvalidProblemError
 
 
+def _refuse_complex(name: str, x) -> None:
+    """Complex data would lose its imaginary part in the float64 conversion, silently."""
+    dtype = x.dtype if sp.issparse(x) or isinstance(x, np.ndarray) else np.asarray(x).dtype
+    if np.issubdtype(dtype, np.complexfloating):
+        raise InvalidProblemError(name, "is complex; the contact problem is real",
+                                  fix="pass real data (the real part, if the imaginary part is rounding)")
+
+
 def as_csc(name: str, A) -> sp.csc_matrix:
     """``A`` (dense or sparse) as a new float64 CSC matrix, duplicates summed, indices sorted."""
+    _refuse_complex(name, A)
     try:
         if sp.issparse(A):
             A = sp.csc_matrix(A, dtype=np.float64, copy=True)  # never sort the caller's matrix
@@ -35,6 +44,7 @@ def as_csc(name: str, A) -> sp.csc_matrix:
 
 def as_vector(name: str, x) -> np.ndarray:
     """``x`` as a new flat float64 vector (a row or column matrix is flattened)."""
+    _refuse_complex(name, x)
     try:
         arr = np.array(x, dtype=np.float64)
     except (TypeError, ValueError) as exc:

@@ -222,26 +222,42 @@ class Settings:
     max_components: int = 4
 
     def __post_init__(self):
-        if not (self.tol > 0 and np.isfinite(self.tol)):
-            raise ValueError(f"tol = {self.tol!r} must be a positive finite number")
-        if self.max_iter < 1:
-            raise ValueError(f"max_iter = {self.max_iter!r} must be ≥ 1")
-        if self.start not in ("velocity_scaled", "paper", "least_squares"):
-            raise ValueError(f"start = {self.start!r} must be 'velocity_scaled', 'paper' or 'least_squares'")
-        if self.sigma_rule not in ("hybrid", "paper", "siconos"):
-            raise ValueError(f"sigma_rule = {self.sigma_rule!r} must be 'hybrid', 'paper' or 'siconos'")
-        if not 0 < self.gamma0 < 1:
-            raise ValueError(f"gamma0 = {self.gamma0!r} must be in (0, 1)")
-        if self.longdouble_below is not None and not (isinstance(self.longdouble_below, (int, float))
-                                                    and not isinstance(self.longdouble_below, bool)
-                                                    and self.longdouble_below > 0):
-            raise ValueError(f"longdouble_below = {self.longdouble_below!r} must be None or a positive number")
-        if self.refine_max < 0:
-            raise ValueError("refine_max must be ≥ 0")
-        if not (self.refine_tol is None or self.refine_tol == "adaptive" or (
-                isinstance(self.refine_tol, (int, float)) and not isinstance(self.refine_tol, bool)
-                and 0 < self.refine_tol < 1)):
-            raise ValueError(f"refine_tol = {self.refine_tol!r} must be 'adaptive', None or a number in (0, 1)")
+        from ..errors import InvalidArgumentError
+
+        def whole(x, least):
+            return isinstance(x, (int, np.integer)) and not isinstance(x, bool) and x >= least
+
+        def real(x):
+            return isinstance(x, (int, float, np.floating, np.integer)) and not isinstance(x, bool)
+
+        checks = (
+            ("tol", real(self.tol) and self.tol > 0 and np.isfinite(self.tol), "a positive finite number", "1e-10"),
+            ("max_iter", whole(self.max_iter, 1), "a whole number ≥ 1", "100"),
+            ("start", self.start in ("velocity_scaled", "paper", "least_squares"),
+             "'velocity_scaled', 'paper' or 'least_squares'", "'velocity_scaled'"),
+            ("sigma_rule", self.sigma_rule in ("hybrid", "paper", "siconos"), "'hybrid', 'paper' or 'siconos'",
+             "'hybrid'"),
+            ("gamma0", real(self.gamma0) and 0 < self.gamma0 < 1, "a number in (0, 1)", "0.9"),
+            ("longdouble_below", self.longdouble_below is None or (real(self.longdouble_below)
+                                                                   and self.longdouble_below > 0),
+             "None or a positive number", "1e-9"),
+            ("refine_max", whole(self.refine_max, 0), "a whole number ≥ 0", "10"),
+            ("refine_tol", self.refine_tol is None or self.refine_tol == "adaptive" or (
+                real(self.refine_tol) and 0 < self.refine_tol < 1), "'adaptive', None or a number in (0, 1)",
+             "'adaptive'"),
+            ("stall_iterations", whole(self.stall_iterations, 1), "a whole number ≥ 1", "8"),
+            ("max_components", whole(self.max_components, 1), "a whole number ≥ 1", "4"),
+            ("almost_factor", real(self.almost_factor) and self.almost_factor >= 1, "a number ≥ 1", "100"),
+        )
+        for name, ok, must, default in checks:
+            if not ok:
+                raise InvalidArgumentError(name, f"is {getattr(self, name)!r}; it must be {must}",
+                                           fix=f"pass e.g. {name}={default} (the default)")
+        for name in ("longdouble_jordan", "longdouble_residuals", "refine_longdouble", "compiled_kernels",
+                     "adaptive_reg", "verbose", "reduce_cones", "drop_free_bodies", "split_components"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise InvalidArgumentError(name, f"is {getattr(self, name)!r}; it must be True or False",
+                                           fix=f"pass {name}=True or {name}=False")
         require_time_limit(self.time_limit)
 
     def as_dict(self) -> dict:
@@ -432,7 +448,8 @@ class SolveResult(Outcome, ResultAliases):
     Attributes
     ----------
     v : ndarray (m,)          velocities
-    u : ndarray (5n,)         contact velocities, recomputed as Hᵀ v + w
+    u : ndarray (5n,)         contact velocities, recomputed as Hᵀ v + w (W r + q, the
+                              file's own, for a problem read from a local file)
     r : ndarray (5n,)         contact reactions, r = P r̃ (zero on components the cone forces to 0)
     status : Status
     success : bool            status is Solved

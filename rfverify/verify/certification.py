@@ -185,7 +185,8 @@ def _own_proof(problem, ctx, v, u, r, digits, polish_max_iter, say, relative, de
     # Keep the better proof: a computed point can bound the candidate worse than itself.
     if ProofDriver.score(polished) >= ProofDriver.score(proof):
         return polished, at, dict(info)
-    return proof, own, {"point_source": "the candidate itself (better than the computed point)"}
+    limit = {"time_limit": info["time_limit"]} if "time_limit" in info else {}  # the search was cut short
+    return proof, own, {"point_source": "the candidate itself (better than the computed point)", **limit}
 
 
 def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=False, deadline=None, time_limit=None):

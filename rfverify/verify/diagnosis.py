@@ -212,7 +212,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     the counterfactual continues the NT algorithm from its best iterate.
     """
     say = progress or (lambda message: None)
-    _check_witness_digits(dps, witness_time)
+    _check_arguments(method, dps, witness_time)
     t0 = time.perf_counter()
     options = renamed_settings(options)
     time_limit = options.get("time_limit")
@@ -319,10 +319,13 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     return diag
 
 
-def _check_witness_digits(dps: int, witness_time: float) -> None:
-    if witness_time and dps < WITNESS_MIN_DPS:
-        from ..errors import InvalidArgumentError
+def _check_arguments(method: str, dps: int, witness_time: float) -> None:
+    from ..errors import InvalidArgumentError
 
+    if method not in FORM_POWER:  # the lockstep compares a form of Algorithm 1 with its exact steps
+        raise InvalidArgumentError("method", f"{method!r} is not a form of Algorithm 1 the diagnosis can follow",
+                                   fix=f"use one of {', '.join(FORM_POWER)}")
+    if witness_time and dps < WITNESS_MIN_DPS:
         raise InvalidArgumentError("dps", f"is {dps}, below {WITNESS_MIN_DPS}: the mpmath witness checks, and may "
                                           "overrule, double-double steps (about 32 digits), so it must carry more",
                                    fix=f"pass dps ≥ {WITNESS_MIN_DPS} (default 40), or witness_time=0 for no witness")
