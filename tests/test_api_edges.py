@@ -65,3 +65,17 @@ def test_a_coulomb_answer_with_a_quantity_bounded_absolutely_is_not_proven_to_k_
 def test_a_certify_search_cut_short_says_so_even_where_the_candidate_itself_is_kept(chute):
     cert = rfverify.certify(chute, rfverify.solve(chute, tol=1e-8), digits=8, time_limit=1e-6)
     assert cert.status == "MaxTime" and "time limit" in cert.verdict
+
+
+def test_arguments_of_the_wrong_kind_are_named_not_python_errors_from_deep_inside():
+    sphere = rfverify.load("bundled:sphere")
+    answer = rfverify.solve(sphere)
+    for call, name in ((lambda: rfverify.solve(sphere, callback=3), "callback"),
+                       (lambda: rfverify.solve(sphere, keep_iterates="x"), "keep_iterates"),
+                       (lambda: rfverify.certify(sphere, answer, point=5), "point"),
+                       (lambda: rfverify.check_solution(sphere, None), "solution"),
+                       (lambda: rfverify.check_solution(sphere, (answer.v, answer.u, answer.r)), "solution")):
+        with pytest.raises(InvalidArgumentError, match=name) as err:
+            call()
+        assert "fix:" in str(err.value)
+    assert rfverify.check_solution(sphere, answer).ok(1e-8)  # a result is still a solution to check

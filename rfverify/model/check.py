@@ -62,6 +62,12 @@ def check_solution(problem: Problem, solution: StoredSolution) -> SolutionCheck:
     """
     from .measures import measures
 
+    if not all(hasattr(solution, name) for name in ("v", "u", "r")):
+        from ..errors import InvalidArgumentError
+
+        raise InvalidArgumentError("solution", f"is a {type(solution).__name__}, not a solution with v, u and r",
+                                   fix="pass a StoredSolution(v=…, u=…, r=…), a result of rfverify.solve, "
+                                       "or problem.solution")
     v, u, r = solution.v, solution.u, solution.r
     missing = tuple(k for k, a in (("v", v), ("r", r)) if a is None)
     zero = tuple(k for k, a in (("v", v), ("u", u), ("r", r)) if a is not None and not np.any(a))

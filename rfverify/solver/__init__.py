@@ -291,6 +291,14 @@ def _solve(problem: Problem, method: str, tol: float, max_iter: int, keep_iterat
     if unknown:
         raise TypeError(f"unknown solver option(s): {', '.join(sorted(unknown))}; "
                         f"valid: {', '.join(Settings.names())}")
+    from ..errors import InvalidArgumentError
+
+    if callback is not None and not callable(callback):
+        raise InvalidArgumentError("callback", f"is {callback!r}, not callable",
+                                   fix="pass a function callback(info) -> bool, or None")
+    if not isinstance(keep_iterates, (bool, np.bool_)):
+        raise InvalidArgumentError("keep_iterates", f"is {keep_iterates!r}; it must be True or False",
+                                   fix="pass keep_iterates=True or keep_iterates=False")
     if keep_iterates:
         options["split_components"] = False
     settings = Settings(tol=tol, max_iter=max_iter, **options)

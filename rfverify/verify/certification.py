@@ -128,6 +128,13 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
     problem = posed(problem, as_stored)
     if point is None and hasattr(v, "point") and u is None and r is None:
         point = v.point
+    from ..proof import Point
+
+    if point is not None and not isinstance(point, Point):
+        from ..errors import InvalidArgumentError
+
+        raise InvalidArgumentError("point", f"is a {type(point).__name__}, not an rfverify.proof.Point",
+                                   fix="pass the .point of a solve_to_digits result, or read_point(FILE), or None")
     v, u, r = _solution_arrays(problem, v, u, r)
     from ..model.scaling import in_scaled_units
     from .certificate import scaled_point, unscaled_certificate
