@@ -190,7 +190,7 @@ def binary_scaling(problem: Problem) -> BinaryScaling | None:
         units = BinaryScaling(a + da, b, k + dk)
         if (da or dk) and _in_safe_range(units, e_M, e_H, e_f, e_w) and \
                 all(units.scale(name, values) is not None for name, values in fields):
-            a, k = a + da, k + dk
+            return units  # every entry checked exact just now
     if a == b == k == 0:
         return None
     scaling = BinaryScaling(a, b, k)

@@ -74,6 +74,13 @@ class DiagnosisContext:
         self.H = problem.H.tocsr()
         self.reference = self.reference_order = None
 
+    def lifting_longdouble(self) -> tuple:
+        """(W, Hᵀ, H) of a local file in long double, converted once for every step's comparison."""
+        if getattr(self, "_lifting_ld", None) is None:
+            self._lifting_ld = tuple(sp_matrix.astype(np.longdouble) for sp_matrix in
+                                     (self.problem.local.W, self.HT, self.H))
+        return self._lifting_ld
+
     def in_time(self) -> bool:
         return self.deadline is None or time.perf_counter() <= self.deadline
 
@@ -236,7 +243,8 @@ def _agreement(ctx: DiagnosisContext, st, v1, r1, z1) -> dict:
         # The double steps solve the lifting u = HᵀH r + q, the exact ones the file's W: how far
         # the two agree on this r bounds the digits of agreement whatever the rounding.
         r_ld = np.asarray(r_exact, dtype=np.longdouble)
-        gap = W.astype(np.longdouble) @ r_ld - ctx.HT.astype(np.longdouble) @ (ctx.H.astype(np.longdouble) @ r_ld)
+        W_ld, HT_ld, H_ld = ctx.lifting_longdouble()
+        gap = W_ld @ r_ld - HT_ld @ (H_ld @ r_ld)
         out["digits_lifting"] = digits_from_error(inf_norm(gap), max(inf_norm(u_exact), sc.u_free))
     else:
         d_v = dd_difference(st.v, v1)
