@@ -32,10 +32,12 @@ on a 1422-contact PrimitiveSoup).  Criterion:
 complementarity; a candidate meets ``tol`` when ``max ≤ tol``.
 
 The paper's measures (DESIGN §4) are computed beside, for the record, in the original
-variables: ``paper_dinfeas`` = ‖Mv − f − Hr‖₂ / max(‖Mv‖₂, ‖f‖₂, ‖Hr‖₂) and
-``paper_mu`` = |uᵀr| / n (absolute: it changes with the units, and its pinfeas scale
-max(‖Jz‖, ‖H̃v‖, ‖w̃‖) vanishes when every contact sticks with w = 0 — the reasons for the
-definition above).
+variables and on the point judged: ``paper_dinfeas`` = ‖Mv − f − Hr‖₂ / max(‖Mv‖₂, ‖f‖₂, ‖Hr‖₂)
+and ``paper_mu`` = |uᵀr| / n.  They are not the solver's ``SolveResult.dinfeas`` and ``mu``, which
+are the iterate's own (μ = zᵀJᵀr̃ / n with the lifted slack z, not u = Hᵀv + w; they differ by the
+primal residual, e.g. in the 7th digit; DESIGN §4.5).  ``paper_mu`` is absolute (it changes with the units), and the paper's pinfeas scale
+max(‖Jz‖, ‖H̃v‖, ‖w̃‖) vanishes when every contact sticks with w = 0: the reasons for the
+definition above.
 """
 
 from __future__ import annotations
