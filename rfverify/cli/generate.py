@@ -90,7 +90,8 @@ def cmd_generate(args) -> int:
     for item in args.param:
         key, sep, val = item.partition("=")
         if not sep or not key.strip():
-            raise SceneError(f"--param {item!r}: expected KEY=VALUE")
+            raise SceneError(f"--param {item!r}: expected KEY=VALUE; fix: give --param NAME=NUMBER "
+                             "(rfverify generate --list gives each scene's parameters)")
         params[key.strip()] = val.strip()
     scene_parameters(args.scene, args.size, **params)  # bad names/values fail before any work
     bar = Progress(100, f"generate {args.scene}", quiet=args.quiet or args.json, percent=True)

@@ -283,8 +283,11 @@ def _solve_digits(args, problem, options, say, after, t_start) -> int:
         if face:  # a self-stress: the problem was solved again on its face (DESIGN §6.8)
             tail += f"; on the face of {len(face['self_stresses'])} self-stress(es): {face.get('reduction', '')}"
         chosen = "as requested" if args.method != "auto" else "by auto"
-        print(f"double solve ({out.double.method} {chosen}): {out.double.status} in {out.double.nit} iterations; "
-              f"extended (double-double) iterations: {out.extended.nit}{tail}")
+        if out.double.extras.get("zero_data"):
+            print("double solve: none needed (f = 0 and w = 0: v = u = r = 0 exactly)")
+        else:
+            print(f"double solve ({out.double.method} {chosen}): {out.double.status} in {out.double.nit} iterations; "
+                  f"extended (double-double) iterations: {out.extended.nit}{tail}")
         print(cert.verdict)
         print_quantities(cert)
         repaired = getattr(cert.proof, "face", None) if cert.proof is not None else None

@@ -230,10 +230,17 @@ def read_real(ds, path) -> np.ndarray:
     check_shape(ds, path, vector=True)
     arr = read_dataset(ds, path).ravel()
     if dt.kind in "iu":
-        if arr.size and np.max(np.abs(arr.astype(np.float64))) > _EXACT_INT:
-            raise ProblemFileError(path, f"holds integers beyond 2^53 that float64 cannot "
-                                         "represent exactly", location=ds.name, fix=FIX_REAL)
-        return arr.astype(np.float64)
+        values = arr.astype(np.float64)
+        # Beyond 2^53 only some integers are float64 numbers: compare each such one exactly.
+        beyond = np.flatnonzero(np.abs(values) >= _EXACT_INT)
+        inexact = [int(i) for i, x, y in zip(beyond.tolist(), arr[beyond].tolist(), values[beyond].tolist())
+                   if int(y) != x]
+        if inexact:
+            raise ProblemFileError(path, f"holds integers that float64 cannot represent exactly "
+                                         f"({len(inexact)}; the first, {arr[inexact[0]]} at index {inexact[0]}, "
+                                         f"would be read as {values[inexact[0]]:.17g})", location=ds.name,
+                                   fix=FIX_REAL)
+        return values
     if dt.itemsize > 8:  # longdouble data: keep it only if float64 holds every value exactly
         with np.errstate(over="ignore"):
             back = arr.astype(np.float64).astype(arr.dtype)

@@ -157,7 +157,10 @@ def quantity_bound(name, e, x, scales, requested, note="", names=DATA_SCALE_NAME
         return QuantityBound(name, 0.0, 0.0, 0.0, data, names[name], None, "absolute", True,
                              note or f"{name}* = 0 exactly (error bound 0)")
     if relative:
-        if digits is None:
+        if digits is None and e_inf == 0 and norm == 0:
+            note = note or (f"relative digits requested, but {name}* = 0 exactly (error bound 0): "
+                            "a zero has no relative digits")
+        elif digits is None:
             note = note or (f"relative digits requested, but ‖{name}*‖∞ may be 0 (‖{name}‖∞ = {norm:.2e} ≤ "
                             f"error bound {bound_text(e_inf)}): relative digits are meaningless here")
         return QuantityBound(name, e_inf, norm, own, data, names[name], digits, "relative", False, note)

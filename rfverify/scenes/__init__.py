@@ -66,7 +66,9 @@ PARAMETER_DOMAINS = {
     **{k: ("≥ 0", lambda x: x >= 0) for k in ("mu", "mu_r", "agitation", "speed_noise", "spin", "gap_jitter")},
     **{k: ("in [0, 1]", lambda x: 0 <= x <= 1) for k in (
         "recent_fraction", "capsule_fraction", "bed_fraction", "first_stage_fraction", "first_bed_fraction",
-        "stream_packing", "rain_packing", "jitter")},
+        "jitter")},
+    # (a stream's length goes as 1/packing: 0 overflowed)
+    **{k: ("in [0.001, 1]", lambda x: 1e-3 <= x <= 1) for k in ("stream_packing", "rain_packing")},
     "tilt": ("in [0, 90) degrees", lambda x: 0 <= x < 90),
     "incline": ("in (0, 90) degrees", lambda x: 0 < x < 90),
     "mass_ratio": ("≥ 1", lambda x: x >= 1),
@@ -111,6 +113,9 @@ def scene_parameters(scene, size=None, **params) -> tuple[Scene, dict, int]:
             raise SceneError(f"{sc.name}: parameter {k} = {val:g} must be {domain[0]}; fix: give --param "
                              f"{k}=VALUE with VALUE {domain[0]} (default {sc.defaults[k]:g})")
         p[k] = val
+    if "radius_min" in p and "radius_max" in p and p["radius_min"] > p["radius_max"]:
+        raise SceneError(f"{sc.name}: radius_min = {p['radius_min']:g} is above radius_max = {p['radius_max']:g}; "
+                         "fix: give --param radius_min=A --param radius_max=B with A ≤ B")
     for k in ("h", "margin"):
         if k in p and not p[k] > 0:
             raise SceneError(f"{sc.name}: parameter {k} = {p[k]!r} must be > 0; fix: give --param {k}=VALUE > 0")
@@ -165,6 +170,19 @@ def generate(scene, count: int = 1, seed: int = 0, size: int | None = None, *,
         step, generator version; ``provenance`` holds the same as a dict plus the sizes.
     """
     sc, p, size = scene_parameters(scene, size, **params)
+    try:
+        return _generate(sc, p, size, count, seed, steps, method, tol, max_iter, progress)
+    except SceneError:
+        raise
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
+        if not params:  # the scene's own defaults: a bug, not the user's choice
+            raise
+        given = ", ".join(f"{k}={v}" for k, v in params.items())
+        raise SceneError(f"{sc.name}: the parameters given ({given}) build no scene: {type(exc).__name__}: {exc}; "
+                         "fix: choose values nearer the defaults (rfverify generate --list)") from exc
+
+
+def _generate(sc, p, size, count, seed, steps, method, tol, max_iter, progress) -> list:
     if int(count) < 1:
         raise SceneError(f"count = {count!r} must be ≥ 1; fix: give --count 1 or more")
     if int(count) > MAX_COUNT:  # (a billion allocated its seeds before the first problem, 1.2 GB in 15 s)

@@ -136,8 +136,7 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
                                                            **options), _unscaled_result)
     if scaled is not None:
         return scaled
-    data = problem.local.q if problem.local is not None else np.concatenate((problem.f, problem.w))
-    if not np.any(data):
+    if has_zero_data(problem):
         return _zero_data_result(problem, method, tol, max_iter, options)
     c0 = compile_seconds()
     result = _solve(problem, method, tol, max_iter, keep_iterates, callback, **options)
@@ -181,6 +180,12 @@ def returned_verdict(status: Status, message: str, final, settings: Settings) ->
         return Status.ALMOST_SOLVED, (f"{status}: {message}; the returned (v, u, r) has criterion {x:.2e} ≤ "
                                       f"{settings.almost_factor:g}·tol")
     return status, message
+
+
+def has_zero_data(problem: Problem) -> bool:
+    """f = 0 and w = 0 (q = 0 for a local file): v = u = r = 0 is the answer, exactly."""
+    data = problem.local.q if problem.local is not None else np.concatenate((problem.f, problem.w))
+    return not np.any(data)
 
 
 def _zero_data_result(problem, method, tol, max_iter, options) -> SolveResult:

@@ -185,7 +185,10 @@ def _own_proof(problem, ctx, v, u, r, digits, polish_max_iter, say, relative, de
     own = candidate_point(v, r)
     proof = ctx.prove(own, v, u, r, digits, relative=relative)
     say(f"the candidate itself as the proof point: {proof.summary()}")
-    if proof.certified or not ctx.hypotheses_proven:
+    from ..solver import has_zero_data
+
+    # f = w = 0: the answer is exactly 0, and no computed point proves more than the candidate does
+    if proof.certified or not ctx.hypotheses_proven or has_zero_data(problem):
         return proof, own, {"point_source": "the candidate itself"}
     polished, at, info = _polish_and_prove(problem, ctx, v, u, r, digits, polish_max_iter, say, relative,
                                            deadline, time_limit)

@@ -214,7 +214,9 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
         raise
     t_double = time.perf_counter() - t0
     c1 = compile_seconds()
-    say(f"double solve ({double.method}{' by auto' if method == 'auto' else ''}): {double.status} in "
+    zero_data = bool(double.extras.get("zero_data"))  # f = w = 0: the exact answer, nothing to iterate
+    say("double solve: none needed (f = 0 and w = 0: v = u = r = 0 exactly)" if zero_data else
+        f"double solve ({double.method}{' by auto' if method == 'auto' else ''}): {double.status} in "
         f"{double.nit} iterations, {t_double:.2f} s")
     t1 = time.perf_counter()
     try:
@@ -234,10 +236,12 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     out_of_time = deadline is not None and time.perf_counter() > deadline
     interrupted = bool(double.extras.get("interrupted"))
     first = None
-    if _on_face is None and (out_of_time or interrupted or not ctx.hypotheses_proven
+    if _on_face is None and (out_of_time or interrupted or not ctx.hypotheses_proven or zero_data
                              or double_answer_may_certify(ctx, problem, double.v, double.r, digits, relative)):
         first = proven_answer(ctx, point, digits, relative)
-    if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted):
+    # An exact zero answer is the answer: no iterate can prove relative digits of it either.
+    if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted
+                              or zero_data):
         prepared.cancel()
         return _ended_after_double(first, ctx, point, double, say, interrupted=interrupted, out_of_time=out_of_time,
                                    time_limit=named_limit, clock=(t0, c0, t1, c1, t_double))
@@ -334,9 +338,10 @@ def _ended_after_double(first, ctx, point, double, say, *, interrupted: bool, ou
     elif out_of_time:
         say(f"time limit of {time_limit:g} s reached after the double solve: {proof.summary()}")
         source, why = "the double solve (time limit reached)", f"time limit of {time_limit:g} s reached"
-    else:
-        say(f"no proof is possible: {proof.failure}")
-        source, why = "the double solve (no proof possible)", proof.failure
+    else:  # the data rule a proof out, or (f = w = 0) the exact zero answer has no relative digits
+        why = proof.failure or proof.summary()
+        say(f"no proof is possible: {why}")
+        source = "the double solve (no proof possible)"
     extra = {"point_source": source}
     if out_of_time and not proof.certified:
         extra["time_limit"] = time_limit

@@ -1,0 +1,77 @@
+"""What the docs promise, at the edges an audit of REFERENCE.md, RESULTS.md and every --help
+against the behaviour found broken: all-zero data under --relative, integers read inexactly,
+scene parameters that build no scene, the Coulomb start's label, certify's time limit beside a
+stored certificate, RFVERIFY_THREADS for every command, certify's --dps, the bench file names."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import rfverify
+from rfverify.cli.app import main
+
+
+@pytest.fixture(scope="module")
+def zero_data():
+    p = rfverify.load("bundled:chute")
+    return rfverify.Problem.from_arrays(p.M, p.H, 0 * p.f, 0 * p.w, p.mu, p.mu_r)
+
+
+def test_all_zero_data_under_relative_digits_is_not_certified_not_a_crash(zero_data, tmp_path):
+    """f = w = 0 with relative digits demanded crashed (ZeroDivisionError, exit 3) in the extended
+    phase started from the exact zero answer; a zero has no relative digits, and that is the verdict."""
+    out = rfverify.solve_to_digits(zero_data, digits=5, relative=True)
+    assert out.status == "NotCertified" and out.extended.nit == 0
+    assert "v* = 0 exactly" in out.certificate.verdict
+    assert rfverify.solve_to_digits(zero_data, digits=5).status == "Certified"
+    zeros = np.zeros(zero_data.n_dofs), np.zeros(5 * zero_data.n_contacts), np.zeros(5 * zero_data.n_contacts)
+    cert = rfverify.certify(zero_data, *zeros, digits=5, relative=True)
+    assert cert.status == "NotCertified" and cert.bounds["v"] == 0.0
+    path = tmp_path / "zero.h5"
+    rfverify.save(zero_data, path)
+    assert main(["solve", str(path), "--digits", "5", "--relative", "--quiet"]) == 1
+
+
+@pytest.mark.parametrize("value, exact", [(2**53 + 1, False), (-(2**53) - 1, False), (2**62 + 1, False),
+                                          (2**63 - 1, False), (2**53 + 2, True), (2**62, True), (7, True)])
+def test_integers_are_read_only_where_float64_holds_them_exactly(tmp_path, value, exact):
+    """'Nothing is read inexactly': 2^53 + 1 was read as 2^53 (the test cast first, then compared
+    with 2^53), and 2^53 + 2, which float64 holds, was refused."""
+    import h5py
+
+    from rfverify.errors import ProblemFileError
+
+    path = tmp_path / "ints.h5"
+    rfverify.save(rfverify.load("bundled:chute"), path)
+    with h5py.File(path, "r+") as f:
+        grp = f["fclib_global_rolling/vectors"]
+        w = np.zeros(grp["w"].shape, dtype=np.int64)
+        w[3] = value
+        del grp["w"]
+        grp["w"] = w
+    if exact:
+        assert rfverify.load(path).w[3] == value
+    else:
+        with pytest.raises(ProblemFileError, match=f"{value} at index 3"):
+            rfverify.load(path)
+
+
+@pytest.mark.parametrize("scene, params, says", [
+    ("Chute", dict(radius_max=0.02), "radius_min = 0.03 is above radius_max = 0.02"),
+    ("AllOpen", dict(radius_max=0.005), "radius_min = 0.008 is above radius_max"),
+    ("Chute", dict(stream_packing=0), "stream_packing = 0 must be in"),
+    ("PrimitiveSoup", dict(rain_packing=1e-300), "rain_packing = 1e-300 must be in"),
+    ("ElasticBlock", dict(cell=1e-300), "the parameters given (cell=1e-300) build no scene"),
+])
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # numpy's, on the way to the singular factor
+def test_scene_parameters_that_build_no_scene_are_refused_with_the_fix(scene, params, says):
+    """These ended in exit 3 (ValueError: high - low < 0, OverflowError, a singular factor)."""
+    from rfverify.scenes import generate
+    from rfverify.scenes.stepper import SceneError
+
+    with pytest.raises(SceneError, match="fix:") as err:
+        generate(scene, size=5 if scene != "ElasticBlock" else 2, **params)
+    assert says in str(err.value)
+    assert main(["generate", scene, "--out", "/nonexistent-never-written", "--quiet", "--size", "5",
+                 *[a for k, v in params.items() for a in ("--param", f"{k}={v}")]]) == 2
