@@ -75,3 +75,55 @@ def test_scene_parameters_that_build_no_scene_are_refused_with_the_fix(scene, pa
     assert says in str(err.value)
     assert main(["generate", scene, "--out", "/nonexistent-never-written", "--quiet", "--size", "5",
                  *[a for k, v in params.items() for a in ("--param", f"{k}={v}")]]) == 2
+
+
+def test_a_coulomb_run_from_zero_is_labelled_from_zero_after_its_friction_continuation(tmp_path):
+    """The continuation's stages start from scaled shifts, and the last stage's label leaked out:
+    the run said 'from the --start shift' and JSON "start": "given shift" where none was given."""
+    from pathlib import Path
+
+    path = Path(__file__).parent / "data" / "hard" / "MassRatio-ndof-240-nc-101-1-3d.hdf5"
+    run = rfverify.solve(rfverify.load(str(path)), problem="coulomb")
+    assert len(run.outer.stages) > 1  # the continuation ran
+    assert not run.outer.started and run.outer.as_dict()["start"] == "zero"
+
+
+def test_certify_cut_short_beside_a_stored_certificate_is_max_time(tmp_path, capsys):
+    """certify --help: 'stop the search … after S seconds … (status MaxTime when short of --digits)'.
+    With the file's stored point proving 6 of 10 digits and no time left for a point of its own,
+    the status was NotCertified and the verdict did not mention the limit."""
+    import json
+
+    path = tmp_path / "chute6.h5"
+    assert main(["solve", "bundled:chute", "--digits", "6", "--out", str(path), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["certify", "bundled:chute", "--solution", str(path), "--time-limit", "1e-9", "--json"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "MaxTime" and "time limit of 1e-09 s" in out["verdict"]
+    assert main(["certify", "bundled:chute", "--solution", str(path), "--json"]) == 1  # a 6-digit answer, searched
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "NotCertified" and "time limit" not in out["verdict"]
+
+
+@pytest.mark.parametrize("command", [["certify", "bundled:sphere", "--solution", "bundled:sphere"],
+                                     ["solve", "bundled:sphere"], ["info", "bundled:sphere"]])
+def test_a_bad_rfverify_threads_is_refused_by_every_command_before_any_work(command, monkeypatch, capsys):
+    """REFERENCE: 'RFVERIFY_THREADS=N (an integer ≥ 1) … a bad value: exit code 2 before anything
+    is solved'; only solve --digits checked it (certify ran and exited 1, bench exited 0)."""
+    monkeypatch.setenv("RFVERIFY_THREADS", "abc")
+    assert main(command) == 2
+    assert "RFVERIFY_THREADS" in capsys.readouterr().err
+
+
+def test_the_cross_check_reference_must_outdo_float64(capsys):
+    """certify --cross-check --dps 1 printed 'agreement u -13.2, r -0.0': a reference at one digit."""
+    from rfverify.errors import InvalidArgumentError
+
+    with pytest.raises(SystemExit) as stop:
+        main(["certify", "bundled:sphere", "--solution", "bundled:sphere", "--cross-check", "--dps", "1"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--dps" in err[0] and "34" in err[0]
+    p = rfverify.load("bundled:sphere")
+    with pytest.raises(InvalidArgumentError, match="dps"):
+        rfverify.certify(p, np.zeros(p.n_dofs), None, np.zeros(5 * p.n_contacts), cross_check=True, dps=10)

@@ -92,6 +92,10 @@ def main(argv=None) -> int:
             # numpy/matplotlib warnings are not for the user's terminal: they are recorded and
             # shown only with RFVERIFY_DEBUG (commands turn the ones that matter into messages).
             warnings.simplefilter("always")
+            if os.environ.get("RFVERIFY_THREADS", "").strip():  # a bad value is refused by every command, first
+                from ..extended.workers import threads
+
+                threads()
             check = getattr(args, "check_outputs", None)
             if check is not None:  # refuse an unusable output path before any work
                 check(args)

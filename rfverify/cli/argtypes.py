@@ -68,7 +68,8 @@ def positive_int(text: str) -> int:
 
 def witness_digits(text: str) -> int:
     """D of diagnose's and report's --dps: the mpmath witness checks double-double steps (about
-    32 digits), so at least :data:`rfverify.verify.lockstep.WITNESS_MIN_DPS`."""
+    32 digits), so at least :data:`rfverify.verify.lockstep.WITNESS_MIN_DPS`; and of certify's
+    --cross-check reference, which must be far more accurate than the float64 answer it measures."""
     return _integer(text, least=34)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .coulomb import add_problem_option, certify_physical
-from .argtypes import digit_count, out_path, positive_int, seconds
+from .argtypes import digit_count, out_path, seconds, witness_digits
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, dumps, end_problem_command, exit_codes,
                      is_hdf5_input, load_problem, print_quantities, progress_printer, require_same_problem,
                      same_problem)
@@ -39,8 +39,9 @@ def add_parser(sub) -> None:
     cert.add_argument("--cross-check", action="store_true",
                       help="also run the independent mpmath reference and report the digits of "
                            "agreement (a second opinion; slow beyond a few hundred contacts)")
-    cert.add_argument("--dps", type=positive_int, default=50, metavar="D",
-                      help="accuracy of the --cross-check reference in decimal digits (default: %(default)s)")
+    cert.add_argument("--dps", type=witness_digits, default=50, metavar="D",
+                      help="accuracy of the --cross-check reference in decimal digits, at least 34: a reference "
+                           "must be far more accurate than the float64 answer it measures (default: %(default)s)")
     cert.add_argument("--relative", action="store_true",
                       help="demand K relative (significant) digits of every quantity; a quantity whose exact "
                            "value may be zero is then not certified, instead of being proven zero within "
@@ -195,11 +196,24 @@ def _certify_with(problem, sol, args, point, say):
         return cert
     left = None if args.time_limit is None else args.time_limit - (time.perf_counter() - t0)
     if left is not None and left <= 0:
-        return cert
+        return _cut_short(cert, args.time_limit)
     (say or (lambda message: None))(f"the stored point {'proves' if cert.proof.valid else 'gives'} "
                                     f"{cert.proof.summary()}; now a point of its own")
     own = certify(problem, sol.v, sol.u, sol.r, time_limit=left, **common)
-    return own if own.proof is not None and ProofDriver.score(own.proof) > ProofDriver.score(cert.proof) else cert
+    if own.proof is not None and ProofDriver.score(own.proof) > ProofDriver.score(cert.proof):
+        return own
+    return _cut_short(cert, args.time_limit) if own.status == "MaxTime" else cert
+
+
+def _cut_short(cert, limit: float):
+    """``cert`` (not certified) as a search the time limit stopped: status MaxTime, and the verdict says so."""
+    import dataclasses
+
+    if cert.certified or "time_limit" in cert.extra:
+        return cert
+    return dataclasses.replace(cert, extra={**cert.extra, "time_limit": limit},
+                               verdict=cert.verdict + f" (the search for a proof point stopped at the time limit of "
+                                                      f"{limit:g} s)")
 
 
 def _write_certificate(args, problem, sol, u, cert):

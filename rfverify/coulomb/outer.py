@@ -268,6 +268,7 @@ def find_shift(problem: Problem, *, continuation: bool = True, start=None, progr
         else:
             step /= 2
     best.stages = stages
+    best.started = first.started  # the run's start is the user's, not the last stage's scaled shift
     if best is not first:
         best.message = (f"friction continuation ({len(stages) - 1} stages after the iteration "
                         f"{stages[0]['from']} stopped at {first.residual:.1e}): {best.message}")

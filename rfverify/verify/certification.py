@@ -98,7 +98,7 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
         The extended-precision point to bound at (default: the object's ``point`` if it has
         one, else a warm polish from the candidate).
     cross_check : bool
-        Also run the independent reference at ``dps`` digits and report agreement.
+        Also run the independent reference at ``dps`` digits (at least 34) and report agreement.
     relative : bool
         Demand relative digits for every quantity: a quantity whose exact value may be zero is
         then not certified (instead of being bounded against its data scale, DESIGN §6.3).
@@ -135,6 +135,12 @@ def certify(problem: Problem, v, u=None, r=None, *, digits: int = 10, point: Poi
 
         raise InvalidArgumentError("point", f"is a {type(point).__name__}, not an rfverify.proof.Point",
                                    fix="pass the .point of a solve_to_digits result, or read_point(FILE), or None")
+    if cross_check and not (isinstance(dps, (int, np.integer)) and dps >= 34):
+        from ..errors import InvalidArgumentError
+
+        # a reference at 1 digit 'agreed' with the answer to -13 digits: it must outdo float64 by far
+        raise InvalidArgumentError("dps", f"is {dps!r}; the cross-check's reference needs at least 34 digits",
+                                   fix="pass dps=50 (the default) or any whole number ≥ 34")
     v, u, r = _solution_arrays(problem, v, u, r)
     from ..model.scaling import in_scaled_units
     from .certificate import scaled_point, unscaled_certificate
