@@ -175,7 +175,7 @@ class _Cholesky:
                         col[i] = col.get(i, 0) - lik * ljk
             d = col.get(j, 0)
             if not d > 0:
-                raise ArithmeticError(f"reduced system not positive definite at pivot {j} ({d})")
+                raise ArithmeticError(f"reduced system not positive definite at pivot {j} ({mpmath.nstr(mpmath.mpf(d), 6)})")
             d = ctx.sqrt(d)
             Lj = {j: d}
             for i, val in col.items():

@@ -127,3 +127,32 @@ def test_the_cross_check_reference_must_outdo_float64(capsys):
     p = rfverify.load("bundled:sphere")
     with pytest.raises(InvalidArgumentError, match="dps"):
         rfverify.certify(p, np.zeros(p.n_dofs), None, np.zeros(5 * p.n_contacts), cross_check=True, dps=10)
+
+
+def _sphere_in_a_corner(mu: float) -> rfverify.Problem:
+    """A sphere (m = 1, I = 4e-5) held by two walls whose normals (±1, 0, 2) meet in a μ > 2 corner:
+    y = (1, ±2, 0, 0, 0) is a self-stress strictly inside K (from the fresh-data audit)."""
+    import scipy.sparse as sp
+
+    H = np.zeros((6, 10))
+    for k, s in enumerate((1.0, -1.0)):
+        N, T1, T2 = np.array([s, 0, 2.0]), np.array([2.0, 0, -s]), np.array([0, 1.0, 0])
+        rho = -np.array([s, 0, 2.0]) / 4
+        for j, d in enumerate((N, T1, T2)):
+            H[0:3, 5 * k + j] = d
+            H[3:6, 5 * k + j] = np.cross(rho, d)
+        H[3:6, 5 * k + 3], H[3:6, 5 * k + 4] = T1 / 8, T2 / 8
+    M = sp.diags([1.0] * 3 + [4e-5] * 3).tocsc()
+    return rfverify.Problem.from_arrays(M, sp.csc_matrix(H), np.array([1e-2, 3e-3, -1e-2, 1e-5, 2e-5, -1e-5]),
+                                        np.zeros(10), np.array([mu, mu]), np.zeros(2))
+
+
+def test_a_cross_check_whose_reference_breaks_down_says_so(tmp_path, capsys):
+    """The reference's factorisation fails along the self-stress of a μ = 5 corner: certify
+    --cross-check crashed (ArithmeticError, exit 3); the proof stands, the opinion is missing."""
+    p = _sphere_in_a_corner(5.0)
+    sol = rfverify.solve_to_digits(p, 10)
+    assert sol.certificate.certified
+    cert = rfverify.certify(p, sol.v, sol.u, sol.r, cross_check=True)
+    assert cert.certified and cert.cross_check["reference_status"] == "BrokeDown"
+    assert "the reference broke down" in cert.cross_check["note"]

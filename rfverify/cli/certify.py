@@ -129,8 +129,8 @@ def cmd_certify(args) -> int:
         if cert.cross_check is not None:
             cc = cert.cross_check
             shown = ", ".join(f"{k[7:]} {v:.1f}" for k, v in cc.items() if k.startswith("digits_") and v is not None)
-            print(f"cross-check against the mpmath reference ({cc.get('reference_status')}): "
-                  f"agreement {shown or cc.get('note', '')}")
+            said = f"agreement {shown}" if shown else cc.get("note", "no agreement to report")
+            print(f"cross-check against the mpmath reference ({cc.get('reference_status')}): {said}")
     return EXIT_OK if cert.certified else EXIT_NOT_SOLVED
 
 
