@@ -232,18 +232,16 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     # Where a hypothesis fails on the data themselves (M, W) no point can be proven: stop here.
     # Where its duality gap alone rules out the digits asked for (the usual case) the proof
     # waits: it is made after the extended phase, only if no iterate was proven.
-    point = candidate_point(double.v, double.r)
     out_of_time = deadline is not None and time.perf_counter() > deadline
     interrupted = bool(double.extras.get("interrupted"))
-    first = None
-    if _on_face is None and (out_of_time or interrupted or not ctx.hypotheses_proven or zero_data
-                             or double_answer_may_certify(ctx, problem, double.v, double.r, digits, relative)):
-        first = proven_answer(ctx, point, digits, relative)
+    first, point, at_rest = _double_answer_first(problem, ctx, double, digits, relative, _on_face is None and (
+        out_of_time or interrupted or not ctx.hypotheses_proven or zero_data), on_face=_on_face is not None)
     # An exact zero answer is the answer: no iterate can prove relative digits of it either.
     if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted
                               or zero_data):
         prepared.cancel()
-        return _ended_after_double(first, ctx, point, double, say, interrupted=interrupted, out_of_time=out_of_time,
+        return _ended_after_double(first, ctx, point, double, say, at_rest=at_rest, interrupted=interrupted,
+                                   out_of_time=out_of_time,
                                    time_limit=named_limit, clock=(t0, c0, t1, c1, t_double))
     data, system = prepared.system()
     t_setup = time.perf_counter() - t1
@@ -323,14 +321,46 @@ def _check_path_arguments(method: str, factor_engine: str) -> None:
                                    fix="use method='auto' (default) or an Algorithm 1 form")
 
 
+def _double_answer_first(problem, ctx, double, digits: int, relative: bool, must: bool, on_face: bool):
+    """(first, point, at_rest): the proof of the double answer's point where it is made now (``must``,
+    or it may certify), or of v = 0, r = 0 where that is the answer (:func:`at_rest_answer`)."""
+    point = candidate_point(double.v, double.r)
+    if on_face:
+        return None, point, False
+    if not double.extras.get("zero_data"):
+        rest = at_rest_answer(problem, ctx, double, digits, relative)
+        if rest is not None:
+            return rest[:2], rest[2], True
+    if must or double_answer_may_certify(ctx, problem, double.v, double.r, digits, relative):
+        return proven_answer(ctx, point, digits, relative), point, False
+    return None, point, False
+
+
+def at_rest_answer(problem: Problem, ctx, double, digits: int, relative: bool):
+    """(proof, (v, u, r), point) of v = 0, r = 0 where f = 0 and that proves ``digits``, else None.
+
+    With no force every body may stay at rest: where w ∈ K* at every contact the answer is
+    v = u − w = 0, r = 0 exactly, and its proof (bound 0) costs O(nnz), where an interior-point
+    iterate only approaches it (1.2e-7 of error after 80 double-double iterations on an audit's
+    one open contact)."""
+    if np.any(problem.f) or not np.any(double.v):
+        return None
+    at_rest = candidate_point(np.zeros_like(double.v), np.zeros_like(double.r))
+    proof, answer = proven_answer(ctx, at_rest, digits, relative)
+    return (proof, answer, at_rest) if proof.certified else None
+
+
 def _ended_after_double(first, ctx, point, double, say, *, interrupted: bool, out_of_time: bool, time_limit,
-                        clock: tuple) -> DigitsSolution:
+                        clock: tuple, at_rest: bool = False) -> DigitsSolution:
     """The path's answer when it ends with the double solve's: proven as it is, interrupted, out
     of time, or no proof possible on these data.  ``clock``: (t0, c0, t1, c1, t_double), the
     path's start, the double solve's end and its seconds (perf_counter, compile_seconds)."""
     t0, c0, t1, c1, t_double = clock
     proof, (v, u, r) = first
-    if proof.certified:
+    if proof.certified and at_rest:
+        say(f"f = 0 and w ∈ K*: v = 0, r = 0 (every body at rest) is proven: {proof.summary()}")
+        source, why = "v = 0, r = 0 (f = 0: every body at rest)", "not needed"
+    elif proof.certified:
         say(f"the double solve's answer is proven as it is: {proof.summary()}")
         source, why = "the double solve's answer itself", "not needed"
     elif interrupted:
