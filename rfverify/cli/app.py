@@ -55,8 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "certificate proves: DESIGN.md; a walk-through with your own file: "
                     "TUTORIAL.md; every option, exit code and file rule: REFERENCE.md; the "
                     f"result objects: RESULTS.md — installed with rfverify in {DOCS_DIR}.",
-        epilog="Exit codes: 0 success, 1 tolerance not reached (solve) or not certified "
-               "(solve --digits, certify), 2 bad input or arguments, 3 internal error, 130 "
+        epilog="Exit codes: 0 success, 1 tolerance not reached (solve; diagnose: its double run) or not "
+               "certified (solve --digits, certify), 2 bad input or arguments, 3 internal error, 130 "
                "interrupted, 141 stdout closed early (e.g. | head), 143 bench stopped by SIGTERM "
                "(per command: REFERENCE.md, 'Guarantees', and each command's --help). "
                "--json output is strict JSON: non-finite numbers are null.",

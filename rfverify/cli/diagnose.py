@@ -43,7 +43,8 @@ is the precision of the default linear solves."""
 
 EPILOG = """\
 Exit codes: 0 the double run was Solved; 1 it was not (MaxIterations, NumericalError, ...) —
-the diagnosis is printed either way; 2 bad input or option; 3 internal error."""
+the diagnosis is printed either way; 2 bad input or option; 3 internal error; 130 interrupted;
+141 stdout closed early."""
 
 
 PLOT_HELP = ("write the figure (PNG): digits of agreement with the threshold, cond(Q_p), λ2 of z and Jᵀr̃ in double "
