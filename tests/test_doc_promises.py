@@ -175,3 +175,10 @@ def test_bodies_at_rest_with_every_contact_open_are_proven_exactly():
     assert out.certificate.extra["point_source"].startswith("v = 0, r = 0")
     closed = rfverify.Problem.from_arrays(M, sp.csc_matrix(H), np.zeros(6), -w, [0.3], [1e-3])  # w ∉ K*
     assert rfverify.solve_to_digits(closed, 10).certificate.extra["point_source"] != out.certificate.extra["point_source"]
+
+
+def test_a_plot_is_written_in_the_format_its_name_says(tmp_path):
+    """diagnose --plot plot.pdf wrote PNG bytes into the .pdf."""
+    for name, magic in (("f.pdf", b"%PDF"), ("f.svg", b"<?xml"), ("f.png", b"\x89PNG")):
+        assert main(["diagnose", "bundled:sphere", "--plot", str(tmp_path / name), "--quiet", "--no-remedy"]) == 0
+        assert (tmp_path / name).read_bytes().startswith(magic)

@@ -82,7 +82,7 @@ def digit_count(text: str) -> int:
         return validate_digits(int(text))
     except ValueError as exc:
         if isinstance(exc, InvalidArgumentError):
-            raise argparse.ArgumentTypeError(f"{text}: {exc.problem}; fix: {exc.fix}") from None
+            raise argparse.ArgumentTypeError(f"{exc.problem}; fix: {exc.fix}") from None
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer; fix: give K in 1 … 15") from None
 
 

@@ -253,7 +253,9 @@ def require_same_problem(problem, other, path):
     from ..errors import InvalidProblemError
 
     if not same_problem(problem, other):
+        sizes = (other.n_dofs, other.n_contacts) != (problem.n_dofs, problem.n_contacts)
         raise InvalidProblemError(
-            "solution", f"{path} holds a different problem (m = {other.n_dofs}, n = {other.n_contacts} "
-                        f"vs m = {problem.n_dofs}, n = {problem.n_contacts}, or different data)",
+            "solution", f"{path} holds a different problem " + (
+                f"(m = {other.n_dofs}, n = {other.n_contacts} vs m = {problem.n_dofs}, n = {problem.n_contacts})"
+                if sizes else f"(the same sizes, m = {problem.n_dofs}, n = {problem.n_contacts}, other data)"),
             fix="pass the solution file written for this problem (rfverify solve ... --out)")

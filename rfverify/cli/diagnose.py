@@ -47,7 +47,7 @@ the diagnosis is printed either way; 2 bad input or option; 3 internal error; 13
 141 stdout closed early."""
 
 
-PLOT_HELP = ("write the figure (PNG): digits of agreement with the threshold, cond(Q_p), λ2 of z and Jᵀr̃ in double "
+PLOT_HELP = ("write the figure (PNG; PDF, SVG or EPS by the file's extension): digits of agreement with the threshold, cond(Q_p), λ2 of z and Jᵀr̃ in double "
              "and exactly, and the criterion of the run beside the exact continuation, per iteration, the departure "
              "marked")
 

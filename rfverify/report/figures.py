@@ -53,14 +53,16 @@ def _log_x(ax):
 
 
 def _save(fig, path: Path) -> None:
-    """PNG written atomically: a reader never sees half a figure."""
+    """The figure written atomically (a reader never sees half a figure), in the format its
+    extension names (PDF, SVG, EPS, PS), else PNG."""
     import io
 
     from ..io.output import write_bytes_atomic
 
+    kind = Path(path).suffix.lower().lstrip(".")
     buf = io.BytesIO()
     try:
-        fig.savefig(buf, format="png", dpi=110)
+        fig.savefig(buf, format=kind if kind in ("pdf", "svg", "eps", "ps") else "png", dpi=110)
     finally:
         _plt().close(fig)
     write_bytes_atomic(path, buf.getvalue())
