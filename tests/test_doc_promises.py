@@ -182,3 +182,25 @@ def test_a_plot_is_written_in_the_format_its_name_says(tmp_path):
     for name, magic in (("f.pdf", b"%PDF"), ("f.svg", b"<?xml"), ("f.png", b"\x89PNG")):
         assert main(["diagnose", "bundled:sphere", "--plot", str(tmp_path / name), "--quiet", "--no-remedy"]) == 0
         assert (tmp_path / name).read_bytes().startswith(magic)
+
+
+def test_a_self_stress_strictly_inside_k_near_its_boundary_is_found():
+    """At μ = 2 + 2⁻³⁰ the stress (1, ±2, 0, 0, 0) lies inside K within 1e-4 of its boundary: it was
+    snapped onto the boundary, missed, and the verdict said 'the feasible set may have an
+    interior'. Found, the problem is proven; with wᵀy < 0 it is called infeasible."""
+    p = _sphere_in_a_corner(2.0 + 2.0 ** -30)
+    p = rfverify.Problem.from_arrays(p.M, p.H, np.array([0, 0, -1e-2, 0, 0, 0]), p.w, p.mu, p.mu_r)
+    out = rfverify.solve_to_digits(p, 10)
+    assert out.certificate.certified and "r not unique" in out.certificate.verdict
+    w = np.zeros(10)
+    w[0] = w[5] = -1e-3  # y = (1, 2, 0, 0, 0 | 1, −2, 0, 0, 0): wᵀy = −2e-3 < 0
+    bad = rfverify.Problem.from_arrays(p.M, p.H, p.f, w, p.mu, p.mu_r)
+    verdict = rfverify.solve_to_digits(bad, 10).certificate.verdict
+    assert "no velocity satisfies" in verdict and "may have an interior" not in verdict
+
+
+def test_a_face_on_which_every_contact_sticks_is_not_posed_as_an_empty_problem():
+    """The same corner pushed sideways: every contact of the stress is stuck on its face, and the
+    face's problem with no contact was refused as 'mu: is empty' naming the user's file (exit 2)."""
+    out = rfverify.solve_to_digits(_sphere_in_a_corner(2.0 + 2.0 ** -30), 10)
+    assert out.certificate.extra["face"]["reduction"].startswith("not possible")

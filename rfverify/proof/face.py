@@ -221,8 +221,10 @@ def _components(H: sp.csc_matrix, contacts: np.ndarray) -> list[np.ndarray]:
 
 
 def _exact_stress(problem, H: sp.csc_matrix, contacts: np.ndarray, y_float: np.ndarray,
-                  max_den: int) -> SelfStress | None:
-    """The float self-stress ``y_float`` on ``contacts`` (one connected group) made exact, or None."""
+                  max_den: int | None) -> SelfStress | None:
+    """The float self-stress ``y_float`` on ``contacts`` (one connected group) made exact, or None.
+    ``max_den`` None: every part taken strictly inside its cone (no boundary direction snapped),
+    for a y_float within :data:`BOUNDARY_TOL` of a boundary it does not lie on."""
     k = contacts.size
     cols = (SPACEDIM * contacts[:, None] + np.arange(SPACEDIM)).ravel()
     Hc = H[:, cols]
@@ -244,7 +246,7 @@ def _exact_stress(problem, H: sp.csc_matrix, contacts: np.ndarray, y_float: np.n
                     row[SPACEDIM * i + off + j] = Fraction(1)
                     eqs.append(row)
                 continue
-            if math.hypot(*ys) >= (1 - BOUNDARY_TOL) * float(coef) * yN:
+            if max_den is not None and math.hypot(*ys) >= (1 - BOUNDARY_TOL) * float(coef) * yN:
                 d = _unit_direction(float(ys[0]), float(ys[1]), max_den)
                 if d is None:
                     return None
@@ -327,7 +329,8 @@ def find_self_stress(problem, seeds, cache: FaceSearch | None = None) -> list:
             if group.size > MAX_GROUP_CONTACTS:
                 continue  # not made exact (see MAX_GROUP_CONTACTS): no claim is made about it
             yg = np.concatenate([y[SPACEDIM * pos[int(c)]:SPACEDIM * pos[int(c)] + SPACEDIM] for c in group])
-            for max_den in SNAP_DENOMINATORS:
+            # (None last: a stress strictly inside K near its boundary, e.g. |y_T| = 2 y_N at μ = 2 + 2⁻³⁰)
+            for max_den in SNAP_DENOMINATORS + (None,):
                 stress = _exact_stress(problem, H, group, yg, max_den)
                 if stress is not None:
                     out.append(stress)

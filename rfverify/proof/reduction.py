@@ -296,7 +296,8 @@ def _dd_add(hi: np.ndarray, lo: np.ndarray, x: np.ndarray):
 
 def reduce_to_face(problem: Problem, stresses: list) -> FaceReduction | None:
     """The reduced problem of ``stresses`` (verified, feasible, on disjoint bodies), or None when
-    the face leaves their bodies no motion or the problem is local."""
+    the face leaves their bodies no motion, every contact is stuck on it (no contact problem is
+    left), or the problem is local."""
     if problem.local is not None or not stresses:
         return None
     blocks = []
@@ -347,6 +348,8 @@ def reduce_to_face(problem: Problem, stresses: list) -> FaceReduction | None:
             owner.append((bi, j))
         first += b.Z.shape[1]
     ne = len(edge_cols)
+    if kept_contacts.size + ne == 0:
+        return None  # every contact stuck on the face: no contact problem is left to pose (not reduced)
     blocks_H = [H_kept]
     if ne:
         E = np.zeros((Z.shape[1], SPACEDIM * ne))

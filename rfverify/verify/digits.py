@@ -422,7 +422,8 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
     note = {"self_stresses": [s.as_dict() for s in stresses],
             "description": "; ".join(s.describe() for s in stresses)}
     if reduction is None:
-        note["reduction"] = "not possible (the face leaves those bodies no motion, or stresses share bodies)"
+        note["reduction"] = ("not possible (the face leaves those bodies no motion, stresses share bodies, or every "
+                             "contact is stuck on it: no contact problem is left to pose)")
         say(f"self-stress found ({stresses[0].describe()}); the problem could not be reduced to its face")
         return note
     say(f"self-stress: {'; '.join(s.describe() for s in stresses)}. Solving the problem on that face "
