@@ -204,3 +204,17 @@ def test_a_face_on_which_every_contact_sticks_is_not_posed_as_an_empty_problem()
     face's problem with no contact was refused as 'mu: is empty' naming the user's file (exit 2)."""
     out = rfverify.solve_to_digits(_sphere_in_a_corner(2.0 + 2.0 ** -30), 10)
     assert out.certificate.extra["face"]["reduction"].startswith("not possible")
+
+
+def test_a_contact_touching_no_body_with_w_outside_k_star_is_called_infeasible():
+    """REFERENCE: 'Data whose forces y ∈ K balance with wᵀy < 0 have no feasible velocity: the
+    verdict says so.' With H = 0 at contact 0 and w_N = −1 the search for y started from an empty
+    neighbourhood (the seed touches no dof) and the verdict said 'may have an interior'."""
+    p = rfverify.load("bundled:chute")
+    H = p.H.tolil()
+    H[:, 0:5] = 0
+    w = p.w.copy()
+    w[0] = -1.0
+    bad = rfverify.Problem.from_arrays(p.M, H.tocsc(), p.f, w, p.mu, p.mu_r)
+    verdict = rfverify.solve_to_digits(bad, 6).certificate.verdict
+    assert "contact 0 carries forces y ∈ K with Hy = 0 and wᵀy < 0" in verdict and "no velocity satisfies" in verdict

@@ -93,10 +93,12 @@ class SelfStress:
         for c, k in zip(self.contacts, self.kinds):
             groups.setdefault(k, []).append(int(c))
         forced = "; ".join(f"{KINDS[k]} at {', '.join(map(str, cs))}" for k, cs in groups.items())
+        who = (f"contacts {self.contact_list()} carry" if self.contacts.size > 1
+               else f"contact {self.contact_list()} carries")
         if self.infeasible:
-            return (f"contacts {self.contact_list()} carry forces y ∈ K with Hy = 0 and wᵀy < 0 (verified in "
+            return (f"{who} forces y ∈ K with Hy = 0 and wᵀy < 0 (verified in "
                     "exact arithmetic): no velocity satisfies Hᵀv + w ∈ K*, so the problem has no solution")
-        return (f"contacts {self.contact_list()} carry a self-stress (y ∈ K, y ≠ 0, Hy = 0, wᵀy = 0, verified in "
+        return (f"{who} a self-stress (y ∈ K, y ≠ 0, Hy = 0, wᵀy = 0, verified in "
                 f"exact arithmetic): the data allow no strictly feasible velocity, and every admissible one has "
                 f"{forced}")
 
@@ -147,7 +149,7 @@ def neighbourhood(H: sp.csc_matrix, HT: sp.csc_matrix, seeds: np.ndarray, rings:
     for _ in range(rings):
         cols = (SPACEDIM * contacts[:, None] + np.arange(SPACEDIM)).ravel()
         rows = np.unique(H[:, cols].indices)
-        more = np.unique(HT[:, rows].indices // SPACEDIM)
+        more = np.union1d(contacts, HT[:, rows].indices // SPACEDIM)  # (a seed touching no body stays)
         if more.size == contacts.size:
             break
         contacts = more
