@@ -218,3 +218,12 @@ def test_a_contact_touching_no_body_with_w_outside_k_star_is_called_infeasible()
     bad = rfverify.Problem.from_arrays(p.M, H.tocsc(), p.f, w, p.mu, p.mu_r)
     verdict = rfverify.solve_to_digits(bad, 6).certificate.verdict
     assert "contact 0 carries forces y ∈ K with Hy = 0 and wᵀy < 0" in verdict and "no velocity satisfies" in verdict
+
+
+def test_a_diagnosis_cut_short_labels_the_double_run_with_its_own_status(capsys):
+    """The double run ended NumericalError (a λ2 breakdown at tol 1e-25); the diagnosis's time
+    limit struck later, in the exact steps, and the run was labelled 'MaxTime after 19 iterations'."""
+    code = main(["diagnose", "bundled:chute", "--tol", "1e-25", "--time-limit", "0.5", "--no-remedy"])
+    out = capsys.readouterr().out.splitlines()
+    run = next(line for line in out if line.startswith("double run ("))
+    assert code == 1 and "NumericalError after" in run and "MaxTime" not in run

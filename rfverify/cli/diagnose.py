@@ -124,8 +124,9 @@ def cmd_diagnose(args) -> int:
         print(dumps(d, indent=2))
         return code
     print(d["conclusion"].replace("PROBLEM", str(args.problem)))
-    print(f"double run ({d['method']}, as rfverify solve runs it): {d['status']} after {d['nit']} iterations: "
-          f"{d['message']}")
+    run = d["evidence"].get("run") or d  # the run's own status (the diagnosis's is MaxTime when it was cut short)
+    print(f"double run ({d['method']}, as rfverify solve runs it): {run['status']} after {d['nit']} iterations: "
+          f"{run['message']}")
     lock = d["evidence"].get("lockstep_run")
     if lock:
         print(f"lockstep's run ({lock['how']}): {lock['status']} after {lock['nit']} iterations, criterion "
