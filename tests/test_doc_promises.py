@@ -196,7 +196,7 @@ def test_a_self_stress_strictly_inside_k_near_its_boundary_is_found():
     w[0] = w[5] = -1e-3  # y = (1, 2, 0, 0, 0 | 1, −2, 0, 0, 0): wᵀy = −2e-3 < 0
     bad = rfverify.Problem.from_arrays(p.M, p.H, p.f, w, p.mu, p.mu_r)
     verdict = rfverify.solve_to_digits(bad, 10).certificate.verdict
-    assert "no velocity satisfies" in verdict and "may have an interior" not in verdict
+    assert "no velocity satisfies" in verdict and "interior thinner" not in verdict
 
 
 def test_a_face_on_which_every_contact_sticks_is_not_posed_as_an_empty_problem():

@@ -104,12 +104,15 @@ def check_claims(problem, cert, u, r, ref):
             q = cert.quantities[name]
             if q.mode == "information":
                 continue
-            assert err <= q.abs_bound, (name, float(err), q.abs_bound, cert.verdict)
+            # the truth itself is a 60-digit interior-point answer (tol 1e-50): an r* that is exactly 0
+            # (a contact proven open, bound 0) comes out as 1e-535 there
+            slack = mpmath.mpf(10) ** -45 * q.data_scale
+            assert err <= q.abs_bound + slack, (name, float(err), q.abs_bound, cert.verdict)
             assert q.own_scale <= norm, (name, q.own_scale, float(norm))
             if q.digits is not None and err > 0:
                 assert q.digits <= -mpmath.log10(err / norm) + 1e-9, (name, q.digits, float(err / norm))
             if q.mode == "absolute":
-                assert norm <= q.zero_within, (name, float(norm), q.zero_within)
+                assert norm <= q.zero_within + slack, (name, float(norm), q.zero_within)
     return errs
 
 

@@ -419,6 +419,17 @@ def _outside_after_face(exact, face, u_num: Dyadic, point_r: Dyadic) -> str:
     return f"the point is not in the cones after it was moved onto a face ({'; '.join(what)}; {face.describe()})"
 
 
+def _mass_span_hint(problem) -> str:
+    """Words on M's diagonal where it spans more than 12 decades (bodies in very different units
+    make an accurate point hard to reach: an audit's per-body unit changes of 3·10^±9), else ""."""
+    d = np.abs(problem.M.diagonal())
+    d = d[d > 0]
+    if d.size == 0 or d.max() <= 1e12 * d.min():
+        return ""
+    return (f" (M's diagonal spans {d.max() / d.min():.0e}: bodies in very different units make the former "
+            "likely)")
+
+
 def _onto_face(problem, exact, point_v, point_r, u_p):
     """(FaceRepair, "") when verified self-stresses explain why the point is not in the cones
     and the point, moved onto their face (and r shifted along them where needed), may be; else
@@ -430,8 +441,9 @@ def _onto_face(problem, exact, point_v, point_r, u_p):
         return None, ""
     stresses = find_self_stress(problem, np.union1d(bad_dual, bad_primal), exact.face_search)
     if not stresses:
-        return None, ("; no self-stress (y ∈ K, Hy = 0, wᵀy = 0) was found near those contacts: the feasible set "
-                      "may have an interior thinner than this point's accuracy")
+        return None, ("; no self-stress (y ∈ K, Hy = 0, wᵀy = 0) was found near those contacts: the point is not "
+                      "accurate enough there, or the feasible set has an interior thinner than its accuracy"
+                      + _mass_span_hint(problem))
     infeasible = [s for s in stresses if s.infeasible]
     if infeasible:
         return None, "; " + infeasible[0].describe()
