@@ -34,7 +34,8 @@ _TINY = np.finfo(float).tiny
 
 
 def _norm(x) -> float:
-    return float(np.sqrt(np.sum(np.square(x, dtype=np.result_type(x, np.float64)))))
+    with np.errstate(over="ignore", invalid="ignore"):  # (as dot: inf is the loop's to judge)
+        return float(np.sqrt(np.sum(np.square(x, dtype=np.result_type(x, np.float64)))))
 
 
 @dataclass
@@ -151,7 +152,8 @@ class _NumpySpace:
 
     @staticmethod
     def dot(x, y) -> float:
-        return float(x @ y)
+        with np.errstate(over="ignore", invalid="ignore"):  # a diverging run's inf is judged by the loop
+            return float(x @ y)
 
     norm2 = staticmethod(_norm)
 
