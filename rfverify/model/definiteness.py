@@ -99,9 +99,11 @@ def upper_sum(*terms):
 
 
 def ldexp_up(x, e):
-    """x·2^e rounded up (exact unless it underflows; then the next float above)."""
+    """x·2^e rounded up (exact unless it underflows; then the next float above; +inf where it
+    overflows, still an upper bound)."""
     x = np.asarray(x, dtype=np.float64)
-    y = np.ldexp(x, e)
+    with np.errstate(over="ignore"):
+        y = np.ldexp(x, e)
     with np.errstate(invalid="ignore"):
         lost = np.ldexp(y, -np.asarray(e)) != x
     return np.where(lost & np.isfinite(x), np.nextafter(y, np.inf), y)

@@ -115,6 +115,13 @@ class ProofContext:
         return point.v_hi.copy(), u, point.r_hi.copy()
 
     def prove(self, point: Point, v, u, r, requested: int, relative: bool = False) -> Proof:
+        parts = (point.v_hi, point.v_lo, point.r_hi, point.r_lo, *(point.v_more if point.v_more is not None else ()),
+                 *(point.r_more if point.r_more is not None else ()))
+        if not all(np.all(np.isfinite(x)) for x in parts):  # an iteration that broke down: nothing to prove
+            from .bound import invalid_proof
+
+            return invalid_proof(requested, "the point has NaN or Inf entries (its iteration broke down)",
+                                 time.perf_counter())
         pv, pr = point.exact()
         if self.is_local:
             from .local import prove_local

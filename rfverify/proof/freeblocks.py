@@ -118,7 +118,11 @@ def free_blocks(problem, mass: MassBounds, stored: bool) -> FreeBlocks:
                 bad = sp.csr_matrix((inexact.astype(np.float64), A.indices, A.indptr), shape=A.shape)
                 err = _gather(bad, dofs)[0] * ETA
                 if not (stored or symmetric):
-                    err = err + 2 * U * np.abs(blocks) + ETA
+                    # the rounding of M/2 + Mᵀ/2 underflows by ETA in the data's units: 2^(e_i + e_j) here
+                    e = exps[dofs]
+                    with np.errstate(over="ignore"):  # (inf: the block is not used)
+                        eta = np.ldexp(ETA, e[:, :, None] + e[:, None, :])
+                    err = err + 2 * U * np.abs(blocks) + eta
             X, rows, rho = verified_left_inverses(blocks, err)
             good = (rho < 1) & ~outside
             if good.any():
