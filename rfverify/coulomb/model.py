@@ -154,7 +154,9 @@ def physical_residuals(problem: Problem, u, r, s=None, scale: float | None = Non
     ph = mu * np.hypot(U[:, 1], U[:, 2]) + mur * np.hypot(U[:, 3], U[:, 4])
     comp = abs(float(np.sum(R[:, 0] * (U[:, 0] + ph) + np.sum(R[:, 1:] * U[:, 1:], axis=1))))
     r_inf = float(np.max(np.abs(R), initial=0.0)) or 1.0
-    cone = np.maximum(np.hypot(R[:, 1], R[:, 2]) - mu * R[:, 0], 0) + np.maximum(np.hypot(R[:, 3], R[:, 4]) - mur * R[:, 0], 0)
+    # r ∈ K: r_N ≥ 0 too (with μ = μr = 0 the other two terms do not see a pulling contact)
+    cone = (np.maximum(-R[:, 0], 0) + np.maximum(np.hypot(R[:, 1], R[:, 2]) - mu * R[:, 0], 0)
+            + np.maximum(np.hypot(R[:, 3], R[:, 4]) - mur * R[:, 0], 0))
     normal = max(0.0, -float(np.min(U[:, 0], initial=0.0)))
     fixed = None if s is None else float(np.max(np.abs(np.asarray(s, dtype=ld) - ph), initial=0.0)) / den
     return PhysicalResiduals(fixed, normal / den, float(np.max(cone, initial=0.0)) / r_inf,
