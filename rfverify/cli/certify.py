@@ -185,6 +185,7 @@ def _certify_with(problem, sol, args, point, say):
     point of its own (the candidate, then a computed one); the better proof is kept."""
     import time
 
+    from ..verify.certificate import cut_short
     from ..verify.driver import ProofDriver
     from ..verify.certification import certify
 
@@ -196,24 +197,13 @@ def _certify_with(problem, sol, args, point, say):
         return cert
     left = None if args.time_limit is None else args.time_limit - (time.perf_counter() - t0)
     if left is not None and left <= 0:
-        return _cut_short(cert, args.time_limit)
+        return cut_short(cert, args.time_limit)
     (say or (lambda message: None))(f"the stored point {'proves' if cert.proof.valid else 'gives'} "
                                     f"{cert.proof.summary()}; now a point of its own")
     own = certify(problem, sol.v, sol.u, sol.r, time_limit=left, **common)
     if own.proof is not None and ProofDriver.score(own.proof) > ProofDriver.score(cert.proof):
         return own
-    return _cut_short(cert, args.time_limit) if own.status == "MaxTime" else cert
-
-
-def _cut_short(cert, limit: float):
-    """``cert`` (not certified) as a search the time limit stopped: status MaxTime, and the verdict says so."""
-    import dataclasses
-
-    if cert.certified or "time_limit" in cert.extra:
-        return cert
-    return dataclasses.replace(cert, extra={**cert.extra, "time_limit": limit},
-                               verdict=cert.verdict + f" (the search for a proof point stopped at the time limit of "
-                                                      f"{limit:g} s)")
+    return cut_short(cert, args.time_limit) if own.status == "MaxTime" else cert
 
 
 def _write_certificate(args, problem, sol, u, cert):

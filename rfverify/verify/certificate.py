@@ -4,6 +4,7 @@ neither imports the other."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -170,8 +171,20 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
     verdict += stored_sentence(proof)
     limit = (extra or {}).get("time_limit")
     if limit is not None and not proof.certified:
-        verdict += f" (the search for a proof point stopped at the time limit of {limit:g} s)"
+        verdict += _time_limit_note(limit)
     return Certificate(req, proof.certified, verdict, proof, point, None, dict(extra or {}), seconds)
+
+
+def _time_limit_note(limit: float) -> str:
+    return f" (the search for a proof point stopped at the time limit of {limit:g} s)"
+
+
+def cut_short(cert: Certificate, limit: float) -> Certificate:
+    """``cert`` (not certified) as a search the time limit stopped: status MaxTime, and the verdict says so."""
+    if cert.certified or "time_limit" in cert.extra:
+        return cert
+    return dataclasses.replace(cert, extra={**cert.extra, "time_limit": limit},
+                               verdict=cert.verdict + _time_limit_note(limit))
 
 
 def stored_sentence(proof: Proof) -> str:
