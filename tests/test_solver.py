@@ -315,6 +315,54 @@ def test_hard_scene_instances_verified(name, method, tmp_path):
         assert res.status is not Status.SOLVED and np.all(np.isfinite(res.v))
 
 
+RESCALED_HARD = ["MassRatio-1e9-ndof-24-nc-4-0", "MassRatio-1e9-ndof-24-nc-6-0"]
+
+
+@pytest.mark.parametrize("name", RESCALED_HARD)
+def test_a_step_to_another_scale_restarts_the_stall_count(name, tmp_path):
+    # Mass ratio 1e9 (data/hard/README.md): one step takes a light sphere's reaction 1e5 times
+    # its start and μ up 1e3–1e7-fold; the measures then fall five-fold a step, but stayed above
+    # their bests from before the move for the 8-iteration stall window, and every form ended
+    # InsufficientProgress (18 of 24 generated MassRatio problems at 1e9).
+    from rfverify.solver.termination import RESCALED
+
+    problem = rfverify.load(HARD_DIR / f"{name}.hdf5")
+    res, chk = _solve_and_recheck(problem, "auto", tmp_path)
+    assert res.status is Status.SOLVED, res.message
+    assert chk["dynamics"] <= 1e-10 and chk["complementarity"] <= 1e-10 and chk["velocity"] <= 1e-12
+    assert chk["dual_cone"] <= 1e-10 and chk["primal_cone"] <= 1e-12
+    runs = [c["trace"] for c in res.extras.get("component_runs", [])] or [res.trace]
+    jumps = [np.asarray(t["mu"]) for t in runs]
+    assert any(np.any(mu[1:] > RESCALED * mu[:-1]) for mu in jumps)  # the case the rule is for
+
+
+class _Measures:
+    def __init__(self, value):
+        self.velocity = self.dual_cone = self.dynamics = self.primal_cone = 0.0
+        self.complementarity = self.max = value
+
+
+@pytest.mark.parametrize("after_the_jump", ["falls", "stays"])
+def test_stall_count_after_mu_jumps(after_the_jump):
+    # A run whose μ jumps 1e7-fold and then falls five-fold a step is not stalled (it would have
+    # been at its 8th step: its best is from before the jump); one that stays at the new scale is.
+    from rfverify.solver.result import Settings
+    from rfverify.solver.termination import Termination
+
+    term = Termination(Settings(tol=1e-10))
+    values = [1.0, 0.1, 1e-2, 1e-3] + [1e4 * (0.2 if after_the_jump == "falls" else 0.99) ** k for k in range(12)]
+    verdicts = []
+    for k, value in enumerate(values):
+        verdicts.append(term.observe(k, _Measures(value), (0.0, 0.0, value), None))
+        term.after_step(1.0)
+    stalled = [v for v in verdicts if v is not None]
+    if after_the_jump == "falls":
+        assert not stalled
+    else:
+        assert stalled and stalled[0].status is Status.INSUFFICIENT_PROGRESS
+        assert verdicts.index(stalled[0]) == 4 + 8  # the count restarted at the jump
+
+
 def test_refinement_resolves_the_primal_block(tmp_path):
     # Refinement that stops at a 0.5 contraction rate (LAPACK's) ended this lattice at
     # pinfeas 1.5e-9 (AlmostSolved); the 0.8 rate solves it.  Measured, see data/hard/README.md.

@@ -183,7 +183,9 @@ class Settings:
         pinfeas, dinfeas, μ that is still above ``tol`` fell below 0.9 × its own best,
         counted from the first step with α ≥ 0.5, with the bests reset there (before it, a
         badly scaled start may take several tiny but growing steps while μ grows 1e6-fold;
-        ``max_iter`` bounds that phase).
+        ``max_iter`` bounds that phase), and afresh after a step that raised μ more than
+        100-fold (:data:`rfverify.solver.termination.RESCALED`: the iterate moved to another
+        scale).
     time_limit : float or None
         Seconds; the run stops with status ``MaxTime`` (returning its best iterate) at the
         first iteration that starts after it.
