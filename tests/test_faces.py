@@ -262,3 +262,20 @@ def test_the_face_runs_step_reports_name_the_posed_problems_contacts():
     for h, line in zip(held, said):
         who = f"contact {h['contact']}'s" if h["contact"] is not None else f"the face's edge contact {h['face_edge']}'s"
         assert f"held by {who} {h['part']} cone ({h['side']})" in line
+
+
+def test_a_face_whose_problem_has_no_data_is_answered_exactly():
+    # One body (M = I), one contact whose rolling cone carries a self-stress y = (1, 0, 0, 1, 0)
+    # (Hy = 0, wᵀy = 0); on its face the reduced problem has f' = w' = 0.  Its iterates divided
+    # by μ = 0 (a ZeroDivisionError, exit 3, found by a mutation audit); its answer, no motion
+    # along the face, is exact.  Truth: v* = M⁻¹f = e1 is feasible (u(e1) = 0 ∈ K*).
+    H = np.zeros((4, 5))
+    H[0, 0] = H[1, 1] = H[2, 2] = H[3, 4] = 1.0
+    H[0, 3] = -1.0
+    p = rfverify.Problem.from_arrays(np.eye(4), H, np.array([1.0, 0, 0, 0]), np.array([-1.0, 0, 0, 1.0, 0]),
+                                     np.array([0.5]), np.array([1.0]))
+    out = rfverify.solve_to_digits(p, digits=10)
+    assert out.status is rfverify.Status.CERTIFIED, out.message
+    assert np.array_equal(out.v, [1.0, 0, 0, 0]) and not np.any(out.u)
+    assert out.certificate.bounds["v"] == 0.0
+    assert "face" in out.certificate.extra

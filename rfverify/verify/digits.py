@@ -235,7 +235,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     out_of_time = deadline is not None and time.perf_counter() > deadline
     interrupted = bool(double.extras.get("interrupted"))
     first, point, at_rest = _double_answer_first(problem, ctx, double, digits, relative, _on_face is None and (
-        out_of_time or interrupted or not ctx.hypotheses_proven or zero_data), on_face=_on_face is not None)
+        out_of_time or interrupted or not ctx.hypotheses_proven or zero_data), on_face=_on_face)
     # An exact zero answer is the answer: no iterate can prove relative digits of it either.
     if first is not None and (first[0].certified or not ctx.hypotheses_proven or out_of_time or interrupted
                               or zero_data):
@@ -321,11 +321,14 @@ def _check_path_arguments(method: str, factor_engine: str) -> None:
                                    fix="use method='auto' (default) or an Algorithm 1 form")
 
 
-def _double_answer_first(problem, ctx, double, digits: int, relative: bool, must: bool, on_face: bool):
+def _double_answer_first(problem, ctx, double, digits: int, relative: bool, must: bool, on_face):
     """(first, point, at_rest): the proof of the double answer's point where it is made now (``must``,
-    or it may certify), or of v = 0, r = 0 where that is the answer (:func:`at_rest_answer`)."""
+    or it may certify), or of v = 0, r = 0 where that is the answer (:func:`at_rest_answer`).
+    ``on_face``: the solve-on-face tuple of a problem on a face (:func:`solve_on_face`), or None."""
     point = candidate_point(double.v, double.r)
-    if on_face:
+    if on_face is not None:  # a problem on a face: only its exact answer of no data is proven here, lifted back
+        if double.extras.get("zero_data"):
+            return (*_face_zero_answer(ctx, on_face, point, digits, relative), False)
         return None, point, False
     if not double.extras.get("zero_data"):
         rest = at_rest_answer(problem, ctx, double, digits, relative)
@@ -334,6 +337,19 @@ def _double_answer_first(problem, ctx, double, digits: int, relative: bool, must
     if must or double_answer_may_certify(ctx, problem, double.v, double.r, digits, relative):
         return proven_answer(ctx, point, digits, relative), point, False
     return None, point, False
+
+
+def _face_zero_answer(ctx, on_face, point, digits: int, relative: bool):
+    """((proof, (v, u, r)), lifted point) where the problem on a face has f = w = 0: its answer,
+    no motion along the face and no reaction, is exact (an iterate from it would divide by μ = 0),
+    and is proven lifted back on the problem itself, as the face's iterates are."""
+    from ..proof.face import returned_reactions
+
+    _, reduction, stresses, target = on_face
+    lifted = reduction.lift(point)
+    v, u, r = ctx.rounded(lifted)
+    sol = target if target is not None else (v, u, returned_reactions(ctx.problem, stresses, r))
+    return (ctx.prove(lifted, *sol, requested=digits, relative=relative), sol), lifted
 
 
 def at_rest_answer(problem: Problem, ctx, double, digits: int, relative: bool):
