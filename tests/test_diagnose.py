@@ -438,3 +438,19 @@ def test_a_breakdown_of_the_witness_own_linear_algebra_decides_nothing():
     # a step the exact algorithm does not have (its point not interior) still decides
     assert witnessed_cause("precision", {"run": {**w.as_dict(), "stopped": "no step from iteration 12: x"}},
                            40) == "data"
+
+
+def test_a_stall_of_the_default_centring_rule_names_it_with_its_remedy(capsys):
+    """MassRatio at mass ratio 1e8 (data/hard/README.md): the default (hybrid) σ rule's steps stall,
+    in exact arithmetic too, while the paper's rule solves it.  The diagnosis says the centring
+    rule, not just "the data", and its remedy, given to `rfverify solve`, is Solved."""
+    path = HARD / "MassRatio-1e8-ndof-600-nc-297-1.hdf5"
+    d = diagnose(rfverify.load(path), tol=1e-10, witness_time=0)
+    assert d.status == "InsufficientProgress" and d.cause == "data"
+    assert d.remedy["args"][-2:] == ["--sigma-rule", "paper"] and d.remedy["status"] == "Solved"
+    assert d.conclusion.startswith("Cause: the centring rule on these data, not double precision")
+    assert main(["solve", str(path), *d.remedy["args"], "--tol", "1e-10", "--quiet"]) == 0
+    assert main(["solve", str(path), "--quiet"]) == 1  # the default rule: not Solved
+    capsys.readouterr()
+    assert main(["solve", str(path), "--sigma-rule", "paper", "--method", "clarabel"]) == 2
+    assert "--sigma-rule: is Algorithm 1's centring rule" in capsys.readouterr().err

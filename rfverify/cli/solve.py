@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS, PEER_METHODS
+from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS, PEER_METHODS, SIGMA_RULES
 from .coulomb import add_problem_option, add_start_option, solve_physical
 from .argtypes import digit_count, out_path, seconds
 from .common import (DOCS_NOTE, EXIT_NOT_SOLVED, EXIT_OK, PROBLEM_HELP, PROGRESS_AFTER, PROGRESS_AFTER_ENV,
@@ -92,6 +92,11 @@ def add_parser(sub) -> None:
                      help="with --digits: demand K relative (significant) digits of every quantity; a "
                           "quantity whose exact value may be zero is then not certified, instead of being "
                           "proven zero within 10^-K of its data scale (DESIGN §6.3)")
+    sol.add_argument("--sigma-rule", choices=SIGMA_RULES, default=None,
+                     help="Algorithm 1's centring rule: hybrid (Mehrotra's cubic sigma, floored at 0.2 while the "
+                          "criterion is above 1e-4, then the paper's; the default), paper (the paper's rule, as the "
+                          "double solve of --digits runs it) or siconos (GRFC3D_IPM's); 'rfverify diagnose' "
+                          "offers paper as a remedy where a stalled run needs it")
     sol.add_argument("--no-presolve", action="store_true",
                      help="switch off the presolve reductions (cone reduction for mu = 0 / "
                           "mu_r = 0 requires them; such problems are refused)")
@@ -127,6 +132,13 @@ def cmd_solve(args) -> int:
 
             raise InvalidProblemError("mu", "has zero coefficients, which the unreduced lifting "
                                             "would divide by", fix="drop --no-presolve")
+    if args.sigma_rule is not None:
+        if args.method in PEER_METHODS:
+            from ..errors import InvalidArgumentError
+
+            raise InvalidArgumentError("--sigma-rule", f"is Algorithm 1's centring rule; --method {args.method} runs its "
+                                                       "own", fix="drop --sigma-rule, or use an Algorithm 1 method")
+        options["sigma_rule"] = args.sigma_rule
     say = progress_printer(args)
     if args.start is not None and args.problem_kind != "coulomb":
         from ..errors import InvalidArgumentError

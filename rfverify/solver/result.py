@@ -67,6 +67,9 @@ PEER_METHODS = ("clarabel", "siconos")
 """Other solvers run on the same problem (no Algorithm 1 iterates, traces or lockstep): Clarabel, and
 Siconos's GRFC3D_IPM (the paper's own implementation; needs a build, see OPTIONAL_METHODS)."""
 
+SIGMA_RULES = ("hybrid", "paper", "siconos")
+"""Algorithm 1's centring rules (:attr:`Settings.sigma_rule`; :func:`rfverify.algorithm.rules.centring`)."""
+
 METHODS = ALGORITHM1_METHODS + PORTFOLIO_METHODS + PEER_METHODS
 """Every method name rfverify accepts: the one declaration the CLI, bench and report derive from."""
 
@@ -237,7 +240,7 @@ class Settings:
             ("max_iter", whole(self.max_iter, 1), "a whole number ≥ 1", "100"),
             ("start", self.start in ("velocity_scaled", "paper", "least_squares"),
              "'velocity_scaled', 'paper' or 'least_squares'", "'velocity_scaled'"),
-            ("sigma_rule", self.sigma_rule in ("hybrid", "paper", "siconos"), "'hybrid', 'paper' or 'siconos'",
+            ("sigma_rule", self.sigma_rule in SIGMA_RULES, "'hybrid', 'paper' or 'siconos'",
              "'hybrid'"),
             ("gamma0", real(self.gamma0) and 0 < self.gamma0 < 1, "a number in (0, 1)", "0.9"),
             ("longdouble_below", self.longdouble_below is None or (real(self.longdouble_below)

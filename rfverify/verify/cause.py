@@ -186,13 +186,17 @@ def try_remedies(ctx: DiagnosisContext, cause, run: ExactRun, user_options: dict
     ks = (15, 12, 10) if tol < DOUBLE_REACH else (max(1, min(15, math.ceil(-math.log10(tol)))),)
     iters = [("solve", {"method": method, "max_iter": more}, ["--method", method, "--max-iter", str(more)])]
     by_form = [("solve", {"method": m, "max_iter": max_iter}, ["--method", m] + base) for m in forms]
+    # the paper's centring rule, as the k-digit path's double solve runs it: where the default rule's
+    # steps stall on the data, exact arithmetic stalls with them, and the other rule may not
+    sigma = [("solve", {"method": method, "max_iter": max_iter, "sigma_rule": "paper"},
+              ["--method", method, "--sigma-rule", "paper"] + base)] if options.get("sigma_rule") != "paper" else []
     if tol < DOUBLE_REACH:  # the double stage of the k-digit path at a tolerance double can reach
         digits = [("digits", {"digits": k, "max_iter": max_iter, "tol": 1e-10},
                    ["--digits", str(k), "--tol", "1e-10"] + base) for k in ks]
     else:
         digits = [("digits", {"digits": k, "max_iter": max_iter}, ["--digits", str(k)] + base) for k in ks]
-    plan = {"precision": by_form + digits, "iterations": iters + by_form + digits,
-            "data": by_form + iters + digits}.get(cause, by_form + digits)
+    plan = {"precision": by_form + sigma + digits, "iterations": iters + by_form + sigma + digits,
+            "data": sigma + by_form + iters + digits}.get(cause, by_form + sigma + digits)
     tried = []
     for kind, kw, args in plan:
         if not ctx.in_time():
@@ -201,7 +205,7 @@ def try_remedies(ctx: DiagnosisContext, cause, run: ExactRun, user_options: dict
         limit = {} if ctx.deadline is None else {"time_limit": max(ctx.deadline - time.perf_counter(), 1e-3)}
         t0 = time.perf_counter()
         if kind == "solve":
-            out = solve(problem, tol=tol, **kw, **options, **limit)
+            out = solve(problem, tol=tol, **{**options, **kw}, **limit)
             crit, status = float(out.criterion), str(out.status)
             ok = out.success
         else:

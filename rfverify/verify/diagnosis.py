@@ -442,6 +442,11 @@ def _conclusion(d: Diagnosis) -> str:
                 .rstrip() + f" (max_iter = {d.nit if d.status == Status.MAX_ITERATIONS else 'its limit'}).")
     elif ev.get("file_only"):
         what = f"Cause: the data, not double precision — {ev['file_only']['text']}."
+    elif d.remedy and "--sigma-rule" in d.remedy["args"]:
+        what = (f"Cause: the centring rule on these data, not double precision — the same algorithm in exact "
+                f"arithmetic stalls too ({run.get('status', '?')}, best criterion "
+                f"{run.get('best_criterion', float('nan')):.1e}), while with the paper's σ rule the double solve meets "
+                f"tol = {d.tol:g}.")
     else:
         what = (f"Cause: the data, not double precision — the same algorithm in exact arithmetic stalls too "
                 f"({run.get('status', '?')}, best criterion {run.get('best_criterion', float('nan')):.1e}).")
