@@ -40,10 +40,13 @@ def test_sweep_counts_every_committed_problem(capsys):
     assert f"{n} problems, jqinv at tol 1e-10" in out
     # Every committed problem verifies at 1e-10 under both option sets (the claim of DECISIONS),
     # except the local files whose W is indefinite as stored (a printed W; FCLIB's Boxes Stack):
-    # their answers are judged on the file's own W since issue 26, and are not solutions of it.
-    bad = "bundled/rfc3d_sphere_from_grfc3d.dat, tests/fclib/local_problem_test.hdf5"
-    assert f"A {{}}: {n - 2}/{n} verified" in out and f"not verified: {bad}\n" in out
-    assert f'B {{"longdouble_below": null}}: {n - 2}/{n} verified' in out
+    # their answers are judged on the file's own W since issue 26, and are not solutions of it;
+    # and a MassRatio problem kept because the default σ rule stalls on it (data/hard/README.md:
+    # diagnose names the rule, and --sigma-rule paper solves it).
+    bad = ("bundled/rfc3d_sphere_from_grfc3d.dat, tests/fclib/local_problem_test.hdf5, "
+           "tests/hard/MassRatio-1e8-ndof-600-nc-297-1.hdf5")
+    assert f"A {{}}: {n - 3}/{n} verified" in out and f"not verified: {bad}\n" in out
+    assert f'B {{"longdouble_below": null}}: {n - 3}/{n} verified' in out
 
 
 @pytest.mark.skipif(not BENCH.is_dir(), reason="benchmarks/ is not shipped in the installed package")
