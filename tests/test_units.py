@@ -76,3 +76,27 @@ def test_a_tiny_problem_is_solved_and_proven():
     q = rfverify.Problem.from_arrays(p.M * 2.0 ** -664, p.H, p.f * 2.0 ** -830, p.w * 2.0 ** -166, p.mu, p.mu_r)
     out = rfverify.solve_to_digits(q, digits=10)
     assert out.success, out.certificate.verdict
+
+
+@pytest.mark.parametrize("e", [830, -700, 0])
+def test_a_local_problem_with_W_and_q_at_the_ends_of_the_range_is_proven(e):
+    # u = W r + q with W = BᵀB (integers) and a planted answer: contact 0 slides (r = (5, -1.5, 2),
+    # u = (2.5, 3, -4), μ = 0.5, a 3-4-5 direction), contact 1 sticks (r = (3, 0, 0), u = 0), so
+    # q = u* − W r* exactly.  W and q ×2^e keep r* and give u* ×2^e.  Scaling q alone (W as it
+    # was) left reactions of 2^-841 beside a W of 2^830, where the double solve failed and the
+    # verdict blamed an overflow (an audit, 2026-12-07).
+    from rfverify.io.fclib3d import LOCAL, extract, local_3d_problem, provenance_3d
+
+    B = np.array([[9, 1, -2, 0, 1, 0], [0, 8, 1, 2, 0, -1], [1, 0, 9, 0, -2, 1],
+                  [-1, 2, 0, 8, 1, 0], [0, 1, 1, -1, 9, 2], [2, 0, -1, 1, 0, 8]], dtype=float)
+    W = B.T @ B
+    r_star = np.array([5.0, -1.5, 2.0, 3.0, 0.0, 0.0])
+    u_star = np.array([2.5, 3.0, -4.0, 0.0, 0.0, 0.0])
+    q = u_star - W @ r_star
+    p = local_3d_problem(np.ldexp(W, e), np.ldexp(q, e), np.array([0.5, 0.5]), "dense",
+                         provenance=provenance_3d(LOCAL, []))
+    out = rfverify.solve_to_digits(p, digits=10)
+    assert out.status is rfverify.Status.CERTIFIED, out.message
+    r, u = extract(np.asarray(out.r)), extract(np.asarray(out.u))
+    assert np.max(np.abs(r - r_star)) <= out.certificate.bounds["r"] <= 1e-9 * 5
+    assert np.max(np.abs(u - np.ldexp(u_star, e))) <= out.certificate.bounds["u"] <= np.ldexp(1e-9 * 4, e)

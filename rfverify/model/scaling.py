@@ -24,7 +24,9 @@ one iteration per factor 2 and failed from about 2^20: the bundled Chute with it
 units 2^20 smaller (M and f ×2^20) ended InsufficientProgress at 6.9e-06.  Problems inside both
 ranges are never touched: their answers stay bit for bit the same.
 
-A local problem (u = W r + q) is scaled through q only (W and its lifting unchanged: a = b = 0).
+A local problem (u = W r + q) has a = 0: W ← 2^(2b) W with its lifting's H ← 2^b H where W's
+largest entries lie beyond the safe range (else b = 0), and q ← 2^(b+k) q; r ← 2^(k−b) r, u ← 2^(b+k) u.
+Scaling q alone left a W of 2^830 beside reactions of 2^-841, where the double solve failed.
 """
 
 from __future__ import annotations
@@ -93,7 +95,7 @@ class BinaryScaling:
 
     def exponent(self, name: str) -> int:
         a, b, k = self.a, self.b, self.k
-        return {"M": a, "H": b, "W": 0, "f": a + k, "Hr": a + k, "w": b + k, "q": b + k, "u": b + k, "v": k,
+        return {"M": a, "H": b, "W": a + 2 * b, "f": a + k, "Hr": a + k, "w": b + k, "q": b + k, "u": b + k, "v": k,
                 "r": a + k - b}[name]
 
     def as_dict(self) -> dict:
@@ -169,8 +171,12 @@ def binary_scaling(problem: Problem) -> BinaryScaling | None:
     P_e = mu_e.ravel()
     local = problem.local is not None
     if local:
-        a = b = 0
-        e_fw = _lifted_exponent(problem.local.q, P_e)
+        a, b = 0, 0
+        e_W = _max_exponent(sp.coo_matrix(problem.local.W).data)
+        if e_W is not None and abs(e_W + int(P_e.max(initial=0))) > SAFE_EXPONENT:  # W ← 2^(2b) W, H ← 2^b H
+            b = -((e_W + int(P_e.max(initial=0))) // 2)
+        e_q = _lifted_exponent(problem.local.q, P_e)
+        e_fw = None if e_q is None else e_q + b
     else:
         e_M = _max_exponent(problem.M.data)
         Hc = sp.coo_matrix(problem.H)
@@ -182,8 +188,9 @@ def binary_scaling(problem: Problem) -> BinaryScaling | None:
         cands = [e for e in ((None if e_f is None else e_f + a), (None if e_w is None else e_w + b)) if e is not None]
         e_fw = max(cands) if cands else None
     k = -e_fw if e_fw is not None and abs(e_fw) > SAFE_EXPONENT else 0
-    fields = [("q", problem.local.q)] if local else [("M", problem.M.data), ("H", problem.H.data),
-                                                     ("f", problem.f), ("w", problem.w)]
+    fields = [("q", problem.local.q), ("W", sp.coo_matrix(problem.local.W).data), ("H", problem.H.data),
+              ("w", problem.w)] if local else [("M", problem.M.data), ("H", problem.H.data),
+                                               ("f", problem.f), ("w", problem.w)]
     if not local:  # grossly mismatched units too, where the result stays exact and in the safe range
         shifted = lambda e, d: None if e is None else e + d  # noqa: E731
         da, dk = _unit_shift(shifted(e_M, a), shifted(e_H, b), shifted(e_f, a + k), shifted(e_w, b + k))
@@ -216,14 +223,16 @@ def _in_safe_range(scaling: BinaryScaling, e_M, e_H, e_f, e_w) -> bool:
 def scaled_problem(problem: Problem, scaling: BinaryScaling) -> Problem:
     """The problem in scaled units (exactly; equations, provenance and title kept)."""
     if problem.local is not None:
-        from .problem import LocalForm
-
         q = scaling.scale("q", problem.local.q)
         w = scaling.scale("w", problem.w)
-        out = Problem.from_arrays(problem.M, problem.H, problem.f, w, problem.mu, problem.mu_r,
+        H = sp.csc_matrix(problem.H, copy=True)
+        H.data = scaling.scale("H", H.data)
+        W = sp.csr_matrix(problem.local.W, copy=True)
+        W.data = scaling.scale("W", W.data)
+        out = Problem.from_arrays(problem.M, H, problem.f, w, problem.mu, problem.mu_r,
                                   title=problem.title, max_asymmetry=np.inf, source=problem.source,
                                   provenance=problem.provenance)
-        local = LocalForm(W=problem.local.W, q=q, significant_digits=problem.local.significant_digits)
+        local = dataclasses.replace(problem.local, W=W, q=q)
         out = dataclasses.replace(out, local=local, equations=problem.equations)
     else:
         M = sp.csc_matrix(problem.M, copy=True)

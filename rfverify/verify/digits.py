@@ -484,8 +484,12 @@ def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsS
         return dataclasses.replace(out, **back, point=cert.point, certificate=cert)
     back = {name: scaling.back(name, getattr(out, name)) for name in ("v", "u", "r")}
     if not all(np.all(np.isfinite(x)) for x in back.values()):
-        cert = Certificate(out.certificate.requested, False, "not certified: the proven answer overflows float64 in "
-                                                             f"the problem's own units ({scaling.describe()})",
+        # an unproven answer (a run that failed in the scaled units) is not called a proven one
+        verdict = (f"not certified: the proven answer overflows float64 in the problem's own units "
+                   f"({scaling.describe()})" if out.certificate.certified else
+                   f"{out.certificate.verdict} — in units scaled by exact powers of two ({scaling.describe()}); "
+                   "that run's answer, not proven, also overflows float64 when scaled back")
+        cert = Certificate(out.certificate.requested, False, verdict,
                            None, None, None, dict(out.certificate.extra), out.certificate.seconds)
         return dataclasses.replace(out, **back, point=None, certificate=cert)
     ups = [scaling.scale(name, back[name]) for name in ("v", "u", "r")]
