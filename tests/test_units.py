@@ -100,3 +100,26 @@ def test_a_local_problem_with_W_and_q_at_the_ends_of_the_range_is_proven(e):
     r, u = extract(np.asarray(out.r)), extract(np.asarray(out.u))
     assert np.max(np.abs(r - r_star)) <= out.certificate.bounds["r"] <= 1e-9 * 5
     assert np.max(np.abs(u - np.ldexp(u_star, e))) <= out.certificate.bounds["u"] <= np.ldexp(1e-9 * 4, e)
+
+
+def test_an_unproven_answer_that_overflows_when_scaled_back_is_not_called_proven(monkeypatch, tmp_path):
+    # The scaling of q alone (the one before W was scaled too) makes the run fail on the 2^830 local
+    # problem above; its answer overflows when scaled back, and the verdict had said "the proven
+    # answer overflows float64".
+    from rfverify.io.fclib3d import LOCAL, local_3d_problem, provenance_3d
+    from rfverify.model import scaling
+
+    B = np.array([[9, 1, -2, 0, 1, 0], [0, 8, 1, 2, 0, -1], [1, 0, 9, 0, -2, 1],
+                  [-1, 2, 0, 8, 1, 0], [0, 1, 1, -1, 9, 2], [2, 0, -1, 1, 0, 8]], dtype=float)
+    W = B.T @ B
+    q = np.array([2.5, 3.0, -4.0, 0.0, 0.0, 0.0]) - W @ np.array([5.0, -1.5, 2.0, 3.0, 0.0, 0.0])
+    p = local_3d_problem(np.ldexp(W, 830), np.ldexp(q, 830), np.array([0.5, 0.5]), "dense",
+                         provenance=provenance_3d(LOCAL, []))
+    rfverify.save(p, tmp_path / "local.hdf5")  # as the audit had it: read back from its file
+    p = rfverify.load(tmp_path / "local.hdf5")
+    monkeypatch.setattr(scaling, "binary_scaling", lambda problem: BinaryScaling(0, 0, -841)
+                        if np.max(np.abs(problem.w)) > 1e200 else None)  # (the scaled problem is in range)
+    out = rfverify.solve_to_digits(p, digits=10, max_iter=15, extended_max_iter=4, wide_tail=False)
+    assert out.status is not rfverify.Status.CERTIFIED
+    assert not np.all(np.isfinite(out.u))  # the case under test: the answer overflowed
+    assert "the proven answer overflows" not in out.message and "not proven" in out.message, out.message

@@ -113,7 +113,8 @@ class BinaryScaling:
             return None
         x = np.asarray(x, dtype=np.float64)
         e = -self.exponent(name) if inverse else self.exponent(name)
-        y = np.ldexp(x, e)
+        with np.errstate(all="ignore"):  # an entry that leaves the range is reported as None, not warned about
+            y = np.ldexp(x, e)
         return y if exact_ldexp(x, y, e) else None
 
     def back(self, name: str, x) -> np.ndarray:
