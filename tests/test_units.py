@@ -123,3 +123,20 @@ def test_an_unproven_answer_that_overflows_when_scaled_back_is_not_called_proven
     assert out.status is not rfverify.Status.CERTIFIED
     assert not np.all(np.isfinite(out.u))  # the case under test: the answer overflowed
     assert "the proven answer overflows" not in out.message and "not proven" in out.message, out.message
+
+
+def test_a_local_W_whose_small_entries_would_not_survive_its_scaling_is_not_refused():
+    # W at 2^830 with one coupling of 1e-60: scaling W down to the safe range would make that entry
+    # subnormal and inexact, so W is left as it is and q alone is scaled (the problem runs; it was
+    # refused with "no exact power-of-two change of units" when W was always scaled).
+    from rfverify.io.fclib3d import LOCAL, local_3d_problem, provenance_3d
+
+    B = np.array([[9, 1, -2, 0, 1, 0], [0, 8, 1, 2, 0, -1], [1, 0, 9, 0, -2, 1],
+                  [-1, 2, 0, 8, 1, 0], [0, 1, 1, -1, 9, 2], [2, 0, -1, 1, 0, 8]], dtype=float)
+    W = np.ldexp(B.T @ B, 830)
+    W[0, 5] = W[5, 0] = 1e-60
+    p = local_3d_problem(W, np.ldexp(np.ones(6), 830), np.array([0.5, 0.5]), "dense",
+                         provenance=provenance_3d(LOCAL, []))
+    scaling = binary_scaling(p)
+    assert scaling is not None and scaling.exponent("W") == 0 and scaling.exponent("q") < -600
+    assert scaled_problem(p, scaling).local.W[0, 7] == 1e-60  # (3-D entry (0, 5) in the 5-per-contact layout)

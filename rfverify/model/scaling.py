@@ -25,7 +25,8 @@ units 2^20 smaller (M and f ×2^20) ended InsufficientProgress at 6.9e-06.  Prob
 ranges are never touched: their answers stay bit for bit the same.
 
 A local problem (u = W r + q) has a = 0: W ← 2^(2b) W with its lifting's H ← 2^b H where W's
-largest entries lie beyond the safe range (else b = 0), and q ← 2^(b+k) q; r ← 2^(k−b) r, u ← 2^(b+k) u.
+largest entries lie beyond the safe range and every entry survives exactly (else b = 0), and
+q ← 2^(b+k) q; r ← 2^(k−b) r, u ← 2^(b+k) u.
 Scaling q alone left a W of 2^830 beside reactions of 2^-841, where the double solve failed.
 """
 
@@ -176,6 +177,9 @@ def binary_scaling(problem: Problem) -> BinaryScaling | None:
         e_W = _max_exponent(sp.coo_matrix(problem.local.W).data)
         if e_W is not None and abs(e_W + int(P_e.max(initial=0))) > SAFE_EXPONENT:  # W ← 2^(2b) W, H ← 2^b H
             b = -((e_W + int(P_e.max(initial=0))) // 2)
+            trial = BinaryScaling(0, b, 0)
+            if trial.scale("W", sp.coo_matrix(problem.local.W).data) is None or trial.scale("H", problem.H.data) is None:
+                b = 0  # W's small entries would not survive: q alone, as before W was scaled
         e_q = _lifted_exponent(problem.local.q, P_e)
         e_fw = None if e_q is None else e_q + b
     else:
