@@ -174,11 +174,12 @@ def binary_scaling(problem: Problem) -> BinaryScaling | None:
     local = problem.local is not None
     if local:
         a, b = 0, 0
-        e_W = _max_exponent(sp.coo_matrix(problem.local.W).data)
+        W_data = sp.coo_matrix(problem.local.W).data
+        e_W = _max_exponent(W_data)
         if e_W is not None and abs(e_W + int(P_e.max(initial=0))) > SAFE_EXPONENT:  # W ← 2^(2b) W, H ← 2^b H
             b = -((e_W + int(P_e.max(initial=0))) // 2)
             trial = BinaryScaling(0, b, 0)
-            if trial.scale("W", sp.coo_matrix(problem.local.W).data) is None or trial.scale("H", problem.H.data) is None:
+            if trial.scale("W", W_data) is None or trial.scale("H", problem.H.data) is None:
                 b = 0  # W's small entries would not survive: q alone, as before W was scaled
         e_q = _lifted_exponent(problem.local.q, P_e)
         e_fw = None if e_q is None else e_q + b
@@ -193,7 +194,7 @@ def binary_scaling(problem: Problem) -> BinaryScaling | None:
         cands = [e for e in ((None if e_f is None else e_f + a), (None if e_w is None else e_w + b)) if e is not None]
         e_fw = max(cands) if cands else None
     k = -e_fw if e_fw is not None and abs(e_fw) > SAFE_EXPONENT else 0
-    fields = [("q", problem.local.q), ("W", sp.coo_matrix(problem.local.W).data), ("H", problem.H.data),
+    fields = [("q", problem.local.q), ("W", W_data), ("H", problem.H.data),
               ("w", problem.w)] if local else [("M", problem.M.data), ("H", problem.H.data),
                                                ("f", problem.f), ("w", problem.w)]
     if not local:  # grossly mismatched units too, where the result stays exact and in the safe range

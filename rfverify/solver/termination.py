@@ -90,7 +90,7 @@ class Termination:
             return Verdict(Status.SOLVED, f"paper's max(pinfeas, dinfeas, mu) = {max(paper):.2e}")
         mu = paper[2]
         if self._engaged and mu > RESCALED * self._last_mu:  # the iterate moved to another scale: count afresh
-            self._best_each, self._since = [np.inf, np.inf, np.inf], 0
+            self._count_afresh()
         self._last_mu = mu
         improved = False
         for i, val in enumerate((max(judged.velocity, judged.dual_cone), judged.dynamics,
@@ -114,7 +114,12 @@ class Termination:
         """Stall counting starts at the first step with α ≥ 0.5, with the bests reset there."""
         if not self._engaged and alpha >= 0.5:
             self._engaged = True
-            self._best_each = [np.inf, np.inf, np.inf]
+            self._count_afresh()
+
+    def _count_afresh(self):
+        """Each measure's best forgotten and the stall count at 0: from the first long step, and after
+        a step to another scale (:data:`RESCALED`)."""
+        self._best_each, self._since = [np.inf, np.inf, np.inf], 0
 
     def ask_callback(self, info) -> Verdict | None:
         if self.callback is not None and self.callback(info):
