@@ -128,6 +128,13 @@ class Policy(Protocol):
 
     def sigma(self, mu: float, mu_aff: float, alpha_aff: float) -> float: ...
 
+    def after_predictor(self, k: int, alpha_aff: float, point_at):
+        """The predictor's direction is known, the corrector's not yet: None to go on (this
+        default), or (verdict, (v, r̃, z)) to stop at that point instead of iterate k — one of
+        ``point_at(α)`` = ((v, r̃, z) + α·predictor, its μ), for an α ≤ ``alpha_aff`` (the
+        largest step the cones allow), that the policy accepted (the extended phases: proven)."""
+        return None
+
     def after_direction(self, k: int, record: dict, predictor: Direction, corrector: Direction):
         """The step is computed, not taken: None to take it, or a verdict to stop."""
 

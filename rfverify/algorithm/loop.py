@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from .interfaces import PROMOTE, Breakdown, OutOfTime, Residuals
+from .interfaces import PROMOTE, Breakdown, Direction, OutOfTime, Residuals
 
 
 @dataclass
@@ -66,6 +66,17 @@ def residuals(space, v, r, z, n_contacts: int) -> Residuals:
                      gap=gap, mu=float(gap / n_contacts), pinfeas=pinf, dinfeas=dinf)
 
 
+def _predicted_points(space, iterate: tuple, s, pred: Direction, ds_aff, n_contacts: int):
+    """``point_at(α)``: the iterate moved α along the predictor's direction, and its μ."""
+    v, r, z = iterate
+
+    def point_at(alpha: float):
+        z_a = space.axpy(z, alpha, pred.dz)
+        mu = float(space.dot(z_a, space.axpy(s, alpha, ds_aff)) / n_contacts)
+        return (space.axpy(v, alpha, pred.dv), space.axpy(r, alpha, pred.dr), z_a), mu
+    return point_at
+
+
 def iterate(precision: Precision, policy, start: tuple, *, n_contacts: int, n_cones: int,
             clock_origin: float) -> LoopOutcome:
     """Run Algorithm 1 from ``start`` = (v, r̃, z) (in ``precision``'s vectors) until the
@@ -108,6 +119,12 @@ def iterate(precision: Precision, policy, start: tuple, *, n_contacts: int, n_co
             alpha_aff = min(1.0, scaling.max_step(pred.dz, ds_aff))
             mu_aff = float(space.dot(space.axpy(z, alpha_aff, pred.dz), space.axpy(res.s, alpha_aff, ds_aff))
                            / n_contacts)
+            stop = policy.after_predictor(k, alpha_aff, _predicted_points(space, (v, r, z), res.s, pred, ds_aff,
+                                                                          n_contacts))
+            if stop is not None:
+                timings["solve"] += time.perf_counter() - t_solve
+                verdict, (v, r, z) = stop
+                break
             sigma = policy.sigma(res.mu, mu_aff, alpha_aff)
             mu_c = res.gap / n_cones
             corr = precision.newton.solve(a, b, scaling.corrector_rhs(sigma * mu_c, pred.dz, ds_aff), "corrector")

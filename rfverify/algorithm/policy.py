@@ -7,6 +7,13 @@ from . import rules
 from .interfaces import Policy
 
 
+PREDICTED_FRACTION = 0.999
+"""The predictor's point offered to ``until`` lies this fraction of the way to the cones'
+boundary along the predictor's direction: late in a run its μ is far below the next iterate's
+(which the corrector re-centres), and a thousandth of the margin is kept so that the proof's
+exact cone tests see a strict interior (docs/DECISIONS.md, "A proof at the predictor's point")."""
+
+
 class UntilPolicy(Policy):
     """The extended phases' policy: stop when ``until(iterate)`` accepts an iterate (status
     "Stopped") or at ``max_iter``; the paper's σ rule; γ = min(γ_max, 0.9 + (γ_max − 0.9)α).
@@ -16,10 +23,24 @@ class UntilPolicy(Policy):
 
     gamma0 = 0.9
 
-    def __init__(self, until, progress, max_iter: int, make_iterate, gamma_max: float, stop_words: str):
+    def __init__(self, until, progress, max_iter: int, make_iterate, gamma_max: float, stop_words: str,
+                 make_predicted=None):
         self.until, self.progress, self.max_iter = until, progress, max_iter
         self.make_iterate, self.gamma_max, self.stop_words = make_iterate, gamma_max, stop_words
+        self.make_predicted = make_predicted  # (k, (v, r̃, z), μ) -> the predictor's point for ``until``
         self.last_step = None  # (α, limit) of the step just taken
+
+    def after_predictor(self, k, alpha_aff, point_at):
+        """Offer ``until`` the point :data:`PREDICTED_FRACTION` of the predictor's largest step
+        along its direction (where ``make_predicted`` is given); stop there if it accepts it."""
+        if self.until is None or self.make_predicted is None or not alpha_aff > 0:
+            return None
+        alpha = PREDICTED_FRACTION * alpha_aff
+        point, mu = point_at(alpha)
+        if self.until(self.make_predicted(k, point, mu)):
+            return ("Stopped", f"{self.stop_words} at iteration {k}'s predictor point, {alpha:.4g} along its "
+                               f"direction (μ = {mu:.2e})"), point
+        return None
 
     def observe(self, k, iterate, res, record):
         if self.progress:

@@ -103,6 +103,9 @@ class Iterate:
     mu: float
     pinfeas: float
     dinfeas: float
+    predicted: bool = False
+    """True for the point along iteration k's predictor direction (its residuals not evaluated:
+    NaN), offered to ``until`` before the corrector is solved."""
 
 
 @dataclass
@@ -354,10 +357,14 @@ class DDBackend(ReducedBackend):
 
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, backend=None,
         refine_max: int = 12, gamma_max: float = 0.99, progress=None,
-        enough: float | None = NEWTON_ENOUGH, predictor_enough: float | None = PREDICTOR_ENOUGH) -> ExtendedResult:
+        enough: float | None = NEWTON_ENOUGH, predictor_enough: float | None = PREDICTOR_ENOUGH,
+        offer_predicted: bool = False) -> ExtendedResult:
     """Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) in double-double from ``start`` =
     {"v", "r_t", "z"} (any float dtype; converted exactly).  ``until(iterate)`` is called at
-    every iterate (before the step); returning True stops the run with status "Stopped".
+    every iterate (before the step); returning True stops the run with status "Stopped".  With
+    ``offer_predicted`` it is also called, before each corrector, with the point along the
+    predictor's direction (``Iterate.predicted``; :meth:`.algorithm.policy.UntilPolicy.after_predictor`),
+    and accepting it stops the run there, with that point as the last iterate.
     ``gamma_max`` caps the step-to-boundary fraction γ = 0.9 + 0.09α (the paper's rule) from
     above.  ``refine_max`` bounds the refinement steps of each Newton solve against the
     unreduced system (each stops earlier when it no longer halves the residual, or once each
@@ -372,7 +379,9 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 60, back
                            enough=enough, predictor_enough=predictor_enough)
     policy = UntilPolicy(until, progress, max_iter,
                          lambda k, it, res: Iterate(k, *it, res.mu, res.pinfeas, res.dinfeas),
-                         gamma_max, "accepted")
+                         gamma_max, "accepted",
+                         make_predicted=(lambda k, it, mu: Iterate(k, *it, mu, math.nan, math.nan, predicted=True))
+                         if offer_predicted else None)
     begin = tuple(V(*dd.from_longdouble(start[key])) for key in ("v", "r_t", "z"))
     out = iterate(Precision(space, DDCones(data), newton), policy, begin, n_contacts=data.n,
                   n_cones=data.n3 + data.n1, clock_origin=t0)

@@ -42,20 +42,22 @@ def proven_answer(ctx: ProofContext, point: Point, digits: int, relative: bool):
     return ctx.prove(point, v, u, r, requested=digits, relative=relative), (v, u, r)
 
 
-def proof_site(phase: str, iteration: int | None = None, *, on_face: bool = False) -> dict:
+def proof_site(phase: str, iteration: int | None = None, *, on_face: bool = False, predicted: bool = False) -> dict:
     """Where a proof's point came from: ``phase`` "double" (the double solve's answer),
     "extended" (a double-double iterate) or "multiple-precision" (an iterate of the tail),
-    its ``iteration``, and ``on_face`` when it is an iterate of the problem reduced to a face,
-    lifted back (DESIGN §6.5)."""
-    return {"phase": phase, "iteration": iteration, "on_face": bool(on_face)}
+    its ``iteration``, ``on_face`` when it is an iterate of the problem reduced to a face,
+    lifted back (DESIGN §6.5), and ``predicted`` when it is not the iterate but the point along
+    its predictor's direction (:meth:`rfverify.algorithm.policy.UntilPolicy.after_predictor`)."""
+    return {"phase": phase, "iteration": iteration, "on_face": bool(on_face), "predicted": bool(predicted)}
 
 
 def site_words(at: dict | None) -> str:
     """A :func:`proof_site` in words: "extended iteration 4", "the double solve's answer",
-    "extended iteration 3 on the face"."""
+    "extended iteration 3 on the face", "extended iteration 12's predictor point"."""
     if at is None:
         return "no point"
     words = "the double solve's answer" if at["phase"] == "double" else f"{at['phase']} iteration {at['iteration']}"
+    words += "'s predictor point" if at.get("predicted") else ""
     return words + (" on the face" if at.get("on_face") else "")
 
 
@@ -150,6 +152,8 @@ class ProofDriver:
                    for name, q in proof.quantities.items() if name in own and q.mode != "information")
 
     def __call__(self, it: ext.Iterate, force: bool = False, quiet: bool = False) -> bool:
+        if getattr(it, "predicted", False):
+            return self._predicted(it)
         if not force and self.deadline is not None and time.perf_counter() > self.deadline:
             self.timed_out = True  # the time limit: stop here; the best proof so far stands
             self.recent = (self.recent + [it])[-RECENT:]
@@ -159,40 +163,20 @@ class ProofDriver:
         else:
             self._since += 1
         stalled = self._since >= self.stall
-        data = self.data
         if not force:
             self.recent = (self.recent + [it])[-RECENT:]
         if isinstance(it, wide.WideIterate):
             gap, point, v_inf, u_inf = it.describe()
             key = ("wide", it.k)
         else:
-            u_t = ext.V(*data.velocity(it.v.h, it.v.l, it.r_t.h, it.r_t.l))
-            gap = abs(it.r_t.dot(u_t))
-            point = point_from_iterate(data, it.v, it.r_t)
-            v_inf = float(np.max(np.abs(it.v.h), initial=0.0))
-            if data.local:
-                u_inf = float(np.max(np.abs(data.problem.local.W @ point.r_hi + data.problem.local.q), initial=0.0))
-            else:
-                u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
+            gap, point, v_inf, u_inf = self._describe(it)
             key = ("dd", it.k)
-        eps_lower = self.ctx.eps_lower(gap)
-        if not (stalled or force) and not self.ctx.may_certify(eps_lower, v_inf, u_inf, self.requested,
-                                                                      relative=self.relative):
+        if not (stalled or force) and not self._may_certify(gap, v_inf, u_inf):
             return False
         if key in self.proven_keys:
             return False
         self.proven_keys.add(key)
-        t0 = time.perf_counter()
-        if self.face is not None:  # an iterate of the problem on a face: proven on the problem itself
-            point = self.face[0].lift(point)
-        sol = self.target if self.target is not None else self.answer(point)
-        proof = self.ctx.prove(point, *sol, requested=self.requested, relative=self.relative)
-        self.proof_seconds += time.perf_counter() - t0
-        self.attempts += 1
-        phase = "multiple-precision" if key[0] == "wide" else "extended"
-        self.offer(proof, point, sol, proof_site(phase, it.k, on_face=self.face is not None))
-        if self.progress and not quiet:
-            self.progress(f"proof at {phase} iteration {it.k} (μ = {it.mu:.1e}): {proof.summary()}")
+        proof = self._prove(it, point, "multiple-precision" if key[0] == "wide" else "extended", quiet)
         if proof.certified:
             return True
         self._invalid_run = 0 if proof.valid else self._invalid_run + 1
@@ -206,4 +190,45 @@ class ProofDriver:
             return True
         return stalled
 
+    def _describe(self, it: ext.Iterate) -> tuple:
+        """(|r̃ᵀũ|, the point, ‖v‖∞, ‖u‖∞) of a double-double iterate, for :meth:`_may_certify`."""
+        data = self.data
+        u_t = ext.V(*data.velocity(it.v.h, it.v.l, it.r_t.h, it.r_t.l))
+        point = point_from_iterate(data, it.v, it.r_t)
+        v_inf = float(np.max(np.abs(it.v.h), initial=0.0))
+        if data.local:
+            u_inf = float(np.max(np.abs(data.problem.local.W @ point.r_hi + data.problem.local.q), initial=0.0))
+        else:
+            u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
+        return abs(it.r_t.dot(u_t)), point, v_inf, u_inf
 
+    def _may_certify(self, gap: float, v_inf: float, u_inf: float) -> bool:
+        return self.ctx.may_certify(self.ctx.eps_lower(gap), v_inf, u_inf, self.requested, relative=self.relative)
+
+    def _prove(self, it, point: Point, phase: str, quiet: bool, predicted: bool = False) -> Proof:
+        """Prove ``point`` (an iterate's, or iteration k's predictor point) and offer it."""
+        t0 = time.perf_counter()
+        if self.face is not None:  # an iterate of the problem on a face: proven on the problem itself
+            point = self.face[0].lift(point)
+        sol = self.target if self.target is not None else self.answer(point)
+        proof = self.ctx.prove(point, *sol, requested=self.requested, relative=self.relative)
+        self.proof_seconds += time.perf_counter() - t0
+        self.attempts += 1
+        at = proof_site(phase, it.k, on_face=self.face is not None, predicted=predicted)
+        self.offer(proof, point, sol, at)
+        if self.progress and not quiet:
+            self.progress(f"proof at {site_words(at)} (μ = {it.mu:.1e}): {proof.summary()}")
+        return proof
+
+    def _predicted(self, it: ext.Iterate) -> bool:
+        """Iteration k's predictor point (:data:`rfverify.algorithm.policy.PREDICTED_FRACTION`
+        of its largest step): proven where it may certify, and the run stops only when it does —
+        it counts neither towards a stall nor among the recent iterates."""
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            return False  # the iterate's own call stops the run
+        key = ("predicted", it.k)
+        gap, point, v_inf, u_inf = self._describe(it)
+        if key in self.proven_keys or not self._may_certify(gap, v_inf, u_inf):
+            return False
+        self.proven_keys.add(key)
+        return self._prove(it, point, "extended", quiet=False, predicted=True).certified

@@ -132,7 +132,8 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
         if verbose:
             tick("extended")(k, mu, pinf, dinf, step)
 
-    run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system, progress=extended_tick)
+    run = ext.run(data, start, until=driver, max_iter=max_iter, backend=system, progress=extended_tick,
+                  offer_predicted=True)
     seconds_dd = time.perf_counter() - t0 - (driver.proof_seconds - p0)
     if run.status == "MaxTime":  # a long kernel was stopped at the time limit (.extended.stoppable)
         driver.timed_out = True
