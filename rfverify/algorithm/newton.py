@@ -137,8 +137,8 @@ class ReducedNewton:
             # the back end made its solves more accurate: solve this system again
             dv, dr, dz, more, res, settled = self._refined(a, b, c, enough)
             steps += more
-        if not math.isfinite(res):
-            raise Breakdown(f"the {self.name} solve failed")
+        if not math.isfinite(res) or not all(math.isfinite(self.inf(x)) for x in (dv, dr, dz)):
+            raise Breakdown(f"the {self.name} solve failed (its direction is not finite)")
         self._residual = res if self._residual is None else max(self._residual, res)
         if phase == "corrector":
             self._last_residual = self._residual

@@ -54,13 +54,14 @@ def refined_newton(core, residual, a, b, c, *, inf, refine_max: int, floor: floa
     level at which that block's residual can be evaluated at all (:func:`_evaluation_floors`):
     an inexact Newton direction that accurate changes the next iterate's residuals, (1 − α)·rhs
     + α·e, by a relative η only.  ``settled``: the loop stopped at the floor or on that test,
-    not because refinement stalled or ran out of steps.  Any vector type with + and - and a
-    norm ``inf`` works (double-double pairs, mpfr arrays)."""
+    not because refinement stalled or ran out of steps.  The direction returned is the one whose
+    residual is returned: a correction that made it worse, or not finite, is undone.  Any vector
+    type with + and - and a norm ``inf`` works (double-double pairs, mpfr arrays)."""
     dv, dr, dz = core(a, b, c)
     sizes = (inf(a), inf(b), inf(c))
     scale = max(*sizes, 1e-300)
     best, steps, settled = math.inf, 0, False
-    floors, predicted = (0.0, 0.0, 0.0), None
+    floors, predicted, before = (0.0, 0.0, 0.0), None, None
     for _ in range(refine_max):
         e = residual(a, b, c, dv, dr, dz)
         if predicted is not None:
@@ -73,14 +74,20 @@ def refined_newton(core, residual, a, b, c, *, inf, refine_max: int, floor: floa
             best, settled = min(best, res), True
             break
         if not res < 0.5 * best:
-            best = min(best, res)
+            if before is not None and not res <= best:  # worse, or NaN: keep the direction before it
+                (dv, dr, dz), steps = before, steps - 1
+            best = min(best, res) if math.isfinite(res) else best
             break
         best = res
         ddv, ddr, ddz = core(*e)
         if enough is not None:  # what the residual will be, evaluated on the correction alone
             predicted = residual(*e, ddv, ddr, ddz)
+        before = (dv, dr, dz)
         dv, dr, dz = dv + ddv, dr + ddr, dz + ddz
         steps += 1
+    else:
+        if before is not None and not all(math.isfinite(inf(x)) for x in (dv, dr, dz)):
+            (dv, dr, dz), steps = before, steps - 1  # the last correction, never evaluated, is not finite
     return dv, dr, dz, steps, best, settled
 
 

@@ -57,6 +57,9 @@ class WideIterate:
     dinfeas: float
     bits: int
     wide_data: WideData = field(repr=False, default=None)
+    predicted: bool = False
+    """True for the point along iteration k's predictor direction (residuals not evaluated: NaN),
+    as :attr:`.ipm.Iterate.predicted`."""
 
     def describe(self):
         """(rᵀu of the iterate, the point (v, r) as a float64 expansion, ‖v‖∞, ‖u‖∞) for the
@@ -194,11 +197,13 @@ class _WideBackend(ReducedBackend):
 
 def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits: int = DEFAULT_BITS,
         refine_max: int = 8, gamma_max: float = 0.99, perm=None, progress=None, sparse: bool = True,
-        enough: float | None = NEWTON_ENOUGH, predictor_enough: float | None = PREDICTOR_ENOUGH) -> WideResult:
+        enough: float | None = NEWTON_ENOUGH, predictor_enough: float | None = PREDICTOR_ENOUGH,
+        offer_predicted: bool = False) -> WideResult:
     """Algorithm 1 (:func:`rfverify.algorithm.loop.iterate`) in ``bits``-bit arithmetic from
     ``start`` = {"v", "r_t", "z"}, each a (hi, lo) pair of float64 arrays (a double-double
     iterate) or an mpfr array.  ``until(WideIterate)`` is called at every iterate; True stops
-    the run ("Stopped").  Same policy as :func:`.ipm.run` (the paper's σ rule, the capped step
+    the run ("Stopped"); with ``offer_predicted`` also with each iteration's predictor point, as
+    in :func:`.ipm.run`.  Same policy as :func:`.ipm.run` (the paper's σ rule, the capped step
     rule) and the same inexact Newton solves (``enough``, ``predictor_enough``; None refines
     every solve to the floor, 2^(24 − bits)).  ``perm``: the factor's ordering from :func:`.wide_factor.dof_space_ordering`, if
     the caller computed it.  ``sparse``: the factor's engine is :class:`SparseWideCholesky`
@@ -215,7 +220,10 @@ def run(data: ExtendedData, start: dict, *, until=None, max_iter: int = 30, bits
                                predictor_enough=predictor_enough)
         policy = UntilPolicy(until, progress, max_iter,
                              lambda k, it, res: WideIterate(k, *it, res.mu, res.pinfeas, res.dinfeas, bits, W),
-                             gamma_max, "stopped by the proof driver")
+                             gamma_max, "stopped by the proof driver",
+                             make_predicted=(lambda k, it, mu: WideIterate(k, *it, mu, math.nan, math.nan, bits, W,
+                                                                           predicted=True))
+                             if offer_predicted else None)
 
         def lift(x):
             return from_dd(*x) if isinstance(x, tuple) else np.asarray(x, dtype=object) + 0

@@ -171,6 +171,8 @@ class ProofDriver:
         else:
             gap, point, v_inf, u_inf = self._describe(it)
             key = ("dd", it.k)
+        if not math.isfinite(gap):  # not a point (a run that broke down): nothing to prove
+            return stalled
         if not (stalled or force) and not self._may_certify(gap, v_inf, u_inf):
             return False
         if key in self.proven_keys:
@@ -226,9 +228,11 @@ class ProofDriver:
         it counts neither towards a stall nor among the recent iterates."""
         if self.deadline is not None and time.perf_counter() > self.deadline:
             return False  # the iterate's own call stops the run
-        key = ("predicted", it.k)
-        gap, point, v_inf, u_inf = self._describe(it)
-        if key in self.proven_keys or not self._may_certify(gap, v_inf, u_inf):
+        wide_point = isinstance(it, wide.WideIterate)
+        key = ("wide-predicted" if wide_point else "predicted", it.k)
+        gap, point, v_inf, u_inf = it.describe() if wide_point else self._describe(it)
+        if key in self.proven_keys or not math.isfinite(gap) or not self._may_certify(gap, v_inf, u_inf):
             return False
         self.proven_keys.add(key)
-        return self._prove(it, point, "extended", quiet=False, predicted=True).certified
+        phase = "multiple-precision" if wide_point else "extended"
+        return self._prove(it, point, phase, quiet=False, predicted=True).certified

@@ -169,7 +169,7 @@ def extend(data: ExtendedData, start: dict, driver: ProofDriver, system, *, max_
                 p1 = driver.proof_seconds
                 tail = wide.run(data, {"v": (it.v.h, it.v.l), "r_t": (it.r_t.h, it.r_t.l), "z": (it.z.h, it.z.l)},
                                 until=driver, max_iter=wide_max_iter, bits=wide_bits, perm=ordering[0],
-                                progress=tick("multiple-precision"))
+                                progress=tick("multiple-precision"), offer_predicted=True)
                 seconds_wide = time.perf_counter() - t1 - (driver.proof_seconds - p1)
                 note = f"{tail.status}: {tail.message}" + (f"; {driver.gave_up}" if driver.gave_up else "")
     if not driver.certified:
