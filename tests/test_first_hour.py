@@ -30,8 +30,11 @@ def run(capsys, *argv):
 def test_solve_text_names_the_form_auto_ran_and_why(capsys):
     code, out, err = run(capsys, "solve", "bundled:sphere")
     assert code == 0
-    assert ("method jqinv (auto: jqinv first, as 1 contact < 500; next reduced, then noscaling, had it stalled)"
+    assert ("method jqinv (auto: jqinv first, as 1 contact < 500; next reduced, then noscaling, then jqinv (σ rule paper), had it stalled)"
             in out.splitlines()), out
+    code, out, err = run(capsys, "solve", "bundled:sphere", "--sigma-rule", "hybrid")  # a chosen rule: no last resort
+    assert code == 0 and ("method jqinv (auto: jqinv first, as 1 contact < 500; next reduced, then noscaling, had it "
+                          "stalled)" in out.splitlines()), out
 
 
 def test_solve_text_names_a_requested_method(capsys):

@@ -822,3 +822,33 @@ def test_the_former_names_of_the_longdouble_settings_still_work():
     assert set(RENAMED_SETTINGS.values()) <= set(Settings.names())
     with pytest.raises(TypeError, match="given twice"):
         Settings(extended_below=None, longdouble_below=1e-9)
+
+
+def test_auto_tries_the_papers_centring_rule_after_every_form_stalled():
+    """MassRatio at 1e8 (data/hard/README.md): every form stalls under the default (hybrid) σ
+    rule; auto's last resort, jqinv with the paper's rule, is Solved and returned, and the
+    attempts say so.  A σ rule the caller chose is kept: then no last resort runs."""
+    from rfverify.solver.result import AUTO_LAST_RESORT
+
+    problem = rfverify.load(HARD_DIR / "MassRatio-1e8-ndof-600-nc-297-1.hdf5")
+    res = rfverify.solve(problem, tol=1e-10)
+    attempts = res.extras["attempts"]
+    assert res.success and res.method == "jqinv" and res.settings.sigma_rule == "paper"
+    assert [a["status"] for a in attempts[:-1]] == ["InsufficientProgress"] * (len(attempts) - 1)
+    assert (attempts[-1]["method"], attempts[-1]["sigma_rule"]) == AUTO_LAST_RESORT
+    assert "jqinv (σ rule paper): Solved" in res.message
+    chosen = rfverify.solve(problem, tol=1e-10, sigma_rule="hybrid")
+    assert not chosen.success and all("sigma_rule" not in a for a in chosen.extras["attempts"])
+    assert len(chosen.extras["attempts"]) == len(attempts) - 1
+
+
+def test_auto_returns_a_failed_last_resort_only_in_its_list():
+    """Where the last resort fails too, the answer returned is the best of auto's own forms (as
+    before it existed); the last resort is listed among the attempts."""
+    problem = rfverify.load("bundled:sphere-from-global")  # W as printed is not PSD: nothing is Solved
+    res = rfverify.solve(problem, tol=1e-10)
+    attempts = res.extras["attempts"]
+    assert not res.success and attempts[-1].get("sigma_rule") == "paper"
+    assert res.settings.sigma_rule == "hybrid"
+    best_form = min(attempts[:-1], key=lambda a: a["criterion"])
+    assert res.criterion == best_form["criterion"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..solver import attempt_words
 from ..solver.result import AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, METHODS, PEER_METHODS, SIGMA_RULES
 from .coulomb import add_problem_option, add_start_option, solve_physical
 from .argtypes import digit_count, out_path, seconds
@@ -43,7 +44,9 @@ def add_parser(sub) -> None:
                           "is Solved, or, on a problem of at least "
                           f"{AUTO_SCHUR_MIN_CONTACTS} contacts whose factor costs at least "
                           f"{AUTO_SCHUR_MIN_FILL:g} per contact (rfverify.solver.body_fill), schur then "
-                          "jqinv then noscaling (the 'method' line of the output names the form that ran, why "
+                          "jqinv then noscaling; after every form stalled, jqinv with --sigma-rule paper "
+                          "unless --sigma-rule is given, its answer returned only if Solved (the 'method' "
+                          "line of the output names the form that ran, why "
                           "auto took it first and what it tried before); or clarabel, the same problem handed to Clarabel; or siconos, "
                           "Siconos's GRFC3D_IPM, the paper's own solver, in a child process (needs a build: "
                           "bash benchmarks/peers/siconos/build.sh, then RFVERIFY_SICONOS=<its prefix>) "
@@ -224,9 +227,9 @@ def method_line(result, requested: str) -> str:
     forms, attempts = auto["forms"], result.extras.get("attempts") or []
     head = f"method {result.method} (auto: {forms[0]} first, as {auto['why']}"
     if len(attempts) <= 1:
-        rest = forms[1:]
+        rest = list(forms[1:]) + ([auto["last_resort"]] if auto.get("last_resort") else [])
         return head + (f"; next {', then '.join(rest)}, had it stalled)" if rest else ")")
-    tried = ", then ".join(f"{a['method']} {a['status']} at criterion {a['criterion']:.1e} after {a['nit']} "
+    tried = ", then ".join(f"{attempt_words(a)} {a['status']} at criterion {a['criterion']:.1e} after {a['nit']} "
                            f"iterations ({a['seconds']:.2f} s)" for a in attempts)
     chosen = "" if result.success else f"; {result.method}'s answer has the smallest criterion"
     return f"{head}; {tried}{chosen})"

@@ -15,7 +15,7 @@ from ..model.measures import Arithmetic, MeasureData, data_scales, data_scales_f
 from ..model.problem import SPACEDIM, Problem
 from .cones import ProductCone
 from .presolve import presolve
-from .result import (AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
+from .result import (AUTO_LAST_RESORT, AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, TRACE_FIELDS, IterationInfo, Settings, SolveResult, Status,
                      method_unavailable, renamed_settings)
 
@@ -93,7 +93,9 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         picks by the problem's size and fill — ``schur`` (the dof-space Schur complement, factored
         by CHOLMOD's supernodal Cholesky) on large problems whose factor fills in (granular piles
         and beds, random problems), ``jqinv`` otherwise — and tries the next form while one
-        stalls; ``extras["attempts"]`` lists the runs and ``method`` names the one returned.
+        stalls, and after the last one ``jqinv`` with the paper's σ rule (:data:`AUTO_LAST_RESORT`;
+        not where ``sigma_rule`` is given; its answer is returned only if it is Solved);
+        ``extras["attempts"]`` lists the runs and ``method`` names the one returned.
         ``clarabel`` hands the same convex problem to Clarabel; ``siconos`` runs the paper's own
         GRFC3D_IPM in a child process (it needs ``bash benchmarks/peers/siconos/build.sh`` and
         ``RFVERIFY_SICONOS``).  Both peers are judged by the same criterion.
@@ -445,8 +447,11 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
     t0 = time.perf_counter()
     attempts, results = [], []
     forms, why = _auto_choice(problem)
-    for form in forms:
-        opts = dict(options)
+    runs = [(form, None) for form in forms]
+    if "sigma_rule" not in options:  # the caller's σ rule is kept; else the last resort after a stall
+        runs.append(AUTO_LAST_RESORT)
+    for form, rule in runs:
+        opts = dict(options) if rule is None else {**options, "sigma_rule": rule}
         left = None
         if settings.time_limit is not None:
             left = settings.time_limit - (time.perf_counter() - t0)
@@ -459,20 +464,30 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
                                               f"time limit of {settings.time_limit:g} s (all forms together)")
         results.append(res)
         attempts.append({"method": form, "status": str(res.status), "criterion": res.criterion, "nit": res.nit,
-                         "seconds": res.timings.get("total", float("nan"))})
+                         "seconds": res.timings.get("total", float("nan")), **({"sigma_rule": rule} if rule else {})})
         if res.status in (Status.SOLVED, Status.STOPPED, Status.MAX_TIME, Status.MAX_ITERATIONS):
             break
+    # the last resort's answer is returned only where it is Solved (its failure is only listed)
     best = next((r for r in results if r.success), None) or min(
-        results, key=lambda r: r.criterion if np.isfinite(r.criterion) else np.inf)
+        results[:len(forms)], key=lambda r: r.criterion if np.isfinite(r.criterion) else np.inf)
     if len(results) > 1:
-        tried = "; ".join(f"{a['method']}: {a['status']} (criterion {a['criterion']:.2e})" for a in attempts)
+        tried = "; ".join(f"{attempt_words(a)}: {a['status']} (criterion {a['criterion']:.2e})" for a in attempts)
         best.message = f"auto returned {best.method} [{tried}]: {best.message}"
     best.extras["attempts"] = attempts
-    best.extras["auto"] = {"forms": list(forms), "why": why}
+    best.extras["auto"] = {"forms": list(forms), "why": why,
+                           "last_resort": attempt_words(dict(zip(("method", "sigma_rule"), runs[-1])))
+                           if len(runs) > len(forms) else None}
     if settings.time_limit is not None:  # its settings name the user's limit, not what was left of it
         best.settings = dataclasses.replace(best.settings, time_limit=settings.time_limit)
     best.timings["total"] = time.perf_counter() - t0
     return best
+
+
+def attempt_words(attempt: dict) -> str:
+    """An ``extras["attempts"]`` entry's form in words: "jqinv", or "jqinv (σ rule paper)" for
+    :data:`AUTO_LAST_RESORT`."""
+    rule = attempt.get("sigma_rule")
+    return attempt["method"] + (f" (σ rule {rule})" if rule else "")
 
 
 def _auto_choice(problem: Problem) -> tuple[tuple, str]:

@@ -29,6 +29,12 @@ AUTO_SEQUENCE_LARGE = ("schur", "jqinv", "noscaling")
 decides): schur, the path of form (16) on the smallest matrix (CHOLMOD's speed where it is
 installed), then jqinv (another path), then noscaling."""
 
+AUTO_LAST_RESORT = ("jqinv", "paper")
+"""(form, σ rule) ``auto`` tries once more after every form of its sequence stalled or broke
+down, unless the caller chose a σ rule: on a MassRatio problem at mass ratio 1e8 every form
+stalls under the default hybrid rule, in exact arithmetic too, and jqinv with the paper's rule is
+Solved in 37 iterations (docs/DECISIONS.md, "auto's last resort")."""
+
 AUTO_SCHUR_MIN_CONTACTS = 500
 AUTO_SCHUR_MIN_FILL = 100.0
 """``auto`` starts with schur instead of jqinv on a problem of at least AUTO_SCHUR_MIN_CONTACTS
