@@ -101,3 +101,19 @@ def test_the_answer_proven_at_a_predictor_point_is_proven_again_from_scratch(mon
     assert sol.certificate.extra["proven_at"]["predicted"]
     again = rfverify.certify(rfverify.load("bundled:sphere"), sol.v, sol.u, sol.r, digits=10)
     assert again.certified
+
+
+def test_a_face_sub_runs_predictor_point_keeps_its_name():
+    """A problem with a self-stress is solved on its face; where the face's run is proven at a
+    predictor point, the certificate's proven_at says so (the relabelling onto the face kept only
+    phase and iteration; found by the seventh session's audit on corner_problem(17))."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from corner_problems import corner_problem
+
+    sol = rfverify.solve_to_digits(corner_problem(17), digits=10)
+    at = sol.certificate.extra["proven_at"]
+    assert sol.certificate.certified and at["on_face"], at
+    assert at["predicted"] and at["where"].endswith("'s predictor point on the face"), at

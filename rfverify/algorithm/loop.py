@@ -72,7 +72,8 @@ def _predicted_points(space, iterate: tuple, s, pred: Direction, ds_aff, n_conta
 
     def point_at(alpha: float):
         z_a = space.axpy(z, alpha, pred.dz)
-        mu = float(space.dot(z_a, space.axpy(s, alpha, ds_aff)) / n_contacts)
+        # inside the cones z·s ≥ 0: a negative value is the dot product's rounding, shown as 0
+        mu = max(0.0, float(space.dot(z_a, space.axpy(s, alpha, ds_aff)) / n_contacts))
         return (space.axpy(v, alpha, pred.dv), space.axpy(r, alpha, pred.dr), z_a), mu
     return point_at
 

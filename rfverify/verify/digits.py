@@ -461,7 +461,8 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
         return note
     say(f"the face's points, lifted back: {proof.summary()}")
     sub_at = sub.certificate.extra.get("proven_at") or {}
-    at = proof_site(sub_at.get("phase", "double"), sub_at.get("iteration"), on_face=True)
+    at = proof_site(sub_at.get("phase", "double"), sub_at.get("iteration"), on_face=True,
+                    predicted=bool(sub_at.get("predicted")))
     sol = driver.target if driver.target is not None else (sub.v, sub.u, sub.r)
     if driver.offer(proof, point, sol, at, proofs=int(sub_at.get("proofs", 1))):
         note["_point"] = point
