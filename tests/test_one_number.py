@@ -127,15 +127,16 @@ def test_a_verdict_about_an_earlier_point_names_it(monkeypatch, capsys, tmp_path
 
 
 def test_a_proof_from_the_face_is_named_as_such(monkeypatch):
-    """The corner sphere: the face's sub-run proves 10 digits at its extended iteration 8; the
-    certificate says the point is that iterate, on the face.  With the first proof made kept
+    """The corner sphere: the face's sub-run proves 10 digits at its extended iteration 7's
+    predictor point; the certificate says the point is that one, on the face.  With the first proof made kept
     instead (the main run's), the verdict names that one and the face's as the last."""
     import rfverify
     from corner_problems import corner_problem
 
     out = rfverify.solve_to_digits(corner_problem(0), digits=10)
     at = out.certificate.extra["proven_at"]
-    assert out.success and at["on_face"] and at["where"] == f"extended iteration {at['iteration']} on the face"
+    assert out.success and at["on_face"] and at["predicted"]
+    assert at["where"] == f"extended iteration {at['iteration']}'s predictor point on the face"
     assert at["last"] == at["where"] and "proof point" not in out.message
     _first_proof_is_best(monkeypatch)
     lines = []
