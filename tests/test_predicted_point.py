@@ -117,3 +117,13 @@ def test_a_face_sub_runs_predictor_point_keeps_its_name():
     at = sol.certificate.extra["proven_at"]
     assert sol.certificate.certified and at["on_face"], at
     assert at["predicted"] and at["where"].endswith("'s predictor point on the face"), at
+
+
+def test_the_result_line_names_a_predictor_point(capsys):
+    """The text output's first line counts the extended iterations; where the proof was made at
+    a predictor point it says so, since the count alone reads as the proof at that iterate."""
+    from rfverify.cli import main
+
+    assert main(["solve", "bundled:sphere", "--digits", "10", "--quiet"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.endswith("; the proof's point: extended iteration 4's predictor point"), first

@@ -297,6 +297,9 @@ def _solve_digits(args, problem, options, say, after, t_start) -> int:
         face = cert.extra.get("face")
         if face:  # a self-stress: the problem was solved again on its face (DESIGN §6.8)
             tail += f"; on the face of {len(face['self_stresses'])} self-stress(es): {face.get('reduction', '')}"
+        at = cert.extra.get("proven_at") or {}
+        if at.get("predicted"):  # the count alone would suggest the proof was at iteration k itself
+            tail += f"; the proof's point: {at['where']}"
         chosen = "as requested" if args.method != "auto" else "by auto"
         if out.double.extras.get("zero_data"):
             print("double solve: none needed (f = 0 and w = 0: v = u = r = 0 exactly)")
