@@ -474,9 +474,9 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
         tried = "; ".join(f"{attempt_words(a)}: {a['status']} (criterion {a['criterion']:.2e})" for a in attempts)
         best.message = f"auto returned {best.method} [{tried}]: {best.message}"
     best.extras["attempts"] = attempts
+    last = runs[-1] if len(runs) > len(forms) else None
     best.extras["auto"] = {"forms": list(forms), "why": why,
-                           "last_resort": attempt_words(dict(zip(("method", "sigma_rule"), runs[-1])))
-                           if len(runs) > len(forms) else None}
+                           "last_resort": last and attempt_words({"method": last[0], "sigma_rule": last[1]})}
     if settings.time_limit is not None:  # its settings name the user's limit, not what was left of it
         best.settings = dataclasses.replace(best.settings, time_limit=settings.time_limit)
     best.timings["total"] = time.perf_counter() - t0
