@@ -250,3 +250,115 @@ def scaled_problem(problem: Problem, scaling: BinaryScaling) -> Problem:
                                   provenance=problem.provenance)
         out = out.stored_equations(problem.equations == "stored")
     return out
+
+
+CONTACT_UNIT_EXPONENT = 8
+"""Contacts whose reactions are in units more than 2^8 from the median contact's are brought
+back to it.  A contact's unit is read from the largest entry of its normal column of H (a unit
+vector, with lever arms, in a problem built from contact frames: within a factor of 2 or 4 of
+the median on every scene generated or shipped); a user who measures one contact's reactions
+in units 2^e smaller multiplies its five columns of H and its rows of w by 2^e.  The problem is
+the same, but the interior-point start (r̃_N = 1 at every contact) is not: the double solve of a
+1355-contact Chute ended InsufficientProgress at 5e-5 with per-contact units spread over 2^±12
+(Solved, and proven to 10 digits, with the units brought back)."""
+
+
+@dataclass(frozen=True)
+class ContactUnits:
+    """Per-contact exact changes of units: contact c's five columns of H and its five rows of w
+    multiplied by 2^e_c (``exponents``, (n,)), so that r_c ← 2^−e_c r_c and u_c ← 2^e_c u_c;
+    v, Hr, M and f are unchanged.  The same interface as :class:`BinaryScaling` for the vectors a
+    point and an answer are made of (``scale``, ``back``)."""
+
+    exponents: np.ndarray
+
+    def _entries(self, name: str, size: int) -> np.ndarray | int:
+        if name in ("v", "M", "f", "Hr"):
+            return 0
+        e = np.repeat(np.asarray(self.exponents, dtype=np.int64), SPACEDIM)
+        if e.size != size:
+            raise ValueError(f"{name} has {size} entries, the contact units are for {e.size}")
+        return -e if name == "r" else e  # "u", "w", and H's columns
+
+    def scale(self, name: str, x, inverse: bool = False) -> np.ndarray | None:
+        """x in the scaled units (the problem's with ``inverse``), or None where not exact."""
+        if x is None:
+            return None
+        x = np.asarray(x, dtype=np.float64)
+        e = self._entries(name, x.shape[-1])
+        e = -e if inverse else e
+        with np.errstate(all="ignore"):
+            y = np.ldexp(x, e)
+        return y if bool(np.all(np.isfinite(y)) and np.array_equal(np.ldexp(y, -e), x)) else None
+
+    def back(self, name: str, x) -> np.ndarray:
+        """x in the problem's units as float64 rounds it (exact unless an entry leaves the range)."""
+        x = np.asarray(x, dtype=np.float64)
+        with np.errstate(all="ignore"):
+            return np.ldexp(x, -self._entries(name, x.shape[-1]))
+
+    def describe(self, proof: bool = False) -> str:
+        e = np.asarray(self.exponents)
+        moved = int(np.count_nonzero(e))
+        return (f"{'solved and proven' if proof else 'solved'} with the reactions of {moved} of {e.size} contacts "
+                f"in units moved by exact powers of two (2^{int(e.min())} … 2^{int(e.max())}) to the median "
+                f"contact's; {'answers and proof' if proof else 'answers judged'} in the problem's own units")
+
+
+def contact_units(problem: Problem) -> ContactUnits | None:
+    """The per-contact change of units that brings every contact's reactions within
+    2^±:data:`CONTACT_UNIT_EXPONENT` of the median contact's, or None where they already are
+    (or the problem is local, or the change is not exact for every entry of H and w)."""
+    n = problem.n_contacts
+    if problem.local is not None or n < 2 or not (np.any(problem.f) or np.any(problem.w)):
+        return None  # a zero-data problem is answered exactly, in any units
+    if any(e is not None and abs(e) > SAFE_EXPONENT - 2 * CONTACT_UNIT_EXPONENT
+           for e in map(_max_exponent, (problem.M.data, problem.H.data, problem.f, problem.w))):
+        return None  # the whole problem is scaled first (binary_scaling), and its proof made in scaled units
+    H = sp.csc_matrix(problem.H)
+    normal = np.arange(n) * SPACEDIM
+    big = np.asarray(abs(H[:, normal]).max(axis=0).todense()).ravel()
+    loaded = big > 0
+    if np.count_nonzero(loaded) < 2:
+        return None
+    e = np.zeros(n, dtype=np.int64)
+    e[loaded] = np.frexp(big[loaded])[1]
+    median = int(np.round(np.median(e[loaded])))
+    shift = np.where(loaded, median - e, 0)
+    if int(np.max(np.abs(shift))) <= CONTACT_UNIT_EXPONENT:
+        return None
+    units = ContactUnits(shift)
+    cols = np.repeat(np.arange(H.shape[1]), np.diff(H.indptr))
+    e_H = np.repeat(shift, SPACEDIM)[cols]
+    with np.errstate(all="ignore"):
+        data = np.ldexp(H.data, e_H)
+    if not (np.all(np.isfinite(data)) and np.array_equal(np.ldexp(data, -e_H), H.data)):
+        return None
+    if units.scale("w", problem.w) is None:
+        return None
+    return units
+
+
+def problem_in_contact_units(problem: Problem, units: ContactUnits) -> Problem:
+    """The problem with its contacts' reactions in the units of ``units`` (exactly)."""
+    H = sp.csc_matrix(problem.H, copy=True)
+    cols = np.repeat(np.arange(H.shape[1]), np.diff(H.indptr))
+    H.data = np.ldexp(H.data, np.repeat(np.asarray(units.exponents, dtype=np.int64), SPACEDIM)[cols])
+    out = Problem.from_arrays(problem.M, H, problem.f, units.scale("w", problem.w), problem.mu, problem.mu_r,
+                              title=problem.title, max_asymmetry=np.inf, source=problem.source,
+                              provenance=problem.provenance)
+    return out.stored_equations(problem.equations == "stored")
+
+
+def in_contact_units(problem: Problem, run, unscale):
+    """Like :func:`in_scaled_units`, for reactions in grossly mismatched units from contact to
+    contact (:func:`contact_units`), and called before it (whose estimate of the problem's units
+    the largest contacts would otherwise set): None where they are not; else ``run(scaled_problem,
+    units)`` and its answer in the problem's units, ``unscale(answer, problem, scaled_problem,
+    units)`` (the proof is made again there: relative digits depend on the units)."""
+    units = contact_units(problem)
+    if units is None:
+        return None
+    scaled = problem_in_contact_units(problem, units)
+    out = run(scaled, units)
+    return None if out is None else unscale(out, problem, scaled, units)

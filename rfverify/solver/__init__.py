@@ -132,10 +132,12 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     """
     problem = posed(problem, as_stored, method)
     options = renamed_settings(options)
-    from ..model.scaling import in_scaled_units
+    from ..model.scaling import in_contact_units, in_scaled_units
 
-    scaled = in_scaled_units(problem, lambda sp_, _: solve(sp_, method, tol, max_iter, keep_iterates, callback,
-                                                           **options), _unscaled_result)
+    again = lambda sp_, _: solve(sp_, method, tol, max_iter, keep_iterates, callback, **options)  # noqa: E731
+    scaled = in_contact_units(problem, again, _in_own_contact_units)
+    if scaled is None:
+        scaled = in_scaled_units(problem, again, _unscaled_result)
     if scaled is not None:
         return scaled
     if has_zero_data(problem):
@@ -229,6 +231,21 @@ def _unscaled_result(res: SolveResult, scaled: Problem, scaling) -> SolveResult:
                                            "problem's own units")
     # The measures are ratios of terms that scale alike: those of the scaled run are the problem's.
     return dataclasses.replace(res, **back, message=f"{res.message} ({note})", extras=extras)
+
+
+def _in_own_contact_units(res: SolveResult, problem: Problem, scaled: Problem, units) -> SolveResult:
+    """:func:`solve`'s answer found with per-contact units brought together
+    (:func:`rfverify.model.scaling.contact_units`), in the problem's units and judged there."""
+    note = units.describe()
+    back = {"v": res.v, "u": units.back("u", res.u), "r": units.back("r", res.r)}
+    # the lifted iterate (z, r̃) is in the scaled units: a later phase starts from (v, r) instead
+    extras = {k: x for k, x in res.extras.items() if k not in ("z", "r_t")}
+    extras.update(contact_units=note, lifted_units="scaled")
+    final = measures(problem, back["v"], back["u"], back["r"], "longdouble")
+    status, message = returned_verdict(*res.extras.get("run_verdict", (res.status, res.message)), final,
+                                       res.settings)
+    return dataclasses.replace(res, **back, measures=final, status=status, message=f"{message} ({note})",
+                               extras=extras)
 
 
 def _counting(callback, components: int):

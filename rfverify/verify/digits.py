@@ -37,11 +37,12 @@ from ..extended import wide
 from ..extended.contactspace import ENGINES
 from ..extended.stoppable import long_kernels
 from ..extended.workers import threads
-from ..model.scaling import in_scaled_units
+from ..model.scaling import in_contact_units, in_scaled_units
 from ..model.problem import Problem
 from ..proof import Point, Proof, ProofContext, validate_digits
 from ..solver import SolveResult, posed, solve
-from .certificate import Certificate, CertifiedResult, candidate_point, certificate_from_proof
+from .certificate import (Certificate, CertifiedResult, candidate_point, certificate_from_proof, cut_short,
+                          unscaled_point)
 from .driver import ProofDriver, proof_site, proven_answer
 from .extend import Extension, extend
 from .prepare import (
@@ -129,7 +130,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
                     relative: bool = False, progress=None, factor_engine: str = "auto",
                     as_stored: bool | None = None, time_limit: float | None = None, callback=None,
-                    _face_depth: int = 0, _on_face=None, _named_limit: float | None = None,
+                    _face_depth: int = 0, _on_face=None, _named_limit: float | None = None, _own=None,
                     **options) -> DigitsSolution:
     """Solve ``problem`` so that v, u, Hr (and r where unique) are proven right to ``digits``
     significant digits (1 … 15; DESIGN §6.3 says what "digits" means when a quantity is zero).
@@ -184,12 +185,12 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     named_limit = time_limit if _named_limit is None else _named_limit
     problem = posed(problem, as_stored, method)
     if _on_face is None:  # data beyond float64's safe range: the whole path in scaled units
-        out = in_scaled_units(problem, lambda scaled, _: solve_to_digits(
+        again = lambda scaled, _, _own=None: solve_to_digits(  # noqa: E731
             scaled, digits, method, tol, max_iter, extended_max_iter=extended_max_iter, backend=backend,
             wide_tail=wide_tail, wide_bits=wide_bits, wide_max_iter=wide_max_iter, relative=relative,
             progress=progress, factor_engine=factor_engine, time_limit=time_limit, callback=callback,
-            _named_limit=_named_limit, **options),
-            _unscaled_solution)
+            _named_limit=_named_limit, _own=_own, **options)
+        out = _in_other_units(problem, again, relative)
         if out is not None:
             return out
     _check_path_arguments(method, factor_engine)
@@ -249,6 +250,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
     start = start_from(data, double)
     driver = ProofDriver(ctx, data, digits, progress=say, relative=relative, deadline=deadline)
+    driver.own = _own  # contacts in scaled units: each iterate proven in the problem's own
     if _on_face is not None:
         driver.face, driver.target = _on_face[1:3], _on_face[3]
     c_ext = compile_seconds()  # (what start_from compiled counts in "compile" only)
@@ -467,6 +469,41 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
     if driver.offer(proof, point, sol, at, proofs=int(sub_at.get("proofs", 1))):
         note["_point"] = point
     return note
+
+
+def _in_other_units(problem: Problem, again, relative: bool) -> DigitsSolution | None:
+    """The whole path ``again(scaled, scaling, _own=…)`` on the problem with its contacts' units
+    brought together (each point proven in the problem's own units), or with its data brought
+    into float64's safe range (proven in the scaled units, the bounds scaled back); None where
+    neither applies (:mod:`rfverify.model.scaling`)."""
+    out = in_contact_units(problem, lambda scaled, units: again(scaled, None, _own=(ProofContext(problem), units)),
+                           lambda res, own, _, units: _in_own_contact_units(res, own, units, relative))
+    return out if out is not None else in_scaled_units(problem, again, _unscaled_solution)
+
+
+def _in_own_contact_units(out: DigitsSolution, problem: Problem, units, relative: bool) -> DigitsSolution:
+    """A k-digit solution found with per-contact units brought together
+    (:func:`rfverify.model.scaling.contact_units`), in the problem's own units, its point proven
+    again there: the theorem's gap and residual are the same numbers in either units (the change
+    is exact), but relative digits of u and r are taken against the problem's own ‖u*‖∞, ‖r*‖∞
+    (the run's driver judged its iterates so too: :attr:`.driver.ProofDriver.own`)."""
+    import dataclasses
+
+    back = {"v": out.v, "u": units.back("u", out.u), "r": units.back("r", out.r)}
+    old = out.certificate
+    extra = {**old.extra, "contact_units": units.describe(proof=True)}
+    point = unscaled_point(out.point, units)
+    if point is None or old.proof is None or not old.proof.valid:  # nothing to prove again
+        verdict = (f"not certified: the proof point, found in contact units, does not carry back to the "
+                   f"problem's units exactly ({old.verdict})") if old.certified else old.verdict
+        cert = Certificate(old.requested, False, verdict, None, None, old.cross_check, extra, old.seconds)
+        return dataclasses.replace(out, **back, point=point, certificate=cert)
+    ctx = ProofContext(problem)
+    proof = ctx.prove(point, *back.values(), requested=old.requested, relative=relative)
+    cert = certificate_from_proof(ctx.with_companion(proof, point, *back.values()), point, extra, old.seconds)
+    if out.timed_out and not cert.certified and "time_limit" in old.extra:
+        cert = cut_short(cert, old.extra["time_limit"])
+    return dataclasses.replace(out, **back, point=point, certificate=cert)
 
 
 def _unscaled_solution(out: DigitsSolution, scaled: Problem, scaling) -> DigitsSolution:

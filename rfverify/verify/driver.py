@@ -72,6 +72,9 @@ class ProofDriver:
         self.relative = relative
         self.target = target  # (v, u, r) to certify; None: the rounding of each point
         self.face = None  # (FaceReduction, stresses): iterates of the reduced problem, proven lifted back
+        # (ProofContext of the problem in its own units, ContactUnits): the run's problem has its
+        # contacts' units brought together, and each point is proven in the problem's own units
+        self.own = None
         self.best: tuple | None = None  # (score, proof, point, (v, u, r))
         self.best_at: dict | None = None  # where the best proof was made (proof_site), and
         self.last_at: dict | None = None  # where the last one was
@@ -173,7 +176,7 @@ class ProofDriver:
             key = ("dd", it.k)
         if not math.isfinite(gap):  # not a point (a run that broke down): nothing to prove
             return stalled
-        if not (stalled or force) and not self._may_certify(gap, v_inf, u_inf):
+        if not (stalled or force) and not self._may_certify(gap, v_inf, u_inf, point):
             return False
         if key in self.proven_keys:
             return False
@@ -204,8 +207,13 @@ class ProofDriver:
             u_inf = float(np.max(np.abs(data.problem.H.T @ it.v.h + data.problem.w), initial=0.0))
         return abs(it.r_t.dot(u_t)), point, v_inf, u_inf
 
-    def _may_certify(self, gap: float, v_inf: float, u_inf: float) -> bool:
-        return self.ctx.may_certify(self.ctx.eps_lower(gap), v_inf, u_inf, self.requested, relative=self.relative)
+    def _may_certify(self, gap: float, v_inf: float, u_inf: float, point: Point | None = None) -> bool:
+        ctx = self.ctx
+        if self.own is not None and point is not None:  # the gate of the proof made: in the own units
+            ctx, units = self.own
+            u = units.back("u", self.data.problem.H.T @ point.v_hi + self.data.problem.w)
+            u_inf = float(np.max(np.abs(u), initial=0.0))
+        return ctx.may_certify(ctx.eps_lower(gap), v_inf, u_inf, self.requested, relative=self.relative)
 
     def _prove(self, it, point: Point, phase: str, quiet: bool, predicted: bool = False) -> Proof:
         """Prove ``point`` (an iterate's, or iteration k's predictor point) and offer it."""
@@ -213,7 +221,8 @@ class ProofDriver:
         if self.face is not None:  # an iterate of the problem on a face: proven on the problem itself
             point = self.face[0].lift(point)
         sol = self.target if self.target is not None else self.answer(point)
-        proof = self.ctx.prove(point, *sol, requested=self.requested, relative=self.relative)
+        proof = self._own_proof(point, sol) if self.own is not None else \
+            self.ctx.prove(point, *sol, requested=self.requested, relative=self.relative)
         self.proof_seconds += time.perf_counter() - t0
         self.attempts += 1
         at = proof_site(phase, it.k, on_face=self.face is not None, predicted=predicted)
@@ -221,6 +230,21 @@ class ProofDriver:
         if self.progress and not quiet:
             self.progress(f"proof at {site_words(at)} (μ = {it.mu:.1e}): {proof.summary()}")
         return proof
+
+    def _own_proof(self, point: Point, sol) -> Proof:
+        """The proof of ``point`` and its answer ``sol`` (in the run's units) made in the problem's
+        own units (:attr:`own`): the same gap and residual, digits against its own norms."""
+        from ..proof.bound import invalid_proof
+        from .certificate import unscaled_point
+
+        ctx, units = self.own
+        own_point = unscaled_point(point, units)
+        if own_point is None:
+            return invalid_proof(self.requested, "the point does not carry back to the problem's own units exactly "
+                                                 "(an entry leaves float64's range)", time.perf_counter())
+        v, u, r = sol
+        return ctx.prove(own_point, v, units.back("u", u), units.back("r", r), requested=self.requested,
+                         relative=self.relative)
 
     def _predicted(self, it: ext.Iterate) -> bool:
         """Iteration k's predictor point (:data:`rfverify.algorithm.policy.PREDICTED_FRACTION`
@@ -231,7 +255,7 @@ class ProofDriver:
         wide_point = isinstance(it, wide.WideIterate)
         key = ("wide-predicted" if wide_point else "predicted", it.k)
         gap, point, v_inf, u_inf = it.describe() if wide_point else self._describe(it)
-        if key in self.proven_keys or not math.isfinite(gap) or not self._may_certify(gap, v_inf, u_inf):
+        if key in self.proven_keys or not math.isfinite(gap) or not self._may_certify(gap, v_inf, u_inf, point):
             return False
         self.proven_keys.add(key)
         phase = "multiple-precision" if wide_point else "extended"

@@ -1,0 +1,109 @@
+"""Reactions in mismatched units from contact to contact: the same problem with each contact's
+five columns of H and rows of w multiplied by its own power of two 2^s_c (its reactions in units
+2^s_c smaller).  The problem is the same; the interior-point start is not.  With s_c spread over
+2^±12 the double solve of a 1355-contact Chute ended InsufficientProgress, the Chute below took
+88 iterations instead of 26, and the 274-contact Lattice at 2^±20 was not proven.  Such units are
+now brought back to the median contact's (rfverify.model.scaling.contact_units), the answer
+scaled back and judged, and every proof made in the problem's own units; checked here against the
+original problem's answer, scaled by hand."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import rfverify
+from rfverify.model.measures import measures
+from rfverify.model.scaling import CONTACT_UNIT_EXPONENT, contact_units
+from rfverify.proof import ProofContext
+
+DATA = Path(__file__).parent / "data"
+HARD = DATA / "hard"
+
+
+def in_contact_units(p, spread: int, seed: int):
+    """``p`` with contact c's reactions in units 2^s_c smaller, s_c uniform in ±``spread``."""
+    s = np.random.default_rng(seed).integers(-spread, spread + 1, p.n_contacts)
+    C = sp.diags(np.ldexp(1.0, np.repeat(s, 5)))
+    return rfverify.Problem.from_arrays(p.M, p.H @ C, p.f, C @ p.w, p.mu, p.mu_r), s
+
+
+@pytest.mark.parametrize("name", sorted(rfverify.bundled_problems()))
+def test_shipped_problems_keep_their_units(name):
+    """The change applies only beyond 2^±8 between contacts: shipped and frozen problems are
+    used as they are (bit for bit the same answers)."""
+    assert contact_units(rfverify.load(f"bundled:{name}")) is None
+
+
+@pytest.mark.parametrize("path", sorted((DATA / "scenes").glob("*.hdf5")) + sorted(HARD.glob("*.hdf5")),
+                         ids=lambda p: p.name)
+def test_generated_problems_keep_their_units(path):
+    assert contact_units(rfverify.load(str(path))) is None
+
+
+def test_units_within_the_margin_are_kept_and_beyond_it_brought_back():
+    p = rfverify.load(str(HARD / "Chute-ndof-1200-nc-240-3.hdf5"))
+    assert contact_units(in_contact_units(p, CONTACT_UNIT_EXPONENT // 2 - 1, 3)[0]) is None
+    q, s = in_contact_units(p, 12, 3)
+    units = contact_units(q)
+    assert units is not None
+    # each contact ends within a factor 2 of its original units, up to one shift shared by all
+    net = s + units.exponents
+    assert np.ptp(net) <= 1
+
+
+def test_solve_brings_the_units_back_and_judges_the_answer_in_its_own():
+    p = rfverify.load(str(HARD / "Chute-ndof-1200-nc-240-3.hdf5"))
+    base = rfverify.solve(p)
+    q, s = in_contact_units(p, 12, 1)
+    res = rfverify.solve(q)
+    assert res.success, res.message
+    assert res.nit <= base.nit + 5  # 88 iterations before the change (26 for the original)
+    assert "contact_units" in res.extras and "units moved by exact powers of two" in res.message
+    # judged independently on the problem as given
+    assert measures(q, res.v, q.H.T @ res.v + q.w, res.r, "longdouble").max <= 1e-10
+    np.testing.assert_allclose(res.u, q.H.T @ res.v + q.w, rtol=0, atol=1e-12 * np.max(np.abs(res.u)))
+    # scaled back by hand, the reactions are an answer of the original problem
+    r_orig = res.r * np.repeat(np.ldexp(1.0, s), 5)
+    assert measures(p, res.v, p.H.T @ res.v + p.w, r_orig, "longdouble").max <= 1e-10
+    assert np.max(np.abs(res.v - base.v)) <= 1e-6 * np.max(np.abs(base.v))  # both to a criterion of 1e-10
+
+
+@pytest.fixture(scope="module")
+def lattice_at_20():
+    p = rfverify.load(str(HARD / "Lattice-ndof-360-nc-274-0.hdf5"))
+    q, s = in_contact_units(p, 20, 1)
+    return p, q, s, rfverify.solve_to_digits(q, 10)
+
+
+def test_digits_are_proven_in_the_problems_own_units(lattice_at_20):
+    """Not proven before the change.  The certificate is the proof of the returned point and
+    answer made afresh on the problem as given (a proof in the scaled units would state other
+    digits of u and r: they are relative to the problem's own ‖u*‖∞ and ‖r*‖∞)."""
+    p, q, s, res = lattice_at_20
+    assert res.certificate.certified, res.message
+    assert "contact_units" in res.certificate.extra
+    again = ProofContext(q).prove(res.point, res.v, res.u, res.r, requested=10)
+    assert again.certified
+    for name, q_bound in again.quantities.items():  # (r's bound is NaN: r is not unique here)
+        mine = res.certificate.proof.quantities[name]
+        assert mine.abs_bound == q_bound.abs_bound or (np.isnan(mine.abs_bound) and np.isnan(q_bound.abs_bound))
+        assert mine.digits == q_bound.digits
+
+
+def test_proven_bounds_hold_against_the_original_problems_answer(lattice_at_20):
+    """Independent: the original problem proven on its own, its answer scaled by hand; v and Hr
+    of the two proven answers differ by no more than the sum of their bounds."""
+    p, q, s, res = lattice_at_20
+    ref = rfverify.solve_to_digits(p, 10)
+    assert ref.certificate.certified
+    bound = {name: qb.abs_bound for name, qb in res.certificate.proof.quantities.items()}
+    ref_bound = {name: qb.abs_bound for name, qb in ref.certificate.proof.quantities.items()}
+    assert np.max(np.abs(res.v - ref.v)) <= bound["v"] + ref_bound["v"]
+    r_orig = res.r * np.repeat(np.ldexp(1.0, s), 5)
+    assert np.max(np.abs(p.H @ r_orig - p.H @ ref.r)) <= 1.001 * (bound["Hr"] + ref_bound["Hr"]) + 1e-15
+    u_orig = res.u * np.repeat(np.ldexp(1.0, -s), 5)
+    assert np.allclose(u_orig, p.H.T @ res.v + p.w, rtol=1e-12, atol=1e-14)
