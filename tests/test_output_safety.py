@@ -88,6 +88,21 @@ def test_solve_onto_bundled_file_is_refused(capsys, no_solve):
     assert target.read_bytes() == before
 
 
+def test_no_command_writes_over_a_bundled_problem(capsys, tmp_path, no_solve):
+    """Audit (2026-12-08): a bundled file was refused only as the command's own input; solving
+    another problem --out onto it, or rfverify.save(p, p.source), replaced it, and
+    bundled:chute then named another problem."""
+    target = rfverify.io.bundled_problems()["chute"]
+    before = target.read_bytes()
+    refused(capsys, "solve", "bundled:sphere", "--out", target, expect=["bundled:chute"])
+    refused(capsys, "solve", "bundled:sphere", "--out", "bundled:chute", expect=["bundled"])
+    p = rfverify.load("bundled:chute")
+    with pytest.raises(OutputPathError, match="bundled"):
+        rfverify.save(p, p.source)
+    assert target.read_bytes() == before
+    assert not (tmp_path / "bundled:chute").exists()
+
+
 def test_certify_out_onto_an_input_is_refused(capsys, tmp_path, problem_file, monkeypatch):
     import rfverify.verify.certification
 

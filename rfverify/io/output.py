@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidArgumentError, OutputPathError
-from ._paths import BUNDLED_PREFIX, resolve_path
+from ._paths import BUNDLED_PREFIX, bundled_problems, resolve_path
 
 __all__ = ["OutputTarget", "check_output_file", "check_output_dir", "atomic_output",
            "write_text_atomic", "write_bytes_atomic", "json_safe", "dumps", "tag_floats",
@@ -136,10 +136,18 @@ def check_output_file(path, *, inputs=(), option: str = "--out",
         with the reason and the fix.
     """
     path = _as_path(path, option)
+    if str(path).startswith(BUNDLED_PREFIX):
+        raise OutputPathError(path, "names a problem bundled with rfverify, which is never written "
+                                    "(and no file of that name could be read back)", option=option,
+                              fix="give a file path, e.g. answer.h5")
     real = Path(os.path.realpath(path))
     exists = _refuse_non_regular(real, path, option)
     in_place, spec = False, None
     if exists:
+        for name, shipped in bundled_problems().items():  # whatever this command reads
+            if shipped.exists() and os.path.samefile(real, shipped):
+                raise OutputPathError(path, f"is the problem file bundled with rfverify (bundled:{name}); "
+                                            "it is never written", option=option, fix="choose another output path")
         for position, item in enumerate(inputs):
             if item is None:
                 continue
