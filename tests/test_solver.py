@@ -852,3 +852,25 @@ def test_auto_returns_a_failed_last_resort_only_in_its_list():
     assert res.settings.sigma_rule == "hybrid"
     best_form = min(attempts[:-1], key=lambda a: a["criterion"])
     assert res.criterion == best_form["criterion"]
+
+
+def test_auto_cut_short_by_the_time_limit_says_so(monkeypatch):
+    """Audit (2026-12-08): where the time limit ran out after one form stalled and before (or
+    during) the next, auto returned the stalled form's InsufficientProgress; the limit, which the
+    docs say ends a run with MaxTime, was nowhere in the answer.  The limit is made to run out in
+    the second form here (whatever the machine's speed): the status is MaxTime and says where."""
+    import rfverify.solver as solver_module
+
+    real = solver_module._solve
+
+    def second_form_out_of_time(problem, form, tol, max_iter, keep_iterates, callback, **opts):
+        if form not in ("auto", "jqinv"):
+            opts["time_limit"] = 1e-9
+        return real(problem, form, tol, max_iter, keep_iterates, callback, **opts)
+
+    monkeypatch.setattr(solver_module, "_solve", second_form_out_of_time)
+    problem = rfverify.load(str(Path(__file__).parent / "data" / "hard" / "MassRatio-1e8-ndof-600-nc-297-1.hdf5"))
+    res = solve(problem, time_limit=3600)
+    assert [a["status"] for a in res.extras["attempts"]] == ["InsufficientProgress", "MaxTime"]
+    assert res.status is Status.MAX_TIME and not res.success
+    assert "time limit of 3600 s (all forms together) ran out during reduced" in res.message

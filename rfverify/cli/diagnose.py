@@ -34,8 +34,9 @@ steps within --witness-time seconds.
 remedy: another --method, more --max-iter, --digits K, run as 'rfverify solve' runs them; the
 first whose answer meets --tol is printed with its figures.
 
-The first line states the cause and the remedy. The run diagnosed is --method as 'rfverify
-solve' runs it; the lockstep's run is the same form as one system (no split into independent
+The first line states the cause and the remedy. The run diagnosed is the one 'rfverify solve
+--method M' makes (M = --method, jqinv by default), not the auto sequence of a plain 'rfverify
+solve', which goes on to other forms where one stalls; the lockstep's run is the same form as one system (no split into independent
 components), every linear solve refined to 4*eps (solver setting refine_tol=None) and the
 longdouble arithmetic from the first iteration (longdouble_below=None), so that the digits measure
 the rounding of one arithmetic. Where that run meets --tol and the plain one does not, the cause
@@ -125,7 +126,7 @@ def cmd_diagnose(args) -> int:
         return code
     print(d["conclusion"].replace("PROBLEM", str(args.problem)))
     run = d["evidence"].get("run") or d  # the run's own status (the diagnosis's is MaxTime when it was cut short)
-    print(f"double run ({d['method']}, as rfverify solve runs it): {run['status']} after {d['nit']} iterations: "
+    print(f"double run (as 'rfverify solve --method {d['method']}' runs it): {run['status']} after {d['nit']} iterations: "
           f"{run['message']}")
     lock = d["evidence"].get("lockstep_run")
     if lock:

@@ -462,7 +462,7 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
     the Solved run, else the one with the smallest criterion, with ``extras["attempts"]`` and
     a message naming what was tried."""
     t0 = time.perf_counter()
-    attempts, results = [], []
+    attempts, results, unrun = [], [], None
     forms, why = _auto_choice(problem)
     runs = [(form, None) for form in forms]
     if "sigma_rule" not in options:  # the caller's σ rule is kept; else the last resort after a stall
@@ -473,6 +473,7 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
         if settings.time_limit is not None:
             left = settings.time_limit - (time.perf_counter() - t0)
             if left <= 0 and results:
+                unrun = attempt_words({"method": form, "sigma_rule": rule})
                 break
             opts["time_limit"] = left = max(left, 1e-12)  # the first form runs, if only to its start
         res = _solve(problem, form, settings.tol, settings.max_iter, keep_iterates, callback, **opts)
@@ -490,6 +491,13 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
     if len(results) > 1:
         tried = "; ".join(f"{attempt_words(a)}: {a['status']} (criterion {a['criterion']:.2e})" for a in attempts)
         best.message = f"auto returned {best.method} [{tried}]: {best.message}"
+    if not best.success and (unrun or results[-1].status is Status.MAX_TIME) and \
+            best.status not in (Status.STOPPED, Status.MAX_TIME):
+        # the user's time limit ended the sequence, whichever form's answer is the best so far
+        why_not = f"before {unrun} could start" if unrun else f"during {attempt_words(attempts[-1])}"
+        best.message = (f"the time limit of {settings.time_limit:g} s (all forms together) ran out {why_not}; "
+                        f"{best.message}")
+        best.status = Status.MAX_TIME
     best.extras["attempts"] = attempts
     last = runs[-1] if len(runs) > len(forms) else None
     best.extras["auto"] = {"forms": list(forms), "why": why,

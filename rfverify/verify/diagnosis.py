@@ -259,7 +259,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     evidence = {"r_unique": ctx.r_unique, "r_unique_note": ctx.r_unique_note,
                 "mu_zero_contacts": int(np.sum(problem.mu == 0)), "form_block": FORM_BLOCK.get(method),
                 "form_power": FORM_POWER.get(method), "form_order": ctx.order, "text": []}
-    evidence["run"] = run_record(plain, "as `rfverify solve` runs it")
+    evidence["run"] = run_record(plain, f"as `rfverify solve --method {method}` runs it")
     evidence["steps_held"], evidence["held_most"] = plain.steps_held, held_most(plain)
     evidence["lockstep_run"] = run_record(res, "one system, every linear solve refined to the floor, longdouble "
                                                 "arithmetic from the first iteration (refine_tol=None, "
@@ -423,7 +423,7 @@ def _conclusion(d: Diagnosis) -> str:
     dep = ev.get("departure")
     if d.cause == "precision" and not run:
         lock = ev.get("lockstep_run") or {}
-        what = (f"Cause: double precision — the {d.method} run ended {d.status} as `rfverify solve` runs it, while the "
+        what = (f"Cause: double precision — the {d.method} run ended {d.status} as `rfverify solve --method {d.method}` runs it, while the "
                 f"same form with every linear solve refined to the floor of longdouble arithmetic meets tol = "
                 f"{d.tol:g} ({lock.get('status')} after {lock.get('nit')} iterations).")
     elif d.cause == "precision":

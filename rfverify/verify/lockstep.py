@@ -427,7 +427,7 @@ def run_record(res, how: str) -> dict:
 def refined_text(ctx, plain, res) -> str:
     split = plain.extras.get("component_runs") or []
     how = f", split into {len(split)} independent components" if split else ""
-    return (f"as `rfverify solve` runs it (default inexact linear solves, float64 until the criterion is 1e-9{how}) "
+    return (f"as `rfverify solve --method {ctx.method}` runs it (default inexact linear solves, float64 until the criterion is 1e-9{how}) "
             f"the {ctx.method} run ends {plain.status} at criterion {plain.criterion:.1e}; the same form as one system "
             f"with every linear solve refined to the floor of longdouble arithmetic meets the tolerance "
             f"({res.status} after {res.nit} iterations, criterion {res.criterion:.1e}; its steps against the exact "
