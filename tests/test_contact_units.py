@@ -107,3 +107,28 @@ def test_proven_bounds_hold_against_the_original_problems_answer(lattice_at_20):
     assert np.max(np.abs(p.H @ r_orig - p.H @ ref.r)) <= 1.001 * (bound["Hr"] + ref_bound["Hr"]) + 1e-15
     u_orig = res.u * np.repeat(np.ldexp(1.0, -s), 5)
     assert np.allclose(u_orig, p.H.T @ res.v + p.w, rtol=1e-12, atol=1e-14)
+
+
+def test_a_self_stress_between_contacts_in_units_far_apart_is_found():
+    """Contacts 201 and 202 of this Chute carry a self-stress (its feasible set has no interior:
+    the answer is proven through their face).  With their units 2^±20 apart the float search
+    for it (bound y_N ≤ 1, a relative support threshold, a least-squares fit) found nothing, and
+    the k-digit path ended "no self-stress was found"; it now searches in units brought together
+    and maps the exact stress back."""
+    from fractions import Fraction
+
+    from rfverify.proof.face import find_self_stress
+
+    p = rfverify.load(str(HARD / "Chute-ndof-1200-nc-240-3.hdf5"))
+    (orig,) = find_self_stress(p, [201, 202])
+    q, s = in_contact_units(p, 20, 1)
+    assert abs(s[201] - s[202]) > 6  # the seed puts the pair's units far apart
+    (found,) = find_self_stress(q, [201, 202])
+    assert list(found.contacts) == [201, 202] and found.kinds == orig.kinds
+    # q's columns are p's times 2^s_c: the stress is p's, each contact's part divided by 2^s_c
+    # (up to one positive factor, as any multiple of a self-stress is one)
+    ratio = [found.y[5 * i] * Fraction(2) ** int(s[c]) / orig.y[5 * i] for i, c in enumerate([201, 202])]
+    assert ratio[0] == ratio[1] > 0
+    res = rfverify.solve_to_digits(q, 10)
+    assert res.certificate.certified, res.message
+    assert "face" in res.certificate.extra

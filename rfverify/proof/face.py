@@ -322,7 +322,8 @@ def find_self_stress(problem, seeds, cache: FaceSearch | None = None) -> list:
     H = sp.csc_matrix(problem.H)
     out: list = []
     hood = neighbourhood(H, sp.csc_matrix(problem.H.T), seeds)
-    y = float_self_stress(problem, hood) if hood.size <= MAX_NEIGHBOURS else None
+    search, H, shift = _in_search_units(problem, H, hood)
+    y = float_self_stress(search, hood) if hood.size <= MAX_NEIGHBOURS else None
     if y is not None:
         yN = y[SPACEDIM * np.arange(hood.size)]
         support = hood[yN > SUPPORT_TOL * float(np.max(yN))]
@@ -333,14 +334,53 @@ def find_self_stress(problem, seeds, cache: FaceSearch | None = None) -> list:
             yg = np.concatenate([y[SPACEDIM * pos[int(c)]:SPACEDIM * pos[int(c)] + SPACEDIM] for c in group])
             # (None last: a stress strictly inside K near its boundary, e.g. |y_T| = 2 y_N at μ = 2 + 2⁻³⁰)
             for max_den in SNAP_DENOMINATORS + (None,):
-                stress = _exact_stress(problem, H, group, yg, max_den)
+                stress = _exact_stress(search, H, group, yg, max_den)
                 if stress is not None:
-                    out.append(stress)
+                    out.append(stress if shift is None else _in_problem_units(stress, shift))
                     break
     if cache is not None:
         cache.tried[key] = out
         cache.found += [s for s in out if not any(np.array_equal(s.contacts, t.contacts) for t in cache.found)]
     return out
+
+
+SEARCH_UNIT_SPREAD = 6
+"""Contacts near the seeds whose reactions' units (the largest entry of their normal column of
+H, as a power of two) span more than 2^6 are searched in units brought together: the float
+search's bound y_N ≤ 1, its support threshold and its least-squares fit are relative, and a
+self-stress between contacts in units 2^12 apart was not found (a Chute of 1355 contacts whose
+per-contact units were spread over 2^±12).  The exact stress is mapped back exactly."""
+
+
+def _in_search_units(problem, H: sp.csc_matrix, hood: np.ndarray):
+    """(problem, H, None) where the units of ``hood``'s contacts agree within
+    :data:`SEARCH_UNIT_SPREAD`, else (a view with H's columns and w's rows of each contact
+    multiplied by 2^s_c, that H, s) with s_c bringing every contact's normal column to [1/2, 1)."""
+    from types import SimpleNamespace
+
+    n = problem.mu.size
+    big = np.asarray(abs(H[:, SPACEDIM * np.arange(n)]).max(axis=0).todense()).ravel()
+    e = np.where(big > 0, np.frexp(big)[1], 0).astype(np.int64)
+    if hood.size == 0 or int(np.ptp(e[hood])) <= SEARCH_UNIT_SPREAD:
+        return problem, H, None
+    shift = np.where(big > 0, -e, 0)
+    per_column = np.repeat(shift, SPACEDIM)
+    Hs = H.copy()
+    Hs.data = np.ldexp(H.data, per_column[np.repeat(np.arange(H.shape[1]), np.diff(H.indptr))])
+    view = SimpleNamespace(H=Hs, w=np.ldexp(np.asarray(problem.w, dtype=np.float64), per_column), mu=problem.mu,
+                           mu_r=problem.mu_r)
+    return view, Hs, shift
+
+
+def _in_problem_units(stress: SelfStress, shift: np.ndarray) -> SelfStress:
+    """A self-stress found in the search's units (contact c's columns of H multiplied by
+    2^shift_c) in the problem's own: y_c multiplied by 2^shift_c, exactly.  Each y_c is scaled
+    by a positive number, so it stays in K with the same kinds, face generators and wᵀy."""
+    y = []
+    for i, c in enumerate(stress.contacts):
+        factor = Fraction(2) ** int(shift[int(c)])
+        y.extend(x * factor for x in stress.y[SPACEDIM * i:SPACEDIM * i + SPACEDIM])
+    return SelfStress(stress.contacts.copy(), tuple(y), stress.kinds, stress.edges, stress.free, stress.w_dot_y)
 
 
 # ---------------------------------------------------------------------------------- r along y
