@@ -132,3 +132,16 @@ def test_a_self_stress_between_contacts_in_units_far_apart_is_found():
     res = rfverify.solve_to_digits(q, 10)
     assert res.certificate.certified, res.message
     assert "face" in res.certificate.extra
+
+
+def test_diagnose_runs_what_solve_runs_in_one_set_of_units():
+    """The diagnosis replays the run `rfverify solve --method jqinv` makes, which brings the
+    units together; its lockstep compares iterates of that one problem.  Before, the run was
+    another (46 iterations against solve's 21) and its steps 'agreed to -0.6 digits'."""
+    p = rfverify.load(str(HARD / "Chute-ndof-1200-nc-240-3.hdf5"))
+    q, _ = in_contact_units(p, 12, 1)
+    d = rfverify.diagnose(q, witness_time=0, remedies=False)
+    assert d.status == "Solved" and d.nit == rfverify.solve(q, method="jqinv").nit
+    assert "units brought together" in d.to_dict()["evidence"]["units"]
+    digits = [s["digits_v"] for s in d.to_dict()["iterations"] if s.get("digits_v") is not None]
+    assert digits and min(digits) > 5

@@ -455,3 +455,28 @@ def test_a_stall_of_the_default_centring_rule_names_it_with_its_remedy(capsys):
     capsys.readouterr()
     assert main(["solve", str(path), "--sigma-rule", "paper", "--method", "clarabel"]) == 2
     assert "--sigma-rule: is Algorithm 1's centring rule" in capsys.readouterr().err
+
+
+def test_the_time_limit_bounds_the_diagnosed_run_and_the_exit_code_is_that_runs(monkeypatch, capsys):
+    """Audit (2026-12-08): the diagnosed run itself was not given --time-limit (a 2800-contact bed
+    ran 23 s under --time-limit 3), and the exit code followed the diagnosis's status (MaxTime
+    when a later stage was cut short) where the help says it is the double run's outcome."""
+    import time
+
+    import rfverify.verify.diagnosis as diagnosis
+
+    real = diagnosis.solve
+    calls = []
+
+    def solve_then_wait(*a, **k):
+        calls.append(k.get("time_limit"))
+        out = real(*a, **k)
+        time.sleep(2.5 if len(calls) == 2 else 0)  # the limit runs out after the lockstep's run
+        return out
+
+    monkeypatch.setattr(diagnosis, "solve", solve_then_wait)
+    code = main(["diagnose", "bundled:chute", "--time-limit", "2", "--witness-time", "0", "--no-remedy", "--json"])
+    d = json.loads(capsys.readouterr().out)
+    assert calls[0] == 2  # the diagnosed run gets the user's limit, as named
+    assert d["evidence"]["run"]["status"] == "Solved" and d["status"] == "MaxTime"
+    assert code == 0

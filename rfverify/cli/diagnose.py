@@ -119,13 +119,14 @@ def cmd_diagnose(args) -> int:
 
         lockstep_figure(d, args.plot, title=str(args.problem))
         d["plot"] = str(args.plot)
-    # The exit code is the double run's outcome, so scripts can tell a failing run apart.
-    code = EXIT_OK if d["status"] == "Solved" else EXIT_NOT_SOLVED
+    # The exit code is the double run's outcome, so scripts can tell a failing run apart (the
+    # diagnosis's own status is MaxTime where the time limit cut a later stage short).
+    run = d["evidence"].get("run") or d
+    code = EXIT_OK if run["status"] == "Solved" else EXIT_NOT_SOLVED
     if args.json:
         print(dumps(d, indent=2))
         return code
     print(d["conclusion"].replace("PROBLEM", str(args.problem)))
-    run = d["evidence"].get("run") or d  # the run's own status (the diagnosis's is MaxTime when it was cut short)
     print(f"double run (as 'rfverify solve --method {d['method']}' runs it): {run['status']} after {d['nit']} iterations: "
           f"{run['message']}")
     lock = d["evidence"].get("lockstep_run")

@@ -220,19 +220,29 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     user_options = {k: v for k, v in options.items() if k != "time_limit"}
     options = {"refine_tol": None, "longdouble_below": None, **options}  # the lockstep run's (docstring)
     problem = posed(problem, options.pop("as_stored", None), method)
-    from ..model.scaling import binary_scaling, scaled_problem
+    from ..model.scaling import binary_scaling, contact_units, problem_in_contact_units, scaled_problem
 
+    notes = []
+    units = contact_units(problem)  # first, as `rfverify solve` does; the lockstep needs one set of units
+    if units is not None:
+        problem = problem_in_contact_units(problem, units)
+        notes.append(f"with the reactions of {int(np.count_nonzero(units.exponents))} of {units.exponents.size} contacts "
+                     f"in units brought together by exact powers of two (2^{int(units.exponents.min())} … "
+                     f"2^{int(units.exponents.max())}), as rfverify solve runs it")
     scaling = binary_scaling(problem)
-    note_units = None
     if scaling is not None:  # digits and causes do not depend on units: diagnose in the scaled ones
         problem = scaled_problem(problem, scaling)
-        note_units = f"diagnosed in exactly scaled units ({scaling.describe()})"
+        notes.append(f"in exactly scaled units ({scaling.describe()})")
+    note_units = f"diagnosed {'; and '.join(notes)}" if notes else None
 
     # The run as `rfverify solve` makes it (default settings, independent components split): the
     # run whose outcome the diagnosis is about.  Then the lockstep's run: the same form as one
     # system, keeping every iterate, its solves refined to the floor (see above).
-    plain = solve(problem, method=method, tol=tol, max_iter=max_iter, **user_options)
-    res = solve(problem, method=method, tol=tol, max_iter=max_iter, keep_iterates=True, **options)
+    limited = lambda: {} if deadline is None else {"time_limit": max(deadline - time.perf_counter(), 1e-12)}  # noqa: E731
+    plain = solve(problem, method=method, tol=tol, max_iter=max_iter, **user_options,  # the user's limit, as named
+                  **({} if time_limit is None else {"time_limit": time_limit}))
+    res = solve(problem, method=method, tol=tol, max_iter=max_iter, keep_iterates=True,
+                **{k: v for k, v in options.items() if k != "time_limit"}, **limited())
     if res.extras.get("zero_data"):  # f = w = 0: answered exactly, without iterating
         return Diagnosis(method=method, status=Status(res.status), message=res.message, nit=0, tol=float(tol),
                          cause="none", evidence={"text": [res.message]},
