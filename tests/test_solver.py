@@ -837,6 +837,7 @@ def test_auto_tries_the_papers_centring_rule_after_every_form_stalled():
     assert [a["status"] for a in attempts[:-1]] == ["InsufficientProgress"] * (len(attempts) - 1)
     assert (attempts[-1]["method"], attempts[-1]["sigma_rule"]) == AUTO_LAST_RESORT
     assert "jqinv (σ rule paper): Solved" in res.message
+    assert res.message.startswith("auto returned jqinv (σ rule paper) [")  # audit: it said "returned jqinv"
     chosen = rfverify.solve(problem, tol=1e-10, sigma_rule="hybrid")
     assert not chosen.success and all("sigma_rule" not in a for a in chosen.extras["attempts"])
     assert len(chosen.extras["attempts"]) == len(attempts) - 1

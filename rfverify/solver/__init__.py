@@ -490,7 +490,8 @@ def _solve_in_turn(problem, settings, keep_iterates, callback, options) -> Solve
         results[:len(forms)], key=lambda r: r.criterion if np.isfinite(r.criterion) else np.inf)
     if len(results) > 1:
         tried = "; ".join(f"{attempt_words(a)}: {a['status']} (criterion {a['criterion']:.2e})" for a in attempts)
-        best.message = f"auto returned {best.method} [{tried}]: {best.message}"
+        which = attempt_words(attempts[next(i for i, r in enumerate(results) if r is best)])
+        best.message = f"auto returned {which} [{tried}]: {best.message}"
     if not best.success and (unrun or results[-1].status is Status.MAX_TIME) and \
             best.status not in (Status.STOPPED, Status.MAX_TIME):
         # the user's time limit ended the sequence, whichever form's answer is the best so far
