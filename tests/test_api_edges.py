@@ -79,3 +79,13 @@ def test_arguments_of_the_wrong_kind_are_named_not_python_errors_from_deep_insid
             call()
         assert "fix:" in str(err.value)
     assert rfverify.check_solution(sphere, answer).ok(1e-8)  # a result is still a solution to check
+
+
+def test_a_problem_built_without_validation_is_refused_by_name():
+    """Audit (2026-12-08): rfverify.Problem(M=…, …) skips from_arrays' validation, and solve then
+    failed with AttributeError: 'NoneType' object has no attribute 'labels' (for valid data too)."""
+    p = rfverify.load("bundled:chute")
+    bare = rfverify.Problem(M=p.M, H=p.H, f=p.f, w=p.w, mu=p.mu, mu_r=p.mu_r)
+    for call in (rfverify.solve, rfverify.solve_to_digits, rfverify.diagnose):
+        with pytest.raises(rfverify.InvalidArgumentError, match="from_arrays"):
+            call(bare)

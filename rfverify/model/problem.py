@@ -424,5 +424,10 @@ def require_problem(obj, argument: str = "problem"):
         raise InvalidArgumentError(
             argument, f"expected an rfverify.Problem, got {type(obj).__name__}",
             fix="pass the result of rfverify.load(path) or rfverify.Problem.from_arrays(...)")
+    if obj.symmetry is None or obj.blocks is None:
+        raise InvalidArgumentError(
+            argument, "was built by calling rfverify.Problem(...) directly, which does not validate the data "
+                      "(shapes, NaN/Inf, μ ≥ 0, M symmetric positive definite)",
+            fix="build it with rfverify.Problem.from_arrays(M, H, f, w, mu, mu_r)")
     return obj
 
