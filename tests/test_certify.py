@@ -251,3 +251,16 @@ def test_a_given_proof_point_that_fails_is_a_hint_not_the_last_word(tmp_path, ca
     out, err = capsys.readouterr()
     assert out.startswith("certified") and "the stored point gives no proof" in err
     assert "about ANOTHER problem" in out  # the stored claim is still judged as what it is
+
+
+def test_cross_check_of_a_zero_quantity_is_measured_at_its_data_scale():
+    """Audit (2026-12-08): the sphere at rest has u* = 0; the reference's u (≈1e-42) and the
+    answer's (≈1e-19) were compared relative to each other: 'agreement u -22.7', read as a huge
+    disagreement next to a certificate 'u zero within 1.8e-19'.  Agreement is now relative to
+    the larger of the exact size and the data scale, as the certificate's absolute bounds are."""
+    p = rfverify.load("bundled:sphere")
+    ten = rfverify.solve_to_digits(p, digits=10)
+    cert = rfverify.certify(p, ten, digits=10, cross_check=True)
+    assert cert.certified
+    agree = cert.cross_check
+    assert agree["digits_u"] >= 10 and agree["digits_r"] >= 10, agree

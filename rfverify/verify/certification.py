@@ -243,7 +243,10 @@ def _polish_and_prove(problem, ctx, v, u, r, digits, max_iter, say, relative=Fal
 
 def reference_agreement(problem: Problem, v, u, r, dps: int = 50) -> dict:
     """Digits of agreement with the independent mpmath reference (information, not proof):
-    −log10(‖x − x_ref‖∞ / ‖x_ref‖∞) for v, u, Hr and r."""
+    −log10(‖x − x_ref‖∞ / s) for v, u, Hr and r, s the larger of ‖x_ref‖∞ and the quantity's
+    data scale (‖M⁻¹f‖∞, ‖HᵀM⁻¹f + w‖∞, ‖f‖∞, ‖f‖∞/max_k‖h_k‖₂: where the exact value is 0, as u
+    of a sphere at rest, a relative measure would compare rounding errors with each other; for a
+    local file ‖q‖∞ and ‖q‖∞ / max_k W_kk, the certificate's own data scales)."""
     import reference
 
     names = ("v", "u", "r")
@@ -263,17 +266,25 @@ def reference_agreement(problem: Problem, v, u, r, dps: int = 50) -> dict:
         out["note"] = f"the reference did not converge ({ref.message})"
         return out
     if problem.local is not None:
+        from ..proof.local import local_data_scales
+
+        floor = local_data_scales(problem)  # ‖q‖∞ for u, ‖q‖∞ / max_k W_kk for r
         with mpmath.workdps(2 * dps):
             for name in names:
                 x, xr = (u, ref.u) if name == "u" else (r, ref.r)
                 err = max((abs(mpmath.mpf(float(a)) - b) for a, b in zip(x, xr)), default=mpmath.mpf(0))
-                out[f"digits_{name}"] = _agreement(err, max((abs(b) for b in xr), default=mpmath.mpf(0)))
+                scale = max(max((abs(b) for b in xr), default=mpmath.mpf(0)), mpmath.mpf(float(floor[name])))
+                out[f"digits_{name}"] = _agreement(err, scale)
         return out
+    from ..model.measures import data_scales
+
+    data = data_scales(problem)  # a quantity whose exact value is (near) 0 is compared at its data scale
+    floor = {"v": data.v_free, "u": data.u_free, "r": data.r, "Hr": data.f}
     with mpmath.workdps(2 * dps):
         for name, x in (("v", v), ("u", u), ("r", r)):
             xr = getattr(ref, name)
             err = max((abs(mpmath.mpf(float(a)) - b) for a, b in zip(x, xr)), default=mpmath.mpf(0))
-            scale = max((abs(b) for b in xr), default=mpmath.mpf(0))
+            scale = max(max((abs(b) for b in xr), default=mpmath.mpf(0)), mpmath.mpf(floor[name]))
             out[f"digits_{name}"] = _agreement(err, scale)
         # H r_ref in the reference's arithmetic: along a self-stress r_ref can be huge (5.6e18 on a
         # wedge) while H r_ref is not, and a float64 product of it loses Hr's digits
@@ -284,7 +295,8 @@ def reference_agreement(problem: Problem, v, u, r, dps: int = 50) -> dict:
                 Hr_ref[Hc.indices[k]] += mpmath.mpf(float(Hc.data[k])) * ref.r[j]
         Hr = problem.H @ r
         err = max((abs(mpmath.mpf(float(a)) - b) for a, b in zip(Hr, Hr_ref)), default=mpmath.mpf(0))
-        out["digits_Hr"] = _agreement(err, max((abs(b) for b in Hr_ref), default=mpmath.mpf(0)))
+        out["digits_Hr"] = _agreement(err, max(max((abs(b) for b in Hr_ref), default=mpmath.mpf(0)),
+                                               mpmath.mpf(floor["Hr"])))
     return out
 
 
