@@ -184,6 +184,23 @@ def test_a_plot_is_written_in_the_format_its_name_says(tmp_path):
         assert (tmp_path / name).read_bytes().startswith(magic)
 
 
+@pytest.mark.parametrize("argv, flag", [
+    (["solve", "bundled:chute", "--relative"], "--relative"),
+    (["solve", "bundled:chute", "--json", "--verbose"], "--verbose"),
+    (["certify", "bundled:sphere", "--solution", "bundled:sphere", "--dps", "60"], "--dps"),
+    (["diagnose", "bundled:sphere", "--plot", "figure.jpg"], "--plot"),
+])
+def test_a_flag_that_would_do_nothing_is_refused_not_ignored(argv, flag, capsys, tmp_path, monkeypatch):
+    """Audit (2026-12-08): --relative without --digits, --dps without --cross-check, --verbose
+    under --json and a --plot name whose extension is no format were accepted and ignored (exit 0;
+    the figure written as PNG under a .jpg name)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and flag in err[0] and "fix:" in err[0]
+    assert not (tmp_path / "figure.jpg").exists()
+
+
 def test_a_self_stress_strictly_inside_k_near_its_boundary_is_found():
     """At μ = 2 + 2⁻³⁰ the stress (1, ±2, 0, 0, 0) lies inside K within 1e-4 of its boundary: it was
     snapped onto the boundary, missed, and the verdict said 'the feasible set may have an

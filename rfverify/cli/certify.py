@@ -39,9 +39,9 @@ def add_parser(sub) -> None:
     cert.add_argument("--cross-check", action="store_true",
                       help="also run the independent mpmath reference and report the digits of "
                            "agreement (a second opinion; slow beyond a few hundred contacts)")
-    cert.add_argument("--dps", type=witness_digits, default=50, metavar="D",
+    cert.add_argument("--dps", type=witness_digits, default=None, metavar="D",
                       help="accuracy of the --cross-check reference in decimal digits, at least 34: a reference "
-                           "must be far more accurate than the float64 answer it measures (default: %(default)s)")
+                           "must be far more accurate than the float64 answer it measures (default: 50)")
     cert.add_argument("--relative", action="store_true",
                       help="demand K relative (significant) digits of every quantity; a quantity whose exact "
                            "value may be zero is then not certified, instead of being proven zero within "
@@ -60,8 +60,14 @@ def add_parser(sub) -> None:
 
 def check_outputs(args) -> None:
     """Refuse an unusable --out (an input of the command, ...) before any work."""
+    from ..errors import InvalidArgumentError
     from ..io.output import check_output_file
 
+    if args.dps is not None and not args.cross_check:  # refused, not silently ignored
+        raise InvalidArgumentError("--dps", "sets the accuracy of the --cross-check reference, which is not run",
+                                   fix="add --cross-check, or drop --dps")
+    if args.dps is None:
+        args.dps = 50
     if args.out is not None:
         args.out_target = check_output_file(args.out, inputs=[args.problem, args.solution])
 

@@ -80,8 +80,14 @@ def add_parser(sub) -> None:
 def check_outputs(args) -> None:
     """Refuse an unusable --plot before any work."""
     if args.plot is not None:
+        from pathlib import Path
+
+        from ..errors import InvalidArgumentError
         from ..io.output import check_output_file
 
+        if Path(args.plot).suffix.lower() not in (".png", ".pdf", ".svg", ".eps", ".ps"):
+            raise InvalidArgumentError("--plot", f"{args.plot}: the extension names no format the figure is written in "
+                                                 "(PNG, PDF, SVG, EPS or PS)", fix="name the file .png, .pdf, .svg or .eps")
         check_output_file(args.plot, inputs=[args.problem], option="--plot")
 
 

@@ -118,6 +118,18 @@ def check_outputs(args) -> None:
                                             in_place_ok=is_hdf5_input(args.problem))
 
 
+def _refuse_ignored_flags(args) -> None:
+    """Flags that would do nothing in this combination are refused, not silently ignored."""
+    from ..errors import InvalidArgumentError
+
+    if args.relative and args.digits is None:
+        raise InvalidArgumentError("--relative", "applies to the digits --digits K proves; without --digits nothing "
+                                                 "is proven", fix="add --digits K, or drop --relative")
+    if args.verbose and args.json:
+        raise InvalidArgumentError("--verbose", "prints the iteration table on stdout, where --json writes its JSON",
+                                   fix="drop --verbose (the JSON's trace holds every iteration) or --json")
+
+
 def cmd_solve(args) -> int:
     import time
 
@@ -126,6 +138,7 @@ def cmd_solve(args) -> int:
 
     t_start = time.perf_counter()
     after = progress_after()  # a bad RFVERIFY_PROGRESS_AFTER is refused before any work
+    _refuse_ignored_flags(args)
     problem = load_problem(args)
     options = {}
     if args.no_presolve:
