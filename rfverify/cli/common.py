@@ -74,7 +74,7 @@ def add_run_limits(p: argparse.ArgumentParser, *, tol_help: str, max_iter_help: 
 PSD_SHIFT_HELP = ("for a local file whose W is not positive semidefinite as stored (rounding in Siconos's "
                   "W = H M⁻¹ Hᵀ; nothing about such a file can be proven): solve and prove W + D instead, D ≥ 0 "
                   "diagonal (the smallest power of two, from about 4·|λmin(W)|, that a verified test proves "
-                  "enough; refused above 1e-8·‖W‖). Every claim then names W + D, and a solution (u, r) of it "
+                  "enough; refused above 1e-8·‖W‖, and a W farther from PSD than the rounding of the file's values explains is refused as it is read). Every claim then names W + D, and a solution (u, r) of it "
                   "solves the file's W exactly for q + D r: a backward error, which --problem coulomb adds to "
                   "its bound. Nothing changes for a W that is PSD as stored")
 

@@ -172,7 +172,9 @@ def factor_delassus(W, *, significant_digits: int | None = None, rank_tol: float
         raise InvalidProblemError(
             "W", f"is not positive semidefinite: eigenvalue {np.ldexp(lowest, exp):.3e} < -{rank_tol:.1e}·‖W‖ "
                  f"(‖W‖ = {norm:.3e})",
-            fix="a Delassus matrix W = H M⁻¹ Hᵀ is PSD; check the data or pass a larger rank_tol")
+            fix=f"a Delassus matrix W = H M⁻¹ Hᵀ is PSD, and this one is farther from it than the rounding of the "
+                f"file's values explains ({rank_tol:.1e}·‖W‖): check the data (--psd-shift, which covers "
+                f"rounding, does not apply to a W refused here)")
     keep = lam > keep_tol * norm_s
     kept = np.flatnonzero(keep)
     scale = np.sqrt(np.ldexp(lam[kept], exp))
