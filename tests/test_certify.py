@@ -264,3 +264,18 @@ def test_cross_check_of_a_zero_quantity_is_measured_at_its_data_scale():
     assert cert.certified
     agree = cert.cross_check
     assert agree["digits_u"] >= 10 and agree["digits_r"] >= 10, agree
+
+
+def test_certifying_a_physical_answer_as_the_relaxations_points_to_problem_coulomb(tmp_path, capsys):
+    """Audit (2026-12-08): a file written by `solve --problem coulomb` certified without
+    --problem coulomb printed 'not proven … u has no relative digits' and nothing else; the file
+    says what it holds (/coulomb/shift), and the output now says so, with the fix."""
+    from rfverify.cli import main
+
+    sol = tmp_path / "coulomb.h5"
+    assert main(["solve", "bundled:chute", "--problem", "coulomb", "--out", str(sol), "--quiet"]) == 0
+    capsys.readouterr()
+    main(["certify", "bundled:chute", "--solution", str(sol)])
+    assert "certify it with --problem coulomb" in capsys.readouterr().out
+    main(["certify", "bundled:chute", "--solution", str(sol), "--json"])
+    assert "--problem coulomb" in json.loads(capsys.readouterr().out)["note"]

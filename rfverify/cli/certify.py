@@ -121,14 +121,23 @@ def cmd_certify(args) -> int:
     if args.out:
         _write_certificate(args, problem, sol, u, cert)
     stored_note = _stored_certificate_note(stored, where, problem)
+    coulomb_note = None
+    if args.solution or is_hdf5_input(args.problem):
+        from ..coulomb.storage import read_shift
+
+        if read_shift(_resolve(args.solution or args.problem), problem.n_contacts) is not None:
+            # the De Saxcé shift stored beside it: an answer to the physical problem, judged here as the relaxation's
+            coulomb_note = (f"note: {where} holds an answer to the physical problem (/coulomb/shift beside it); this "
+                            "is about the convex relaxation: certify it with --problem coulomb")
     if args.json:
         print(dumps({**cert.as_dict(), "stored_certificate": None if stored is None else
-                     {**stored, "note": stored_note}}, indent=2))
+                     {**stored, "note": stored_note}, **({"note": coulomb_note} if coulomb_note else {})}, indent=2))
     else:
         print(cert.verdict)
         print_quantities(cert)
-        if stored_note:
-            print(stored_note)
+        for note in (stored_note, coulomb_note):
+            if note:
+                print(note)
         src = cert.extra.get("point_source")
         print(f"point: {'stored in ' + where if src == 'given' else 'computed (' + str(src) + ')'}; "
               f"time {cert.seconds:.2f} s")
