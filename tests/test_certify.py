@@ -279,3 +279,23 @@ def test_certifying_a_physical_answer_as_the_relaxations_points_to_problem_coulo
     assert "certify it with --problem coulomb" in capsys.readouterr().out
     main(["certify", "bundled:chute", "--solution", str(sol), "--json"])
     assert "--problem coulomb" in json.loads(capsys.readouterr().out)["note"]
+
+
+def test_a_search_that_stalls_says_why():
+    """Audit (2026-12-08): a k-digit run whose double-double steps stayed near 1e-6 ended 'not
+    proven … Hr 0.6 digits' with no reason; the JSON's extended status 'Stopped' reads like a
+    user's interrupt.  Where the search for a proof point stops because μ no longer falls, the
+    verdict says so, at which iteration, and which cone held the last step."""
+    from pathlib import Path
+
+    from rfverify.proof.bound import invalid_proof
+    from rfverify.verify.certificate import certificate_from_proof
+
+    words = "the search stopped at iteration 4: μ = 1e-12 had not halved in 4 iterations"
+    failed = certificate_from_proof(invalid_proof(10, "the point is not in the cones", 0.0),
+                                    extra={"search_stopped": words})
+    assert failed.verdict.endswith(f"({words})")
+    p = rfverify.load(str(Path(__file__).parent / "data" / "hard" / "SpheresPile-f2e-20-ndof-120-nc-37-0.hdf5"))
+    res = rfverify.solve_to_digits(p, 10)
+    assert res.certificate.certified or ("the search stopped at iteration" in res.message
+                                         and "held by contact" in res.message), res.message

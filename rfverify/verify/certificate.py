@@ -168,6 +168,9 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
     if at and at.get("proofs", 0) > 1 and at.get("last") != at.get("where"):
         # the last progress lines are about another point: say which one this verdict is about
         verdict += f" (proof point: {at['where']}, the best of {at['proofs']} proven; the last was {at['last']})"
+    stopped = (extra or {}).get("search_stopped")
+    if stopped and not proof.certified:  # why no later point was tried (the words name their iteration)
+        verdict += f" ({stopped})"
     verdict += stored_sentence(proof)
     limit = (extra or {}).get("time_limit")
     if limit is not None and not proof.certified:

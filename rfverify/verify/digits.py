@@ -280,6 +280,8 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     timed_out = driver.timed_out and not proof.certified
     if timed_out:
         extra["time_limit"] = named_limit
+    if not proof.certified and driver.stalled_at is not None and not driver.timed_out:
+        extra["search_stopped"] = _stall_words(driver, ext_out)
     cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra=extra)
     c3 = compile_seconds()  # in extend(): the double-double kernels (the tail and the proofs compile none)
     timings = {"double": t_double - (c1 - c0), "setup": t_setup - (c2 - c1), "extended": ext_out.seconds_dd - (c3 - c_ext),
@@ -469,6 +471,16 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
     if driver.offer(proof, point, sol, at, proofs=int(sub_at.get("proofs", 1))):
         note["_point"] = point
     return note
+
+
+def _stall_words(driver: ProofDriver, ext_out: Extension) -> str:
+    """Why the search for a proof point ended where no iterate was proven: μ stopped falling,
+    and where it was the steps' length, the cone that held the last one."""
+    k, mu = driver.stalled_at
+    held = (ext_out.wide_steps_held or ext_out.steps_held)
+    last = f"; its last step was {held[-1]['alpha']:.1e} long, held by contact {held[-1]['contact']}'s " \
+           f"{held[-1]['part']} cone ({held[-1]['side']})" if held else ""
+    return (f"the search stopped at iteration {k}: μ = {mu:.1e} had not halved in {driver.stall} iterations{last}")
 
 
 def _in_other_units(problem: Problem, again, relative: bool) -> DigitsSolution | None:

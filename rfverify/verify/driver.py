@@ -91,6 +91,7 @@ class ProofDriver:
         self.invalid_limit = None  # stop after this many invalid proofs in a row (None: never)
         self._invalid_run = 0
         self.gave_up = ""
+        self.stalled_at = None  # (iteration, μ) where a stall ended a run, for the verdict
         self.deadline = deadline  # time.perf_counter() value past which the run stops (None: never)
         self.timed_out = False
 
@@ -185,6 +186,8 @@ class ProofDriver:
         if proof.certified:
             return True
         self._invalid_run = 0 if proof.valid else self._invalid_run + 1
+        if stalled and not force:
+            self.stalled_at = (it.k, it.mu)
         if self.invalid_limit is not None and self._invalid_run >= self.invalid_limit:
             self.gave_up = f"{self._invalid_run} proofs in a row were invalid ({proof.summary()})"
             return True
