@@ -184,6 +184,26 @@ class Diagnosis(ResultAliases):
 
 
 # ---------------------------------------------------------------------- the diagnosis
+def _in_diagnosis_units(problem: Problem) -> tuple:
+    """(the problem the diagnosis works on, a note or None): contacts' units brought together
+    first, as `rfverify solve` does (the lockstep compares iterates of one problem), then data
+    beyond float64's safe range scaled exactly (digits and causes do not depend on units)."""
+    from ..model.scaling import binary_scaling, contact_units, problem_in_contact_units, scaled_problem
+
+    notes = []
+    units = contact_units(problem)
+    if units is not None:
+        problem = problem_in_contact_units(problem, units)
+        notes.append(f"with the reactions of {int(np.count_nonzero(units.exponents))} of {units.exponents.size} "
+                     f"contacts in units brought together by exact powers of two (2^{int(units.exponents.min())} … "
+                     f"2^{int(units.exponents.max())}), as rfverify solve runs it")
+    scaling = binary_scaling(problem)
+    if scaling is not None:
+        problem = scaled_problem(problem, scaling)
+        notes.append(f"in exactly scaled units ({scaling.describe()})")
+    return problem, (f"diagnosed {'; and '.join(notes)}" if notes else None)
+
+
 def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_iter: int = 100,
              dps: int = 40, progress=None, *, remedies: bool = True, witness_time: float = WITNESS_SECONDS,
              **options) -> Diagnosis:
@@ -220,20 +240,7 @@ def diagnose(problem: Problem, method: str = "jqinv", tol: float = 1e-10, max_it
     user_options = {k: v for k, v in options.items() if k != "time_limit"}
     options = {"refine_tol": None, "longdouble_below": None, **options}  # the lockstep run's (docstring)
     problem = posed(problem, options.pop("as_stored", None), method)
-    from ..model.scaling import binary_scaling, contact_units, problem_in_contact_units, scaled_problem
-
-    notes = []
-    units = contact_units(problem)  # first, as `rfverify solve` does; the lockstep needs one set of units
-    if units is not None:
-        problem = problem_in_contact_units(problem, units)
-        notes.append(f"with the reactions of {int(np.count_nonzero(units.exponents))} of {units.exponents.size} contacts "
-                     f"in units brought together by exact powers of two (2^{int(units.exponents.min())} … "
-                     f"2^{int(units.exponents.max())}), as rfverify solve runs it")
-    scaling = binary_scaling(problem)
-    if scaling is not None:  # digits and causes do not depend on units: diagnose in the scaled ones
-        problem = scaled_problem(problem, scaling)
-        notes.append(f"in exactly scaled units ({scaling.describe()})")
-    note_units = f"diagnosed {'; and '.join(notes)}" if notes else None
+    problem, note_units = _in_diagnosis_units(problem)
 
     # The run as `rfverify solve` makes it (default settings, independent components split): the
     # run whose outcome the diagnosis is about.  Then the lockstep's run: the same form as one

@@ -249,8 +249,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     c2 = compile_seconds()
     say(f"extended phase: double-double, {system.name}, setup {t_setup:.2f} s")
     start = start_from(data, double)
-    driver = ProofDriver(ctx, data, digits, progress=say, relative=relative, deadline=deadline)
-    driver.own = _own  # contacts in scaled units: each iterate proven in the problem's own
+    driver = ProofDriver(ctx, data, digits, progress=say, relative=relative, deadline=deadline, own=_own)
     if _on_face is not None:
         driver.face, driver.target = _on_face[1:3], _on_face[3]
     c_ext = compile_seconds()  # (what start_from compiled counts in "compile" only)
@@ -280,8 +279,7 @@ def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", to
     timed_out = driver.timed_out and not proof.certified
     if timed_out:
         extra["time_limit"] = named_limit
-    if not proof.certified and driver.stalled_at is not None and not driver.timed_out:
-        extra["search_stopped"] = _stall_words(driver, ext_out)
+    extra.update(_stall_words(driver, ext_out) if not proof.certified else {})
     cert = certificate_from_proof(ctx.with_companion(proof, point, v, u, r), point, extra=extra)
     c3 = compile_seconds()  # in extend(): the double-double kernels (the tail and the proofs compile none)
     timings = {"double": t_double - (c1 - c0), "setup": t_setup - (c2 - c1), "extended": ext_out.seconds_dd - (c3 - c_ext),
@@ -473,14 +471,17 @@ def solve_on_face(problem: Problem, ctx: ProofContext, driver: ProofDriver, digi
     return note
 
 
-def _stall_words(driver: ProofDriver, ext_out: Extension) -> str:
-    """Why the search for a proof point ended where no iterate was proven: μ stopped falling,
-    and where it was the steps' length, the cone that held the last one."""
+def _stall_words(driver: ProofDriver, ext_out: Extension) -> dict:
+    """``{"search_stopped": why}`` where the search for a proof point ended because μ stopped
+    falling (the iteration, and the cone that held the last step), else {}."""
+    if driver.stalled_at is None or driver.timed_out:
+        return {}
     k, mu = driver.stalled_at
     held = (ext_out.wide_steps_held or ext_out.steps_held)
     last = f"; its last step was {held[-1]['alpha']:.1e} long, held by contact {held[-1]['contact']}'s " \
            f"{held[-1]['part']} cone ({held[-1]['side']})" if held else ""
-    return (f"the search stopped at iteration {k}: μ = {mu:.1e} had not halved in {driver.stall} iterations{last}")
+    return {"search_stopped": f"the search stopped at iteration {k}: μ = {mu:.1e} had not halved in "
+                              f"{driver.stall} iterations{last}"}
 
 
 def _in_other_units(problem: Problem, again, relative: bool) -> DigitsSolution | None:

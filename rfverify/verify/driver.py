@@ -67,14 +67,14 @@ class ProofDriver:
     has stalled for ``stall`` iterations."""
 
     def __init__(self, ctx: ProofContext, data: ExtendedData, requested: int, target=None, stall: int = 4,
-                 progress=None, relative: bool = False, deadline: float | None = None):
+                 progress=None, relative: bool = False, deadline: float | None = None, own=None):
         self.ctx, self.data, self.requested = ctx, data, requested
         self.relative = relative
         self.target = target  # (v, u, r) to certify; None: the rounding of each point
         self.face = None  # (FaceReduction, stresses): iterates of the reduced problem, proven lifted back
         # (ProofContext of the problem in its own units, ContactUnits): the run's problem has its
         # contacts' units brought together, and each point is proven in the problem's own units
-        self.own = None
+        self.own = own
         self.best: tuple | None = None  # (score, proof, point, (v, u, r))
         self.best_at: dict | None = None  # where the best proof was made (proof_site), and
         self.last_at: dict | None = None  # where the last one was
