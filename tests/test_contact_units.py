@@ -145,3 +145,20 @@ def test_diagnose_runs_what_solve_runs_in_one_set_of_units():
     assert "units brought together" in d.to_dict()["evidence"]["units"]
     digits = [s["digits_v"] for s in d.to_dict()["iterations"] if s.get("digits_v") is not None]
     assert digits and min(digits) > 5
+
+
+def test_what_auto_said_before_the_judgement_is_kept():
+    """The answer is judged again in the problem's own units; what auto (its attempts, its time
+    limit) put before the judged message stays, and only the judgement is redone."""
+    from rfverify.model.scaling import problem_in_contact_units
+    from rfverify.solver import _in_own_contact_units
+
+    p = rfverify.load(str(HARD / "Chute-ndof-1200-nc-240-3.hdf5"))
+    q, _ = in_contact_units(p, 12, 1)
+    units = contact_units(q)
+    scaled = problem_in_contact_units(q, units)
+    res = rfverify.solve(scaled)
+    res.message = "auto returned jqinv [reduced: InsufficientProgress]: " + res.message
+    out = _in_own_contact_units(res, q, scaled, units)
+    assert out.message.startswith("auto returned jqinv [reduced: InsufficientProgress]: criterion ")
+    assert f"{out.criterion:.2e}" in out.message and out.message.count("≤ tol") == 1

@@ -242,9 +242,14 @@ def _in_own_contact_units(res: SolveResult, problem: Problem, scaled: Problem, u
     extras = {k: x for k, x in res.extras.items() if k not in ("z", "r_t")}
     extras.update(contact_units=note, lifted_units="scaled")
     final = measures(problem, back["v"], back["u"], back["r"], "longdouble")
-    status, message = returned_verdict(*res.extras.get("run_verdict", (res.status, res.message)), final,
-                                       res.settings)
-    return dataclasses.replace(res, **back, measures=final, status=status, message=f"{message} ({note})",
+    run = res.extras.get("run_verdict", (res.status, res.message))
+    status, message = returned_verdict(*run, final, res.settings)
+    # what auto (or its time limit) put before the judged message stays: only the judgement is redone
+    judged_there = returned_verdict(*run, res.measures, res.settings)[1]
+    before = res.message[:-len(judged_there)] if res.message.endswith(judged_there) else ""
+    if res.status is Status.MAX_TIME or status is Status.MAX_TIME:
+        status = res.status if res.status is Status.MAX_TIME else status
+    return dataclasses.replace(res, **back, measures=final, status=status, message=f"{before}{message} ({note})",
                                extras=extras)
 
 
