@@ -151,7 +151,7 @@ def test_what_auto_said_before_the_judgement_is_kept():
     """The answer is judged again in the problem's own units; what auto (its attempts, its time
     limit) put before the judged message stays, and only the judgement is redone."""
     from rfverify.model.scaling import problem_in_contact_units
-    from rfverify.solver import _in_own_contact_units
+    from rfverify.solver.in_units import in_own_contact_units
 
     p = rfverify.load(str(HARD / "Chute-ndof-1200-nc-240-3.hdf5"))
     q, _ = in_contact_units(p, 12, 1)
@@ -159,6 +159,6 @@ def test_what_auto_said_before_the_judgement_is_kept():
     scaled = problem_in_contact_units(q, units)
     res = rfverify.solve(scaled)
     res.message = "auto returned jqinv [reduced: InsufficientProgress]: " + res.message
-    out = _in_own_contact_units(res, q, scaled, units)
+    out = in_own_contact_units(res, q, scaled, units)
     assert out.message.startswith("auto returned jqinv [reduced: InsufficientProgress]: criterion ")
     assert f"{out.criterion:.2e}" in out.message and out.message.count("≤ tol") == 1
