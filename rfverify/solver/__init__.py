@@ -108,7 +108,8 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
         Store every iterate in ``extras["iterates"]`` (for :func:`rfverify.diagnose`).  The
         iterates are those of one system, so this also solves the problem unsplit
         (``split_components=False``): the answer can differ, within the tolerance, from a split
-        solve's (on the bundled Chute by 6.9e-7 in v).
+        solve's (on the bundled Chute by 6.9e-7 in v); and reactions in units that differ from
+        contact to contact are then not brought together (the iterates are the problem's own).
     as_stored : bool, optional
         True: solve the equations with an unsymmetric M exactly as stored; False: with
         (M + Mᵀ)/2, the convention of Siconos and FCLIB; None (default): the problem object's own
@@ -136,7 +137,8 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
     from .in_units import in_own_contact_units, unscaled_result
 
     again = lambda sp_, _: solve(sp_, method, tol, max_iter, keep_iterates, callback, **options)  # noqa: E731
-    scaled = in_contact_units(problem, again, in_own_contact_units)
+    # (iterates kept are the lifted variables of the problem solved: it is then solved as given)
+    scaled = None if keep_iterates else in_contact_units(problem, again, in_own_contact_units)
     if scaled is None:
         scaled = in_scaled_units(problem, again, unscaled_result)
     if scaled is not None:
