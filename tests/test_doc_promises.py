@@ -244,3 +244,26 @@ def test_a_diagnosis_cut_short_labels_the_double_run_with_its_own_status(capsys)
     out = capsys.readouterr().out.splitlines()
     run = next(line for line in out if line.startswith("double run ("))
     assert code == 1 and "NumericalError after" in run and "MaxTime" not in run
+
+
+def test_no_presolve_names_the_field_that_holds_the_zeros(tmp_path, capsys):
+    """Audit (2026-12-08): every problem with μr = 0 somewhere (every 3-D FCLIB file) was told
+    'mu: has zero coefficients' under --no-presolve, though its μ were all positive."""
+    p = rfverify.load("bundled:chute")
+    q = rfverify.Problem.from_arrays(p.M, p.H, p.f, p.w, np.maximum(p.mu, 0.5), np.zeros_like(p.mu_r))
+    path = tmp_path / "no_rolling.hdf5"
+    rfverify.save(q, path)
+    assert main(["solve", str(path), "--no-presolve"]) == 2
+    err = capsys.readouterr().err
+    assert "mu_r: has zero coefficients" in err and "error: mu:" not in err
+
+
+def test_with_relative_digits_a_tie_is_broken_by_the_other_quantities(tmp_path):
+    """Audit (2026-12-08): with relative=True on an all-open pile (Hr* = 0: every proof has 'Hr no
+    relative digits') the tie went to the last point proven, the double answer, whose bound on v
+    is 7.7e-4 (4.2 digits) where an iterate's proves v to 10.9."""
+    assert main(["generate", "AllOpen", "--size", "20", "--seed", "7100", "--out", str(tmp_path), "--quiet"]) == 0
+    (path,) = tmp_path.glob("*.hdf5")
+    res = rfverify.solve_to_digits(rfverify.load(str(path)), 10, relative=True)
+    assert not res.certificate.certified  # Hr* = 0 has no relative digits, as it must
+    assert res.digits["v"] >= 10 and res.digits["u"] >= 10, res.digits

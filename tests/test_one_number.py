@@ -92,7 +92,9 @@ def test_the_verdict_is_about_the_last_point_shown_when_that_is_the_best():
     assert not out.success
     at = out.certificate.extra["proven_at"]
     assert at["phase"] == "double" and at["last"] == at["where"] == "the double solve's answer"
-    assert lines[-1].startswith("the double solve's answer proven too: ") and lines[-1].endswith("it is the best proof")
+    assert lines[-1].startswith("the double solve's answer proven too: no proof")
+    # no point proved anything: none is called "the best proof" (audit, 2026-12-08)
+    assert not lines[-1].endswith("it is the best proof")
     assert "proof point:" not in out.message  # it is the last one shown: nothing to name
 
 
@@ -119,8 +121,8 @@ def test_a_verdict_about_an_earlier_point_names_it(monkeypatch, capsys, tmp_path
     assert (at["phase"], at["iteration"], at["on_face"]) == ("extended", 4, False)
     assert at["last"] == "the double solve's answer" and at["proofs"] == 4
     headline = s["certificate"]["verdict"].split(". ")[0]
-    assert headline.endswith("(proof point: extended iteration 4, the best of 4 proven; the last was the double "
-                             "solve's answer)"), headline
+    assert ("(proof point: extended iteration 4, the best of 4 proven; the last was the double "
+            "solve's answer) (the search stopped at iteration 4: ") in headline, headline
     code, out, err = run(capsys, "solve", path, "--digits", 10, "--as-stored", "--max-asymmetry", 2)
     assert "(proof point: extended iteration 4, the best of 4 proven;" in out.splitlines()[1]
     assert "the best proof is extended iteration 4's" in err

@@ -143,11 +143,12 @@ def cmd_solve(args) -> int:
     options = {}
     if args.no_presolve:
         options.update(reduce_cones=False, drop_free_bodies=False, split_components=False)
-        if np.any(problem.mu == 0) or np.any(problem.mu_r == 0):
-            from ..errors import InvalidProblemError
+        for name, coefficient in (("mu", problem.mu), ("mu_r", problem.mu_r)):
+            if np.any(coefficient == 0):  # the field that holds the zeros is the one named
+                from ..errors import InvalidProblemError
 
-            raise InvalidProblemError("mu", "has zero coefficients, which the unreduced lifting "
-                                            "would divide by", fix="drop --no-presolve")
+                raise InvalidProblemError(name, f"has zero coefficients ({int(np.sum(coefficient == 0))} contacts), "
+                                                "which the unreduced lifting would divide by", fix="drop --no-presolve")
     if args.sigma_rule is not None:
         if args.method in PEER_METHODS:
             from ..errors import InvalidArgumentError

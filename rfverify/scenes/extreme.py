@@ -71,7 +71,8 @@ class Frictionless(SpheresPile):
 class AllSticking(SpheresPile):
     name = "AllSticking"
     summary = ("pile at rest on a ground tilted by 'tilt' degrees, with friction and rolling "
-               "resistance large enough that every contact sticks (v = 0 is the solution); only "
+               "resistance large enough that every contact sticks (v* ≈ 0, not exactly: a touching contact's "
+               "round-off gap makes w_N = gap/h > 0, and v* of that size, about 1e-12 m/s); only "
                "touching contacts (margin 1e-6 m: the deposit's gaps are at round-off level, and "
                "the margin must exceed the drift h*v of an interior-point solution at 1e-10, "
                "measured ~4e-9 m per step)")

@@ -404,15 +404,15 @@ def _ended_after_double(first, ctx, point, double, say, *, interrupted: bool, ou
 
 
 def _prove_double_answer_last(driver: ProofDriver, ctx, point, digits: int, relative: bool, say) -> None:
-    """The double answer's proof, made after the extended phases only when no iterate was
-    proven; on a tie it is the best (as when it is proven first)."""
+    """The double answer's proof, made after the extended phases where no point was proven to
+    the digits asked (certified); on a tie it is the best (as when it is proven first)."""
     t_first = time.perf_counter()
     first = proven_answer(ctx, point, digits, relative)
     driver.proof_seconds += time.perf_counter() - t_first
     became_best = driver.offer(first[0], point, first[1], proof_site("double"), ties=True)
     if driver.proofs > 1:  # after the iterates' proofs: a line, as they have
         say(f"the double solve's answer proven too: {first[0].summary()}"
-            + ("; it is the best proof" if became_best else ""))
+            + ("; it is the best proof" if became_best and first[0].valid else ""))
 
 
 MAX_FACE_DEPTH = 2
@@ -480,8 +480,9 @@ def _stall_words(driver: ProofDriver, ext_out: Extension) -> dict:
     held = (ext_out.wide_steps_held or ext_out.steps_held)
     last = f"; its last step was {held[-1]['alpha']:.1e} long, held by contact {held[-1]['contact']}'s " \
            f"{held[-1]['part']} cone ({held[-1]['side']})" if held else ""
+    tail = f"; the multiple-precision tail: {ext_out.wide_note}" if ext_out.wide is None else ""
     return {"search_stopped": f"the search stopped at iteration {k}: μ = {mu:.1e} had not halved in "
-                              f"{driver.stall} iterations{last}"}
+                              f"{driver.stall} iterations{last}{tail}"}
 
 
 def _in_other_units(problem: Problem, again, relative: bool) -> DigitsSolution | None:

@@ -139,9 +139,17 @@ class ProofDriver:
         self.invalid_limit, self._invalid_run = invalid_limit, 0
 
     @staticmethod
-    def score(proof: Proof) -> float:
-        """Fewest proven digits (:func:`rfverify.proof.merit`): which of two proofs says more."""
-        return merit(proof)
+    def score(proof: Proof) -> tuple:
+        """Which of two proofs says more: the fewest proven digits (:func:`rfverify.proof.merit`)
+        first, then the next fewest, and so on (a tuple compared in that order).  With every
+        point tied at "Hr: no relative digits" (``relative`` where Hr* = 0) the digits of v and u
+        then decide, not the order in which the points were proven."""
+        if not proof.valid:
+            return (-math.inf,)
+        vals = sorted(math.inf if (q.certified and q.mode == "absolute") else
+                      (-math.inf if q.digits is None else q.digits)
+                      for q in proof.quantities.values() if q.mode != "information")
+        return (merit(proof), *vals)
 
     @staticmethod
     def _distance_dominates(proof: Proof) -> bool:
