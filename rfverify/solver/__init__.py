@@ -14,6 +14,7 @@ from ..model.lifting import KIND_NAMES
 from ..model.measures import Arithmetic, MeasureData, data_scales, data_scales_from_arrays, measures
 from ..model.problem import SPACEDIM, Problem
 from .cones import ProductCone
+from .in_units import returned_verdict
 from .presolve import presolve
 from .result import (AUTO_LAST_RESORT, AUTO_SCHUR_MIN_CONTACTS, AUTO_SCHUR_MIN_FILL, AUTO_SEQUENCE, AUTO_SEQUENCE_LARGE, METHODS,
                      OPTIONAL_METHODS, TRACE_FIELDS, IterationInfo, Settings, SolveResult, Status,
@@ -160,33 +161,6 @@ def solve(problem: Problem, method: str = "auto", tol: float = 1e-10, max_iter: 
 DOUBLE_REACH = 1e-15
 """Tolerances below this are out of double precision's reach on most problems (the criterion's
 own rounding is about 1e-16): a run that misses one says so and points to the k-digit path."""
-
-
-def returned_verdict(status: Status, message: str, final, settings: Settings) -> tuple[Status, str]:
-    """The status and message of a returned answer, decided by ``final`` — the measures of the
-    returned (v, u, r) on the whole problem, the one criterion value a result states — from the
-    run's own ending (``status``, ``message``: why it stopped, naming the returned iteration).
-
-    A run judges its iterates on its own component (its arithmetic, its data scales), so its
-    stopping test and the returned answer's criterion can differ; the answer decides: Solved
-    when ``final.max ≤ tol``, AlmostSolved when ``≤ almost_factor·tol``, and the number stated
-    is ``final.max``.  A user's stop (Stopped) stays Stopped."""
-    tol, almost = settings.tol, settings.almost_factor * settings.tol
-    x = final.max if final is not None and np.isfinite(final.max) else np.inf
-    if status is Status.STOPPED or not np.isfinite(x):
-        return status, message
-    if x <= tol:
-        if status is Status.SOLVED:
-            return status, f"criterion {x:.2e} ≤ tol (worst: {final.worst()}); {message}"
-        return Status.SOLVED, f"criterion of the returned (v, u, r) {x:.2e} ≤ tol (the iterations ended {status}: {message})"
-    if status is Status.SOLVED:  # the run's own test passed, the returned answer's did not
-        return (Status.ALMOST_SOLVED if x <= almost else Status.INSUFFICIENT_PROGRESS,
-                f"the run met tol on its own iterates ({message}), but the returned (v, u, r) has criterion "
-                f"{x:.2e} > tol ({final.worst()})")
-    if x <= almost:
-        return Status.ALMOST_SOLVED, (f"{status}: {message}; the returned (v, u, r) has criterion {x:.2e} ≤ "
-                                      f"{settings.almost_factor:g}·tol")
-    return status, message
 
 
 def has_zero_data(problem: Problem) -> bool:

@@ -1,5 +1,6 @@
-"""A solve's answer found in other units, brought back to the problem's own: the exact scaling
-of data beyond float64's safe range, and per-contact units brought together
+"""A returned answer judged (:func:`returned_verdict`: the one criterion value a result states),
+and a solve's answer found in other units brought back to the problem's own and judged there:
+the exact scaling of data beyond float64's safe range, and per-contact units brought together
 (:mod:`rfverify.model.scaling`)."""
 
 from __future__ import annotations
@@ -10,7 +11,34 @@ import numpy as np
 
 from ..model.measures import measures
 from ..model.problem import Problem
-from . import SolveResult, Status, returned_verdict
+from .result import Settings, SolveResult, Status
+
+
+def returned_verdict(status: Status, message: str, final, settings: Settings) -> tuple[Status, str]:
+    """The status and message of a returned answer, decided by ``final`` — the measures of the
+    returned (v, u, r) on the whole problem, the one criterion value a result states — from the
+    run's own ending (``status``, ``message``: why it stopped, naming the returned iteration).
+
+    A run judges its iterates on its own component (its arithmetic, its data scales), so its
+    stopping test and the returned answer's criterion can differ; the answer decides: Solved
+    when ``final.max ≤ tol``, AlmostSolved when ``≤ almost_factor·tol``, and the number stated
+    is ``final.max``.  A user's stop (Stopped) stays Stopped."""
+    tol, almost = settings.tol, settings.almost_factor * settings.tol
+    x = final.max if final is not None and np.isfinite(final.max) else np.inf
+    if status is Status.STOPPED or not np.isfinite(x):
+        return status, message
+    if x <= tol:
+        if status is Status.SOLVED:
+            return status, f"criterion {x:.2e} ≤ tol (worst: {final.worst()}); {message}"
+        return Status.SOLVED, f"criterion of the returned (v, u, r) {x:.2e} ≤ tol (the iterations ended {status}: {message})"
+    if status is Status.SOLVED:  # the run's own test passed, the returned answer's did not
+        return (Status.ALMOST_SOLVED if x <= almost else Status.INSUFFICIENT_PROGRESS,
+                f"the run met tol on its own iterates ({message}), but the returned (v, u, r) has criterion "
+                f"{x:.2e} > tol ({final.worst()})")
+    if x <= almost:
+        return Status.ALMOST_SOLVED, (f"{status}: {message}; the returned (v, u, r) has criterion {x:.2e} ≤ "
+                                      f"{settings.almost_factor:g}·tol")
+    return status, message
 
 
 def unscaled_result(res: SolveResult, scaled: Problem, scaling) -> SolveResult:
