@@ -299,3 +299,20 @@ def test_a_search_that_stalls_says_why():
     res = rfverify.solve_to_digits(p, 10)
     assert res.certificate.certified or ("the search stopped at iteration" in res.message
                                          and "held by contact" in res.message), res.message
+
+
+def test_a_stalled_search_starts_again_from_another_double_answer():
+    """Fresh-data audit (2026-12-08): from auto's double answer (jqinv) the search for a proof
+    point stalls at steps of 1e-6 and proves nothing; from noscaling's it proves 10 digits.  The
+    path now starts again from there, says so, and counts the first start's time.  A form the
+    caller chose is kept: then no second start."""
+    from pathlib import Path
+
+    p = rfverify.load(str(Path(__file__).parent / "data" / "hard" / "MassRatio-1e16-ndof-120-nc-39-0.hdf5"))
+    res = rfverify.solve_to_digits(p, 10)
+    assert res.certificate.certified, res.message
+    assert res.double.method == "noscaling" and "found from the noscaling double answer" in res.message
+    assert "the search stopped at iteration" in res.certificate.extra["second_start"]
+    assert 0 < res.timings["first_start"] < res.timings["total"]
+    chosen = rfverify.solve_to_digits(p, 10, method="jqinv")
+    assert not chosen.certificate.certified and "second_start" not in chosen.certificate.extra

@@ -74,8 +74,9 @@ def test_the_best_iterate_is_named_without_a_second_number():
 
 # ---------------------------------------------------------------------- the verdict names its point
 def _skewed():
-    """A strongly skewed M (entrywise asymmetry ~1.1), its stored equations: no point of the
-    path is proven (every one outside the cones), four points are tried."""
+    """A strongly skewed M (entrywise asymmetry ~1.1), its stored equations: from jqinv's double
+    answer no point of the path is proven (every one outside the cones), four points are tried
+    (auto starts again from noscaling's, which proves v to 4.0 digits)."""
     from exact_problems import exact_problem
 
     problem, *_ = exact_problem(0, 6, asymmetry=2000, max_asymmetry=2.0)
@@ -88,7 +89,8 @@ def test_the_verdict_is_about_the_last_point_shown_when_that_is_the_best():
     import rfverify
 
     lines = []
-    out = rfverify.solve_to_digits(_skewed(), digits=10, as_stored=True, progress=lines.append)
+    # (jqinv chosen: auto's second start, from noscaling's answer, proves 4 digits here)
+    out = rfverify.solve_to_digits(_skewed(), digits=10, method="jqinv", as_stored=True, progress=lines.append)
     assert not out.success
     at = out.certificate.extra["proven_at"]
     assert at["phase"] == "double" and at["last"] == at["where"] == "the double solve's answer"
@@ -114,7 +116,8 @@ def test_a_verdict_about_an_earlier_point_names_it(monkeypatch, capsys, tmp_path
     _first_proof_is_best(monkeypatch)
     path = tmp_path / "skewed.hdf5"
     save(_skewed(), path)
-    code, out, err = run(capsys, "solve", path, "--digits", 10, "--as-stored", "--max-asymmetry", 2, "--json")
+    code, out, err = run(capsys, "solve", path, "--digits", 10, "--as-stored", "--max-asymmetry", 2, "--json",
+                         "--method", "jqinv")
     assert code == 1, err
     s = json.loads(out)
     at = s["certificate"]["proven_at"]
@@ -123,7 +126,8 @@ def test_a_verdict_about_an_earlier_point_names_it(monkeypatch, capsys, tmp_path
     headline = s["certificate"]["verdict"].split(". ")[0]
     assert ("(proof point: extended iteration 4, the best of 4 proven; the last was the double "
             "solve's answer) (the search stopped at iteration 4: ") in headline, headline
-    code, out, err = run(capsys, "solve", path, "--digits", 10, "--as-stored", "--max-asymmetry", 2)
+    code, out, err = run(capsys, "solve", path, "--digits", 10, "--as-stored", "--max-asymmetry", 2, "--method",
+                         "jqinv")
     assert "(proof point: extended iteration 4, the best of 4 proven;" in out.splitlines()[1]
     assert "the best proof is extended iteration 4's" in err
 

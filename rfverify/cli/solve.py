@@ -328,6 +328,7 @@ def _solve_digits(args, problem, options, say, after, t_start) -> int:
         t = out.timings
         wide_time = f", multiple precision {t['wide']:.2f}" if out.wide is not None else ""
         wide_time += f", on the face {t['face']:.2f}" if t.get("face") else ""
+        wide_time += f", the first start (stalled) {t['first_start']:.2f}" if t.get("first_start") else ""
         # numba compiling the kernels (a cold start: first run on a machine) has its own entry
         compile_time = f"compiling kernels {t['compile']:.2f}, " if t.get("compile", 0.0) >= 0.005 else ""
         factored = getattr(out.extended, "factorisation", "")

@@ -171,6 +171,8 @@ def certificate_from_proof(proof: Proof, point: Point | None = None, extra: dict
     stopped = (extra or {}).get("search_stopped")
     if stopped and not proof.certified:  # why no later point was tried (the words name their iteration)
         verdict += f" ({stopped})"
+    if (extra or {}).get("second_start"):  # the double answer the point was found from, and why that one
+        verdict += f" ({extra['second_start']})"
     verdict += stored_sentence(proof)
     limit = (extra or {}).get("time_limit")
     if limit is not None and not proof.certified:
