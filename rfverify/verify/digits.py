@@ -18,7 +18,6 @@ proven.  With two CPUs the set-up of stage 2 is built on the second one during s
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -45,6 +44,7 @@ from ..solver import SolveResult, posed, solve
 from .certificate import (Certificate, CertifiedResult, candidate_point, certificate_from_proof, cut_short,
                           unscaled_point)
 from .driver import ProofDriver, proof_site, proven_answer
+from .second_start import SECOND_START, second_start  # noqa: F401 (SECOND_START: its setting, named here too)
 from .extend import Extension, extend
 from .prepare import (
     Preparation,
@@ -126,53 +126,7 @@ docs/DECISIONS.md).  It costs the path some time: 25 iterations against the defa
 the 9675-contact GranularBed, whose double solve is about half of the path (docs/DECISIONS.md, "The
 double-double kernels on both cores")."""
 
-SECOND_START = "noscaling"
-"""The double solve's form from whose answer the k-digit path starts again where, from auto's, the
-search for a proof point stalled and proved nothing: three of nine fresh MassRatio problems at
-mass ratio 1e16 (20 spheres, μ = 1, tilt 20°) stalled at steps of 1e-6 from the jqinv answer, held
-by one rolling cone, and were proven to 10.5 digits from noscaling's (docs/DECISIONS.md)."""
-
-
-def _second_start(run):
-    """``run`` (the k-digit path), and where it stalled without proving anything from the double
-    answer of ``method="auto"``, once more from :data:`SECOND_START`'s; the better of the two."""
-    import functools
-
-    @functools.wraps(run)
-    def path(problem, digits=10, method="auto", *args, **kwargs):
-        t0 = time.perf_counter()
-        out = run(problem, digits, method, *args, **kwargs)
-        cert = out.certificate
-        if (method != "auto" or kwargs.get("_on_face") is not None or cert.certified or out.timed_out
-                or out.interrupted or "search_stopped" not in cert.extra or out.double.method == SECOND_START):
-            return out
-        if kwargs.get("time_limit") is not None:
-            left = kwargs["time_limit"] - (time.perf_counter() - t0)
-            if left <= 0:
-                return out
-            kwargs = {**kwargs, "time_limit": left, "_named_limit": kwargs.get("_named_limit") or kwargs["time_limit"]}
-        say = kwargs.get("progress") or (lambda message: None)
-        say(f"the search stalled from the {out.double.method} double answer without a proof: once more from "
-            f"the {SECOND_START} form's")
-        again = run(problem, digits, SECOND_START, *args, **kwargs)
-        first, second = cert.proof, again.certificate.proof
-        if not (again.certificate.certified or (second is not None and (
-                first is None or ProofDriver.score(second) > ProofDriver.score(first)))):
-            return out
-        note = (f"found from the {SECOND_START} double answer; from auto's ({out.double.method}) "
-                f"{cert.extra['search_stopped']}")
-        proof, extra = again.certificate.proof, {**again.certificate.extra, "second_start": note}
-        cert = certificate_from_proof(proof, again.certificate.point, extra, again.certificate.seconds) \
-            if proof is not None else dataclasses.replace(again.certificate, extra=extra)
-        cert.cross_check = again.certificate.cross_check
-        first_start = out.timings.get("total", 0.0)  # the first start's whole path, spent too
-        timings = {**again.timings, "first_start": first_start, "total": again.timings.get("total", 0.0) + first_start}
-        return dataclasses.replace(again, certificate=cert, timings=timings)
-
-    return path
-
-
-@_second_start
+@second_start
 def solve_to_digits(problem: Problem, digits: int = 10, method: str = "auto", tol: float = 1e-10,
                     max_iter: int = 100, *, extended_max_iter: int = 80, backend: str = "auto",
                     wide_tail: bool = True, wide_bits: int = wide.DEFAULT_BITS, wide_max_iter: int = 40,
