@@ -13,9 +13,9 @@ from .driver import ProofDriver
 
 SECOND_START = "noscaling"
 """The double solve's form from whose answer the k-digit path starts again where, from auto's, the
-search for a proof point stalled and proved nothing: three of nine fresh MassRatio problems at
-mass ratio 1e16 (20 spheres, μ = 1, tilt 20°) stalled at steps of 1e-6 from the jqinv answer, held
-by one rolling cone, and were proven to 10.5 digits from noscaling's (docs/DECISIONS.md)."""
+search for a proof point stalled and proved nothing: a fresh MassRatio problem at mass ratio 1e16
+(20 spheres, μ = 1, tilt 20°, seed 21212) stalled at steps of 1e-6 from the jqinv answer, held by
+one rolling cone, and is proven to 10.4 digits from noscaling's (docs/DECISIONS.md)."""
 
 
 def second_start(run):
