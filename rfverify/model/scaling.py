@@ -289,7 +289,7 @@ class ContactUnits:
         e = -e if inverse else e
         with np.errstate(all="ignore"):
             y = np.ldexp(x, e)
-        return y if bool(np.all(np.isfinite(y)) and np.array_equal(np.ldexp(y, -e), x)) else None
+        return y if exact_ldexp(x, y, e) else None
 
     def back(self, name: str, x) -> np.ndarray:
         """x in the problem's units as float64 rounds it (exact unless an entry leaves the range)."""
@@ -316,34 +316,44 @@ def contact_units(problem: Problem) -> ContactUnits | None:
            for e in map(_max_exponent, (problem.M.data, problem.H.data, problem.f, problem.w))):
         return None  # the whole problem is scaled first (binary_scaling), and its proof made in scaled units
     H = sp.csc_matrix(problem.H)
-    normal = np.arange(n) * SPACEDIM
-    big = np.asarray(abs(H[:, normal]).max(axis=0).todense()).ravel()
-    loaded = big > 0
+    e, loaded = normal_exponents(H, n)
     if np.count_nonzero(loaded) < 2:
         return None
-    e = np.zeros(n, dtype=np.int64)
-    e[loaded] = np.frexp(big[loaded])[1]
     median = int(np.round(np.median(e[loaded])))
     shift = np.where(loaded, median - e, 0)
     if int(np.max(np.abs(shift))) <= CONTACT_UNIT_EXPONENT:
         return None
     units = ContactUnits(shift)
-    cols = np.repeat(np.arange(H.shape[1]), np.diff(H.indptr))
-    e_H = np.repeat(shift, SPACEDIM)[cols]
-    with np.errstate(all="ignore"):
-        data = np.ldexp(H.data, e_H)
-    if not (np.all(np.isfinite(data)) and np.array_equal(np.ldexp(data, -e_H), H.data)):
+    if not exact_ldexp(H.data, columns_in_contact_units(H, shift), column_exponents(H, shift)):
         return None
     if units.scale("w", problem.w) is None:
         return None
     return units
 
 
+def normal_exponents(H: sp.csc_matrix, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(e, loaded): per contact, the frexp exponent of the largest |entry| of its normal column
+    of H (0 where the column is zero), and whether it has one: the contact's unit."""
+    big = np.asarray(abs(H[:, SPACEDIM * np.arange(n)]).max(axis=0).todense()).ravel()
+    loaded = big > 0
+    return np.where(loaded, np.frexp(big)[1], 0).astype(np.int64), loaded
+
+
+def column_exponents(H: sp.csc_matrix, shift) -> np.ndarray:
+    """The power of two of each stored value of H when contact c's columns move by 2^shift_c."""
+    return np.repeat(np.asarray(shift, dtype=np.int64), SPACEDIM)[np.repeat(np.arange(H.shape[1]), np.diff(H.indptr))]
+
+
+def columns_in_contact_units(H: sp.csc_matrix, shift) -> np.ndarray:
+    """H's stored values with contact c's five columns multiplied by 2^shift_c (as ldexp rounds)."""
+    with np.errstate(all="ignore"):
+        return np.ldexp(H.data, column_exponents(H, shift))
+
+
 def problem_in_contact_units(problem: Problem, units: ContactUnits) -> Problem:
     """The problem with its contacts' reactions in the units of ``units`` (exactly)."""
     H = sp.csc_matrix(problem.H, copy=True)
-    cols = np.repeat(np.arange(H.shape[1]), np.diff(H.indptr))
-    H.data = np.ldexp(H.data, np.repeat(np.asarray(units.exponents, dtype=np.int64), SPACEDIM)[cols])
+    H.data = columns_in_contact_units(H, units.exponents)
     out = Problem.from_arrays(problem.M, H, problem.f, units.scale("w", problem.w), problem.mu, problem.mu_r,
                               title=problem.title, max_asymmetry=np.inf, source=problem.source,
                               provenance=problem.provenance)

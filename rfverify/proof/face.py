@@ -358,17 +358,16 @@ def _in_search_units(problem, H: sp.csc_matrix, hood: np.ndarray):
     multiplied by 2^s_c, that H, s) with s_c bringing every contact's normal column to [1/2, 1)."""
     from types import SimpleNamespace
 
-    n = problem.mu.size
-    big = np.asarray(abs(H[:, SPACEDIM * np.arange(n)]).max(axis=0).todense()).ravel()
-    e = np.where(big > 0, np.frexp(big)[1], 0).astype(np.int64)
+    from ..model.scaling import columns_in_contact_units, normal_exponents
+
+    e, loaded = normal_exponents(H, problem.mu.size)
     if hood.size == 0 or int(np.ptp(e[hood])) <= SEARCH_UNIT_SPREAD:
         return problem, H, None
-    shift = np.where(big > 0, -e, 0)
-    per_column = np.repeat(shift, SPACEDIM)
+    shift = np.where(loaded, -e, 0)
     Hs = H.copy()
-    Hs.data = np.ldexp(H.data, per_column[np.repeat(np.arange(H.shape[1]), np.diff(H.indptr))])
-    view = SimpleNamespace(H=Hs, w=np.ldexp(np.asarray(problem.w, dtype=np.float64), per_column), mu=problem.mu,
-                           mu_r=problem.mu_r)
+    Hs.data = columns_in_contact_units(H, shift)
+    view = SimpleNamespace(H=Hs, w=np.ldexp(np.asarray(problem.w, dtype=np.float64), np.repeat(shift, SPACEDIM)),
+                           mu=problem.mu, mu_r=problem.mu_r)
     return view, Hs, shift
 
 
